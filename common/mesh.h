@@ -1,0 +1,43 @@
+/*
+ * mesh.h — triangle surface meshes: import and export through assimp.
+ *
+ * A cs_mesh is a plain indexed triangle list in double precision. It is what the daemon loads
+ * from scene files, what --export writes, and what clients rebuild from the bus.
+ * Owns: v and t (malloc'd). cs_mesh_free releases them and zeroes the struct.
+ */
+#ifndef CS_MESH_H
+#define CS_MESH_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+typedef struct cs_mesh {
+    double *v;   /* 3 per vertex */
+    int nv;
+    int32_t *t;  /* 3 per triangle */
+    int nt;
+} cs_mesh;
+
+void cs_mesh_free(cs_mesh *m);
+
+/*
+ * Load every mesh of a file assimp reads (OBJ, STL, PLY, OFF, glTF, ...), merged into one,
+ * node transforms applied, triangulated, identical vertices welded (by exact position after
+ * import), degenerate triangles dropped. Returns 0, or -1 with a one-line message naming the
+ * file and the problem (missing, unreadable, rejected by assimp, no triangles, non-finite).
+ */
+int cs_mesh_load(const char *path, cs_mesh *out, char *err, size_t errlen);
+
+/* Scale, then rotate by Euler angles in degrees (about x, then y, then z), then translate. */
+void cs_mesh_transform(cs_mesh *m, double scale, const double rotation_deg[3],
+                       const double position[3]);
+
+/*
+ * Write pieces through assimp; the format follows the file extension (obj, stl, ply, off, glb,
+ * gltf, ...). Each piece becomes one mesh/node named names[i] (OBJ: one `g` group per piece).
+ * Returns 0, or -1 with a message.
+ */
+int cs_mesh_export(const char *path, const cs_mesh *pieces, const char *const *names, int n,
+                   char *err, size_t errlen);
+
+#endif

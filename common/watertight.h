@@ -1,0 +1,30 @@
+/*
+ * watertight.h — is a triangle surface closed and consistently oriented?
+ *
+ * The checker every later stage leans on (fracture, replay --verify): each undirected edge is
+ * used by exactly two triangles, in opposite directions; no triangle is degenerate (repeated
+ * index or zero area); the enclosed signed volume is positive.
+ */
+#ifndef CS_WATERTIGHT_H
+#define CS_WATERTIGHT_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+typedef struct cs_watertight_report {
+    int boundary_edges;     /* edges used by one triangle */
+    int nonmanifold_edges;  /* edges used by three or more */
+    int misoriented_edges;  /* edges used twice in the same direction */
+    int degenerate_triangles;
+    double volume;          /* signed enclosed volume (divergence theorem) */
+} cs_watertight_report;
+
+/* Returns 1 if closed, consistently oriented, non-degenerate and of positive volume; else 0
+ * with the first problem in err (e.g. "12 boundary edges: the surface is open"). */
+int cs_watertight_check(const double *v, int nv, const int32_t *t, int nt,
+                        cs_watertight_report *rep, char *err, size_t errlen);
+
+/* Signed volume enclosed by a triangle surface. */
+double cs_mesh_volume(const double *v, const int32_t *t, int nt);
+
+#endif

@@ -1,0 +1,225 @@
+/*
+ * cubesim.h — the one public header of the cubesim engine.
+ *
+ * The engine owns worlds of deformable objects, each a surface mesh embedded in a mesh of
+ * equal cubes (seed 000). It has no knowledge of LCM, files or scenes: the daemon, the tests
+ * and the benchmarks are adapters around this API.
+ *
+ * Conventions
+ * - Worlds and objects are made from definition structs; cs_*_def_default() gives the documented
+ *   defaults. `create` validates every field and reports the first bad one by name.
+ * - Objects are named by ids (cs_object_id). Ids are never reused within a world; a stale or
+ *   unknown id is the error CS_ERR_UNKNOWN_OBJECT, never a crash.
+ * - Runtime errors are negative return codes (cs_status) plus, where a function takes one, a
+ *   caller-owned message buffer `err` of `errlen` bytes that receives one line naming the
+ *   problem. The engine never prints and never aborts on bad input.
+ * - SI units throughout: metres, seconds, kilograms, newtons, pascals.
+ * - Pointers returned by read functions stay valid until the next call that mutates the world
+ *   (step, solve, reset, add/remove object, destroy).
+ * - A world is not thread-safe; the engine may use worker threads inside a step only, and its
+ *   results do not depend on their number.
+ */
+#ifndef CUBESIM_H
+#define CUBESIM_H
+
+#include <stddef.h>
+#include <stdint.h>
+#include <stdbool.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef enum cs_status {
+    CS_OK = 0,
+    CS_ERR_INVALID = -1,        /* a definition or argument is out of range or not finite */
+    CS_ERR_UNKNOWN_OBJECT = -2, /* no object with that id (or name) in this world */
+    CS_ERR_NOMEM = -3,          /* an allocation failed; the world is unchanged */
+    CS_ERR_GEOMETRY = -4,       /* a mesh cannot be voxelized (open, empty, degenerate) */
+    CS_ERR_NOT_CONVERGED = -5,  /* a solve hit its iteration limit; state is still finite */
+    CS_ERR_DIVERGED = -6        /* a step produced non-finite values; the step was undone */
+} cs_status;
+
+/* Human-readable name of a status code ("ok", "invalid argument", ...). Never NULL. */
+const char *cs_status_str(int status);
+
+typedef uint32_t cs_object_id; /* 0 is never a valid id */
+#define CS_NULL_OBJECT ((cs_object_id)0)
+
+typedef enum cs_model {
+    CS_MODEL_LINEAR = 0,       /* small-strain hexahedral FEM (seed 000 App. A) */
+    CS_MODEL_COROTATIONAL = 1, /* the same with per-element rotation (seed 000 §2.2) */
+    CS_MODEL_MSS = 2,          /* hexahedral mass-spring element (seed 004) — not yet built */
+    CS_MODEL_LOCALFRAME = 3,   /* local-frame B-spline model (seed 001) — not yet built */
+    CS_MODEL_RIGID = 4         /* rigid cube sets (seed 000 §2.4) — not yet built */
+} cs_model;
+
+/* Parse "linear", "corotational", ...; returns 0 and sets *out, or -1 for an unknown name. */
+int cs_model_from_name(const char *name, cs_model *out);
+const char *cs_model_name(cs_model m);
+
+typedef struct cs_material {
+    double young;         /* Young's modulus E [Pa], > 0; default 1000 */
+    double poisson;       /* Poisson ratio ν, in [0, 0.5); default 0.3 */
+    double density;       /* ρ [kg/m³], > 0; default 1000 */
+    double damping[2];    /* Rayleigh [α (1/s, on mass), β (s, on stiffness)], >= 0; default 0,0 */
+    double strength;      /* tensile strength [Pa], > 0 (fracture only); default 1e300 (never) */
+} cs_material;
+
+cs_material cs_material_default(void);
+
+typedef struct cs_aabb {
+    double min[3], max[3];
+} cs_aabb;
+
+/* A total force spread over the exposed cube faces whose centres lie in `box` (DESIGN.md). */
+typedef struct cs_load {
+    cs_aabb box;
+    double force[3]; /* [N] */
+} cs_load;
+
+typedef enum cs_geometry_kind {
+    CS_GEOMETRY_MESH = 0,  /* a closed triangle surface, voxelized (seed 000 §2.1) */
+    CS_GEOMETRY_CELLS = 1  /* explicit cells; the surface is their boundary */
+} cs_geometry_kind;
+
+typedef struct cs_object_def {
+    const char *name;        /* copied; must be non-empty and unique in the world */
+    cs_model model;          /* default CS_MODEL_COROTATIONAL */
+    cs_material material;    /* default cs_material_default() */
+    double cube_size;        /* h [m], > 0; default 0.1 */
+    bool fracture;           /* default false */
+
+    cs_geometry_kind geometry;
+    /* CS_GEOMETRY_MESH: world-space surface (already scaled/placed), borrowed during create. */
+    const double *mesh_vertices;  /* 3 per vertex */
+    int n_mesh_vertices;
+    const int32_t *mesh_triangles; /* 3 per triangle, counter-clockwise seen from outside */
+    int n_mesh_triangles;
+    /* CS_GEOMETRY_CELLS: cell (i,j,k) spans origin + h·[i,i+1]×[j,j+1]×[k,k+1]. Borrowed. */
+    double cells_origin[3];
+    const int32_t *cells_ijk; /* 3 per cell, no duplicates */
+    int n_cells;
+
+    const cs_aabb *fixed;     /* boxes; every cube-mesh vertex inside one is held. Borrowed. */
+    int n_fixed;
+    const cs_load *loads;     /* constant loads. Borrowed. */
+    int n_loads;
+} cs_object_def;
+
+cs_object_def cs_object_def_default(void);
+
+typedef struct cs_world_def {
+    double dt;               /* time step [s], in (0, 1]; default 1/60 */
+    double gravity[3];       /* [m/s²]; default (0, 0, -9.81) */
+    bool has_ground;         /* default false */
+    double ground_height;    /* the plane z = ground_height, solid below; default 0 */
+    double ground_friction;  /* Coulomb coefficient at the ground, >= 0; default 0.5 */
+    double cg_tolerance;     /* relative residual ‖r‖/‖b‖ of every solve, in (0, 1); 1e-6 */
+    int cg_max_iterations;   /* >= 1; default 500 */
+    int threads;             /* worker threads inside a step, >= 0; 0 = all cores; default 0 */
+    double sleep_speed;      /* an object whose fastest node is slower than this [m/s] ... */
+    int sleep_steps;         /* ... for this many steps in a row sleeps; 0 = never; default 30 */
+    double max_force;        /* |force| above this [N] is refused; default 1e9 */
+} cs_world_def;
+
+cs_world_def cs_world_def_default(void);
+
+typedef struct cs_world cs_world_t;
+
+/* Create an empty world. On error *out is NULL and err names the bad field. */
+int cs_world_create(const cs_world_def *def, cs_world_t **out, char *err, size_t errlen);
+void cs_world_destroy(cs_world_t *w); /* NULL is fine */
+
+/* Voxelize and add an object; on error the world is unchanged. */
+int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *id,
+                        char *err, size_t errlen);
+int cs_world_remove_object(cs_world_t *w, cs_object_id id);
+
+/* Ids of the live objects in creation order; returns the count, writes at most `max`. */
+int cs_world_object_ids(const cs_world_t *w, cs_object_id *ids, int max);
+/* Id of the object named `name`, or CS_NULL_OBJECT. */
+cs_object_id cs_world_find_object(const cs_world_t *w, const char *name);
+
+/*
+ * A point force: `force` [N] acts for `seconds` of simulated time (0: exactly one step) at the
+ * material point currently nearest to `point` (world space), spread to the eight corners of its
+ * cube by trilinear weights. Refused (CS_ERR_INVALID, message in err) if anything is not
+ * finite, |force| > max_force or seconds < 0.
+ */
+int cs_world_apply_force(cs_world_t *w, cs_object_id id, const double point[3],
+                         const double force[3], double seconds, char *err, size_t errlen);
+/*
+ * A drag: the material point nearest to `grab` is pulled towards `target` by a spring of
+ * `stiffness` [N/m] for `seconds` of simulated time. Same refusals as apply_force.
+ */
+int cs_world_drag(cs_world_t *w, cs_object_id id, const double grab[3], const double target[3],
+                  double stiffness, double seconds, char *err, size_t errlen);
+
+/* Advance one dt: inputs, rotations, implicit Euler solve, ground, skinning, sleep. */
+int cs_world_step(cs_world_t *w);
+/*
+ * Static equilibrium under gravity, loads and held forces, from the current state. For
+ * corotational objects this is the geometrically nonlinear equilibrium (load stepping and
+ * Newton iterations with the corotated tangent). Velocities are zeroed.
+ */
+int cs_world_solve_static(cs_world_t *w);
+/* Every object back to its rest shape, at rest; time and inputs cleared. */
+void cs_world_reset(cs_world_t *w);
+
+double cs_world_time(const cs_world_t *w);
+int64_t cs_world_frame(const cs_world_t *w);
+const cs_world_def *cs_world_get_def(const cs_world_t *w);
+
+typedef struct cs_object_info {
+    const char *name;
+    cs_model model;
+    cs_material material;
+    double cube_size;
+    double origin[3];         /* world position of lattice index (0,0,0) */
+    int n_cells, n_nodes, n_fixed_nodes;
+    int n_surface_vertices, n_surface_triangles;
+    uint32_t topology_version; /* bumped whenever the surface's triangles change */
+    bool sleeping;
+    bool fracture;
+    double volume;            /* n_cells·h³ */
+    double mass;
+} cs_object_info;
+
+int cs_object_get_info(const cs_world_t *w, cs_object_id id, cs_object_info *info);
+
+/* Cube-mesh nodes: rest and current positions, 3 doubles each; n nodes. */
+int cs_object_nodes(const cs_world_t *w, cs_object_id id, const double **rest,
+                    const double **pos, const double **vel, int *n);
+/* Cells: 3 int32 lattice indices and 8 node indices each (seed 000 App. A corner order). */
+int cs_object_cells(const cs_world_t *w, cs_object_id id, const int32_t **ijk,
+                    const int32_t **nodes, int *n);
+/* The embedded surface: current vertex positions (3 doubles each) and triangles. */
+int cs_object_surface(const cs_world_t *w, cs_object_id id, const double **vertices, int *nv,
+                      const int32_t **triangles, int *nt);
+/* 64-bit FNV-1a hash of the surface vertex positions rounded to float: clients compare it. */
+uint64_t cs_object_state_hash(const cs_world_t *w, cs_object_id id);
+
+typedef struct cs_energy {
+    double kinetic, elastic, gravity; /* [J]; gravity potential relative to z = 0 */
+} cs_energy;
+int cs_object_energy(const cs_world_t *w, cs_object_id id, cs_energy *e);
+
+/* Cost and convergence of the last step or static solve, summed over objects. */
+typedef struct cs_step_stats {
+    double ms_total;
+    double ms_inputs, ms_rotations, ms_rhs, ms_solve, ms_post, ms_skin; /* by stage */
+    int cg_iterations;      /* total over objects (sum of Newton iterations for static) */
+    double cg_residual;     /* largest final relative residual over objects */
+    int objects_stepped;    /* objects awake and not fully fixed */
+    bool converged;
+} cs_step_stats;
+const cs_step_stats *cs_world_last_stats(const cs_world_t *w);
+
+/* The 24×24 element stiffness matrix of a cube (row-major, seed 000 App. A corner order). */
+void cs_cube_stiffness(double young, double poisson, double h, double K[24 * 24]);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

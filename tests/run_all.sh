@@ -1,0 +1,38 @@
+#!/usr/bin/env bash
+# Runs every test: the unit tests (in the sanitizer build unless CS_UNIT_BIN says otherwise)
+# and every integration script tests/it/*.sh. Each prints "PASS name" / "FAIL name" lines;
+# this script totals them and ends with the line "N passed, N failed".
+set -u
+cd "$(dirname "$0")/.."
+unit=${CS_UNIT_BIN:-build/san/bin/cs_unit_tests}
+log=$(mktemp)
+trap 'rm -f "$log"' EXIT
+
+echo "== unit tests ($unit)"
+if [ -x "$unit" ]; then
+  ASAN_OPTIONS=detect_leaks=1 "$unit" ${CS_UNIT_ARGS:-} 2>&1 | tee -a "$log"
+  rc=${PIPESTATUS[0]}
+  if [ "$rc" -gt 1 ]; then echo "FAIL unit-runner (exit $rc: crashed or sanitizer report)" | tee -a "$log"; fi
+else
+  echo "FAIL unit-runner (no $unit)" | tee -a "$log"
+fi
+
+for t in tests/it/*.sh; do
+  [ -e "$t" ] || continue
+  echo "== $t"
+  one=$(mktemp)
+  timeout 600 bash "$t" 2>&1 | tee "$one"
+  rc=${PIPESTATUS[0]}
+  cat "$one" >> "$log"
+  if [ "$rc" -ne 0 ] && ! grep -q '^FAIL ' "$one"; then
+    echo "FAIL $(basename "$t" .sh) (exit $rc with no FAIL line)" | tee -a "$log"
+  fi
+  rm -f "$one"
+done
+
+p=$(grep -c '^PASS ' "$log")
+f=$(grep -c '^FAIL ' "$log")
+echo
+grep '^FAIL ' "$log" | sed 's/^/  /'
+echo "$p passed, $f failed"
+[ "$f" -eq 0 ] && [ "$p" -gt 0 ]
