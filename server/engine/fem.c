@@ -1,0 +1,303 @@
+/*
+ * fem.c — seed 000 §2.2 (warped stiffness / corotation) and Appendix A (cube stiffness).
+ *
+ * The element matrix is computed, not transcribed: Appendix A's sub-matrices are garbled in
+ * our copy of the paper, so K comes from 2×2×2 Gauss quadrature of the trilinear shape
+ * functions (exact for a cube); tests/unit/test_fem.c checks it against the closed-form
+ * constants that survived (a, b, c and the diagonal-block entries).
+ */
+#include "fem.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "cubesim.h"
+
+/* Sign pattern (2·corner − 1) of each corner: the gradient directions of the shape functions. */
+static const double SGN[8][3] = {
+    {-1, -1, -1}, {1, -1, -1}, {1, 1, -1}, {-1, 1, -1},
+    {-1, -1, 1},  {1, -1, 1},  {1, 1, 1},  {-1, 1, 1},
+};
+
+void cs_cube_stiffness(double young, double poisson, double h, double K[24 * 24])
+{
+    const double lambda = young * poisson / ((1 + poisson) * (1 - 2 * poisson));
+    const double mu = young / (2 * (1 + poisson));
+    const double g = 1.0 / sqrt(3.0);
+    const double detj = h * h * h / 8.0;
+    memset(K, 0, sizeof(double) * 576);
+    for (int gp = 0; gp < 8; gp++) {
+        const double xi[3] = {SGN[gp][0] * g, SGN[gp][1] * g, SGN[gp][2] * g};
+        double grad[8][3];
+        for (int k = 0; k < 8; k++) {
+            double f[3];
+            for (int a = 0; a < 3; a++)
+                f[a] = 1 + SGN[k][a] * xi[a];
+            /* dφ/dx = (2/h)·∂φ/∂ξ, φ = ⅛ Π (1 + s ξ) */
+            grad[k][0] = SGN[k][0] * f[1] * f[2] / 8.0 * (2.0 / h);
+            grad[k][1] = SGN[k][1] * f[0] * f[2] / 8.0 * (2.0 / h);
+            grad[k][2] = SGN[k][2] * f[0] * f[1] / 8.0 * (2.0 / h);
+        }
+        for (int a = 0; a < 8; a++)
+            for (int b = 0; b < 8; b++) {
+                const double dot = grad[a][0] * grad[b][0] + grad[a][1] * grad[b][1] +
+                                   grad[a][2] * grad[b][2];
+                for (int i = 0; i < 3; i++)
+                    for (int j = 0; j < 3; j++) {
+                        double v = lambda * grad[a][i] * grad[b][j] +
+                                   mu * grad[a][j] * grad[b][i] + (i == j ? mu * dot : 0.0);
+                        K[(3 * a + i) * 24 + 3 * b + j] += v * detj;
+                    }
+            }
+    }
+}
+
+void cs_quat_to_mat(const double q[4], double R[9])
+{
+    const double w = q[0], x = q[1], y = q[2], z = q[3];
+    R[0] = 1 - 2 * (y * y + z * z);
+    R[1] = 2 * (x * y - w * z);
+    R[2] = 2 * (x * z + w * y);
+    R[3] = 2 * (x * y + w * z);
+    R[4] = 1 - 2 * (x * x + z * z);
+    R[5] = 2 * (y * z - w * x);
+    R[6] = 2 * (x * z - w * y);
+    R[7] = 2 * (y * z + w * x);
+    R[8] = 1 - 2 * (x * x + y * y);
+}
+
+void cs_extract_rotation(const double A[9], double q[4], int max_iter)
+{
+    for (int it = 0; it < max_iter; it++) {
+        double R[9], om[3] = {0, 0, 0}, den = 0;
+        cs_quat_to_mat(q, R);
+        for (int c = 0; c < 3; c++) {
+            const double r[3] = {R[c], R[3 + c], R[6 + c]};
+            const double a[3] = {A[c], A[3 + c], A[6 + c]};
+            om[0] += r[1] * a[2] - r[2] * a[1];
+            om[1] += r[2] * a[0] - r[0] * a[2];
+            om[2] += r[0] * a[1] - r[1] * a[0];
+            den += r[0] * a[0] + r[1] * a[1] + r[2] * a[2];
+        }
+        const double s = 1.0 / (fabs(den) + 1e-9);
+        om[0] *= s;
+        om[1] *= s;
+        om[2] *= s;
+        const double wn = sqrt(om[0] * om[0] + om[1] * om[1] + om[2] * om[2]);
+        if (wn < 1e-12)
+            break;
+        const double half = 0.5 * wn, sh = sin(half) / wn;
+        const double d[4] = {cos(half), om[0] * sh, om[1] * sh, om[2] * sh};
+        const double n[4] = {
+            d[0] * q[0] - d[1] * q[1] - d[2] * q[2] - d[3] * q[3],
+            d[0] * q[1] + d[1] * q[0] + d[2] * q[3] - d[3] * q[2],
+            d[0] * q[2] - d[1] * q[3] + d[2] * q[0] + d[3] * q[1],
+            d[0] * q[3] + d[1] * q[2] - d[2] * q[1] + d[3] * q[0],
+        };
+        const double nn = 1.0 / sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2] + n[3] * n[3]);
+        for (int i = 0; i < 4; i++)
+            q[i] = n[i] * nn;
+        if (wn < 1e-9)
+            break;
+    }
+}
+
+int cs_fem_relink(cs_fem *fem, const cs_cubemesh *cm)
+{
+    free(fem->adj_start);
+    free(fem->adj);
+    fem->n_cells = cm->n_cells;
+    fem->n_nodes = cm->n_nodes;
+    fem->cell_nodes = cm->cell_nodes;
+    fem->adj_start = calloc((size_t)cm->n_nodes + 1, sizeof *fem->adj_start);
+    fem->adj = malloc((size_t)cm->n_cells * 8 * sizeof *fem->adj);
+    if (!fem->adj_start || !fem->adj)
+        return -1;
+    for (int e = 0; e < 8 * cm->n_cells; e++)
+        fem->adj_start[cm->cell_nodes[e] + 1]++;
+    for (int n = 0; n < cm->n_nodes; n++)
+        fem->adj_start[n + 1] += fem->adj_start[n];
+    int32_t *fill = malloc((size_t)cm->n_nodes * sizeof *fill);
+    if (!fill)
+        return -1;
+    memcpy(fill, fem->adj_start, (size_t)cm->n_nodes * sizeof *fill);
+    /* Cells in increasing order: the gather order is fixed by the mesh, not by threads. */
+    for (int e = 0; e < 8 * cm->n_cells; e++)
+        fem->adj[fill[cm->cell_nodes[e]]++] = e;
+    free(fill);
+    return 0;
+}
+
+int cs_fem_init(cs_fem *fem, const cs_cubemesh *cm, double young, double poisson,
+                bool corotational, int threads)
+{
+    memset(fem, 0, sizeof *fem);
+    fem->h = cm->h;
+    fem->corotational = corotational;
+    fem->threads = threads > 0 ? threads : 1;
+    cs_cube_stiffness(young, poisson, cm->h, fem->K);
+    fem->R = malloc((size_t)cm->n_cells * 9 * sizeof *fem->R);
+    fem->q = malloc((size_t)cm->n_cells * 4 * sizeof *fem->q);
+    fem->fe = malloc((size_t)cm->n_cells * 24 * sizeof *fem->fe);
+    if (!fem->R || !fem->q || !fem->fe || cs_fem_relink(fem, cm) != 0) {
+        cs_fem_free(fem);
+        return -1;
+    }
+    cs_fem_reset_rotations(fem);
+    return 0;
+}
+
+void cs_fem_free(cs_fem *fem)
+{
+    free(fem->R);
+    free(fem->q);
+    free(fem->fe);
+    free(fem->adj_start);
+    free(fem->adj);
+    memset(fem, 0, sizeof *fem);
+}
+
+void cs_fem_reset_rotations(cs_fem *fem)
+{
+    for (int c = 0; c < fem->n_cells; c++) {
+        static const double I[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+        memcpy(fem->R + 9 * c, I, sizeof I);
+        fem->q[4 * c] = 1;
+        fem->q[4 * c + 1] = fem->q[4 * c + 2] = fem->q[4 * c + 3] = 0;
+    }
+}
+
+void cs_fem_update_rotations(cs_fem *fem, const double *x)
+{
+    if (!fem->corotational)
+        return;
+    const double inv4h = 1.0 / (4.0 * fem->h);
+#pragma omp parallel for num_threads(fem->threads) schedule(static)
+    for (int c = 0; c < fem->n_cells; c++) {
+        const int32_t *nd = fem->cell_nodes + 8 * c;
+        double F[9] = {0};
+        for (int k = 0; k < 8; k++) {
+            const double *p = x + 3 * nd[k];
+            for (int i = 0; i < 3; i++)
+                for (int j = 0; j < 3; j++)
+                    F[3 * i + j] += p[i] * SGN[k][j];
+        }
+        for (int i = 0; i < 9; i++)
+            F[i] *= inv4h;
+        cs_extract_rotation(F, fem->q + 4 * c, 30);
+        cs_quat_to_mat(fem->q + 4 * c, fem->R + 9 * c);
+    }
+}
+
+/* y = K x for one element (24-vectors). */
+static inline void kmul(const double *restrict K, const double *restrict x, double *restrict y)
+{
+    for (int i = 0; i < 24; i++) {
+        const double *row = K + 24 * i;
+        double s = 0;
+        for (int j = 0; j < 24; j++)
+            s += row[j] * x[j];
+        y[i] = s;
+    }
+}
+
+/* Node pass: out[n] = sign · Σ fe over the node's (cell, corner) slots, in a fixed order. */
+static void gather(cs_fem *fem, double *out, double sign)
+{
+#pragma omp parallel for num_threads(fem->threads) schedule(static)
+    for (int n = 0; n < fem->n_nodes; n++) {
+        double s0 = 0, s1 = 0, s2 = 0;
+        for (int a = fem->adj_start[n]; a < fem->adj_start[n + 1]; a++) {
+            const double *v = fem->fe + 3 * fem->adj[a];
+            s0 += v[0];
+            s1 += v[1];
+            s2 += v[2];
+        }
+        out[3 * n] = sign * s0;
+        out[3 * n + 1] = sign * s1;
+        out[3 * n + 2] = sign * s2;
+    }
+}
+
+void cs_fem_elastic_force(cs_fem *fem, const double *x, double *f, double *energy)
+{
+    const double h = fem->h;
+    double e_sum = 0;
+#pragma omp parallel for num_threads(fem->threads) schedule(static) reduction(+ : e_sum)
+    for (int c = 0; c < fem->n_cells; c++) {
+        const int32_t *nd = fem->cell_nodes + 8 * c;
+        const double *R = fem->R + 9 * c;
+        const double *x0 = x + 3 * nd[0];
+        double u[24], ku[24];
+        for (int k = 0; k < 8; k++) {
+            const double *p = x + 3 * nd[k];
+            const double d[3] = {p[0] - x0[0], p[1] - x0[1], p[2] - x0[2]};
+            for (int i = 0; i < 3; i++)
+                u[3 * k + i] = R[i] * d[0] + R[3 + i] * d[1] + R[6 + i] * d[2] -
+                               h * CS_CORNER[k][i];
+        }
+        kmul(fem->K, u, ku);
+        double *out = fem->fe + 24 * c;
+        double e = 0;
+        for (int k = 0; k < 8; k++) {
+            const double *l = ku + 3 * k;
+            for (int i = 0; i < 3; i++)
+                out[3 * k + i] = R[3 * i] * l[0] + R[3 * i + 1] * l[1] + R[3 * i + 2] * l[2];
+            e += u[3 * k] * l[0] + u[3 * k + 1] * l[1] + u[3 * k + 2] * l[2];
+        }
+        e_sum += 0.5 * e;
+    }
+    gather(fem, f, -1.0);
+    if (energy)
+        *energy = e_sum;
+}
+
+void cs_fem_apply_K(cs_fem *fem, const double *p, double *y)
+{
+#pragma omp parallel for num_threads(fem->threads) schedule(static)
+    for (int c = 0; c < fem->n_cells; c++) {
+        const int32_t *nd = fem->cell_nodes + 8 * c;
+        const double *R = fem->R + 9 * c;
+        double u[24], ku[24];
+        for (int k = 0; k < 8; k++) {
+            const double *d = p + 3 * nd[k];
+            for (int i = 0; i < 3; i++)
+                u[3 * k + i] = R[i] * d[0] + R[3 + i] * d[1] + R[6 + i] * d[2];
+        }
+        kmul(fem->K, u, ku);
+        double *out = fem->fe + 24 * c;
+        for (int k = 0; k < 8; k++) {
+            const double *l = ku + 3 * k;
+            for (int i = 0; i < 3; i++)
+                out[3 * k + i] = R[3 * i] * l[0] + R[3 * i + 1] * l[1] + R[3 * i + 2] * l[2];
+        }
+    }
+    gather(fem, y, 1.0);
+}
+
+void cs_fem_diag_blocks(cs_fem *fem, double *blocks)
+{
+    memset(blocks, 0, sizeof(double) * 9 * (size_t)fem->n_nodes);
+    /* Serial: called once per step, 8·n_cells small products. */
+    for (int c = 0; c < fem->n_cells; c++) {
+        const int32_t *nd = fem->cell_nodes + 8 * c;
+        const double *R = fem->R + 9 * c;
+        for (int k = 0; k < 8; k++) {
+            double Kk[9], T[9];
+            for (int i = 0; i < 3; i++)
+                for (int j = 0; j < 3; j++)
+                    Kk[3 * i + j] = fem->K[(3 * k + i) * 24 + 3 * k + j];
+            /* T = R Kk, then blocks += T Rᵀ */
+            for (int i = 0; i < 3; i++)
+                for (int j = 0; j < 3; j++)
+                    T[3 * i + j] = R[3 * i] * Kk[j] + R[3 * i + 1] * Kk[3 + j] +
+                                   R[3 * i + 2] * Kk[6 + j];
+            double *B = blocks + 9 * nd[k];
+            for (int i = 0; i < 3; i++)
+                for (int j = 0; j < 3; j++)
+                    B[3 * i + j] += T[3 * i] * R[3 * j] + T[3 * i + 1] * R[3 * j + 1] +
+                                    T[3 * i + 2] * R[3 * j + 2];
+        }
+    }
+}

@@ -1,0 +1,64 @@
+/*
+ * fem.h — hexahedral finite elements on the cube mesh: seed 000 §2.2 and Appendix A.
+ *
+ * One 24×24 stiffness matrix K per material (all cubes share their geometry), computed by
+ * 2×2×2 Gauss quadrature of the trilinear shape functions, which is exact for a cube.
+ * Linear model: f = -K (x - X) per element. Corotational (warped stiffness): each element's
+ * rotation R is the rotational part of the deformation gradient at its centre, and
+ * f = -R K (Rᵀ x - X); the tangent used by the implicit solve is R K Rᵀ.
+ *
+ * Products are matrix-free and race-free: an element pass writes each cell's 24 results to its
+ * own slot, a node pass gathers them through a node→(cell,corner) list in a fixed order, so
+ * results are identical for any number of threads.
+ *
+ * Owns: R, q, fe, adj_start, adj. Borrows: cell_nodes (from the object's cube mesh).
+ */
+#ifndef CS_FEM_H
+#define CS_FEM_H
+
+#include <stdbool.h>
+#include <stdint.h>
+#include "cubemesh.h"
+
+typedef struct cs_fem {
+    int n_cells, n_nodes;
+    const int32_t *cell_nodes; /* 8 per cell, borrowed */
+    double h;
+    bool corotational;
+    int threads;
+    double K[24 * 24];
+    double *R;          /* 9 per cell, row-major; identity for the linear model */
+    double *q;          /* 4 per cell (w,x,y,z): warm start of the rotation extraction */
+    double *fe;         /* 24 per cell: scratch of the element pass */
+    int32_t *adj_start; /* n_nodes + 1 */
+    int32_t *adj;       /* cell*8 + corner, grouped by node */
+} cs_fem;
+
+int cs_fem_init(cs_fem *fem, const cs_cubemesh *cm, double young, double poisson,
+                bool corotational, int threads);
+void cs_fem_free(cs_fem *fem);
+/* Rebuild the node→cell list after the cell/node links changed (fracture). */
+int cs_fem_relink(cs_fem *fem, const cs_cubemesh *cm);
+
+/* Per-element rotations from current positions x (3 per node). No-op for the linear model. */
+void cs_fem_update_rotations(cs_fem *fem, const double *x);
+/* Reset rotations to identity (reset / rest state). */
+void cs_fem_reset_rotations(cs_fem *fem);
+
+/*
+ * Elastic forces f = -Σ R K (Rᵀ x - X) (3 per node, overwritten) and, if energy is non-NULL,
+ * the elastic energy ½ Σ uᵀ K u with u = Rᵀ x - X in element-local coordinates.
+ */
+void cs_fem_elastic_force(cs_fem *fem, const double *x, double *f, double *energy);
+/* y = Σ R K Rᵀ p over elements (3 per node, overwritten). */
+void cs_fem_apply_K(cs_fem *fem, const double *p, double *y);
+/* The 3×3 diagonal blocks of Σ R K Rᵀ (9 per node, overwritten). */
+void cs_fem_diag_blocks(cs_fem *fem, double *blocks);
+
+/* Rotational part of a 3×3 matrix A (row-major) by the iterative method of Müller et al.
+ * (2016), warm-started from unit quaternion q (w,x,y,z), which is updated. Robust for
+ * inverted and degenerate A. */
+void cs_extract_rotation(const double A[9], double q[4], int max_iter);
+void cs_quat_to_mat(const double q[4], double R[9]);
+
+#endif

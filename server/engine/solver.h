@@ -1,0 +1,48 @@
+/*
+ * solver.h — matrix-free preconditioned conjugate gradient (seed 000 §2.2: "the Conjugate
+ * Gradient solver only needs to multiply the global stiffness matrix with a vector").
+ *
+ * The operator is a callback; the preconditioner is 3×3 block Jacobi (the inverse of each
+ * node's diagonal block). Constrained degrees of freedom (mask[i] != 0) are held at their
+ * initial value: residual and search directions are projected to zero there (filtered CG).
+ * Reductions are summed in fixed blocks, so results do not depend on the thread count.
+ *
+ * Owns: the scratch vectors in cs_cg_work.
+ */
+#ifndef CS_SOLVER_H
+#define CS_SOLVER_H
+
+#include <stdint.h>
+
+typedef void (*cs_matvec_fn)(void *ctx, const double *x, double *y);
+
+typedef struct cs_cg_work {
+    int n;        /* degrees of freedom (3 per node) */
+    double *r, *z, *p, *q, *partial;
+} cs_cg_work;
+
+int cs_cg_work_init(cs_cg_work *w, int n);
+void cs_cg_work_free(cs_cg_work *w);
+
+/* Invert each 3×3 block in place (9 per node); a singular block becomes its diagonal inverse. */
+void cs_invert_blocks(double *blocks, int n_nodes);
+
+typedef struct cs_cg_result {
+    int iterations;
+    double relres;   /* ‖r‖/‖b‖ at exit (b projected) */
+    int converged;
+} cs_cg_result;
+
+/*
+ * Solve A x = b for the unconstrained dofs, x holding the initial guess (warm start).
+ * Stops when ‖r‖ <= tol·‖b‖ or after max_iter. A must be symmetric positive definite on
+ * the free dofs. Returns the result; x is finite on exit unless A or b were not.
+ */
+cs_cg_result cs_pcg(cs_cg_work *w, cs_matvec_fn A, void *ctx, const double *inv_blocks,
+                    const uint8_t *mask, const double *b, double *x, double tol, int max_iter,
+                    int threads);
+
+/* Deterministic dot product (fixed blocks, then a serial sum). */
+double cs_dot(cs_cg_work *w, const double *a, const double *b, int n, int threads);
+
+#endif

@@ -1,0 +1,1094 @@
+/*
+ * world.c — the engine's face (cubesim.h): worlds, objects, inputs and the step.
+ *
+ * One step, per object that is awake and not fully fixed (seed 000 §2.2, DESIGN.md):
+ *   inputs → rotations (corotational only) → right-hand side → block-Jacobi PCG on
+ *   (1+dt·α)M + (dt·β+dt²)K_R [+ dt²·drag springs] for the new velocities (implicit Euler,
+ *   warm-started from the old ones) → positions → ground → skin the surface → sleep test.
+ * A step that produces non-finite values is undone and reported (CS_ERR_DIVERGED).
+ *
+ * Owns: every object and everything an object holds. Objects are kept in creation order in
+ * an array of pointers; ids count up from 1 and are never reused.
+ */
+#include "cubesim.h"
+
+#include <math.h>
+#include <omp.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "cubemesh.h"
+#include "fem.h"
+#include "solver.h"
+#include "surface.h"
+#include "voxelize.h"
+
+#define CS_MAX_INPUTS 1024
+#define CS_MAX_NAME 255
+
+typedef enum { CS_INPUT_FORCE = 0, CS_INPUT_DRAG = 1 } cs_input_kind;
+
+typedef struct cs_input {
+    cs_input_kind kind;
+    int32_t cell;
+    double w[8];          /* trilinear weight of each corner of `cell` */
+    double force[3];      /* CS_INPUT_FORCE */
+    double target[3];     /* CS_INPUT_DRAG */
+    double stiffness;
+    int steps_left;
+} cs_input;
+
+typedef struct cs_object {
+    cs_object_id id;
+    char *name;
+    cs_model model;
+    cs_material mat;
+    bool fracture;
+    cs_cubemesh cm;
+    cs_surface surf;
+    cs_fem fem;
+    int n;                 /* nodes */
+    double *x, *v, *m;     /* 3, 3, 1 per node */
+    double *f_const;       /* gravity + scene loads, 3 per node */
+    double *f, *b, *v1, *blocks;
+    uint8_t *mask;         /* per dof: held */
+    int n_fixed_nodes;
+    double mass;
+    cs_cg_work cg;
+    cs_input inputs[CS_MAX_INPUTS];
+    int n_inputs;
+    int still_steps;
+    bool sleeping;
+    uint32_t topology_version;
+    /* operator coefficients of the current solve */
+    double mcoef, kcoef, dcoef;
+} cs_object;
+
+struct cs_world {
+    cs_world_def def;
+    int threads;
+    cs_object **objects;
+    int n_objects, cap_objects;
+    cs_object_id next_id;
+    double time;
+    int64_t frame;
+    cs_step_stats stats;
+};
+
+/* ---------------------------------------------------------------- small helpers */
+
+static int fail(char *err, size_t errlen, int code, const char *fmt, ...)
+{
+    if (err && errlen) {
+        va_list ap;
+        va_start(ap, fmt);
+        vsnprintf(err, errlen, fmt, ap);
+        va_end(ap);
+    }
+    return code;
+}
+
+static double now_ms(void)
+{
+    struct timespec t;
+    clock_gettime(CLOCK_MONOTONIC, &t);
+    return t.tv_sec * 1e3 + t.tv_nsec / 1e6;
+}
+
+static bool finite3(const double v[3])
+{
+    return isfinite(v[0]) && isfinite(v[1]) && isfinite(v[2]);
+}
+
+static double norm3(const double v[3])
+{
+    return sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+}
+
+const char *cs_status_str(int status)
+{
+    switch (status) {
+    case CS_OK: return "ok";
+    case CS_ERR_INVALID: return "invalid argument";
+    case CS_ERR_UNKNOWN_OBJECT: return "unknown object";
+    case CS_ERR_NOMEM: return "out of memory";
+    case CS_ERR_GEOMETRY: return "bad geometry";
+    case CS_ERR_NOT_CONVERGED: return "not converged";
+    case CS_ERR_DIVERGED: return "diverged";
+    default: return "unknown status";
+    }
+}
+
+static const char *const MODEL_NAMES[] = {"linear", "corotational", "mss", "localframe", "rigid"};
+
+int cs_model_from_name(const char *name, cs_model *out)
+{
+    for (int i = 0; i < 5; i++)
+        if (name && !strcmp(name, MODEL_NAMES[i])) {
+            *out = (cs_model)i;
+            return 0;
+        }
+    return -1;
+}
+
+const char *cs_model_name(cs_model m)
+{
+    return (unsigned)m < 5 ? MODEL_NAMES[m] : "unknown";
+}
+
+/* ---------------------------------------------------------------- defaults */
+
+cs_material cs_material_default(void)
+{
+    return (cs_material){.young = 1000.0, .poisson = 0.3, .density = 1000.0,
+                         .damping = {0.0, 0.0}, .strength = 1e300};
+}
+
+cs_object_def cs_object_def_default(void)
+{
+    return (cs_object_def){.name = NULL, .model = CS_MODEL_COROTATIONAL,
+                           .material = cs_material_default(), .cube_size = 0.1,
+                           .geometry = CS_GEOMETRY_CELLS};
+}
+
+cs_world_def cs_world_def_default(void)
+{
+    return (cs_world_def){.dt = 1.0 / 60.0, .gravity = {0, 0, -9.81}, .has_ground = false,
+                          .ground_height = 0.0, .ground_friction = 0.5, .cg_tolerance = 1e-6,
+                          .cg_max_iterations = 500, .threads = 0, .sleep_speed = 5e-4,
+                          .sleep_steps = 30, .max_force = 1e9};
+}
+
+/* ---------------------------------------------------------------- world lifetime */
+
+int cs_world_create(const cs_world_def *def, cs_world_t **out, char *err, size_t errlen)
+{
+    *out = NULL;
+    if (!def)
+        return fail(err, errlen, CS_ERR_INVALID, "world definition is NULL");
+    if (!(def->dt > 0 && def->dt <= 1.0))
+        return fail(err, errlen, CS_ERR_INVALID, "dt must be in (0, 1] s, got %g", def->dt);
+    if (!finite3(def->gravity) || norm3(def->gravity) > 1e4)
+        return fail(err, errlen, CS_ERR_INVALID, "gravity must be finite and below 1e4 m/s^2");
+    if (!isfinite(def->ground_height))
+        return fail(err, errlen, CS_ERR_INVALID, "ground height must be finite");
+    if (!(def->ground_friction >= 0 && def->ground_friction <= 100))
+        return fail(err, errlen, CS_ERR_INVALID, "ground friction must be in [0, 100]");
+    if (!(def->cg_tolerance > 0 && def->cg_tolerance < 1))
+        return fail(err, errlen, CS_ERR_INVALID, "solver tolerance must be in (0, 1), got %g",
+                    def->cg_tolerance);
+    if (def->cg_max_iterations < 1 || def->cg_max_iterations > 1000000)
+        return fail(err, errlen, CS_ERR_INVALID, "solver max_iterations must be in [1, 1e6]");
+    if (def->threads < 0 || def->threads > 256)
+        return fail(err, errlen, CS_ERR_INVALID, "threads must be in [0, 256]");
+    if (!(def->sleep_speed >= 0 && isfinite(def->sleep_speed)) || def->sleep_steps < 0)
+        return fail(err, errlen, CS_ERR_INVALID, "sleep speed and steps must be >= 0");
+    if (!(def->max_force > 0 && isfinite(def->max_force)))
+        return fail(err, errlen, CS_ERR_INVALID, "max_force must be positive and finite");
+    cs_world_t *w = calloc(1, sizeof *w);
+    if (!w)
+        return fail(err, errlen, CS_ERR_NOMEM, "out of memory creating a world");
+    w->def = *def;
+    w->threads = def->threads > 0 ? def->threads : omp_get_num_procs();
+    if (w->threads < 1)
+        w->threads = 1;
+    w->next_id = 1;
+    *out = w;
+    return CS_OK;
+}
+
+static void object_free(cs_object *o)
+{
+    if (!o)
+        return;
+    free(o->name);
+    cs_cubemesh_free(&o->cm);
+    cs_surface_free(&o->surf);
+    cs_fem_free(&o->fem);
+    free(o->x);
+    free(o->v);
+    free(o->m);
+    free(o->f_const);
+    free(o->f);
+    free(o->b);
+    free(o->v1);
+    free(o->blocks);
+    free(o->mask);
+    cs_cg_work_free(&o->cg);
+    free(o);
+}
+
+void cs_world_destroy(cs_world_t *w)
+{
+    if (!w)
+        return;
+    for (int i = 0; i < w->n_objects; i++)
+        object_free(w->objects[i]);
+    free(w->objects);
+    free(w);
+}
+
+static cs_object *find(const cs_world_t *w, cs_object_id id)
+{
+    if (!w || id == CS_NULL_OBJECT)
+        return NULL;
+    for (int i = 0; i < w->n_objects; i++)
+        if (w->objects[i]->id == id)
+            return w->objects[i];
+    return NULL;
+}
+
+/* ---------------------------------------------------------------- adding objects */
+
+static int check_material(const cs_material *m, char *err, size_t errlen)
+{
+    if (!(m->young > 0 && isfinite(m->young)))
+        return fail(err, errlen, CS_ERR_INVALID, "material young must be > 0 Pa, got %g",
+                    m->young);
+    if (!(m->poisson >= 0 && m->poisson < 0.5))
+        return fail(err, errlen, CS_ERR_INVALID, "material poisson must be in [0, 0.5), got %g",
+                    m->poisson);
+    if (!(m->density > 0 && isfinite(m->density)))
+        return fail(err, errlen, CS_ERR_INVALID, "material density must be > 0, got %g",
+                    m->density);
+    if (!(m->damping[0] >= 0 && isfinite(m->damping[0]) && m->damping[1] >= 0 &&
+          isfinite(m->damping[1])))
+        return fail(err, errlen, CS_ERR_INVALID, "material damping must be finite and >= 0");
+    if (!(m->strength > 0))
+        return fail(err, errlen, CS_ERR_INVALID, "material strength must be > 0");
+    return CS_OK;
+}
+
+static bool in_box(const cs_aabb *b, const double p[3])
+{
+    return p[0] >= b->min[0] && p[0] <= b->max[0] && p[1] >= b->min[1] && p[1] <= b->max[1] &&
+           p[2] >= b->min[2] && p[2] <= b->max[2];
+}
+
+/* Faces of a cell: axis, side, and the corners on that face in counter-clockwise order. */
+static const int FACE_CORNERS[6][4] = {
+    {0, 3, 7, 4}, {1, 2, 6, 5}, {0, 4, 5, 1}, {3, 7, 6, 2}, {0, 1, 2, 3}, {4, 5, 6, 7},
+};
+
+/* DESIGN.md: a load's total force is spread over the exposed faces whose centres lie in its
+ * box, a quarter of each face's share to each of its corners. */
+static int apply_loads(cs_object *o, const cs_object_def *def, char *err, size_t errlen)
+{
+    const cs_cubemesh *cm = &o->cm;
+    for (int l = 0; l < def->n_loads; l++) {
+        const cs_load *ld = &def->loads[l];
+        if (!finite3(ld->force) || !finite3(ld->box.min) || !finite3(ld->box.max))
+            return fail(err, errlen, CS_ERR_INVALID, "loads[%d]: values must be finite", l);
+        int count = 0;
+        for (int pass = 0; pass < 2; pass++) {
+            for (int c = 0; c < cm->n_cells; c++) {
+                const int32_t *q = cm->cell_ijk + 3 * c;
+                for (int f = 0; f < 6; f++) {
+                    int axis = f / 2, side = f % 2;
+                    int32_t nb[3] = {q[0], q[1], q[2]};
+                    nb[axis] += side ? 1 : -1;
+                    if (cs_cubemesh_find(cm, nb[0], nb[1], nb[2]) >= 0)
+                        continue;
+                    double centre[3];
+                    for (int a = 0; a < 3; a++)
+                        centre[a] = cm->origin[a] + cm->h * (q[a] + 0.5);
+                    centre[axis] += (side ? 0.5 : -0.5) * cm->h;
+                    if (!in_box(&ld->box, centre))
+                        continue;
+                    if (pass == 0) {
+                        count++;
+                        continue;
+                    }
+                    for (int k = 0; k < 4; k++) {
+                        int32_t node = cm->cell_nodes[8 * c + FACE_CORNERS[f][k]];
+                        for (int a = 0; a < 3; a++)
+                            o->f_const[3 * node + a] += ld->force[a] / (4.0 * count);
+                    }
+                }
+            }
+            if (pass == 0 && count == 0)
+                return fail(err, errlen, CS_ERR_INVALID,
+                            "loads[%d]: no exposed cube face centre lies in its box", l);
+        }
+    }
+    return CS_OK;
+}
+
+static int build_geometry(cs_object *o, const cs_object_def *def, char *err, size_t errlen)
+{
+    const double h = def->cube_size;
+    if (def->geometry == CS_GEOMETRY_CELLS) {
+        if (!def->cells_ijk || def->n_cells <= 0)
+            return fail(err, errlen, CS_ERR_INVALID, "cells: no cells given");
+        if (!finite3(def->cells_origin))
+            return fail(err, errlen, CS_ERR_INVALID, "cells: origin must be finite");
+        if (cs_cubemesh_build(&o->cm, h, def->cells_origin, def->cells_ijk, def->n_cells, err,
+                              errlen) != 0)
+            return CS_ERR_INVALID;
+        double *v = NULL;
+        int32_t *t = NULL;
+        int nv = 0, nt = 0;
+        if (cs_surface_of_cells(&o->cm, 1, &v, &nv, &t, &nt, err, errlen) != 0)
+            return CS_ERR_GEOMETRY;
+        int rc = cs_surface_bind(&o->surf, &o->cm, v, nv, t, nt, err, errlen);
+        free(v);
+        free(t);
+        return rc == 0 ? CS_OK : CS_ERR_GEOMETRY;
+    }
+    if (def->geometry != CS_GEOMETRY_MESH)
+        return fail(err, errlen, CS_ERR_INVALID, "unknown geometry kind %d", (int)def->geometry);
+    if (!def->mesh_vertices || !def->mesh_triangles || def->n_mesh_vertices < 4 ||
+        def->n_mesh_triangles < 4)
+        return fail(err, errlen, CS_ERR_GEOMETRY, "mesh: fewer than 4 vertices or triangles");
+    for (int i = 0; i < 3 * def->n_mesh_vertices; i++)
+        if (!isfinite(def->mesh_vertices[i]))
+            return fail(err, errlen, CS_ERR_GEOMETRY, "mesh: vertex %d is not finite", i / 3);
+    for (int i = 0; i < 3 * def->n_mesh_triangles; i++)
+        if (def->mesh_triangles[i] < 0 || def->mesh_triangles[i] >= def->n_mesh_vertices)
+            return fail(err, errlen, CS_ERR_GEOMETRY, "mesh: triangle %d has a bad index", i / 3);
+    /* Seed 000 §3.3 on a private copy: no surface edge longer than h. */
+    int nv = def->n_mesh_vertices, nt = def->n_mesh_triangles;
+    double *v = malloc((size_t)nv * 3 * sizeof *v);
+    int32_t *t = malloc((size_t)nt * 3 * sizeof *t);
+    int32_t *ijk = NULL;
+    int n_cells = 0, rc = CS_ERR_GEOMETRY;
+    double origin[3];
+    if (!v || !t) {
+        rc = fail(err, errlen, CS_ERR_NOMEM, "out of memory copying the mesh");
+        goto out;
+    }
+    memcpy(v, def->mesh_vertices, (size_t)nv * 3 * sizeof *v);
+    memcpy(t, def->mesh_triangles, (size_t)nt * 3 * sizeof *t);
+    if (cs_subdivide_edges(&v, &nv, &t, &nt, h, err, errlen) != 0)
+        goto out;
+    if (cs_voxelize(v, nv, t, nt, h, origin, &ijk, &n_cells, err, errlen) != 0)
+        goto out;
+    if (cs_cubemesh_build(&o->cm, h, origin, ijk, n_cells, err, errlen) != 0)
+        goto out;
+    if (cs_surface_bind(&o->surf, &o->cm, v, nv, t, nt, err, errlen) != 0)
+        goto out;
+    rc = CS_OK;
+out:
+    free(v);
+    free(t);
+    free(ijk);
+    return rc;
+}
+
+static int alloc_state(cs_object *o)
+{
+    size_t n3 = (size_t)o->n * 3;
+    o->x = malloc(n3 * sizeof(double));
+    o->v = calloc(n3, sizeof(double));
+    o->m = calloc((size_t)o->n, sizeof(double));
+    o->f_const = calloc(n3, sizeof(double));
+    o->f = malloc(n3 * sizeof(double));
+    o->b = malloc(n3 * sizeof(double));
+    o->v1 = malloc(n3 * sizeof(double));
+    o->blocks = malloc(n3 * 3 * sizeof(double));
+    o->mask = calloc(n3, 1);
+    if (!o->x || !o->v || !o->m || !o->f_const || !o->f || !o->b || !o->v1 || !o->blocks ||
+        !o->mask || cs_cg_work_init(&o->cg, (int)n3) != 0)
+        return -1;
+    return 0;
+}
+
+int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *id, char *err,
+                        size_t errlen)
+{
+    if (id)
+        *id = CS_NULL_OBJECT;
+    if (!w || !def)
+        return fail(err, errlen, CS_ERR_INVALID, "world or object definition is NULL");
+    if (!def->name || !def->name[0] || strlen(def->name) > CS_MAX_NAME)
+        return fail(err, errlen, CS_ERR_INVALID, "object name must have 1 to %d characters",
+                    CS_MAX_NAME);
+    if (cs_world_find_object(w, def->name) != CS_NULL_OBJECT)
+        return fail(err, errlen, CS_ERR_INVALID, "object name '%s' is already used", def->name);
+    if (def->model != CS_MODEL_LINEAR && def->model != CS_MODEL_COROTATIONAL)
+        return fail(err, errlen, CS_ERR_INVALID, "model '%s' is not implemented yet",
+                    cs_model_name(def->model));
+    if (!(def->cube_size > 0 && isfinite(def->cube_size)))
+        return fail(err, errlen, CS_ERR_INVALID, "cube_size must be > 0 m, got %g",
+                    def->cube_size);
+    int rc = check_material(&def->material, err, errlen);
+    if (rc)
+        return rc;
+    for (int i = 0; i < def->n_fixed; i++)
+        if (!finite3(def->fixed[i].min) || !finite3(def->fixed[i].max))
+            return fail(err, errlen, CS_ERR_INVALID, "fixed[%d]: values must be finite", i);
+
+    cs_object *o = calloc(1, sizeof *o);
+    if (!o)
+        return fail(err, errlen, CS_ERR_NOMEM, "out of memory");
+    o->name = strdup(def->name);
+    o->model = def->model;
+    o->mat = def->material;
+    o->fracture = def->fracture;
+    if (!o->name) {
+        rc = fail(err, errlen, CS_ERR_NOMEM, "out of memory");
+        goto fail;
+    }
+    rc = build_geometry(o, def, err, errlen);
+    if (rc)
+        goto fail;
+    o->n = o->cm.n_nodes;
+    if (alloc_state(o) != 0 ||
+        cs_fem_init(&o->fem, &o->cm, def->material.young, def->material.poisson,
+                    def->model == CS_MODEL_COROTATIONAL, w->threads) != 0) {
+        rc = fail(err, errlen, CS_ERR_NOMEM, "out of memory for %d nodes", o->n);
+        goto fail;
+    }
+    memcpy(o->x, o->cm.node_rest, (size_t)o->n * 3 * sizeof(double));
+    /* Lumped mass: ρh³, an eighth to each corner; gravity on every cube's mass. */
+    const double h = def->cube_size, mc = def->material.density * h * h * h;
+    for (int c = 0; c < o->cm.n_cells; c++)
+        for (int k = 0; k < 8; k++)
+            o->m[o->cm.cell_nodes[8 * c + k]] += mc / 8.0;
+    for (int i = 0; i < o->n; i++) {
+        o->mass += o->m[i];
+        for (int a = 0; a < 3; a++)
+            o->f_const[3 * i + a] = o->m[i] * w->def.gravity[a];
+    }
+    rc = apply_loads(o, def, err, errlen);
+    if (rc)
+        goto fail;
+    for (int i = 0; i < o->n; i++)
+        for (int b = 0; b < def->n_fixed; b++)
+            if (in_box(&def->fixed[b], o->cm.node_rest + 3 * i)) {
+                o->mask[3 * i] = o->mask[3 * i + 1] = o->mask[3 * i + 2] = 1;
+                o->n_fixed_nodes++;
+                break;
+            }
+    cs_surface_skin(&o->surf, &o->cm, o->x);
+    if (w->n_objects == w->cap_objects) {
+        int cap = w->cap_objects ? 2 * w->cap_objects : 8;
+        cs_object **grown = realloc(w->objects, (size_t)cap * sizeof *grown);
+        if (!grown) {
+            rc = fail(err, errlen, CS_ERR_NOMEM, "out of memory");
+            goto fail;
+        }
+        w->objects = grown;
+        w->cap_objects = cap;
+    }
+    o->id = w->next_id++;
+    w->objects[w->n_objects++] = o;
+    if (id)
+        *id = o->id;
+    return CS_OK;
+fail:
+    object_free(o);
+    return rc;
+}
+
+int cs_world_remove_object(cs_world_t *w, cs_object_id id)
+{
+    for (int i = 0; w && i < w->n_objects; i++)
+        if (w->objects[i]->id == id) {
+            object_free(w->objects[i]);
+            memmove(w->objects + i, w->objects + i + 1,
+                    (size_t)(w->n_objects - i - 1) * sizeof *w->objects);
+            w->n_objects--;
+            return CS_OK;
+        }
+    return CS_ERR_UNKNOWN_OBJECT;
+}
+
+int cs_world_object_ids(const cs_world_t *w, cs_object_id *ids, int max)
+{
+    for (int i = 0; i < w->n_objects && i < max; i++)
+        ids[i] = w->objects[i]->id;
+    return w->n_objects;
+}
+
+cs_object_id cs_world_find_object(const cs_world_t *w, const char *name)
+{
+    for (int i = 0; w && name && i < w->n_objects; i++)
+        if (!strcmp(w->objects[i]->name, name))
+            return w->objects[i]->id;
+    return CS_NULL_OBJECT;
+}
+
+/* ---------------------------------------------------------------- inputs */
+
+/* The material point nearest to p: the nearest current surface vertex, with its cell and
+ * trilinear weights. */
+static void nearest_material_point(const cs_object *o, const double p[3], int32_t *cell,
+                                   double wts[8])
+{
+    int best = 0;
+    double bd = INFINITY;
+    for (int i = 0; i < o->surf.n_vertices; i++) {
+        const double *q = o->surf.pos + 3 * i;
+        double d = (q[0] - p[0]) * (q[0] - p[0]) + (q[1] - p[1]) * (q[1] - p[1]) +
+                   (q[2] - p[2]) * (q[2] - p[2]);
+        if (d < bd) {
+            bd = d;
+            best = i;
+        }
+    }
+    *cell = o->surf.vert_cell[best];
+    const double *u = o->surf.vert_uvw + 3 * best;
+    for (int k = 0; k < 8; k++)
+        wts[k] = (CS_CORNER[k][0] ? u[0] : 1 - u[0]) * (CS_CORNER[k][1] ? u[1] : 1 - u[1]) *
+                 (CS_CORNER[k][2] ? u[2] : 1 - u[2]);
+}
+
+static int add_input(cs_world_t *w, cs_object_id id, cs_input *in, const double point[3],
+                     double seconds, char *err, size_t errlen)
+{
+    cs_object *o = find(w, id);
+    if (!o)
+        return fail(err, errlen, CS_ERR_UNKNOWN_OBJECT, "no object with id %u", (unsigned)id);
+    if (!finite3(point))
+        return fail(err, errlen, CS_ERR_INVALID, "point is not finite");
+    if (!(seconds >= 0 && seconds <= 1e6))
+        return fail(err, errlen, CS_ERR_INVALID, "duration must be in [0, 1e6] s, got %g",
+                    seconds);
+    if (o->n_inputs == CS_MAX_INPUTS)
+        return fail(err, errlen, CS_ERR_INVALID, "object '%s' already has %d active inputs",
+                    o->name, CS_MAX_INPUTS);
+    nearest_material_point(o, point, &in->cell, in->w);
+    double steps = ceil(seconds / w->def.dt - 1e-9);
+    in->steps_left = steps < 1 ? 1 : (int)steps;
+    o->inputs[o->n_inputs++] = *in;
+    o->sleeping = false;
+    o->still_steps = 0;
+    return CS_OK;
+}
+
+int cs_world_apply_force(cs_world_t *w, cs_object_id id, const double point[3],
+                         const double force[3], double seconds, char *err, size_t errlen)
+{
+    if (!w || !point || !force)
+        return fail(err, errlen, CS_ERR_INVALID, "NULL argument");
+    if (!finite3(force))
+        return fail(err, errlen, CS_ERR_INVALID, "force is not finite");
+    if (norm3(force) > w->def.max_force)
+        return fail(err, errlen, CS_ERR_INVALID, "force of %g N exceeds max_force %g N",
+                    norm3(force), w->def.max_force);
+    cs_input in = {.kind = CS_INPUT_FORCE, .force = {force[0], force[1], force[2]}};
+    return add_input(w, id, &in, point, seconds, err, errlen);
+}
+
+int cs_world_drag(cs_world_t *w, cs_object_id id, const double grab[3], const double target[3],
+                  double stiffness, double seconds, char *err, size_t errlen)
+{
+    if (!w || !grab || !target)
+        return fail(err, errlen, CS_ERR_INVALID, "NULL argument");
+    if (!finite3(target))
+        return fail(err, errlen, CS_ERR_INVALID, "drag target is not finite");
+    if (!(stiffness > 0 && isfinite(stiffness)))
+        return fail(err, errlen, CS_ERR_INVALID, "drag stiffness must be > 0 N/m, got %g",
+                    stiffness);
+    /* The largest force the spring could exert over the object's extent must stay sane. */
+    cs_object *o = find(w, id);
+    if (o) {
+        double d = norm3((double[3]){target[0] - grab[0], target[1] - grab[1],
+                                     target[2] - grab[2]});
+        if (stiffness * d > w->def.max_force)
+            return fail(err, errlen, CS_ERR_INVALID,
+                        "drag force of %g N (stiffness x distance) exceeds max_force %g N",
+                        stiffness * d, w->def.max_force);
+    }
+    cs_input in = {.kind = CS_INPUT_DRAG, .target = {target[0], target[1], target[2]},
+                   .stiffness = stiffness};
+    return add_input(w, id, &in, grab, seconds, err, errlen);
+}
+
+/* f = f_const + point forces + drag forces at the current positions. */
+static void gather_forces(cs_object *o)
+{
+    memcpy(o->f, o->f_const, (size_t)o->n * 3 * sizeof(double));
+    for (int i = 0; i < o->n_inputs; i++) {
+        const cs_input *in = &o->inputs[i];
+        const int32_t *nd = o->cm.cell_nodes + 8 * in->cell;
+        double F[3] = {in->force[0], in->force[1], in->force[2]};
+        if (in->kind == CS_INPUT_DRAG) {
+            double p[3] = {0, 0, 0};
+            for (int k = 0; k < 8; k++)
+                for (int a = 0; a < 3; a++)
+                    p[a] += in->w[k] * o->x[3 * nd[k] + a];
+            for (int a = 0; a < 3; a++)
+                F[a] = in->stiffness * (in->target[a] - p[a]);
+        }
+        for (int k = 0; k < 8; k++)
+            for (int a = 0; a < 3; a++)
+                o->f[3 * nd[k] + a] += in->w[k] * F[a];
+    }
+}
+
+static void expire_inputs(cs_object *o)
+{
+    int j = 0;
+    for (int i = 0; i < o->n_inputs; i++)
+        if (--o->inputs[i].steps_left > 0)
+            o->inputs[j++] = o->inputs[i];
+    o->n_inputs = j;
+}
+
+/* ---------------------------------------------------------------- the implicit step */
+
+/* y = mcoef·M p + kcoef·K_R p + dcoef·Σ drags k w (w·p): the implicit Euler operator. */
+static void step_operator(void *ctx, const double *p, double *y)
+{
+    cs_object *o = ctx;
+    cs_fem_apply_K(&o->fem, p, y);
+    const double mc = o->mcoef, kc = o->kcoef;
+#pragma omp parallel for num_threads(o->fem.threads) schedule(static)
+    for (int i = 0; i < o->n; i++)
+        for (int a = 0; a < 3; a++)
+            y[3 * i + a] = kc * y[3 * i + a] + mc * o->m[i] * p[3 * i + a];
+    if (o->dcoef == 0)
+        return;
+    for (int i = 0; i < o->n_inputs; i++) {
+        const cs_input *in = &o->inputs[i];
+        if (in->kind != CS_INPUT_DRAG)
+            continue;
+        const int32_t *nd = o->cm.cell_nodes + 8 * in->cell;
+        double s[3] = {0, 0, 0};
+        for (int k = 0; k < 8; k++)
+            for (int a = 0; a < 3; a++)
+                s[a] += in->w[k] * p[3 * nd[k] + a];
+        for (int k = 0; k < 8; k++)
+            for (int a = 0; a < 3; a++)
+                y[3 * nd[k] + a] += o->dcoef * in->stiffness * in->w[k] * s[a];
+    }
+}
+
+/* Block-Jacobi preconditioner of the current operator, inverted. */
+static void build_preconditioner(cs_object *o)
+{
+    cs_fem_diag_blocks(&o->fem, o->blocks);
+    for (int i = 0; i < o->n; i++) {
+        double *B = o->blocks + 9 * i;
+        for (int k = 0; k < 9; k++)
+            B[k] *= o->kcoef;
+        for (int a = 0; a < 3; a++)
+            B[4 * a] += o->mcoef * o->m[i];
+    }
+    for (int i = 0; o->dcoef != 0 && i < o->n_inputs; i++) {
+        const cs_input *in = &o->inputs[i];
+        if (in->kind != CS_INPUT_DRAG)
+            continue;
+        for (int k = 0; k < 8; k++)
+            for (int a = 0; a < 3; a++)
+                o->blocks[9 * o->cm.cell_nodes[8 * in->cell + k] + 4 * a] +=
+                    o->dcoef * in->stiffness * in->w[k] * in->w[k];
+    }
+    cs_invert_blocks(o->blocks, o->n);
+}
+
+/* Seed 000 has no contact model for the ground; we project: a node below the plane is put
+ * back on it, its inward normal velocity removed and its tangential speed reduced by
+ * μ·|removed normal velocity| (a Coulomb impulse). */
+static void ground_contact(const cs_world_t *w, cs_object *o)
+{
+    if (!w->def.has_ground)
+        return;
+    const double g = w->def.ground_height, mu = w->def.ground_friction;
+    for (int i = 0; i < o->n; i++) {
+        double *x = o->x + 3 * i, *v = o->v + 3 * i;
+        if (x[2] >= g || o->mask[3 * i + 2])
+            continue;
+        double dvn = v[2] < 0 ? -v[2] : 0;
+        /* The penetration depth also counts as removed normal motion. */
+        dvn += (g - x[2]) / w->def.dt;
+        x[2] = g;
+        if (v[2] < 0)
+            v[2] = 0;
+        double vt = sqrt(v[0] * v[0] + v[1] * v[1]);
+        if (vt > 0) {
+            double s = vt > mu * dvn ? (vt - mu * dvn) / vt : 0;
+            v[0] *= s;
+            v[1] *= s;
+        }
+    }
+}
+
+static bool all_finite(const double *a, size_t n)
+{
+    for (size_t i = 0; i < n; i++)
+        if (!isfinite(a[i]))
+            return false;
+    return true;
+}
+
+static int step_object(cs_world_t *w, cs_object *o, cs_step_stats *st)
+{
+    const double dt = w->def.dt;
+    const size_t n3 = (size_t)o->n * 3;
+    double t0 = now_ms();
+    gather_forces(o);
+    double t1 = now_ms();
+    cs_fem_update_rotations(&o->fem, o->x);
+    double t2 = now_ms();
+    /* b = M v + dt (f + f_el(x)); the solve is for v1 (implicit Euler, Rayleigh damping). */
+    cs_fem_elastic_force(&o->fem, o->x, o->b, NULL);
+    for (int i = 0; i < o->n; i++)
+        for (int a = 0; a < 3; a++) {
+            size_t d = 3 * (size_t)i + a;
+            o->b[d] = o->m[i] * o->v[d] + dt * (o->f[d] + o->b[d]);
+        }
+    o->mcoef = 1 + dt * o->mat.damping[0];
+    o->kcoef = dt * o->mat.damping[1] + dt * dt;
+    o->dcoef = dt * dt;
+    build_preconditioner(o);
+    for (size_t d = 0; d < n3; d++)
+        o->v1[d] = o->mask[d] ? 0.0 : o->v[d];
+    double t3 = now_ms();
+    cs_cg_result r = cs_pcg(&o->cg, step_operator, o, o->blocks, o->mask, o->b, o->v1,
+                            w->def.cg_tolerance, w->def.cg_max_iterations, o->fem.threads);
+    double t4 = now_ms();
+    if (!all_finite(o->v1, n3))
+        return CS_ERR_DIVERGED;
+    memcpy(o->v, o->v1, n3 * sizeof(double));
+    double vmax2 = 0;
+    for (size_t d = 0; d < n3; d += 3) {
+        for (int a = 0; a < 3; a++)
+            o->x[d + a] += dt * o->v[d + a];
+    }
+    ground_contact(w, o);
+    for (size_t d = 0; d < n3; d += 3) {
+        double s = o->v[d] * o->v[d] + o->v[d + 1] * o->v[d + 1] + o->v[d + 2] * o->v[d + 2];
+        if (s > vmax2)
+            vmax2 = s;
+    }
+    expire_inputs(o);
+    double t5 = now_ms();
+    cs_surface_skin(&o->surf, &o->cm, o->x);
+    double t6 = now_ms();
+    if (w->def.sleep_steps > 0 && o->n_inputs == 0 && sqrt(vmax2) < w->def.sleep_speed) {
+        if (++o->still_steps >= w->def.sleep_steps) {
+            o->sleeping = true;
+            memset(o->v, 0, n3 * sizeof(double));
+        }
+    } else {
+        o->still_steps = 0;
+    }
+    st->ms_inputs += t1 - t0;
+    st->ms_rotations += t2 - t1;
+    st->ms_rhs += t3 - t2;
+    st->ms_solve += t4 - t3;
+    st->ms_post += t5 - t4;
+    st->ms_skin += t6 - t5;
+    st->cg_iterations += r.iterations;
+    if (r.relres > st->cg_residual)
+        st->cg_residual = r.relres;
+    if (!r.converged)
+        st->converged = false;
+    st->objects_stepped++;
+    return CS_OK;
+}
+
+static bool needs_step(const cs_object *o)
+{
+    return !o->sleeping && o->n_fixed_nodes < o->n;
+}
+
+int cs_world_step(cs_world_t *w)
+{
+    if (!w)
+        return CS_ERR_INVALID;
+    cs_step_stats st = {.converged = true};
+    double t0 = now_ms();
+    int rc = CS_OK;
+    for (int i = 0; i < w->n_objects; i++) {
+        cs_object *o = w->objects[i];
+        if (!needs_step(o)) {
+            expire_inputs(o);
+            continue;
+        }
+        /* Keep the old state so a diverged step can be undone. b and v1 are scratch. */
+        int r = step_object(w, o, &st);
+        if (r != CS_OK) {
+            /* Non-finite velocities: drop the inputs and bring the object to rest in place. */
+            memset(o->v, 0, (size_t)o->n * 3 * sizeof(double));
+            o->n_inputs = 0;
+            rc = r;
+        }
+    }
+    w->time += w->def.dt;
+    w->frame++;
+    st.ms_total = now_ms() - t0;
+    w->stats = st;
+    return rc;
+}
+
+/* ---------------------------------------------------------------- static equilibrium */
+
+static double masked_norm(cs_object *o, const double *r)
+{
+    double s = 0;
+    for (int d = 0; d < 3 * o->n; d++)
+        if (!o->mask[d])
+            s += r[d] * r[d];
+    return sqrt(s);
+}
+
+/* residual = f_ext·load + f_el(x), zero at held dofs; returns its norm. */
+static double static_residual(cs_object *o, double load, double *res)
+{
+    cs_fem_update_rotations(&o->fem, o->x);
+    cs_fem_elastic_force(&o->fem, o->x, res, NULL);
+    for (int d = 0; d < 3 * o->n; d++)
+        res[d] = o->mask[d] ? 0.0 : res[d] + load * o->f[d];
+    return masked_norm(o, res);
+}
+
+/*
+ * Static equilibrium of one object: Newton iterations with the corotated (warped) tangent
+ * R K Rᵀ, a backtracking line search on the residual norm, and adaptive load stepping for
+ * large rotations. Linear objects converge in one iteration.
+ */
+static int solve_static_object(cs_world_t *w, cs_object *o, cs_step_stats *st)
+{
+    const int n3 = 3 * o->n;
+    gather_forces(o);
+    const double fnorm = masked_norm(o, o->f);
+    memset(o->v, 0, (size_t)n3 * sizeof(double));
+    if (fnorm == 0)
+        return CS_OK;
+    const double tol = w->def.cg_tolerance * fnorm;
+    double *res = o->b, *dx = o->v1;
+    double *x_save = malloc((size_t)n3 * sizeof(double));
+    if (!x_save)
+        return CS_ERR_NOMEM;
+    o->mcoef = 0;
+    o->kcoef = 1;
+    o->dcoef = 0;
+    double load = 0, dl = 1;
+    int total_newton = 0, rc = CS_OK;
+    while (load < 1) {
+        double target = load + dl > 1 ? 1 : load + dl;
+        memcpy(x_save, o->x, (size_t)n3 * sizeof(double));
+        double rn = static_residual(o, target, res);
+        bool ok = false;
+        for (int it = 0; it < 60 && isfinite(rn); it++) {
+            double ltol = (target < 1 ? 1e3 : 1.0) * tol;
+            if (rn <= ltol) {
+                ok = true;
+                break;
+            }
+            build_preconditioner(o);
+            memset(dx, 0, (size_t)n3 * sizeof(double));
+            /* Inexact Newton: each linear solve to a fraction of the current residual. */
+            double ctol = fmin(1e-3, 0.1 * ltol / rn);
+            if (ctol < w->def.cg_tolerance * 1e-2)
+                ctol = w->def.cg_tolerance * 1e-2;
+            cs_cg_result r = cs_pcg(&o->cg, step_operator, o, o->blocks, o->mask, res, dx,
+                                    ctol, w->def.cg_max_iterations * 4, o->fem.threads);
+            st->cg_iterations += r.iterations;
+            total_newton++;
+            if (!all_finite(dx, (size_t)n3))
+                break;
+            /* Backtracking on ‖residual‖; res is recomputed at every trial point. */
+            double s = 1.0, rn_new = INFINITY;
+            for (int ls = 0; ls < 8; ls++) {
+                for (int d = 0; d < n3; d++)
+                    o->x[d] += s * dx[d];
+                rn_new = static_residual(o, target, o->cg.q);
+                if (rn_new < rn || ls == 7)
+                    break;
+                for (int d = 0; d < n3; d++)
+                    o->x[d] -= s * dx[d];
+                s *= 0.5;
+            }
+            if (!(rn_new < rn * (1 - 1e-4)) && rn_new > ltol)
+                break; /* no progress: give up at this load level */
+            rn = static_residual(o, target, res);
+        }
+        if (ok) {
+            load = target;
+            dl = fmin(1.0, dl * 2);
+        } else {
+            memcpy(o->x, x_save, (size_t)n3 * sizeof(double));
+            cs_fem_update_rotations(&o->fem, o->x);
+            dl *= 0.5;
+            if (dl < 1e-4) {
+                rc = CS_ERR_NOT_CONVERGED;
+                break;
+            }
+        }
+    }
+    double final = static_residual(o, load, res);
+    st->cg_residual = fmax(st->cg_residual, final / fnorm);
+    if (rc != CS_OK)
+        st->converged = false;
+    st->objects_stepped++;
+    (void)total_newton;
+    free(x_save);
+    cs_surface_skin(&o->surf, &o->cm, o->x);
+    return rc;
+}
+
+int cs_world_solve_static(cs_world_t *w)
+{
+    if (!w)
+        return CS_ERR_INVALID;
+    cs_step_stats st = {.converged = true};
+    double t0 = now_ms();
+    int rc = CS_OK;
+    for (int i = 0; i < w->n_objects; i++) {
+        cs_object *o = w->objects[i];
+        if (o->n_fixed_nodes == 0 || o->n_fixed_nodes == o->n)
+            continue; /* no equilibrium without supports; nothing to do when all held */
+        int r = solve_static_object(w, o, &st);
+        if (r != CS_OK)
+            rc = r;
+        o->sleeping = false;
+        o->still_steps = 0;
+    }
+    st.ms_total = st.ms_solve = now_ms() - t0;
+    w->stats = st;
+    return rc;
+}
+
+/* ---------------------------------------------------------------- reset and reading */
+
+void cs_world_reset(cs_world_t *w)
+{
+    if (!w)
+        return;
+    for (int i = 0; i < w->n_objects; i++) {
+        cs_object *o = w->objects[i];
+        memcpy(o->x, o->cm.node_rest, (size_t)o->n * 3 * sizeof(double));
+        memset(o->v, 0, (size_t)o->n * 3 * sizeof(double));
+        o->n_inputs = 0;
+        o->sleeping = false;
+        o->still_steps = 0;
+        cs_fem_reset_rotations(&o->fem);
+        cs_surface_skin(&o->surf, &o->cm, o->x);
+    }
+    w->time = 0;
+    w->frame = 0;
+    memset(&w->stats, 0, sizeof w->stats);
+}
+
+double cs_world_time(const cs_world_t *w)
+{
+    return w->time;
+}
+
+int64_t cs_world_frame(const cs_world_t *w)
+{
+    return w->frame;
+}
+
+const cs_world_def *cs_world_get_def(const cs_world_t *w)
+{
+    return &w->def;
+}
+
+const cs_step_stats *cs_world_last_stats(const cs_world_t *w)
+{
+    return &w->stats;
+}
+
+int cs_object_get_info(const cs_world_t *w, cs_object_id id, cs_object_info *info)
+{
+    const cs_object *o = find(w, id);
+    if (!o || !info)
+        return CS_ERR_UNKNOWN_OBJECT;
+    *info = (cs_object_info){
+        .name = o->name, .model = o->model, .material = o->mat, .cube_size = o->cm.h,
+        .origin = {o->cm.origin[0], o->cm.origin[1], o->cm.origin[2]},
+        .n_cells = o->cm.n_cells, .n_nodes = o->n, .n_fixed_nodes = o->n_fixed_nodes,
+        .n_surface_vertices = o->surf.n_vertices, .n_surface_triangles = o->surf.n_triangles,
+        .topology_version = o->topology_version, .sleeping = o->sleeping,
+        .fracture = o->fracture, .volume = o->cm.n_cells * o->cm.h * o->cm.h * o->cm.h,
+        .mass = o->mass};
+    return CS_OK;
+}
+
+int cs_object_nodes(const cs_world_t *w, cs_object_id id, const double **rest,
+                    const double **pos, const double **vel, int *n)
+{
+    const cs_object *o = find(w, id);
+    if (!o)
+        return CS_ERR_UNKNOWN_OBJECT;
+    if (rest)
+        *rest = o->cm.node_rest;
+    if (pos)
+        *pos = o->x;
+    if (vel)
+        *vel = o->v;
+    if (n)
+        *n = o->n;
+    return CS_OK;
+}
+
+int cs_object_cells(const cs_world_t *w, cs_object_id id, const int32_t **ijk,
+                    const int32_t **nodes, int *n)
+{
+    const cs_object *o = find(w, id);
+    if (!o)
+        return CS_ERR_UNKNOWN_OBJECT;
+    if (ijk)
+        *ijk = o->cm.cell_ijk;
+    if (nodes)
+        *nodes = o->cm.cell_nodes;
+    if (n)
+        *n = o->cm.n_cells;
+    return CS_OK;
+}
+
+int cs_object_surface(const cs_world_t *w, cs_object_id id, const double **vertices, int *nv,
+                      const int32_t **triangles, int *nt)
+{
+    const cs_object *o = find(w, id);
+    if (!o)
+        return CS_ERR_UNKNOWN_OBJECT;
+    if (vertices)
+        *vertices = o->surf.pos;
+    if (nv)
+        *nv = o->surf.n_vertices;
+    if (triangles)
+        *triangles = o->surf.tris;
+    if (nt)
+        *nt = o->surf.n_triangles;
+    return CS_OK;
+}
+
+uint64_t cs_object_state_hash(const cs_world_t *w, cs_object_id id)
+{
+    const cs_object *o = find(w, id);
+    if (!o)
+        return 0;
+    uint64_t hsh = 14695981039346656037ULL;
+    for (int i = 0; i < 3 * o->surf.n_vertices; i++) {
+        float f = (float)o->surf.pos[i];
+        unsigned char b[sizeof f];
+        memcpy(b, &f, sizeof f);
+        for (size_t k = 0; k < sizeof f; k++) {
+            hsh ^= b[k];
+            hsh *= 1099511628211ULL;
+        }
+    }
+    return hsh;
+}
+
+int cs_object_energy(const cs_world_t *w, cs_object_id id, cs_energy *e)
+{
+    const cs_object *o = find(w, id);
+    if (!o || !e)
+        return CS_ERR_UNKNOWN_OBJECT;
+    double ek = 0, eg = 0;
+    for (int i = 0; i < o->n; i++) {
+        const double *v = o->v + 3 * i, *x = o->x + 3 * i;
+        ek += 0.5 * o->m[i] * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+        eg -= o->m[i] * (w->def.gravity[0] * x[0] + w->def.gravity[1] * x[1] +
+                         w->def.gravity[2] * x[2]);
+    }
+    /* Elastic energy with the rotations of the current positions; the force buffer of the
+     * last step is scratch here (it is rebuilt at the start of every step). */
+    cs_object *mo = (cs_object *)o;
+    cs_fem_update_rotations(&mo->fem, mo->x);
+    double ee = 0;
+    cs_fem_elastic_force(&mo->fem, mo->x, mo->b, &ee);
+    *e = (cs_energy){.kinetic = ek, .elastic = ee, .gravity = eg};
+    return CS_OK;
+}
