@@ -1,0 +1,157 @@
+/*
+ * surface_state.h — what a client holds of the daemon's world, rebuilt from the bus.
+ *
+ * Owns: per object its id, name, model, topology_version, float32 surface positions and
+ * triangles (DESIGN.md "Bus"). Fed with decoded CUBESIM_SNAPSHOT chunks and CUBESIM_DELTA
+ * messages; it makes no LCM calls itself, so tests drive it directly.
+ *
+ * Invariants
+ * - `objects` is the last complete snapshot with every accepted delta applied on top; every
+ *   triangle index is in [0, nv) and every coordinate is finite.
+ * - A snapshot replaces the state only when all n_chunks chunks of one (session_id,
+ *   snapshot_id) arrived, in any order; a chunk of a newer snapshot drops a half-built one.
+ * - A delta is applied only to the same session, epoch, object and topology_version, and only
+ *   whole: a delta with any bad field changes nothing.
+ * - A message of a new session or epoch invalidates the state (valid = 0, stale = 1) until the
+ *   next complete snapshot of that session and epoch; a gap in header.seq on CUBESIM_DELTA
+ *   marks it stale (the client should ask for a snapshot). A stale state is still applied to.
+ *
+ * Every malformed input is rejected with CS_SS_REJECTED and a one-line message; nothing here
+ * prints, aborts or trusts a count it did not check.
+ */
+#ifndef CS_SURFACE_STATE_H
+#define CS_SURFACE_STATE_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "mesh.h"
+
+/* Results of the apply functions. */
+typedef enum cs_ss_result {
+    CS_SS_APPLIED = 0,    /* the message changed the state (or completed a snapshot) */
+    CS_SS_PENDING = 1,    /* a snapshot chunk was stored; the snapshot is not complete yet */
+    CS_SS_IGNORED = 2,    /* well formed but not applicable (old, other session, no state yet) */
+    CS_SS_REJECTED = -1,  /* malformed: err says why; the state is unchanged */
+    CS_SS_NOMEM = -2      /* out of memory; the state is unchanged */
+} cs_ss_result;
+
+/* The header fields every daemon -> client message carries (cubesim_header_t, flattened so
+ * this file does not depend on lcm-gen output). */
+typedef struct cs_ss_header {
+    int64_t session_id;
+    int32_t epoch;
+    int64_t frame;
+    int64_t seq;
+    double sim_time;
+} cs_ss_header;
+
+/* One CUBESIM_SNAPSHOT chunk, borrowed views of the decoded message. */
+typedef struct cs_ss_chunk {
+    cs_ss_header header;
+    int32_t snapshot_id, chunk, n_chunks, n_objects;
+    int32_t object_id;
+    const char *object_name, *model;
+    int32_t topology_version, n_vertices_total, n_triangles_total;
+    int32_t vertex_offset, n_coords;
+    const float *xyz;
+    int32_t triangle_offset, n_indices;
+    const int32_t *indices;
+} cs_ss_chunk;
+
+/* One CUBESIM_DELTA message, borrowed views. */
+typedef struct cs_ss_delta {
+    cs_ss_header header;
+    int32_t object_id, topology_version, chunk, n_chunks, n_vertices_total;
+    int32_t n;
+    const int32_t *index;
+    int32_t n_coords;
+    const float *xyz;
+} cs_ss_delta;
+
+typedef struct cs_ss_object {
+    int32_t id;
+    char *name;              /* owned */
+    char *model;             /* owned */
+    int32_t topology_version;
+    int nv;
+    float *xyz;              /* owned, 3 per vertex */
+    int nt;
+    int32_t *tris;           /* owned, 3 per triangle */
+} cs_ss_object;
+
+typedef struct cs_ss_pending cs_ss_pending; /* a snapshot being assembled (private) */
+
+typedef struct cs_surface_state {
+    int valid;               /* a complete snapshot of the current session/epoch is held */
+    int stale;               /* the client should ask for a snapshot (loss, restart, reset) */
+    int64_t session_id;      /* of the state (or of the last message seen when !valid) */
+    int32_t epoch;
+    int have_session;
+    int64_t frame;           /* last frame applied */
+    double sim_time;
+    int32_t snapshot_id;     /* of the last complete snapshot */
+    int n_objects;
+    cs_ss_object *objects;   /* owned */
+
+    /* CUBESIM_DELTA sequence tracking (per daemon session). */
+    int have_delta_seq;
+    int64_t delta_session;
+    int64_t last_delta_seq;
+    int64_t deltas_lost;     /* messages missing from header.seq gaps, all sessions */
+
+    cs_ss_pending *pending;  /* owned */
+} cs_surface_state;
+
+/* An empty state (valid = 0). Nothing is allocated until messages arrive. */
+void cs_surface_state_init(cs_surface_state *st);
+/* Free everything and leave an empty state. */
+void cs_surface_state_free(cs_surface_state *st);
+
+/*
+ * Store one snapshot chunk. Returns CS_SS_APPLIED when it completed a snapshot (the state is
+ * replaced: valid = 1, stale = 0), CS_SS_PENDING when more chunks are needed, CS_SS_IGNORED
+ * for a chunk of an older snapshot or epoch, CS_SS_REJECTED for a malformed chunk (counts that
+ * disagree, offsets out of range, chunk >= n_chunks, non-finite coordinates, triangle indices
+ * outside the object) — a rejected chunk also drops the half-built snapshot it belonged to.
+ */
+int cs_surface_state_apply_chunk(cs_surface_state *st, const cs_ss_chunk *c, char *err,
+                                 size_t errlen);
+
+/*
+ * Apply one delta (absolute float32 positions). Tracks header.seq first: a gap marks the
+ * state stale and adds to deltas_lost. Returns CS_SS_APPLIED, CS_SS_IGNORED (no valid state,
+ * another session or epoch, a frame older than the state, or a topology_version other than
+ * the object's — err then says which), or CS_SS_REJECTED (unknown object, counts that
+ * disagree, index out of range, non-finite coordinate).
+ */
+int cs_surface_state_apply_delta(cs_surface_state *st, const cs_ss_delta *d, char *err,
+                                 size_t errlen);
+
+/* Track header.seq of a CUBESIM_DELTA that the caller chooses not to apply (e.g. a replay
+ * stopping at a frame) so that the gaps it would hide are not reported as loss. */
+void cs_surface_state_note_delta_seq(cs_surface_state *st, const cs_ss_header *h);
+
+/* Object by id, or NULL. */
+const cs_ss_object *cs_surface_state_find(const cs_surface_state *st, int32_t id);
+
+/* FNV-1a 64 (offset 14695981039346656037, prime 1099511628211) over the bytes of the float32
+ * array x0,y0,z0,x1,... in little-endian order: equals cs_object_state_hash of the engine when
+ * the floats are the engine's positions rounded to float. */
+uint64_t cs_surface_hash_floats(const float *xyz, int nv);
+uint64_t cs_ss_object_hash(const cs_ss_object *o);
+
+/*
+ * The state as meshes for cs_mesh_export: one piece per object, in state order, named after
+ * the object. *pieces and *names (and the strings, which are copies) are malloc'd; release
+ * them with cs_surface_state_meshes_free. Returns 0, or -1 with err set (empty or no state,
+ * out of memory).
+ */
+int cs_surface_state_to_meshes(const cs_surface_state *st, cs_mesh **pieces, char ***names,
+                               int *n, char *err, size_t errlen);
+void cs_surface_state_meshes_free(cs_mesh *pieces, char **names, int n);
+
+/* One object's surface as doubles (3 per vertex), malloc'd; NULL on out of memory. */
+double *cs_ss_object_vertices_double(const cs_ss_object *o);
+
+#endif
