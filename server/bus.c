@@ -1,0 +1,802 @@
+/*
+ * bus.c — the daemon's LCM adapter (see bus.h for ownership and invariants; DESIGN.md "Bus").
+ *
+ * Inputs are subscribed raw (lcm_subscribe, not the generated typed subscribe) so that a
+ * message that does not decode — another type's fingerprint, or truncated bytes — gets our
+ * own one-line warning naming the channel instead of LCM's anonymous "error -1 decoding".
+ */
+#include "bus.h"
+
+#include <errno.h>
+#include <fcntl.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/random.h>
+#include <unistd.h>
+
+#include <lcm/lcm.h>
+
+#include "cubesim_ack_t.h"
+#include "cubesim_command_t.h"
+#include "cubesim_delta_t.h"
+#include "cubesim_force_t.h"
+#include "cubesim_snapshot_t.h"
+#include "cubesim_status_t.h"
+
+typedef struct outmsg {
+    const char *channel; /* one of the CS_CH_* literals */
+    void *data;
+    int len;
+    int32_t snapshot_id; /* > 0 for snapshot chunks */
+} outmsg;
+
+typedef struct sent_object {
+    cs_object_id id;
+    uint32_t topology_version;
+    int nv;
+    float *xyz; /* 3·nv: the floats last sent */
+} sent_object;
+
+struct cs_bus {
+    lcm_t *lcm;
+    lcm_subscription_t *sub_force, *sub_command;
+    cs_dlog *log;
+    double max_force;
+
+    /* header context */
+    int64_t session_id;
+    int32_t epoch;
+    int64_t frame;
+    double sim_time;
+    int64_t seq_snapshot, seq_delta, seq_status, seq_ack;
+
+    /* decoded inputs: a ring */
+    cs_input *in;
+    int in_head, in_count;
+
+    /* outbox: a ring of encoded messages */
+    outmsg *out;
+    int out_cap, out_head, out_count;
+    size_t out_bytes;
+    double credit, credit_time;
+
+    int32_t snapshot_id;          /* last made */
+    int32_t pending_snapshot_id;  /* queued, first chunk not yet sent; 0 if none */
+
+    sent_object *sent;
+    int n_sent, cap_sent;
+
+    /* scratch reused by deltas */
+    int32_t *scratch_index;
+    float *scratch_xyz;
+    int scratch_cap;
+};
+
+void cs_input_clear(cs_input *in)
+{
+    free(in->object_name);
+    free(in->argument);
+    memset(in, 0, sizeof *in);
+}
+
+/* ---------------------------------------------------------------- inputs */
+
+static cs_input *push_input(cs_bus_t *b)
+{
+    if (b->in_count >= CS_BUS_INPUT_MAX)
+        return NULL;
+    cs_input *x = &b->in[(b->in_head + b->in_count) % CS_BUS_INPUT_MAX];
+    memset(x, 0, sizeof *x);
+    b->in_count++;
+    return x;
+}
+
+int cs_bus_next_input(cs_bus_t *b, cs_input *in)
+{
+    if (b->in_count == 0)
+        return 0;
+    *in = b->in[b->in_head];
+    memset(&b->in[b->in_head], 0, sizeof b->in[b->in_head]);
+    b->in_head = (b->in_head + 1) % CS_BUS_INPUT_MAX;
+    b->in_count--;
+    return 1;
+}
+
+static bool finite3(const double v[3])
+{
+    return isfinite(v[0]) && isfinite(v[1]) && isfinite(v[2]);
+}
+
+static char *dup_str(const char *s)
+{
+    size_t n = s ? strlen(s) : 0;
+    char *d = malloc(n + 1);
+    if (d) {
+        if (n)
+            memcpy(d, s, n);
+        d[n] = 0;
+    }
+    return d;
+}
+
+/* Refuse the input: its error is acked when the daemon pops it; logged once here. */
+static void refuse(cs_bus_t *b, cs_input *x, const char *fmt, const char *detail)
+{
+    snprintf(x->error, sizeof x->error, fmt, detail);
+    cs_dlog_warn(b->log, "refused input", "refused %s from client %lld (command %lld): %s",
+                 x->request, (long long)x->client_id, (long long)x->command_id, x->error);
+}
+
+static void validate_force(cs_bus_t *b, cs_input *x)
+{
+    char num[64];
+    if (x->force_kind != CUBESIM_FORCE_T_POINT && x->force_kind != CUBESIM_FORCE_T_DRAG) {
+        snprintf(num, sizeof num, "%d", (int)x->force_kind);
+        refuse(b, x, "force: unknown kind %s (0 = point, 1 = drag)", num);
+    } else if (x->object_id < 0) {
+        snprintf(num, sizeof num, "%d", (int)x->object_id);
+        refuse(b, x, "force: invalid object id %s", num);
+    } else if (x->object_id == 0 && (!x->object_name || !x->object_name[0])) {
+        refuse(b, x, "force: no object given (object_id is 0 and object_name empty)%s", "");
+    } else if (!finite3(x->point)) {
+        refuse(b, x, "force: point is not finite%s", "");
+    } else if (!isfinite(x->duration)) {
+        refuse(b, x, "force: duration is not finite%s", "");
+    } else if (x->duration < 0) {
+        snprintf(num, sizeof num, "%g", x->duration);
+        refuse(b, x, "force: negative duration %s s", num);
+    } else if (x->force_kind == CUBESIM_FORCE_T_POINT) {
+        if (!finite3(x->force)) {
+            refuse(b, x, "force: force vector is not finite%s", "");
+        } else {
+            double m = sqrt(x->force[0] * x->force[0] + x->force[1] * x->force[1] +
+                            x->force[2] * x->force[2]);
+            if (m > b->max_force) {
+                snprintf(num, sizeof num, "%g N exceeds max_force %g N", m, b->max_force);
+                refuse(b, x, "force: |force| = %s", num);
+            }
+        }
+    } else {
+        if (!finite3(x->target))
+            refuse(b, x, "force: drag target is not finite%s", "");
+        else if (!isfinite(x->stiffness))
+            refuse(b, x, "force: drag stiffness is not finite%s", "");
+        else if (x->stiffness <= 0) {
+            snprintf(num, sizeof num, "%g", x->stiffness);
+            refuse(b, x, "force: drag stiffness %s N/m is not positive", num);
+        }
+    }
+}
+
+static void on_force(const lcm_recv_buf_t *rbuf, const char *channel, void *user)
+{
+    cs_bus_t *b = user;
+    cubesim_force_t m;
+    memset(&m, 0, sizeof m);
+    int rc = cubesim_force_t_decode(rbuf->data, 0, (int)rbuf->data_size, &m);
+    if (rc < 0) {
+        cs_dlog_warn(b->log, "undecodable " CS_CH_FORCE,
+                     "ignored a message on %s that is not a cubesim.force_t (%u bytes: "
+                     "another type or truncated)",
+                     channel, (unsigned)rbuf->data_size);
+        return;
+    }
+    cs_input *x = push_input(b);
+    if (!x) {
+        cs_input tmp;
+        memset(&tmp, 0, sizeof tmp);
+        tmp.kind = CS_INPUT_FORCE;
+        tmp.client_id = m.client_id;
+        tmp.command_id = m.command_id;
+        snprintf(tmp.request, sizeof tmp.request, "force");
+        cs_dlog_warn(b->log, "input queue full", "input queue full: refused a force");
+        cs_bus_ack(b, &tmp, false, "daemon input queue full; force dropped");
+        cubesim_force_t_decode_cleanup(&m);
+        return;
+    }
+    x->kind = CS_INPUT_FORCE;
+    x->client_id = m.client_id;
+    x->command_id = m.command_id;
+    snprintf(x->request, sizeof x->request, "force");
+    x->object_id = m.object_id;
+    x->object_name = dup_str(m.object_name);
+    x->force_kind = m.kind;
+    memcpy(x->point, m.point, sizeof x->point);
+    memcpy(x->force, m.force, sizeof x->force);
+    memcpy(x->target, m.target, sizeof x->target);
+    x->stiffness = m.stiffness;
+    x->duration = m.duration;
+    if (!x->object_name)
+        snprintf(x->error, sizeof x->error, "daemon out of memory");
+    else
+        validate_force(b, x);
+    cubesim_force_t_decode_cleanup(&m);
+}
+
+static cs_command command_from_name(const char *s)
+{
+    static const struct { const char *name; cs_command c; } t[] = {
+        {"pause", CS_CMD_PAUSE}, {"resume", CS_CMD_RESUME}, {"step", CS_CMD_STEP},
+        {"reset", CS_CMD_RESET}, {"snapshot", CS_CMD_SNAPSHOT}, {"load", CS_CMD_LOAD},
+    };
+    for (size_t i = 0; s && i < sizeof t / sizeof t[0]; i++)
+        if (strcmp(s, t[i].name) == 0)
+            return t[i].c;
+    return CS_CMD_UNKNOWN;
+}
+
+static void on_command(const lcm_recv_buf_t *rbuf, const char *channel, void *user)
+{
+    cs_bus_t *b = user;
+    cubesim_command_t m;
+    memset(&m, 0, sizeof m);
+    int rc = cubesim_command_t_decode(rbuf->data, 0, (int)rbuf->data_size, &m);
+    if (rc < 0) {
+        cs_dlog_warn(b->log, "undecodable " CS_CH_COMMAND,
+                     "ignored a message on %s that is not a cubesim.command_t (%u bytes: "
+                     "another type or truncated)",
+                     channel, (unsigned)rbuf->data_size);
+        return;
+    }
+    cs_input tmp;
+    cs_input *x = push_input(b);
+    bool full = x == NULL;
+    if (full) {
+        memset(&tmp, 0, sizeof tmp);
+        x = &tmp;
+    }
+    x->kind = CS_INPUT_COMMAND;
+    x->client_id = m.client_id;
+    x->command_id = m.command_id;
+    /* The request name is echoed in the ack; keep it printable. */
+    snprintf(x->request, sizeof x->request, "%s", m.command ? m.command : "");
+    for (char *p = x->request; *p; p++)
+        if ((unsigned char)*p < 32 || (unsigned char)*p > 126)
+            *p = '?';
+    x->command = command_from_name(m.command);
+    x->count = m.count;
+    x->argument = dup_str(m.argument);
+    if (full) {
+        cs_dlog_warn(b->log, "input queue full", "input queue full: refused a command");
+        cs_bus_ack(b, x, false, "daemon input queue full; command dropped");
+        cs_input_clear(x);
+    } else if (!x->argument) {
+        snprintf(x->error, sizeof x->error, "daemon out of memory");
+    } else if (x->command == CS_CMD_UNKNOWN) {
+        refuse(b, x,
+               "unknown command '%s' (known: pause, resume, step, reset, snapshot, load)",
+               x->request);
+    } else if (x->command == CS_CMD_STEP && x->count < 1) {
+        char num[32];
+        snprintf(num, sizeof num, "%d", (int)x->count);
+        refuse(b, x, "step: count %s is less than 1", num);
+    } else if (x->command == CS_CMD_LOAD && !x->argument[0]) {
+        refuse(b, x, "load: no scene path given (argument is empty)%s", "");
+    }
+    cubesim_command_t_decode_cleanup(&m);
+}
+
+/* ---------------------------------------------------------------- lifetime */
+
+static int64_t random_session_id(void)
+{
+    uint64_t r = 0;
+    if (getrandom(&r, sizeof r, 0) != (ssize_t)sizeof r)
+        r = (uint64_t)cs_dlog_utime() * 6364136223846793005ull ^ (uint64_t)getpid();
+    r &= 0x7fffffffffffffffull; /* positive: easier to print and compare */
+    return r ? (int64_t)r : 1;
+}
+
+int cs_bus_create(const char *url, cs_dlog *log, cs_bus_t **out, char *err, size_t errlen)
+{
+    *out = NULL;
+    cs_bus_t *b = calloc(1, sizeof *b);
+    if (!b) {
+        snprintf(err, errlen, "out of memory");
+        return -1;
+    }
+    b->log = log;
+    b->max_force = 1e9;
+    b->session_id = random_session_id();
+    b->in = calloc(CS_BUS_INPUT_MAX, sizeof *b->in);
+    if (!b->in) {
+        snprintf(err, errlen, "out of memory");
+        free(b);
+        return -1;
+    }
+    b->lcm = lcm_create(url);
+    if (!b->lcm) {
+        snprintf(err, errlen, "cannot open the LCM bus at '%s'", url ? url : "(LCM default)");
+        cs_bus_destroy(b);
+        return -1;
+    }
+    b->sub_force = lcm_subscribe(b->lcm, CS_CH_FORCE, on_force, b);
+    b->sub_command = lcm_subscribe(b->lcm, CS_CH_COMMAND, on_command, b);
+    if (!b->sub_force || !b->sub_command) {
+        snprintf(err, errlen, "cannot subscribe to %s / %s", CS_CH_FORCE, CS_CH_COMMAND);
+        cs_bus_destroy(b);
+        return -1;
+    }
+    lcm_subscription_set_queue_capacity(b->sub_force, CS_BUS_QUEUE_CAPACITY);
+    lcm_subscription_set_queue_capacity(b->sub_command, CS_BUS_QUEUE_CAPACITY);
+    b->credit = CS_BUS_BURST;
+    b->credit_time = cs_dlog_now();
+    *out = b;
+    return 0;
+}
+
+static void outbox_clear(cs_bus_t *b)
+{
+    for (int i = 0; i < b->out_count; i++)
+        free(b->out[(b->out_head + i) % b->out_cap].data);
+    b->out_head = b->out_count = 0;
+    b->out_bytes = 0;
+    b->pending_snapshot_id = 0;
+}
+
+void cs_bus_forget_objects(cs_bus_t *b)
+{
+    for (int i = 0; i < b->n_sent; i++)
+        free(b->sent[i].xyz);
+    b->n_sent = 0;
+}
+
+void cs_bus_destroy(cs_bus_t *b)
+{
+    if (!b)
+        return;
+    if (b->lcm) {
+        if (b->sub_force)
+            lcm_unsubscribe(b->lcm, b->sub_force);
+        if (b->sub_command)
+            lcm_unsubscribe(b->lcm, b->sub_command);
+        lcm_destroy(b->lcm);
+    }
+    if (b->in) {
+        cs_input x;
+        while (cs_bus_next_input(b, &x))
+            cs_input_clear(&x);
+        free(b->in);
+    }
+    outbox_clear(b);
+    free(b->out);
+    cs_bus_forget_objects(b);
+    free(b->sent);
+    free(b->scratch_index);
+    free(b->scratch_xyz);
+    free(b);
+}
+
+int cs_bus_fileno(cs_bus_t *b) { return lcm_get_fileno(b->lcm); }
+
+void cs_bus_set_max_force(cs_bus_t *b, double max_force)
+{
+    if (isfinite(max_force) && max_force > 0)
+        b->max_force = max_force;
+}
+
+int cs_bus_drain(cs_bus_t *b, int max)
+{
+    int n = 0;
+    while (n < max) {
+        int rc = lcm_handle_timeout(b->lcm, 0);
+        if (rc < 0)
+            return -1;
+        if (rc == 0)
+            break;
+        n++;
+    }
+    return n;
+}
+
+void cs_bus_set_context(cs_bus_t *b, int32_t epoch, int64_t frame, double sim_time)
+{
+    b->epoch = epoch;
+    b->frame = frame;
+    b->sim_time = sim_time;
+}
+
+int64_t cs_bus_session_id(const cs_bus_t *b) { return b->session_id; }
+int32_t cs_bus_last_snapshot_id(const cs_bus_t *b) { return b->snapshot_id; }
+
+static cubesim_header_t header(cs_bus_t *b, int64_t *seq)
+{
+    cubesim_header_t h;
+    h.session_id = b->session_id;
+    h.epoch = b->epoch;
+    h.frame = b->frame;
+    h.seq = (*seq)++;
+    h.sim_time = b->sim_time;
+    h.utime = cs_dlog_utime();
+    return h;
+}
+
+/* ---------------------------------------------------------------- acks, status */
+
+int cs_bus_ack(cs_bus_t *b, const cs_input *in, bool ok, const char *message)
+{
+    cubesim_ack_t a;
+    a.header = header(b, &b->seq_ack);
+    a.client_id = in->client_id;
+    a.command_id = in->command_id;
+    a.request = (char *)in->request;
+    a.ok = ok ? 1 : 0;
+    a.message = (char *)(message ? message : "");
+    return cubesim_ack_t_publish(b->lcm, CS_CH_ACK, &a) < 0 ? -1 : 0;
+}
+
+int cs_bus_publish_status(cs_bus_t *b, const cs_world_t *w, const cs_bus_status_extra *x)
+{
+    int n = cs_world_object_ids(w, NULL, 0);
+    if (n < 0)
+        n = 0;
+    cubesim_status_t s;
+    memset(&s, 0, sizeof s);
+    s.header = header(b, &b->seq_status);
+    s.paused = x->paused ? 1 : 0;
+    s.dt = cs_world_get_def(w)->dt;
+    s.real_time_factor = x->real_time_factor;
+    s.step_ms = x->step_ms;
+    s.step_ms_avg = x->step_ms_avg;
+    const cs_step_stats *st = cs_world_last_stats(w);
+    if (st) {
+        s.ms_rotations = st->ms_rotations;
+        s.ms_rhs = st->ms_rhs;
+        s.ms_solve = st->ms_solve;
+        s.ms_skin = st->ms_skin;
+        s.cg_iterations = st->cg_iterations;
+        s.cg_residual = st->cg_residual;
+    }
+    s.last_snapshot_id = b->snapshot_id;
+    /* One block holds every per-object array (freed once below). */
+    size_t per = sizeof(cs_object_id) + sizeof(int32_t) * 2 + sizeof(int64_t) + sizeof(int8_t) +
+                 sizeof(double) * 3 + sizeof(char *);
+    char *blk = calloc((size_t)(n > 0 ? n : 1), per + 8);
+    if (!blk)
+        return -1;
+    double *ke = (double *)blk, *ee = ke + n, *ge = ee + n;
+    int64_t *hash = (int64_t *)(ge + n);
+    char **names = (char **)(hash + n);
+    cs_object_id *ids = (cs_object_id *)(names + n);
+    int32_t *oid = (int32_t *)(ids + n), *topo = oid + n;
+    int8_t *sleeping = (int8_t *)(topo + n);
+    n = cs_world_object_ids(w, ids, n);
+    for (int i = 0; i < n; i++) {
+        cs_object_info info;
+        memset(&info, 0, sizeof info);
+        cs_object_get_info(w, ids[i], &info);
+        cs_energy e = {0, 0, 0};
+        cs_object_energy(w, ids[i], &e);
+        oid[i] = (int32_t)ids[i];
+        names[i] = (char *)(info.name ? info.name : "");
+        topo[i] = (int32_t)info.topology_version;
+        hash[i] = (int64_t)cs_object_state_hash(w, ids[i]);
+        sleeping[i] = info.sleeping ? 1 : 0;
+        ke[i] = e.kinetic;
+        ee[i] = e.elastic;
+        ge[i] = e.gravity;
+    }
+    s.n_objects = n;
+    s.object_id = oid;
+    s.object_name = names;
+    s.topology_version = topo;
+    s.state_hash = hash;
+    s.sleeping = sleeping;
+    s.kinetic_energy = ke;
+    s.elastic_energy = ee;
+    s.gravity_energy = ge;
+    int rc = cubesim_status_t_publish(b->lcm, CS_CH_STATUS, &s);
+    free(blk);
+    return rc < 0 ? -1 : 0;
+}
+
+/* ---------------------------------------------------------------- outbox */
+
+static int outbox_push(cs_bus_t *b, const char *channel, void *data, int len, int32_t snap)
+{
+    if (b->out_count == b->out_cap) {
+        int cap = b->out_cap ? 2 * b->out_cap : 64;
+        outmsg *o = malloc((size_t)cap * sizeof *o);
+        if (!o)
+            return -1;
+        for (int i = 0; i < b->out_count; i++)
+            o[i] = b->out[(b->out_head + i) % b->out_cap];
+        free(b->out);
+        b->out = o;
+        b->out_cap = cap;
+        b->out_head = 0;
+    }
+    outmsg *m = &b->out[(b->out_head + b->out_count) % b->out_cap];
+    m->channel = channel;
+    m->data = data;
+    m->len = len;
+    m->snapshot_id = snap;
+    b->out_count++;
+    b->out_bytes += (size_t)len;
+    return 0;
+}
+
+int cs_bus_pump(cs_bus_t *b, double now, double *next_send)
+{
+    b->credit += (now - b->credit_time) * CS_BUS_RATE;
+    if (b->credit > CS_BUS_BURST)
+        b->credit = CS_BUS_BURST;
+    b->credit_time = now;
+    while (b->out_count > 0) {
+        outmsg *m = &b->out[b->out_head];
+        if (b->credit < (double)m->len)
+            break;
+        if (lcm_publish(b->lcm, m->channel, m->data, (unsigned)m->len) < 0)
+            cs_dlog_warn(b->log, "publish failed", "lcm_publish on %s failed (%d bytes)",
+                         m->channel, m->len);
+        if (m->snapshot_id && m->snapshot_id == b->pending_snapshot_id)
+            b->pending_snapshot_id = 0; /* it started leaving: no longer coalescible */
+        b->credit -= (double)m->len;
+        b->out_bytes -= (size_t)m->len;
+        free(m->data);
+        m->data = NULL;
+        b->out_head = (b->out_head + 1) % b->out_cap;
+        b->out_count--;
+    }
+    if (next_send) {
+        *next_send = now;
+        if (b->out_count > 0) {
+            double need = (double)b->out[b->out_head].len - b->credit;
+            *next_send = now + (need > 0 ? need / CS_BUS_RATE : 0);
+        }
+    }
+    return b->out_count;
+}
+
+/* ---------------------------------------------------------------- snapshots */
+
+static sent_object *find_sent(cs_bus_t *b, cs_object_id id)
+{
+    for (int i = 0; i < b->n_sent; i++)
+        if (b->sent[i].id == id)
+            return &b->sent[i];
+    return NULL;
+}
+
+static sent_object *add_sent(cs_bus_t *b, cs_object_id id)
+{
+    sent_object *s = find_sent(b, id);
+    if (s)
+        return s;
+    if (b->n_sent == b->cap_sent) {
+        int cap = b->cap_sent ? 2 * b->cap_sent : 8;
+        sent_object *n = realloc(b->sent, (size_t)cap * sizeof *n);
+        if (!n)
+            return NULL;
+        b->sent = n;
+        b->cap_sent = cap;
+    }
+    s = &b->sent[b->n_sent++];
+    memset(s, 0, sizeof *s);
+    s->id = id;
+    return s;
+}
+
+/* Items (vertices or triangles, 12 bytes each) one chunk of this object can carry. */
+static int items_per_chunk(const char *name, const char *model)
+{
+    int fixed = 200 + (int)strlen(name) + (int)strlen(model);
+    int k = (CS_BUS_CHUNK_BYTES - fixed) / 12;
+    return k < 1 ? 1 : k;
+}
+
+static int encode_push(cs_bus_t *b, const char *channel, int32_t snap, int size,
+                       int (*enc)(void *, int, int, const void *), const void *msg)
+{
+    void *buf = malloc((size_t)size);
+    if (!buf)
+        return -1;
+    if (enc(buf, 0, size, msg) != size || outbox_push(b, channel, buf, size, snap) < 0) {
+        free(buf);
+        return -1;
+    }
+    return 0;
+}
+
+static int enc_snapshot(void *buf, int off, int max, const void *m)
+{
+    return cubesim_snapshot_t_encode(buf, off, max, m);
+}
+
+static int enc_delta(void *buf, int off, int max, const void *m)
+{
+    return cubesim_delta_t_encode(buf, off, max, m);
+}
+
+int32_t cs_bus_queue_snapshot(cs_bus_t *b, const cs_world_t *w, bool coalesce)
+{
+    if (coalesce && b->pending_snapshot_id)
+        return b->pending_snapshot_id;
+    int n = cs_world_object_ids(w, NULL, 0);
+    if (n < 0)
+        n = 0;
+    cs_object_id *ids = calloc((size_t)(n > 0 ? n : 1), sizeof *ids);
+    if (!ids)
+        return -1;
+    n = cs_world_object_ids(w, ids, n);
+
+    /* Count the chunks first: every chunk carries n_chunks. */
+    int total = 0;
+    for (int i = 0; i < n; i++) {
+        cs_object_info info;
+        memset(&info, 0, sizeof info);
+        cs_object_get_info(w, ids[i], &info);
+        int k = items_per_chunk(info.name ? info.name : "", cs_model_name(info.model));
+        int items = info.n_surface_vertices + info.n_surface_triangles;
+        total += items > 0 ? (items + k - 1) / k : 1;
+    }
+    if (n == 0)
+        total = 1;
+
+    int32_t id = ++b->snapshot_id;
+    cubesim_snapshot_t s;
+    memset(&s, 0, sizeof s);
+    s.snapshot_id = id;
+    s.n_chunks = total;
+    s.n_objects = n;
+    int chunk = 0, rc = 0;
+    if (n == 0) {
+        s.header = header(b, &b->seq_snapshot);
+        s.object_name = "";
+        s.model = "";
+        rc = encode_push(b, CS_CH_SNAPSHOT, id, cubesim_snapshot_t_encoded_size(&s),
+                         enc_snapshot, &s);
+    }
+    for (int i = 0; i < n && rc == 0; i++) {
+        cs_object_info info;
+        memset(&info, 0, sizeof info);
+        cs_object_get_info(w, ids[i], &info);
+        const double *v = NULL;
+        const int32_t *t = NULL;
+        int nv = 0, nt = 0;
+        cs_object_surface(w, ids[i], &v, &nv, &t, &nt);
+        sent_object *so = add_sent(b, ids[i]);
+        float *xyz = so ? realloc(so->xyz, (size_t)(nv > 0 ? nv : 1) * 3 * sizeof(float)) : NULL;
+        if (!xyz) {
+            rc = -1;
+            break;
+        }
+        so->xyz = xyz;
+        so->nv = nv;
+        so->topology_version = info.topology_version;
+        for (int j = 0; j < 3 * nv; j++)
+            xyz[j] = (float)v[j];
+
+        s.object_id = (int32_t)ids[i];
+        s.object_name = (char *)(info.name ? info.name : "");
+        s.model = (char *)cs_model_name(info.model);
+        s.topology_version = (int32_t)info.topology_version;
+        s.n_vertices_total = nv;
+        s.n_triangles_total = nt;
+        int k = items_per_chunk(s.object_name, s.model);
+        int items = nv + nt;
+        for (int start = 0; rc == 0 && (start < items || (items == 0 && start == 0));
+             start += k) {
+            int end = start + k < items ? start + k : items;
+            int v0 = start < nv ? start : nv, v1 = end < nv ? end : nv;
+            int t0 = (start > nv ? start : nv) - nv, t1 = (end > nv ? end : nv) - nv;
+            s.header = header(b, &b->seq_snapshot);
+            s.chunk = chunk++;
+            s.vertex_offset = v0;
+            s.n_coords = 3 * (v1 - v0);
+            s.xyz = xyz + 3 * v0;
+            s.triangle_offset = t0;
+            s.n_indices = 3 * (t1 - t0);
+            s.indices = (int32_t *)(t + 3 * t0);
+            rc = encode_push(b, CS_CH_SNAPSHOT, id, cubesim_snapshot_t_encoded_size(&s),
+                             enc_snapshot, &s);
+            if (items == 0)
+                break;
+        }
+    }
+    free(ids);
+    if (rc < 0)
+        return -1;
+    b->pending_snapshot_id = id;
+    return id;
+}
+
+/* ---------------------------------------------------------------- deltas */
+
+int cs_bus_queue_deltas(cs_bus_t *b, const cs_world_t *w, double eps)
+{
+    int n = cs_world_object_ids(w, NULL, 0);
+    if (n <= 0)
+        return 0;
+    cs_object_id *ids = calloc((size_t)n, sizeof *ids);
+    if (!ids)
+        return -1;
+    n = cs_world_object_ids(w, ids, n);
+    if (!(eps >= 0) || !isfinite(eps))
+        eps = 0;
+    double eps2 = eps * eps;
+    int queued = 0;
+    bool need_snapshot = false;
+    for (int i = 0; i < n; i++) {
+        cs_object_info info;
+        memset(&info, 0, sizeof info);
+        cs_object_get_info(w, ids[i], &info);
+        const double *v = NULL;
+        const int32_t *t = NULL;
+        int nv = 0, nt = 0;
+        cs_object_surface(w, ids[i], &v, &nv, &t, &nt);
+        sent_object *so = find_sent(b, ids[i]);
+        if (!so || so->nv != nv || so->topology_version != info.topology_version) {
+            need_snapshot = true; /* a new object or new topology: deltas cannot say it */
+            continue;
+        }
+        if (info.sleeping)
+            continue;
+        if (b->scratch_cap < nv) {
+            int32_t *ix = realloc(b->scratch_index, (size_t)nv * sizeof *ix);
+            if (ix)
+                b->scratch_index = ix;
+            float *xf = realloc(b->scratch_xyz, (size_t)nv * 3 * sizeof *xf);
+            if (xf)
+                b->scratch_xyz = xf;
+            if (!ix || !xf) {
+                free(ids);
+                return -1;
+            }
+            b->scratch_cap = nv;
+        }
+        int m = 0;
+        for (int j = 0; j < nv; j++) {
+            const double *x = v + 3 * j;
+            float *s = so->xyz + 3 * j;
+            double dx = x[0] - s[0], dy = x[1] - s[1], dz = x[2] - s[2];
+            if (dx * dx + dy * dy + dz * dz > eps2) {
+                s[0] = (float)x[0];
+                s[1] = (float)x[1];
+                s[2] = (float)x[2];
+                b->scratch_index[m] = j;
+                memcpy(b->scratch_xyz + 3 * m, s, 3 * sizeof(float));
+                m++;
+            }
+        }
+        if (m == 0)
+            continue;
+        const int per = (CS_BUS_CHUNK_BYTES - 200) / 16;
+        int nchunks = (m + per - 1) / per;
+        cubesim_delta_t d;
+        memset(&d, 0, sizeof d);
+        d.object_id = (int32_t)ids[i];
+        d.topology_version = (int32_t)info.topology_version;
+        d.n_chunks = nchunks;
+        d.n_vertices_total = nv;
+        for (int c = 0; c < nchunks; c++) {
+            int a = c * per, e = a + per < m ? a + per : m;
+            d.header = header(b, &b->seq_delta);
+            d.chunk = c;
+            d.n = e - a;
+            d.index = b->scratch_index + a;
+            d.n_coords = 3 * d.n;
+            d.xyz = b->scratch_xyz + 3 * a;
+            if (encode_push(b, CS_CH_DELTA, 0, cubesim_delta_t_encoded_size(&d), enc_delta,
+                            &d) < 0) {
+                free(ids);
+                return -1;
+            }
+            queued++;
+        }
+    }
+    free(ids);
+    if (b->out_bytes > (size_t)CS_BUS_OUTBOX_MAX) {
+        /* The bus cannot keep up: drop the backlog (receivers see a seq gap) and resync. */
+        cs_dlog_warn(b->log, "outbox overflow",
+                     "outbox over %d MiB: dropped %d queued messages, sending a snapshot",
+                     CS_BUS_OUTBOX_MAX >> 20, b->out_count);
+        outbox_clear(b);
+        need_snapshot = true;
+    }
+    if (need_snapshot && cs_bus_queue_snapshot(b, w, true) < 0)
+        return -1;
+    return queued;
+}
