@@ -42,6 +42,7 @@ CLIENT_SRC := $(wildcard client/cubesim-*.c)
 CLIENT_LIB_SRC := $(filter-out client/cubesim-%.c,$(wildcard client/*.c))
 UNIT_SRC   := $(wildcard tests/unit/*.c)
 BENCH_SRC  := $(wildcard bench/*.c)
+IT_TOOL_SRC := $(wildcard tests/it/tools/*.c)
 
 obj = $(patsubst %.c,$(B)/obj/%.o,$(1))
 
@@ -52,7 +53,8 @@ LIB_CLIENT := $(B)/lib/libcsclient.a
 LIBS       := $(LIB_CLIENT) $(LIB_COMMON) $(LIB_ENGINE) $(LIB_TYPES)
 
 BINS := $(B)/bin/cubesimd $(patsubst client/%.c,$(B)/bin/%,$(CLIENT_SRC)) \
-        $(B)/bin/cs_unit_tests $(patsubst bench/%.c,$(B)/bin/%,$(BENCH_SRC))
+        $(B)/bin/cs_unit_tests $(patsubst bench/%.c,$(B)/bin/%,$(BENCH_SRC)) \
+        $(patsubst tests/it/tools/%.c,$(B)/bin/cs_it_%,$(IT_TOOL_SRC))
 
 .PHONY: all deps test run bench stress valgrind san clean gen
 all: $(BINS)
@@ -101,6 +103,11 @@ $(B)/bin/cs_unit_tests: $(call obj,$(UNIT_SRC)) $(LIBS)
 	$(CC) $(OPT) -o $@ $^ $(LDLIBS)
 
 $(B)/bin/bench_%: $(B)/obj/bench/bench_%.o $(LIBS)
+	@mkdir -p $(dir $@)
+	$(CC) $(OPT) -o $@ $^ $(LDLIBS)
+
+# Integration-test tools (tests/it/tools/NAME.c -> cs_it_NAME): small LCM senders/receivers.
+$(B)/bin/cs_it_%: $(B)/obj/tests/it/tools/%.o $(LIBS)
 	@mkdir -p $(dir $@)
 	$(CC) $(OPT) -o $@ $^ $(LDLIBS)
 
