@@ -1,0 +1,467 @@
+/*
+ * mesh_io.c — triangle surface import and export through assimp's C API (implements mesh.h;
+ * the input side of seed 000 §2.1: "an arbitrary surface mesh" becomes one indexed triangle list).
+ *
+ * Import: assimp triangulates, pre-transforms (node transforms baked in) and splits primitive
+ * types; we then merge every triangle mesh of the scene, weld vertices with bit-identical
+ * positions across meshes (sort, O(n log n): STL shares none), drop points, lines, triangles with
+ * a repeated index or exactly zero area, and vertices no triangle uses. Every coordinate is
+ * checked with isfinite. Assimp stores float32 (ai_real), so that is the precision of any file.
+ *
+ * Export: a scene built by hand (one aiMesh and one child node per piece, one empty material),
+ * handed to aiExportScene and freed here — it was never assimp's, so aiReleaseImport must not
+ * see it. The exporter id follows the extension.
+ */
+#include "mesh.h"
+
+#include <assimp/cexport.h>
+#include <assimp/cimport.h>
+#include <assimp/material.h>
+#include <assimp/postprocess.h>
+#include <assimp/scene.h>
+#include <errno.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <strings.h>
+#include <sys/stat.h>
+
+void cs_mesh_free(cs_mesh *m)
+{
+    if (!m)
+        return;
+    free(m->v);
+    free(m->t);
+    m->v = NULL;
+    m->t = NULL;
+    m->nv = m->nt = 0;
+}
+
+typedef struct {
+    const double *v;
+    int32_t idx;
+} weld_key;
+
+static int cmp_pos(const void *pa, const void *pb)
+{
+    const weld_key *a = pa, *b = pb;
+    for (int k = 0; k < 3; k++) {
+        double x = a->v[3 * a->idx + k], y = b->v[3 * b->idx + k];
+        if (x < y)
+            return -1;
+        if (x > y)
+            return 1;
+    }
+    return (a->idx > b->idx) - (a->idx < b->idx);
+}
+
+/*
+ * Weld identical positions, drop degenerate triangles, compact unused vertices. In place on
+ * m (arrays may shrink but are not reallocated). Returns 0 or -1 on out of memory.
+ */
+static int weld_and_clean(cs_mesh *m)
+{
+    int nv = m->nv;
+    weld_key *keys = malloc((size_t)(nv ? nv : 1) * sizeof *keys);
+    int32_t *remap = malloc((size_t)(nv ? nv : 1) * sizeof *remap);
+    int32_t *used = malloc((size_t)(nv ? nv : 1) * sizeof *used);
+    if (!keys || !remap || !used) {
+        free(keys);
+        free(remap);
+        free(used);
+        return -1;
+    }
+    for (int i = 0; i < nv; i++)
+        keys[i] = (weld_key){m->v, i};
+    qsort(keys, (size_t)nv, sizeof *keys, cmp_pos);
+    /* remap every vertex to the first (lowest index) of its equal-position run */
+    for (int i = 0; i < nv;) {
+        int j = i + 1;
+        while (j < nv && m->v[3 * keys[j].idx] == m->v[3 * keys[i].idx] &&
+               m->v[3 * keys[j].idx + 1] == m->v[3 * keys[i].idx + 1] &&
+               m->v[3 * keys[j].idx + 2] == m->v[3 * keys[i].idx + 2])
+            j++;
+        for (int k = i; k < j; k++)
+            remap[keys[k].idx] = keys[i].idx;
+        i = j;
+    }
+    free(keys);
+    /* keep non-degenerate triangles */
+    int nt = 0;
+    for (int t = 0; t < m->nt; t++) {
+        int32_t a = remap[m->t[3 * t]], b = remap[m->t[3 * t + 1]], c = remap[m->t[3 * t + 2]];
+        if (a == b || b == c || a == c)
+            continue;
+        const double *pa = m->v + 3 * a, *pb = m->v + 3 * b, *pc = m->v + 3 * c;
+        double u[3] = {pb[0] - pa[0], pb[1] - pa[1], pb[2] - pa[2]};
+        double w[3] = {pc[0] - pa[0], pc[1] - pa[1], pc[2] - pa[2]};
+        double n0 = u[1] * w[2] - u[2] * w[1], n1 = u[2] * w[0] - u[0] * w[2],
+               n2 = u[0] * w[1] - u[1] * w[0];
+        if (n0 == 0.0 && n1 == 0.0 && n2 == 0.0)
+            continue;
+        m->t[3 * nt] = a;
+        m->t[3 * nt + 1] = b;
+        m->t[3 * nt + 2] = c;
+        nt++;
+    }
+    m->nt = nt;
+    /* compact: new index of each used vertex, in original order */
+    for (int i = 0; i < nv; i++)
+        used[i] = -1;
+    for (int k = 0; k < 3 * nt; k++)
+        used[m->t[k]] = 0;
+    int n = 0;
+    for (int i = 0; i < nv; i++) {
+        if (used[i] < 0)
+            continue;
+        used[i] = n;
+        memmove(m->v + 3 * n, m->v + 3 * i, 3 * sizeof(double));
+        n++;
+    }
+    for (int k = 0; k < 3 * nt; k++)
+        m->t[k] = used[m->t[k]];
+    m->nv = n;
+    free(remap);
+    free(used);
+    return 0;
+}
+
+int cs_mesh_load(const char *path, cs_mesh *out, char *err, size_t errlen)
+{
+    memset(out, 0, sizeof *out);
+    struct stat st;
+    if (stat(path, &st) != 0) {
+        if (errno == ENOENT)
+            snprintf(err, errlen, "mesh '%s': no such file", path);
+        else
+            snprintf(err, errlen, "mesh '%s': %s", path, strerror(errno));
+        return -1;
+    }
+    if (!S_ISREG(st.st_mode)) {
+        snprintf(err, errlen, "mesh '%s': not a regular file", path);
+        return -1;
+    }
+    if (st.st_size == 0) {
+        snprintf(err, errlen, "mesh '%s': empty file", path);
+        return -1;
+    }
+    const struct aiScene *sc =
+        aiImportFile(path, aiProcess_Triangulate | aiProcess_JoinIdenticalVertices |
+                               aiProcess_PreTransformVertices | aiProcess_SortByPType |
+                               aiProcess_ValidateDataStructure);
+    if (!sc) {
+        const char *why = aiGetErrorString();
+        snprintf(err, errlen, "mesh '%s': assimp: %s", path, why && *why ? why : "unreadable");
+        /* assimp messages may end in a newline; keep the message one line */
+        for (char *p = err; *p; p++)
+            if (*p == '\n' || *p == '\r')
+                *p = ' ';
+        return -1;
+    }
+    size_t nv = 0, nt = 0;
+    for (unsigned i = 0; i < sc->mNumMeshes; i++) {
+        const struct aiMesh *am = sc->mMeshes[i];
+        if (!(am->mPrimitiveTypes & aiPrimitiveType_TRIANGLE))
+            continue;
+        nv += am->mNumVertices;
+        for (unsigned f = 0; f < am->mNumFaces; f++)
+            nt += am->mFaces[f].mNumIndices == 3;
+    }
+    if (nt == 0) {
+        aiReleaseImport(sc);
+        snprintf(err, errlen, "mesh '%s': no triangles", path);
+        return -1;
+    }
+    if (nv > INT32_MAX / 3 || nt > INT32_MAX / 3) {
+        aiReleaseImport(sc);
+        snprintf(err, errlen, "mesh '%s': too large (%zu vertices, %zu triangles)", path, nv, nt);
+        return -1;
+    }
+    out->v = malloc(nv * 3 * sizeof(double));
+    out->t = malloc(nt * 3 * sizeof(int32_t));
+    if (!out->v || !out->t) {
+        aiReleaseImport(sc);
+        cs_mesh_free(out);
+        snprintf(err, errlen, "mesh '%s': out of memory", path);
+        return -1;
+    }
+    int vbase = 0, tcount = 0;
+    for (unsigned i = 0; i < sc->mNumMeshes; i++) {
+        const struct aiMesh *am = sc->mMeshes[i];
+        if (!(am->mPrimitiveTypes & aiPrimitiveType_TRIANGLE))
+            continue;
+        for (unsigned k = 0; k < am->mNumVertices; k++) {
+            double x = am->mVertices[k].x, y = am->mVertices[k].y, z = am->mVertices[k].z;
+            if (!isfinite(x) || !isfinite(y) || !isfinite(z)) {
+                aiReleaseImport(sc);
+                cs_mesh_free(out);
+                snprintf(err, errlen, "mesh '%s': vertex %u of mesh %u is not finite", path, k,
+                         i);
+                return -1;
+            }
+            out->v[3 * (vbase + (int)k)] = x;
+            out->v[3 * (vbase + (int)k) + 1] = y;
+            out->v[3 * (vbase + (int)k) + 2] = z;
+        }
+        for (unsigned f = 0; f < am->mNumFaces; f++) {
+            const struct aiFace *fc = &am->mFaces[f];
+            if (fc->mNumIndices != 3)
+                continue;
+            for (int c = 0; c < 3; c++) {
+                if (fc->mIndices[c] >= am->mNumVertices) {
+                    aiReleaseImport(sc);
+                    cs_mesh_free(out);
+                    snprintf(err, errlen, "mesh '%s': face %u of mesh %u has a bad index", path,
+                             f, i);
+                    return -1;
+                }
+                out->t[3 * tcount + c] = vbase + (int32_t)fc->mIndices[c];
+            }
+            tcount++;
+        }
+        vbase += (int)am->mNumVertices;
+    }
+    aiReleaseImport(sc);
+    out->nv = vbase;
+    out->nt = tcount;
+    if (weld_and_clean(out) != 0) {
+        cs_mesh_free(out);
+        snprintf(err, errlen, "mesh '%s': out of memory", path);
+        return -1;
+    }
+    if (out->nt == 0) {
+        cs_mesh_free(out);
+        snprintf(err, errlen, "mesh '%s': no triangles (all degenerate)", path);
+        return -1;
+    }
+    return 0;
+}
+
+void cs_mesh_transform(cs_mesh *m, double scale, const double rotation_deg[3],
+                       const double position[3])
+{
+    const double d2r = 3.14159265358979323846 / 180.0;
+    double cx = 1, sx = 0, cy = 1, sy = 0, cz = 1, sz = 0;
+    if (rotation_deg) {
+        cx = cos(rotation_deg[0] * d2r), sx = sin(rotation_deg[0] * d2r);
+        cy = cos(rotation_deg[1] * d2r), sy = sin(rotation_deg[1] * d2r);
+        cz = cos(rotation_deg[2] * d2r), sz = sin(rotation_deg[2] * d2r);
+    }
+    /* R = Rz * Ry * Rx: rotate about x first, then y, then z (fixed axes). */
+    const double r[3][3] = {
+        {cz * cy, cz * sy * sx - sz * cx, cz * sy * cx + sz * sx},
+        {sz * cy, sz * sy * sx + cz * cx, sz * sy * cx - cz * sx},
+        {-sy, cy * sx, cy * cx},
+    };
+    for (int i = 0; i < m->nv; i++) {
+        double *p = m->v + 3 * i;
+        double q[3] = {scale * p[0], scale * p[1], scale * p[2]};
+        for (int k = 0; k < 3; k++)
+            p[k] = r[k][0] * q[0] + r[k][1] * q[1] + r[k][2] * q[2] +
+                   (position ? position[k] : 0.0);
+    }
+}
+
+/* Does assimp have an exporter with this id? */
+static int have_exporter(const char *want)
+{
+    int found = 0;
+    for (size_t k = 0; k < aiGetExportFormatCount() && !found; k++) {
+        const struct aiExportFormatDesc *d = aiGetExportFormatDescription(k);
+        if (!d)
+            continue;
+        found = d->id && !strcmp(d->id, want);
+        aiReleaseExportFormatDescription(d); /* frees the strings too: copy before */
+    }
+    return found;
+}
+
+/* Exporter id for a file name, from its extension, copied into id (0), or -1 if none. */
+static int format_for(const char *path, char *id, size_t idlen)
+{
+    const char *dot = strrchr(path, '.');
+    const char *slash = strrchr(path, '/');
+    if (!dot || (slash && dot < slash) || !dot[1])
+        return -1;
+    const char *ext = dot + 1;
+    /* Where several exporters share an extension, pick the one a user expects: OBJ without a
+     * side .mtl file, binary STL, glTF 2. */
+    static const char *const prefer[][2] = {
+        {"obj", "objnomtl"}, {"stl", "stlb"}, {"gltf", "gltf2"}, {"glb", "glb2"},
+    };
+    for (size_t i = 0; i < sizeof prefer / sizeof prefer[0]; i++)
+        if (!strcasecmp(ext, prefer[i][0]) && have_exporter(prefer[i][1])) {
+            snprintf(id, idlen, "%s", prefer[i][1]);
+            return 0;
+        }
+    int found = 0;
+    for (size_t k = 0; k < aiGetExportFormatCount() && !found; k++) {
+        const struct aiExportFormatDesc *d = aiGetExportFormatDescription(k);
+        if (!d)
+            continue;
+        if (d->id && d->fileExtension && !strcasecmp(d->fileExtension, ext)) {
+            snprintf(id, idlen, "%s", d->id);
+            found = 1;
+        }
+        aiReleaseExportFormatDescription(d);
+    }
+    return found ? 0 : -1;
+}
+
+static void set_name(struct aiString *s, const char *name)
+{
+    size_t n = strlen(name);
+    if (n >= MAXLEN)
+        n = MAXLEN - 1;
+    memcpy(s->data, name, n);
+    s->data[n] = '\0';
+    s->length = (ai_uint32)n;
+}
+
+static void free_scene(struct aiScene *sc)
+{
+    if (!sc)
+        return;
+    if (sc->mMeshes) {
+        for (unsigned i = 0; i < sc->mNumMeshes; i++) {
+            struct aiMesh *am = sc->mMeshes[i];
+            if (!am)
+                continue;
+            if (am->mFaces)
+                for (unsigned f = 0; f < am->mNumFaces; f++)
+                    free(am->mFaces[f].mIndices);
+            free(am->mFaces);
+            free(am->mVertices);
+            free(am);
+        }
+        free(sc->mMeshes);
+    }
+    if (sc->mMaterials) {
+        for (unsigned i = 0; i < sc->mNumMaterials; i++)
+            free(sc->mMaterials[i]);
+        free(sc->mMaterials);
+    }
+    struct aiNode *root = sc->mRootNode;
+    if (root) {
+        if (root->mChildren) {
+            for (unsigned i = 0; i < root->mNumChildren; i++) {
+                if (!root->mChildren[i])
+                    continue;
+                free(root->mChildren[i]->mMeshes);
+                free(root->mChildren[i]);
+            }
+            free(root->mChildren);
+        }
+        free(root);
+    }
+    free(sc);
+}
+
+static void identity(struct aiMatrix4x4 *m)
+{
+    memset(m, 0, sizeof *m);
+    m->a1 = m->b2 = m->c3 = m->d4 = 1;
+}
+
+int cs_mesh_export(const char *path, const cs_mesh *pieces, const char *const *names, int n,
+                   char *err, size_t errlen)
+{
+    if (n <= 0) {
+        snprintf(err, errlen, "export '%s': nothing to write", path);
+        return -1;
+    }
+    char fmt[64];
+    if (format_for(path, fmt, sizeof fmt) != 0) {
+        const char *dot = strrchr(path, '.');
+        snprintf(err, errlen, "export '%s': no assimp exporter for extension '%s'", path,
+                 dot ? dot : "(none)");
+        return -1;
+    }
+    for (int p = 0; p < n; p++)
+        for (int k = 0; k < 3 * pieces[p].nv; k++)
+            if (!isfinite(pieces[p].v[k])) {
+                snprintf(err, errlen, "export '%s': piece %d has a non-finite vertex", path, p);
+                return -1;
+            }
+    struct aiScene *sc = calloc(1, sizeof *sc);
+    if (!sc)
+        goto oom;
+    sc->mMeshes = calloc((size_t)n, sizeof *sc->mMeshes);
+    sc->mMaterials = calloc(1, sizeof *sc->mMaterials);
+    sc->mRootNode = calloc(1, sizeof *sc->mRootNode);
+    if (!sc->mMeshes || !sc->mMaterials || !sc->mRootNode)
+        goto oom;
+    sc->mNumMeshes = (unsigned)n;
+    sc->mMaterials[0] = calloc(1, sizeof *sc->mMaterials[0]);
+    if (!sc->mMaterials[0])
+        goto oom;
+    sc->mNumMaterials = 1;
+    struct aiNode *root = sc->mRootNode;
+    set_name(&root->mName, "cubesim");
+    identity(&root->mTransformation);
+    root->mChildren = calloc((size_t)n, sizeof *root->mChildren);
+    if (!root->mChildren)
+        goto oom;
+    root->mNumChildren = (unsigned)n;
+    for (int p = 0; p < n; p++) {
+        const cs_mesh *pc = &pieces[p];
+        char fallback[32];
+        snprintf(fallback, sizeof fallback, "piece%d", p);
+        const char *name = names && names[p] && names[p][0] ? names[p] : fallback;
+        struct aiMesh *am = calloc(1, sizeof *am);
+        sc->mMeshes[p] = am;
+        if (!am)
+            goto oom;
+        am->mPrimitiveTypes = aiPrimitiveType_TRIANGLE;
+        am->mMaterialIndex = 0;
+        set_name(&am->mName, name);
+        am->mVertices = calloc((size_t)(pc->nv ? pc->nv : 1), sizeof *am->mVertices);
+        am->mFaces = calloc((size_t)(pc->nt ? pc->nt : 1), sizeof *am->mFaces);
+        if (!am->mVertices || !am->mFaces)
+            goto oom;
+        am->mNumVertices = (unsigned)pc->nv;
+        for (int i = 0; i < pc->nv; i++) {
+            am->mVertices[i].x = (ai_real)pc->v[3 * i];
+            am->mVertices[i].y = (ai_real)pc->v[3 * i + 1];
+            am->mVertices[i].z = (ai_real)pc->v[3 * i + 2];
+        }
+        am->mNumFaces = (unsigned)pc->nt;
+        for (int f = 0; f < pc->nt; f++) {
+            am->mFaces[f].mIndices = malloc(3 * sizeof(unsigned));
+            if (!am->mFaces[f].mIndices)
+                goto oom;
+            am->mFaces[f].mNumIndices = 3;
+            for (int c = 0; c < 3; c++)
+                am->mFaces[f].mIndices[c] = (unsigned)pc->t[3 * f + c];
+        }
+        struct aiNode *node = calloc(1, sizeof *node);
+        root->mChildren[p] = node;
+        if (!node)
+            goto oom;
+        set_name(&node->mName, name);
+        identity(&node->mTransformation);
+        node->mParent = root;
+        node->mMeshes = malloc(sizeof(unsigned));
+        if (!node->mMeshes)
+            goto oom;
+        node->mMeshes[0] = (unsigned)p;
+        node->mNumMeshes = 1;
+    }
+    aiReturn rc = aiExportScene(sc, fmt, path, 0);
+    free_scene(sc);
+    if (rc != aiReturn_SUCCESS) {
+        const char *why = aiGetErrorString();
+        snprintf(err, errlen, "export '%s': assimp (%s): %s", path, fmt,
+                 why && *why ? why : "failed");
+        for (char *q = err; *q; q++)
+            if (*q == '\n' || *q == '\r')
+                *q = ' ';
+        return -1;
+    }
+    return 0;
+oom:
+    free_scene(sc);
+    snprintf(err, errlen, "export '%s': out of memory", path);
+    return -1;
+}

@@ -1,0 +1,136 @@
+/*
+ * watertight.c — closedness and orientation of a triangle surface (implements watertight.h).
+ *
+ * Every directed edge (a,b) of every triangle is listed under its undirected key (min,max) and
+ * the list is sorted (O(n log n), no hash table to size): a run of one is a boundary edge, a run
+ * of three or more a non-manifold edge, a run of two with the same direction a misoriented one.
+ * The volume is the divergence-theorem sum of signed tetrahedra (origin, a, b, c). This is the
+ * invariant seed 000 §2.3/§3.1 fracture must keep: every piece a closed, oriented surface.
+ */
+#include "watertight.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+
+typedef struct {
+    int32_t lo, hi;
+    int32_t forward; /* 1 if the triangle runs lo -> hi */
+} edge_rec;
+
+static int cmp_edge(const void *pa, const void *pb)
+{
+    const edge_rec *a = pa, *b = pb;
+    if (a->lo != b->lo)
+        return a->lo < b->lo ? -1 : 1;
+    if (a->hi != b->hi)
+        return a->hi < b->hi ? -1 : 1;
+    return (a->forward > b->forward) - (a->forward < b->forward);
+}
+
+double cs_mesh_volume(const double *v, const int32_t *t, int nt)
+{
+    double vol = 0.0;
+    for (int i = 0; i < nt; i++) {
+        const double *a = v + 3 * t[3 * i], *b = v + 3 * t[3 * i + 1], *c = v + 3 * t[3 * i + 2];
+        vol += a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) +
+               a[2] * (b[0] * c[1] - b[1] * c[0]);
+    }
+    return vol / 6.0;
+}
+
+static int fail(char *err, size_t errlen, const char *msg)
+{
+    if (err && errlen)
+        snprintf(err, errlen, "%s", msg);
+    return 0;
+}
+
+int cs_watertight_check(const double *v, int nv, const int32_t *t, int nt,
+                        cs_watertight_report *rep, char *err, size_t errlen)
+{
+    cs_watertight_report r = {0};
+    char msg[160];
+    if (rep)
+        *rep = r;
+    if (nt <= 0)
+        return fail(err, errlen, "no triangles: the surface is empty");
+    for (int i = 0; i < 3 * nt; i++)
+        if (t[i] < 0 || t[i] >= nv) {
+            snprintf(msg, sizeof msg, "triangle %d has vertex index %d out of range [0,%d)",
+                     i / 3, (int)t[i], nv);
+            return fail(err, errlen, msg);
+        }
+    edge_rec *e = malloc((size_t)nt * 3 * sizeof *e);
+    if (!e)
+        return fail(err, errlen, "out of memory checking the surface");
+    int ne = 0;
+    for (int i = 0; i < nt; i++) {
+        const int32_t *tri = t + 3 * i;
+        if (tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2]) {
+            r.degenerate_triangles++;
+        } else {
+            const double *a = v + 3 * tri[0], *b = v + 3 * tri[1], *c = v + 3 * tri[2];
+            double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]};
+            double w[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+            double n[3] = {u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2],
+                           u[0] * w[1] - u[1] * w[0]};
+            double nn = n[0] * n[0] + n[1] * n[1] + n[2] * n[2];
+            double uu = u[0] * u[0] + u[1] * u[1] + u[2] * u[2];
+            double ww = w[0] * w[0] + w[1] * w[1] + w[2] * w[2];
+            /* zero area relative to the edge lengths (sin of the angle below ~1e-12) */
+            if (!(nn > 1e-24 * uu * ww))
+                r.degenerate_triangles++;
+        }
+        for (int k = 0; k < 3; k++) {
+            int32_t a = tri[k], b = tri[(k + 1) % 3];
+            if (a == b)
+                continue;
+            e[ne++] = a < b ? (edge_rec){a, b, 1} : (edge_rec){b, a, 0};
+        }
+    }
+    qsort(e, (size_t)ne, sizeof *e, cmp_edge);
+    for (int i = 0; i < ne;) {
+        int j = i + 1;
+        while (j < ne && e[j].lo == e[i].lo && e[j].hi == e[i].hi)
+            j++;
+        int run = j - i;
+        if (run == 1)
+            r.boundary_edges++;
+        else if (run > 2)
+            r.nonmanifold_edges++;
+        else if (e[i].forward == e[i + 1].forward)
+            r.misoriented_edges++;
+        i = j;
+    }
+    free(e);
+    r.volume = cs_mesh_volume(v, t, nt);
+    if (rep)
+        *rep = r;
+    if (r.boundary_edges) {
+        snprintf(msg, sizeof msg, "%d boundary edges: the surface is open", r.boundary_edges);
+        return fail(err, errlen, msg);
+    }
+    if (r.nonmanifold_edges) {
+        snprintf(msg, sizeof msg, "%d edges shared by three or more triangles: not manifold",
+                 r.nonmanifold_edges);
+        return fail(err, errlen, msg);
+    }
+    if (r.misoriented_edges) {
+        snprintf(msg, sizeof msg,
+                 "%d edges used twice in the same direction: inconsistent orientation",
+                 r.misoriented_edges);
+        return fail(err, errlen, msg);
+    }
+    if (r.degenerate_triangles) {
+        snprintf(msg, sizeof msg, "%d degenerate triangles (repeated vertex or zero area)",
+                 r.degenerate_triangles);
+        return fail(err, errlen, msg);
+    }
+    if (!(r.volume > 0.0)) {
+        snprintf(msg, sizeof msg, "enclosed volume %.6g is not positive: the surface is inside out",
+                 r.volume);
+        return fail(err, errlen, msg);
+    }
+    return 1;
+}

@@ -1,0 +1,360 @@
+/*
+ * test_mesh.c — mesh import/export through assimp (common/mesh_io.c) and the watertightness
+ * check (common/watertight.c). Mesh files come from scenes/meshes/ (make_meshes.py), found
+ * relative to CS_SOURCE_DIR (default: the repository root the tests run from).
+ */
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "check.h"
+#include "mesh.h"
+#include "watertight.h"
+
+#ifndef CS_SOURCE_DIR
+#define CS_SOURCE_DIR "."
+#endif
+
+static const char *mesh_path(char *buf, size_t n, const char *name)
+{
+    const char *root = getenv("CS_SOURCE_DIR");
+    snprintf(buf, n, "%s/scenes/meshes/%s", root && *root ? root : CS_SOURCE_DIR, name);
+    return buf;
+}
+
+static double bbox_extent(const cs_mesh *m, int axis, double *lo_out)
+{
+    double lo = m->v[axis], hi = m->v[axis];
+    for (int i = 1; i < m->nv; i++) {
+        double x = m->v[3 * i + axis];
+        lo = x < lo ? x : lo;
+        hi = x > hi ? x : hi;
+    }
+    if (lo_out)
+        *lo_out = lo;
+    return hi - lo;
+}
+
+/* Volume of a float32 icosphere of radius 0.1 with 320 faces (computed from the OBJ). */
+TEST(mesh_every_format_loads_the_same_sphere)
+{
+    char p[512], err[256];
+    cs_mesh ref;
+    ENSURE_MSG(cs_mesh_load(mesh_path(p, sizeof p, "icosphere.obj"), &ref, err, sizeof err) == 0,
+               "%s", err);
+    ENSURE(ref.nv == 162 && ref.nt == 320);
+    double vref = cs_mesh_volume(ref.v, ref.t, ref.nt);
+    /* an icosphere of radius r lies inside the ball: a little less than 4/3 pi r^3 */
+    ENSURE(vref > 0.95 * 4.18879e-3 && vref < 4.18879e-3);
+    cs_watertight_report rep;
+    ENSURE_MSG(cs_watertight_check(ref.v, ref.nv, ref.t, ref.nt, &rep, err, sizeof err), "%s",
+               err);
+    const char *names[] = {"icosphere.stl", "icosphere.ply", "icosphere.off", "icosphere.gltf"};
+    for (int f = 0; f < 4; f++) {
+        cs_mesh m;
+        ENSURE_MSG(cs_mesh_load(mesh_path(p, sizeof p, names[f]), &m, err, sizeof err) == 0,
+                   "%s: %s", names[f], err);
+        int ok_counts = m.nv == ref.nv && m.nt == ref.nt;
+        double vol = cs_mesh_volume(m.v, m.t, m.nt);
+        int closed = cs_watertight_check(m.v, m.nv, m.t, m.nt, &rep, err, sizeof err);
+        cs_mesh_free(&m);
+        ENSURE_MSG(ok_counts, "%s: %d vertices / %d triangles", names[f], m.nv, m.nt);
+        ENSURE_NEAR(vol, vref, 1e-12);
+        ENSURE_MSG(closed, "%s: %s", names[f], err);
+    }
+    cs_mesh_free(&ref);
+}
+
+TEST(mesh_merges_all_meshes_of_a_file)
+{
+    char p[512], err[256];
+    cs_mesh m;
+    ENSURE_MSG(cs_mesh_load(mesh_path(p, sizeof p, "twopart.obj"), &m, err, sizeof err) == 0, "%s",
+               err);
+    /* sphere 162/320 + cube 8/12 */
+    int nv = m.nv, nt = m.nt;
+    double vol = cs_mesh_volume(m.v, m.t, m.nt);
+    int closed = cs_watertight_check(m.v, m.nv, m.t, m.nt, NULL, err, sizeof err);
+    cs_mesh_free(&m);
+    ENSURE(nv == 170 && nt == 332);
+    ENSURE(closed);
+    cs_mesh sph;
+    ENSURE(cs_mesh_load(mesh_path(p, sizeof p, "icosphere.obj"), &sph, err, sizeof err) == 0);
+    double vs = cs_mesh_volume(sph.v, sph.t, sph.nt);
+    cs_mesh_free(&sph);
+    ENSURE_NEAR(vol, vs + 0.05 * 0.05 * 0.05, 1e-9);
+
+    /* glTF: one cube mesh used by two nodes, the second translated by 0.1 in x */
+    ENSURE_MSG(cs_mesh_load(mesh_path(p, sizeof p, "two_nodes.gltf"), &m, err, sizeof err) == 0,
+               "%s", err);
+    nv = m.nv, nt = m.nt;
+    double lo;
+    double ext = bbox_extent(&m, 0, &lo);
+    vol = cs_mesh_volume(m.v, m.t, m.nt);
+    cs_mesh_free(&m);
+    ENSURE(nv == 16 && nt == 24);
+    ENSURE_NEAR(lo, 0.0, 1e-7);
+    ENSURE_NEAR(ext, 0.15, 1e-7);
+    ENSURE_NEAR(vol, 2 * 0.05 * 0.05 * 0.05, 1e-9);
+}
+
+TEST(mesh_welds_stl_and_drops_degenerates)
+{
+    char path[] = "/tmp/cs_test_degenerate_XXXXXX.obj";
+    int fd = mkstemps(path, 4);
+    ENSURE(fd >= 0);
+    FILE *f = fdopen(fd, "w");
+    /* a tetrahedron, plus a zero-area triangle, a line and an unused vertex */
+    fprintf(f, "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nv 2 0 0\nv 9 9 9\n"
+               "f 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\nf 1 2 5\nl 1 6\n");
+    fclose(f);
+    cs_mesh m;
+    char err[256];
+    int rc = cs_mesh_load(path, &m, err, sizeof err);
+    unlink(path);
+    ENSURE_MSG(rc == 0, "%s", err);
+    int nv = m.nv, nt = m.nt;
+    double vol = cs_mesh_volume(m.v, m.t, m.nt);
+    cs_mesh_free(&m);
+    ENSURE(nt == 4);
+    ENSURE(nv == 4);
+    ENSURE_NEAR(vol, 1.0 / 6.0, 1e-12);
+}
+
+TEST(mesh_load_errors_name_the_problem)
+{
+    char p[512], err[256];
+    cs_mesh m;
+    ENSURE(cs_mesh_load("/nonexistent/x.obj", &m, err, sizeof err) == -1);
+    ENSURE_MSG(!strcmp(err, "mesh '/nonexistent/x.obj': no such file"), "%s", err);
+    ENSURE(m.v == NULL && m.t == NULL);
+
+    mesh_path(p, sizeof p, "garbage.obj");
+    ENSURE(cs_mesh_load(p, &m, err, sizeof err) == -1);
+    ENSURE_MSG(strstr(err, "garbage.obj") && strstr(err, "assimp: "), "%s", err);
+    ENSURE(!strchr(err, '\n'));
+
+    char empty[] = "/tmp/cs_test_empty_XXXXXX.obj";
+    int fd = mkstemps(empty, 4);
+    ENSURE(fd >= 0);
+    close(fd);
+    int rc = cs_mesh_load(empty, &m, err, sizeof err);
+    ENSURE(rc == -1);
+    ENSURE_MSG(strstr(err, "empty"), "%s", err);
+
+    /* an OBJ with only points and lines: "no triangles" */
+    FILE *f = fopen(empty, "w");
+    fprintf(f, "v 0 0 0\nv 1 0 0\nv 0 1 0\nl 1 2\nl 2 3\n");
+    fclose(f);
+    rc = cs_mesh_load(empty, &m, err, sizeof err);
+    ENSURE(rc == -1);
+    ENSURE_MSG(strstr(err, "no triangles") || strstr(err, "assimp"), "%s", err);
+
+    unlink(empty);
+
+    /* a binary STL carrying a NaN coordinate: assimp passes it through, we refuse it */
+    char stl[] = "/tmp/cs_test_nan_XXXXXX.stl";
+    fd = mkstemps(stl, 4);
+    ENSURE(fd >= 0);
+    f = fdopen(fd, "wb");
+    char header[80] = "cubesim nan test";
+    uint32_t n1 = 1;
+    float tri[12] = {0, 0, 1, 0, 0, 0, 1, 0, 0, 0, NAN, 0};
+    uint16_t attr = 0;
+    fwrite(header, 1, 80, f);
+    fwrite(&n1, 4, 1, f);
+    fwrite(tri, 4, 12, f);
+    fwrite(&attr, 2, 1, f);
+    fclose(f);
+    rc = cs_mesh_load(stl, &m, err, sizeof err);
+    unlink(stl);
+    ENSURE(rc == -1);
+    ENSURE_MSG(strstr(err, "not finite"), "%s", err);
+
+    ENSURE(cs_mesh_load("/tmp", &m, err, sizeof err) == -1);
+    ENSURE_MSG(strstr(err, "not a regular file"), "%s", err);
+}
+
+TEST(mesh_transform_scale_rotate_translate)
+{
+    double v[6] = {1, 0, 0, 0, 1, 0};
+    int32_t t[3] = {0, 1, 1};
+    cs_mesh m = {v, 2, t, 1};
+    /* scale 2, 90° about z: (1,0,0) -> (0,2,0); (0,1,0) -> (-2,0,0); then + (1,1,1) */
+    cs_mesh_transform(&m, 2.0, (double[3]){0, 0, 90}, (double[3]){1, 1, 1});
+    ENSURE_NEAR(v[0], 1.0, 1e-15);
+    ENSURE_NEAR(v[1], 3.0, 1e-15);
+    ENSURE_NEAR(v[2], 1.0, 1e-15);
+    ENSURE_NEAR(v[3], -1.0, 1e-15);
+    ENSURE_NEAR(v[4], 1.0, 1e-15);
+    /* order: x first then y. (0,1,0) -x90-> (0,0,1) -y90-> (1,0,0) */
+    double w[3] = {0, 1, 0};
+    cs_mesh m2 = {w, 1, t, 0};
+    cs_mesh_transform(&m2, 1.0, (double[3]){90, 90, 0}, (double[3]){0, 0, 0});
+    ENSURE_NEAR(w[0], 1.0, 1e-15);
+    ENSURE_NEAR(w[1], 0.0, 1e-15);
+    ENSURE_NEAR(w[2], 0.0, 1e-15);
+    /* a rotation keeps the volume; scale s multiplies it by s^3 */
+    char p[512], err[256];
+    cs_mesh s;
+    ENSURE(cs_mesh_load(mesh_path(p, sizeof p, "icosphere.obj"), &s, err, sizeof err) == 0);
+    double v0 = cs_mesh_volume(s.v, s.t, s.nt);
+    cs_mesh_transform(&s, 1.5, (double[3]){30, -45, 120}, (double[3]){5, -2, 3});
+    double v1 = cs_mesh_volume(s.v, s.t, s.nt);
+    cs_mesh_free(&s);
+    ENSURE_NEAR(v1, 1.5 * 1.5 * 1.5 * v0, 1e-12);
+}
+
+static int count_lines_starting(const char *path, const char *prefix, char *names, size_t n)
+{
+    FILE *f = fopen(path, "r");
+    if (!f)
+        return -1;
+    char line[512];
+    int c = 0;
+    if (names)
+        names[0] = '\0';
+    while (fgets(line, sizeof line, f))
+        if (!strncmp(line, prefix, strlen(prefix))) {
+            c++;
+            if (names) {
+                line[strcspn(line, "\r\n")] = '\0';
+                strncat(names, line + strlen(prefix), n - strlen(names) - 2);
+                strcat(names, ",");
+            }
+        }
+    fclose(f);
+    return c;
+}
+
+TEST(mesh_export_round_trips)
+{
+    char p[512], err[256];
+    cs_mesh pieces[2];
+    ENSURE(cs_mesh_load(mesh_path(p, sizeof p, "icosphere.obj"), &pieces[0], err, sizeof err) ==
+           0);
+    ENSURE(cs_mesh_load(mesh_path(p, sizeof p, "torus.obj"), &pieces[1], err, sizeof err) == 0);
+    cs_mesh_transform(&pieces[1], 1.0, NULL, (double[3]){0.5, 0, 0});
+    double vol = cs_mesh_volume(pieces[0].v, pieces[0].t, pieces[0].nt) +
+                 cs_mesh_volume(pieces[1].v, pieces[1].t, pieces[1].nt);
+    int nv = pieces[0].nv + pieces[1].nv, nt = pieces[0].nt + pieces[1].nt;
+    const char *names[2] = {"ball", "ring"};
+    const char *exts[] = {"obj", "stl", "ply", "glb", "gltf"};
+    int failed = 0;
+    for (int e = 0; e < 5 && !failed; e++) {
+        char out[128];
+        snprintf(out, sizeof out, "/tmp/cs_test_export_%d.%s", (int)getpid(), exts[e]);
+        if (cs_mesh_export(out, pieces, names, 2, err, sizeof err) != 0) {
+            cs_test_fail(__FILE__, __LINE__, "export %s: %s", exts[e], err);
+            failed = 1;
+            break;
+        }
+        cs_mesh back;
+        if (cs_mesh_load(out, &back, err, sizeof err) != 0) {
+            cs_test_fail(__FILE__, __LINE__, "reload %s: %s", exts[e], err);
+            failed = 1;
+        } else {
+            double vb = cs_mesh_volume(back.v, back.t, back.nt);
+            int closed = cs_watertight_check(back.v, back.nv, back.t, back.nt, NULL, err,
+                                             sizeof err);
+            if (back.nv != nv || back.nt != nt || fabs(vb - vol) > 1e-6 * vol || !closed) {
+                cs_test_fail(__FILE__, __LINE__, "%s: %d/%d vs %d/%d, volume %g vs %g, %s",
+                             exts[e], back.nv, back.nt, nv, nt, vb, vol,
+                             closed ? "closed" : err);
+                failed = 1;
+            }
+            cs_mesh_free(&back);
+        }
+        if (!failed && !strcmp(exts[e], "obj")) {
+            char groups[256];
+            int g = count_lines_starting(out, "g ", groups, sizeof groups);
+            if (g != 2 || strcmp(groups, "ball,ring,")) {
+                cs_test_fail(__FILE__, __LINE__, "OBJ groups: %d (%s)", g, groups);
+                failed = 1;
+            }
+        }
+        unlink(out);
+    }
+    cs_mesh_free(&pieces[0]);
+    cs_mesh_free(&pieces[1]);
+    if (failed)
+        return;
+    ENSURE(cs_mesh_export("/tmp/x.nosuchformat", pieces, names, 1, err, sizeof err) == -1);
+    ENSURE_MSG(strstr(err, "no assimp exporter"), "%s", err);
+}
+
+/* ---------------------------------------------------------------- watertight */
+
+static const double cube_v[8][3] = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {1, 1, 0},
+                                    {0, 0, 1}, {1, 0, 1}, {0, 1, 1}, {1, 1, 1}};
+static const int32_t cube_t[12][3] = {{0, 2, 3}, {0, 3, 1}, {4, 5, 7}, {4, 7, 6},
+                                      {0, 1, 5}, {0, 5, 4}, {2, 6, 7}, {2, 7, 3},
+                                      {0, 4, 6}, {0, 6, 2}, {1, 3, 7}, {1, 7, 5}};
+
+TEST(watertight_closed_open_flipped_nonmanifold)
+{
+    cs_watertight_report r;
+    char err[256];
+    int32_t t[12][3];
+    memcpy(t, cube_t, sizeof t);
+    ENSURE_MSG(cs_watertight_check(&cube_v[0][0], 8, &t[0][0], 12, &r, err, sizeof err), "%s",
+               err);
+    ENSURE_NEAR(r.volume, 1.0, 1e-15);
+    ENSURE(r.boundary_edges == 0 && r.nonmanifold_edges == 0 && r.misoriented_edges == 0);
+
+    /* open: drop one triangle -> 3 boundary edges */
+    ENSURE(!cs_watertight_check(&cube_v[0][0], 8, &t[0][0], 11, &r, err, sizeof err));
+    ENSURE(r.boundary_edges == 3);
+    ENSURE_MSG(strstr(err, "3 boundary edges"), "%s", err);
+
+    /* one triangle flipped: its 3 edges are misoriented */
+    int32_t s = t[5][1];
+    t[5][1] = t[5][2];
+    t[5][2] = s;
+    ENSURE(!cs_watertight_check(&cube_v[0][0], 8, &t[0][0], 12, &r, err, sizeof err));
+    ENSURE(r.misoriented_edges == 3);
+    ENSURE_MSG(strstr(err, "orientation"), "%s", err);
+
+    /* all flipped: closed but inside out */
+    for (int i = 0; i < 12; i++) {
+        t[i][0] = cube_t[i][0];
+        t[i][1] = cube_t[i][2];
+        t[i][2] = cube_t[i][1];
+    }
+    ENSURE(!cs_watertight_check(&cube_v[0][0], 8, &t[0][0], 12, &r, err, sizeof err));
+    ENSURE_NEAR(r.volume, -1.0, 1e-15);
+    ENSURE_MSG(strstr(err, "inside out"), "%s", err);
+
+    /* degenerate: repeated index */
+    memcpy(t, cube_t, sizeof t);
+    int32_t td[13][3];
+    memcpy(td, t, sizeof t);
+    td[12][0] = 0, td[12][1] = 0, td[12][2] = 1;
+    ENSURE(!cs_watertight_check(&cube_v[0][0], 8, &td[0][0], 13, &r, err, sizeof err));
+    ENSURE(r.degenerate_triangles == 1);
+
+    /* index out of range */
+    td[12][0] = 0, td[12][1] = 1, td[12][2] = 8;
+    ENSURE(!cs_watertight_check(&cube_v[0][0], 8, &td[0][0], 13, &r, err, sizeof err));
+    ENSURE_MSG(strstr(err, "out of range"), "%s", err);
+
+    /* two cubes sharing one edge (file): closed but not manifold */
+    char p[512];
+    cs_mesh m;
+    ENSURE(cs_mesh_load(mesh_path(p, sizeof p, "nonmanifold.obj"), &m, err, sizeof err) == 0);
+    int ok = cs_watertight_check(m.v, m.nv, m.t, m.nt, &r, err, sizeof err);
+    cs_mesh_free(&m);
+    ENSURE(!ok);
+    ENSURE(r.boundary_edges == 0);
+    ENSURE(r.nonmanifold_edges == 1);
+    ENSURE_MSG(strstr(err, "not manifold"), "%s", err);
+
+    /* open sphere file */
+    ENSURE(cs_mesh_load(mesh_path(p, sizeof p, "open_sphere.obj"), &m, err, sizeof err) == 0);
+    ok = cs_watertight_check(m.v, m.nv, m.t, m.nt, &r, err, sizeof err);
+    cs_mesh_free(&m);
+    ENSURE(!ok);
+    ENSURE(r.boundary_edges == 6);
+}
