@@ -770,6 +770,10 @@ static int parse_object(sc_ctx *c, const cJSON *o, int index, const char *base_d
     size_t len = strlen(name->valuestring);
     if (len == 0 || len > SC_MAX_NAME)
         return fail(c, p, "must have 1 to %d bytes, got %zu", SC_MAX_NAME, len);
+    /* Names travel in one-line messages and on the bus: no control characters. */
+    for (size_t i = 0; i < len; i++)
+        if ((unsigned char)name->valuestring[i] < 0x20 || name->valuestring[i] == 0x7f)
+            return fail(c, p, "must not contain control characters");
     for (int i = 0; i < index; i++)
         if (!strcmp(s->objects[i].name, name->valuestring))
             return fail(c, p, "duplicate object name '%s' (also objects[%d])",

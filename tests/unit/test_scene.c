@@ -405,6 +405,8 @@ static const bad_case BAD[] = {
     {"{\"objects\": [{\"name\": \"a\", " BOX "}, {\"name\": \"b\", " BOX "}, {\"name\": \"a\", " BOX
      "}]}",
      "objects[2].name: duplicate object name 'a' (also objects[0])"},
+    {"{\"objects\": [{\"name\": \"a\\nb\", " BOX "}]}",
+     "objects[0].name: must not contain control characters"},
     {OBJ("\"model\": \"fem\", " BOX), "objects[0].model: unknown model 'fem'"},
     {OBJ("\"material\": \"sof\", " BOX), "objects[0].material: unknown material 'sof'"},
     {OBJ("\"cube_size\": 0.1"), "objects[0]: missing geometry"},
