@@ -213,8 +213,8 @@ int cs_log_open(const char *path, cs_log *log, char *err, size_t errlen)
         }
         if (off + 28 + chlen + (int64_t)dlen > size) {
             snprintf(err, errlen, "%s: truncated: event %" PRId64 " at byte %" PRId64
-                     " needs %d bytes, the file ends %" PRId64 " bytes later", path, log->n, off,
-                     28 + chlen + dlen, size - off);
+                     " needs %" PRId64 " bytes, the file ends %" PRId64 " bytes later", path, log->n, off,
+                     (int64_t)28 + chlen + dlen, size - off);
             goto fail;
         }
         if (fread(chan, 1, (size_t)chlen, log->f) != (size_t)chlen) {

@@ -88,8 +88,8 @@ rc=$?
 
 sleep 1.0
 # Late joiners: one asks for a snapshot, one waits for a key frame (keyframe_s 1.5).
-"$B/cubesim-log" late.lcm --lcm "$U" --duration 1.5 >log_late.txt 2>&1 & plate=$!
-"$B/cubesim-log" late_passive.lcm --lcm "$U" --passive --duration 2.5 >log_latep.txt 2>&1 & plp=$!
+"$B/cubesim-log" late.lcm --lcm "$U" --duration 3 >log_late.txt 2>&1 & plate=$!
+"$B/cubesim-log" late_passive.lcm --lcm "$U" --passive --duration 3.5 >log_latep.txt 2>&1 & plp=$!
 wait $plate $plp
 "$B/cubesim-push" --lcm "$U" --timeout 3 pause >/dev/null || cs_fail push_pause "no ok ack"
 sleep 0.7
