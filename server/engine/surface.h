@@ -23,7 +23,8 @@ typedef struct cs_surface {
     int n_triangles;
     int32_t *tris;         /* 3 per triangle, counter-clockwise seen from outside */
     int32_t *vert_cell;    /* cell each vertex is skinned to */
-    double *vert_uvw;      /* 3 per vertex: local coordinates in that cell, each in [0,1] */
+    double *vert_uvw;      /* 3 per vertex: local coordinates in that cell, each in [0,1]
+                              up to the binding tolerance / h (not clamped: exact at rest) */
     int32_t *tri_cell;     /* cell containing each triangle's centroid */
     int32_t *cell_tri_start; /* n_cells + 1 offsets into cell_tri_list */
     int32_t *cell_tri_list;  /* triangles intersecting each cell (seed 000 Table 1) */
@@ -32,7 +33,7 @@ typedef struct cs_surface {
 /*
  * Bind a surface (vertices and triangles copied) to a cube mesh: skin weights, centroid cells,
  * per-cell triangle lists. Fails (-1, message in err) if a vertex or centroid lies in no cell
- * of cm (within a tolerance of 1e-9·h), or on out of memory.
+ * of cm (within cs_voxel_tolerance of voxelize.h), or on out of memory.
  */
 int cs_surface_bind(cs_surface *s, const cs_cubemesh *cm, const double *verts, int nv,
                     const int32_t *tris, int nt, char *err, size_t errlen);

@@ -27,6 +27,14 @@ int cs_subdivide_edges(double **verts, int *nv, int32_t **tris, int *nt, double 
 int cs_voxelize(const double *verts, int nv, const int32_t *tris, int nt, double h,
                 double origin[3], int32_t **ijk, int *n_cells, char *err, size_t errlen);
 
+/*
+ * The geometric tolerance (a length) of voxelization and surface binding for a mesh: points
+ * and surfaces within it of a cell boundary count as on it. max(1e-9·h, 2^-20·M), M the largest
+ * |coordinate| of verts, capped at 1e-4·h: meshes come from files in float32, so a surface
+ * meant to lie on a lattice plane is only there to float precision.
+ */
+double cs_voxel_tolerance(double h, const double *verts, int nv);
+
 /* Exact triangle/axis-aligned-box overlap (separating axis theorem). */
 int cs_tri_box_overlap(const double center[3], const double half[3], const double a[3],
                        const double b[3], const double c[3]);

@@ -1,0 +1,329 @@
+/*
+ * surface.c — the surface mesh embedded in the cube mesh (seed 000 §2.1 Table 1, §3, §3.3).
+ * Implements surface.h.
+ *
+ * Binding: a point goes to the cell floor((x - origin)/h); if that cell is not in the mesh, or
+ * the point lies on its boundary, the neighbouring cells that contain it within tol are tried
+ * (the floor cell first). tol is twice cs_voxel_tolerance (voxelize.h), so whatever
+ * voxelization kept binds; local coordinates are not clamped (they leave [0,1] by at most
+ * tol/h), so skinning at rest and under affine node maps is exact.
+ * Each cell's triangle list holds every triangle meeting the cell grown by tol
+ * (exact SAT), so a triangle is always listed in the cell its centroid is assigned to.
+ * Skinning is the trilinear interpolation of the cell's 8 nodes: the hot path, no allocation.
+ * cs_surface_of_cells builds the closed boundary of a cell set on an integer sub-lattice, which
+ * makes welding exact.
+ */
+#include "surface.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "voxelize.h"
+
+
+void cs_surface_free(cs_surface *s)
+{
+    if (!s)
+        return;
+    free(s->rest);
+    free(s->pos);
+    free(s->tris);
+    free(s->vert_cell);
+    free(s->vert_uvw);
+    free(s->tri_cell);
+    free(s->cell_tri_start);
+    free(s->cell_tri_list);
+    memset(s, 0, sizeof *s);
+}
+
+/* Cell containing p (within tol_h cell widths) and the local coordinates, or -1. */
+static int32_t locate(const cs_cubemesh *cm, double tol_h, const double p[3], double uvw[3])
+{
+    double l[3];
+    int base[3], cnt[3], opt[3][2];
+    for (int k = 0; k < 3; k++) {
+        l[k] = (p[k] - cm->origin[k]) / cm->h;
+        double f = floor(l[k]);
+        if (!(fabs(f) < 1e9))
+            return -1;
+        base[k] = (int)f;
+        /* candidates: the floor cell, then a neighbour if p is within tolerance of that side */
+        cnt[k] = 0;
+        opt[k][cnt[k]++] = base[k];
+        if (l[k] - f <= tol_h)
+            opt[k][cnt[k]++] = base[k] - 1;
+        else if (f + 1.0 - l[k] <= tol_h)
+            opt[k][cnt[k]++] = base[k] + 1;
+    }
+    for (int a = 0; a < cnt[0]; a++)
+        for (int b = 0; b < cnt[1]; b++)
+            for (int c = 0; c < cnt[2]; c++) {
+                int32_t cell = cs_cubemesh_find(cm, opt[0][a], opt[1][b], opt[2][c]);
+                if (cell < 0)
+                    continue;
+                const int32_t *ijk = cm->cell_ijk + 3 * cell;
+                for (int k = 0; k < 3; k++)
+                    uvw[k] = l[k] - ijk[k];
+                return cell;
+            }
+    return -1;
+}
+
+typedef struct {
+    int32_t cell, tri;
+} pair;
+
+int cs_surface_bind(cs_surface *s, const cs_cubemesh *cm, const double *verts, int nv,
+                    const int32_t *tris, int nt, char *err, size_t errlen)
+{
+    memset(s, 0, sizeof *s);
+    pair *pairs = NULL;
+    int n_pairs = 0, cap_pairs = 0;
+    s->n_vertices = nv;
+    s->n_triangles = nt;
+    size_t nv3 = (size_t)(nv ? nv : 1) * 3, nt3 = (size_t)(nt ? nt : 1) * 3;
+    s->rest = malloc(nv3 * sizeof *s->rest);
+    s->pos = malloc(nv3 * sizeof *s->pos);
+    s->vert_uvw = malloc(nv3 * sizeof *s->vert_uvw);
+    s->vert_cell = malloc((size_t)(nv ? nv : 1) * sizeof *s->vert_cell);
+    s->tris = malloc(nt3 * sizeof *s->tris);
+    s->tri_cell = malloc((size_t)(nt ? nt : 1) * sizeof *s->tri_cell);
+    s->cell_tri_start = calloc((size_t)cm->n_cells + 1, sizeof *s->cell_tri_start);
+    if (!s->rest || !s->pos || !s->vert_uvw || !s->vert_cell || !s->tris || !s->tri_cell ||
+        !s->cell_tri_start)
+        goto oom;
+    memcpy(s->rest, verts, (size_t)nv * 3 * sizeof *verts);
+    memcpy(s->pos, verts, (size_t)nv * 3 * sizeof *verts);
+    memcpy(s->tris, tris, (size_t)nt * 3 * sizeof *tris);
+    const double tol = 2.0 * cs_voxel_tolerance(cm->h, verts, nv), tol_h = tol / cm->h;
+    for (int i = 0; i < nv; i++) {
+        const double *p = verts + 3 * i;
+        if (!isfinite(p[0]) || !isfinite(p[1]) || !isfinite(p[2])) {
+            snprintf(err, errlen, "surface: vertex %d is not finite", i);
+            goto fail;
+        }
+        s->vert_cell[i] = locate(cm, tol_h, p, s->vert_uvw + 3 * i);
+        if (s->vert_cell[i] < 0) {
+            snprintf(err, errlen, "surface: vertex %d at (%g, %g, %g) lies in no cube", i, p[0],
+                     p[1], p[2]);
+            goto fail;
+        }
+    }
+    const double h = cm->h;
+    const double grown = 0.5 * h + tol;
+    const double half[3] = {grown, grown, grown};
+    for (int t = 0; t < nt; t++) {
+        const int32_t *tri = tris + 3 * t;
+        if (tri[0] < 0 || tri[0] >= nv || tri[1] < 0 || tri[1] >= nv || tri[2] < 0 ||
+            tri[2] >= nv) {
+            snprintf(err, errlen, "surface: triangle %d has a bad vertex index", t);
+            goto fail;
+        }
+        const double *a = verts + 3 * tri[0], *b = verts + 3 * tri[1], *c = verts + 3 * tri[2];
+        double ctr[3], uvw[3];
+        for (int k = 0; k < 3; k++)
+            ctr[k] = (a[k] + b[k] + c[k]) / 3.0;
+        s->tri_cell[t] = locate(cm, tol_h, ctr, uvw);
+        if (s->tri_cell[t] < 0) {
+            snprintf(err, errlen, "surface: centroid of triangle %d lies in no cube", t);
+            goto fail;
+        }
+        int r0[3], r1[3];
+        for (int k = 0; k < 3; k++) {
+            double lo = fmin(a[k], fmin(b[k], c[k])), hi = fmax(a[k], fmax(b[k], c[k]));
+            r0[k] = (int)floor((lo - cm->origin[k]) / h - 2 * tol_h);
+            r1[k] = (int)floor((hi - cm->origin[k]) / h + 2 * tol_h);
+        }
+        for (int k = r0[2]; k <= r1[2]; k++)
+            for (int j = r0[1]; j <= r1[1]; j++)
+                for (int i = r0[0]; i <= r1[0]; i++) {
+                    int32_t cell = cs_cubemesh_find(cm, i, j, k);
+                    if (cell < 0)
+                        continue;
+                    double cc[3] = {cm->origin[0] + (i + 0.5) * h, cm->origin[1] + (j + 0.5) * h,
+                                    cm->origin[2] + (k + 0.5) * h};
+                    if (!cs_tri_box_overlap(cc, half, a, b, c))
+                        continue;
+                    if (n_pairs == cap_pairs) {
+                        int nc = cap_pairs ? 2 * cap_pairs : 1024;
+                        pair *np = realloc(pairs, (size_t)nc * sizeof *np);
+                        if (!np)
+                            goto oom;
+                        pairs = np;
+                        cap_pairs = nc;
+                    }
+                    pairs[n_pairs++] = (pair){cell, t};
+                }
+    }
+    /* CSR by counting sort on the cell; triangles stay in increasing order within a cell */
+    s->cell_tri_list = malloc((size_t)(n_pairs ? n_pairs : 1) * sizeof *s->cell_tri_list);
+    if (!s->cell_tri_list)
+        goto oom;
+    for (int p = 0; p < n_pairs; p++)
+        s->cell_tri_start[pairs[p].cell + 1]++;
+    for (int c = 0; c < cm->n_cells; c++)
+        s->cell_tri_start[c + 1] += s->cell_tri_start[c];
+    {
+        int32_t *fill = malloc((size_t)(cm->n_cells ? cm->n_cells : 1) * sizeof *fill);
+        if (!fill)
+            goto oom;
+        memcpy(fill, s->cell_tri_start, (size_t)cm->n_cells * sizeof *fill);
+        for (int p = 0; p < n_pairs; p++)
+            s->cell_tri_list[fill[pairs[p].cell]++] = pairs[p].tri;
+        free(fill);
+    }
+    free(pairs);
+    return 0;
+oom:
+    snprintf(err, errlen, "surface: out of memory");
+fail:
+    free(pairs);
+    cs_surface_free(s);
+    return -1;
+}
+
+void cs_surface_skin(cs_surface *s, const cs_cubemesh *cm, const double *node_pos)
+{
+    const int nv = s->n_vertices;
+    const int32_t *vc = s->vert_cell;
+    const double *uvw = s->vert_uvw;
+    double *out = s->pos;
+    for (int i = 0; i < nv; i++) {
+        const int32_t *nodes = cm->cell_nodes + 8 * (size_t)vc[i];
+        const double u = uvw[3 * i], v = uvw[3 * i + 1], w = uvw[3 * i + 2];
+        const double wx[2] = {1.0 - u, u}, wy[2] = {1.0 - v, v}, wz[2] = {1.0 - w, w};
+        double x = 0.0, y = 0.0, z = 0.0;
+        for (int k = 0; k < 8; k++) {
+            const double wk = wx[CS_CORNER[k][0]] * wy[CS_CORNER[k][1]] * wz[CS_CORNER[k][2]];
+            const double *p = node_pos + 3 * (size_t)nodes[k];
+            x += wk * p[0];
+            y += wk * p[1];
+            z += wk * p[2];
+        }
+        out[3 * i] = x;
+        out[3 * i + 1] = y;
+        out[3 * i + 2] = z;
+    }
+}
+
+/* ---------------------------------------------------------------- boundary of a cell set */
+
+typedef struct {
+    int64_t p[3];
+    int32_t idx;
+} lattice_pt;
+
+static int cmp_lattice(const void *pa, const void *pb)
+{
+    const lattice_pt *a = pa, *b = pb;
+    for (int k = 0; k < 3; k++)
+        if (a->p[k] != b->p[k])
+            return a->p[k] < b->p[k] ? -1 : 1;
+    return (a->idx > b->idx) - (a->idx < b->idx);
+}
+
+int cs_surface_of_cells(const cs_cubemesh *cm, int sub, double **verts, int *nv,
+                        int32_t **tris, int *nt, char *err, size_t errlen)
+{
+    *verts = NULL;
+    *tris = NULL;
+    *nv = *nt = 0;
+    if (sub < 1 || sub > 1024) {
+        snprintf(err, errlen, "surface of cells: subdivision %d out of range [1, 1024]", sub);
+        return -1;
+    }
+    /* count exposed faces */
+    size_t faces = 0;
+    for (int c = 0; c < cm->n_cells; c++) {
+        const int32_t *q = cm->cell_ijk + 3 * c;
+        for (int f = 0; f < 6; f++) {
+            int d[3] = {0, 0, 0};
+            d[f / 2] = f % 2 ? -1 : 1;
+            faces += cs_cubemesh_find(cm, q[0] + d[0], q[1] + d[1], q[2] + d[2]) < 0;
+        }
+    }
+    size_t quads = faces * (size_t)sub * (size_t)sub;
+    if (quads * 4 > INT32_MAX / 2) {
+        snprintf(err, errlen, "surface of cells: too many faces (%zu)", faces);
+        return -1;
+    }
+    lattice_pt *pts = malloc((quads * 4 + 1) * sizeof *pts);
+    int32_t *t = malloc((quads * 2 + 1) * 3 * sizeof *t);
+    int32_t *remap = malloc((quads * 4 + 1) * sizeof *remap);
+    double *v = NULL;
+    if (!pts || !t || !remap)
+        goto oom;
+    size_t np = 0, ntri = 0;
+    for (int c = 0; c < cm->n_cells; c++) {
+        const int32_t *q = cm->cell_ijk + 3 * c;
+        for (int f = 0; f < 6; f++) {
+            int ax = f / 2, sign = f % 2 ? -1 : 1;
+            int d[3] = {0, 0, 0};
+            d[ax] = sign;
+            if (cs_cubemesh_find(cm, q[0] + d[0], q[1] + d[1], q[2] + d[2]) >= 0)
+                continue;
+            int b = (ax + 1) % 3, e = (ax + 2) % 3;
+            /* e_b × e_e = e_ax: (b,e) counter-clockwise is outward for the + face */
+            int64_t plane = (int64_t)(q[ax] + (sign > 0 ? 1 : 0)) * sub;
+            for (int s1 = 0; s1 < sub; s1++)
+                for (int s2 = 0; s2 < sub; s2++) {
+                    static const int corner[4][2] = {{0, 0}, {1, 0}, {1, 1}, {0, 1}};
+                    size_t first = np;
+                    for (int m = 0; m < 4; m++) {
+                        lattice_pt *lp = &pts[np];
+                        lp->p[ax] = plane;
+                        lp->p[b] = (int64_t)q[b] * sub + s1 + corner[m][0];
+                        lp->p[e] = (int64_t)q[e] * sub + s2 + corner[m][1];
+                        lp->idx = (int32_t)np;
+                        np++;
+                    }
+                    int32_t i0 = (int32_t)first, i1 = i0 + 1, i2 = i0 + 2, i3 = i0 + 3;
+                    if (sign < 0) { /* reverse the winding for the - face */
+                        int32_t tmp = i1;
+                        i1 = i3;
+                        i3 = tmp;
+                    }
+                    int32_t *tt = t + 3 * ntri;
+                    tt[0] = i0, tt[1] = i1, tt[2] = i2;
+                    tt[3] = i0, tt[4] = i2, tt[5] = i3;
+                    ntri += 2;
+                }
+        }
+    }
+    qsort(pts, np, sizeof *pts, cmp_lattice);
+    size_t nu = 0;
+    for (size_t i = 0; i < np;) {
+        size_t j = i + 1;
+        while (j < np && !memcmp(pts[j].p, pts[i].p, sizeof pts[i].p))
+            j++;
+        for (size_t k = i; k < j; k++)
+            remap[pts[k].idx] = (int32_t)nu;
+        pts[nu].p[0] = pts[i].p[0], pts[nu].p[1] = pts[i].p[1], pts[nu].p[2] = pts[i].p[2];
+        nu++;
+        i = j;
+    }
+    v = malloc((nu + 1) * 3 * sizeof *v);
+    if (!v)
+        goto oom;
+    for (size_t i = 0; i < nu; i++)
+        for (int k = 0; k < 3; k++)
+            v[3 * i + k] = cm->origin[k] + cm->h * ((double)pts[i].p[k] / sub);
+    for (size_t i = 0; i < 3 * ntri; i++)
+        t[i] = remap[t[i]];
+    free(pts);
+    free(remap);
+    *verts = v;
+    *tris = t;
+    *nv = (int)nu;
+    *nt = (int)ntri;
+    return 0;
+oom:
+    free(pts);
+    free(t);
+    free(remap);
+    free(v);
+    snprintf(err, errlen, "surface of cells: out of memory");
+    return -1;
+}

@@ -1,0 +1,643 @@
+/*
+ * test_voxelize.c — seed 000 §3.3 edge subdivision, the triangle/box SAT, §2.1 voxelization,
+ * and the embedded surface (server/engine/voxelize.c, surface.c): binding, skinning, the
+ * boundary surface of a cell set.
+ */
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "check.h"
+#include "cubemesh.h"
+#include "mesh.h"
+#include "surface.h"
+#include "voxelize.h"
+#include "watertight.h"
+
+#ifndef CS_SOURCE_DIR
+#define CS_SOURCE_DIR "."
+#endif
+
+static const char *vox_mesh_path(char *buf, size_t n, const char *name)
+{
+    const char *root = getenv("CS_SOURCE_DIR");
+    snprintf(buf, n, "%s/scenes/meshes/%s", root && *root ? root : CS_SOURCE_DIR, name);
+    return buf;
+}
+
+/* An axis-aligned box mesh [lo, lo+size], 8 vertices, 12 outward triangles (malloc'd). */
+static void box_mesh(cs_mesh *m, const double lo[3], const double size[3])
+{
+    static const int32_t bt[12][3] = {{0, 2, 3}, {0, 3, 1}, {4, 5, 7}, {4, 7, 6},
+                                      {0, 1, 5}, {0, 5, 4}, {2, 6, 7}, {2, 7, 3},
+                                      {0, 4, 6}, {0, 6, 2}, {1, 3, 7}, {1, 7, 5}};
+    m->nv = 8;
+    m->nt = 12;
+    m->v = malloc(24 * sizeof *m->v);
+    m->t = malloc(36 * sizeof *m->t);
+    for (int i = 0; i < 8; i++)
+        for (int k = 0; k < 3; k++)
+            m->v[3 * i + k] = lo[k] + ((i >> k) & 1) * size[k];
+    memcpy(m->t, bt, sizeof bt);
+}
+
+static double max_edge(const cs_mesh *m)
+{
+    double worst = 0;
+    for (int t = 0; t < m->nt; t++)
+        for (int k = 0; k < 3; k++) {
+            const double *a = m->v + 3 * m->t[3 * t + k], *b = m->v + 3 * m->t[3 * t + (k + 1) % 3];
+            double d = sqrt((a[0] - b[0]) * (a[0] - b[0]) + (a[1] - b[1]) * (a[1] - b[1]) +
+                            (a[2] - b[2]) * (a[2] - b[2]));
+            worst = d > worst ? d : worst;
+        }
+    return worst;
+}
+
+/* The icosphere of scenes/meshes, subdivided to edges <= len and pushed onto the sphere. */
+static int fine_sphere(cs_mesh *m, double radius, double len)
+{
+    char p[512], err[256];
+    if (cs_mesh_load(vox_mesh_path(p, sizeof p, "icosphere.obj"), m, err, sizeof err) != 0)
+        return -1;
+    /* pushing midpoints outwards lengthens edges by up to ~1/cos: leave some margin */
+    if (cs_subdivide_edges(&m->v, &m->nv, &m->t, &m->nt, 0.9 * len * 0.1 / radius, err,
+                           sizeof err) != 0) {
+        cs_mesh_free(m);
+        return -1;
+    }
+    for (int i = 0; i < m->nv; i++) {
+        double *q = m->v + 3 * i;
+        double r = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2]);
+        for (int k = 0; k < 3; k++)
+            q[k] *= radius / r;
+    }
+    return 0;
+}
+
+/* ---------------------------------------------------------------- subdivision */
+
+TEST(subdivide_bounds_edges_keeps_closed_and_volume)
+{
+    char p[512], err[256];
+    const double lens[] = {0.05, 0.013, 0.004};
+    for (int l = 0; l < 3; l++) {
+        cs_mesh m;
+        ENSURE(cs_mesh_load(vox_mesh_path(p, sizeof p, "icosphere.obj"), &m, err, sizeof err) ==
+               0);
+        double v0 = cs_mesh_volume(m.v, m.t, m.nt);
+        int nt0 = m.nt;
+        int rc = cs_subdivide_edges(&m.v, &m.nv, &m.t, &m.nt, lens[l], err, sizeof err);
+        double worst = max_edge(&m);
+        double v1 = cs_mesh_volume(m.v, m.t, m.nt);
+        int closed = cs_watertight_check(m.v, m.nv, m.t, m.nt, NULL, err, sizeof err);
+        int nv = m.nv, nt = m.nt;
+        cs_mesh_free(&m);
+        ENSURE_MSG(rc == 0, "%s", err);
+        ENSURE_MSG(worst <= lens[l], "longest edge %g > %g", worst, lens[l]);
+        ENSURE_MSG(closed, "after subdivision to %g: %s", lens[l], err);
+        ENSURE_NEAR(v1, v0, 1e-15);
+        /* Euler: a closed genus-0 surface has V - E + F = 2, E = 3F/2 */
+        ENSURE(nv - 3 * nt / 2 + nt == 2);
+        ENSURE(l == 0 || nt > nt0);
+    }
+    /* an open mesh stays open with the same boundary length, and nothing short is touched */
+    cs_mesh o;
+    ENSURE(cs_mesh_load(vox_mesh_path(p, sizeof p, "open_sphere.obj"), &o, err, sizeof err) == 0);
+    int nt_before = o.nt;
+    ENSURE(cs_subdivide_edges(&o.v, &o.nv, &o.t, &o.nt, 1.0, err, sizeof err) == 0);
+    ENSURE(o.nt == nt_before);
+    ENSURE(cs_subdivide_edges(&o.v, &o.nv, &o.t, &o.nt, 0.01, err, sizeof err) == 0);
+    cs_watertight_report rep;
+    cs_watertight_check(o.v, o.nv, o.t, o.nt, &rep, err, sizeof err);
+    double worst = max_edge(&o);
+    cs_mesh_free(&o);
+    ENSURE(worst <= 0.01);
+    ENSURE(rep.misoriented_edges == 0 && rep.nonmanifold_edges == 0);
+    ENSURE(rep.boundary_edges > 6); /* the hole's rim is split too */
+    ENSURE(cs_subdivide_edges(&o.v, &o.nv, &o.t, &o.nt, 0.0, err, sizeof err) == -1);
+}
+
+TEST(subdivide_100k_triangles_quickly)
+{
+    /* a unit box with 12 long triangles; edges <= 1/64 gives well over 100k triangles */
+    cs_mesh m;
+    char err[256];
+    box_mesh(&m, (double[3]){0, 0, 0}, (double[3]){1, 1, 1});
+    struct timespec t0, t1;
+    clock_gettime(CLOCK_MONOTONIC, &t0);
+    int rc = cs_subdivide_edges(&m.v, &m.nv, &m.t, &m.nt, 1.0 / 64, err, sizeof err);
+    clock_gettime(CLOCK_MONOTONIC, &t1);
+    double s = (t1.tv_sec - t0.tv_sec) + 1e-9 * (t1.tv_nsec - t0.tv_nsec);
+    double worst = max_edge(&m);
+    int closed = cs_watertight_check(m.v, m.nv, m.t, m.nt, NULL, err, sizeof err);
+    double vol = cs_mesh_volume(m.v, m.t, m.nt);
+    int nt = m.nt;
+    cs_mesh_free(&m);
+    ENSURE(rc == 0);
+    ENSURE_MSG(nt >= 100000, "only %d triangles", nt);
+    ENSURE(worst <= 1.0 / 64);
+    ENSURE_MSG(closed, "%s", err);
+    ENSURE_NEAR(vol, 1.0, 1e-12);
+    /* generous: about 0.1 s in the release build, slower under sanitizers */
+    ENSURE_MSG(s < 5.0, "%d triangles took %.2f s", nt, s);
+}
+
+/* ---------------------------------------------------------------- SAT */
+
+static uint64_t rng_state = 0x9e3779b97f4a7c15ULL;
+static double urand(void)
+{
+    rng_state ^= rng_state << 13;
+    rng_state ^= rng_state >> 7;
+    rng_state ^= rng_state << 17;
+    return (double)(rng_state >> 11) / 9007199254740992.0;
+}
+
+/* Independent exact reference: clip the triangle by the six slabs (Sutherland–Hodgman). */
+static int clip_overlap(const double c[3], const double hlf[3], const double *a, const double *b,
+                        const double *cc)
+{
+    double poly[16][3], tmp[16][3];
+    int n = 3;
+    memcpy(poly[0], a, sizeof poly[0]);
+    memcpy(poly[1], b, sizeof poly[0]);
+    memcpy(poly[2], cc, sizeof poly[0]);
+    for (int ax = 0; ax < 3; ax++)
+        for (int side = -1; side <= 1; side += 2) {
+            double bound = c[ax] + side * hlf[ax];
+            int m = 0;
+            for (int i = 0; i < n; i++) {
+                const double *p = poly[i], *q = poly[(i + 1) % n];
+                double dp = side * (p[ax] - bound), dq = side * (q[ax] - bound); /* <= 0 inside */
+                if (dp <= 0)
+                    memcpy(tmp[m++], p, sizeof tmp[0]);
+                if ((dp < 0 && dq > 0) || (dp > 0 && dq < 0)) {
+                    double s = dp / (dp - dq);
+                    for (int k = 0; k < 3; k++)
+                        tmp[m][k] = p[k] + s * (q[k] - p[k]);
+                    tmp[m][ax] = bound;
+                    m++;
+                }
+            }
+            n = m;
+            memcpy(poly, tmp, (size_t)m * sizeof tmp[0]);
+            if (n == 0)
+                return 0;
+        }
+    return 1;
+}
+
+TEST(sat_matches_clipping_and_sampling)
+{
+    int checked = 0, hits = 0;
+    for (int it = 0; it < 200000; it++) {
+        double c[3], hf[3], v[3][3];
+        for (int k = 0; k < 3; k++) {
+            c[k] = urand() - 0.5;
+            hf[k] = 0.05 + 0.3 * urand();
+        }
+        double scale = it % 3 == 0 ? 0.3 : 1.0;
+        for (int q = 0; q < 3; q++)
+            for (int k = 0; k < 3; k++)
+                v[q][k] = scale * (2 * urand() - 1);
+        if (it % 5 == 0) /* put a vertex exactly on a box face plane */
+            v[it % 3][it % 2] = c[it % 2] + hf[it % 2];
+        if (it % 7 == 0) /* a degenerate (collinear) triangle */
+            for (int k = 0; k < 3; k++)
+                v[2][k] = 0.5 * (v[0][k] + v[1][k]);
+        int clip = clip_overlap(c, hf, v[0], v[1], v[2]);
+        double big[3], small[3];
+        for (int k = 0; k < 3; k++) {
+            big[k] = hf[k] * (1 + 1e-9);
+            small[k] = hf[k] * (1 - 1e-9);
+        }
+        if (clip) {
+            ENSURE_MSG(cs_tri_box_overlap(c, big, v[0], v[1], v[2]),
+                       "iteration %d: SAT misses: c %.17g %.17g %.17g h %.17g %.17g %.17g "
+                       "a %.17g %.17g %.17g b %.17g %.17g %.17g c %.17g %.17g %.17g",
+                       it, c[0], c[1], c[2], hf[0], hf[1], hf[2], v[0][0], v[0][1], v[0][2],
+                       v[1][0], v[1][1], v[1][2], v[2][0], v[2][1], v[2][2]);
+            hits++;
+        } else {
+            ENSURE_MSG(!cs_tri_box_overlap(c, small, v[0], v[1], v[2]),
+                       "iteration %d: SAT overlaps", it);
+        }
+        /* sampling: a sample point of the triangle inside the box means overlap */
+        if (it % 20 == 0) {
+            for (int s = 0; s < 400; s++) {
+                double r1 = urand(), r2 = urand();
+                if (r1 + r2 > 1)
+                    r1 = 1 - r1, r2 = 1 - r2;
+                int inside = 1;
+                for (int k = 0; k < 3; k++) {
+                    double x = v[0][k] + r1 * (v[1][k] - v[0][k]) + r2 * (v[2][k] - v[0][k]);
+                    inside &= fabs(x - c[k]) < small[k];
+                }
+                if (inside) {
+                    ENSURE_MSG(cs_tri_box_overlap(c, hf, v[0], v[1], v[2]),
+                               "iteration %d: sample inside but SAT says apart", it);
+                    break;
+                }
+            }
+        }
+        checked++;
+    }
+    ENSURE(hits > 10000 && checked - hits > 10000);
+    /* touching exactly on a face counts as overlap for the closed test */
+    ENSURE(cs_tri_box_overlap((double[3]){0, 0, 0}, (double[3]){1, 1, 1}, (double[3]){1, -5, -5},
+                              (double[3]){1, 5, -5}, (double[3]){1, 0, 5}));
+    ENSURE(!cs_tri_box_overlap((double[3]){0, 0, 0}, (double[3]){1, 1, 1},
+                               (double[3]){1.000001, -5, -5}, (double[3]){1.000001, 5, -5},
+                               (double[3]){1.000001, 0, 5}));
+    /* a big triangle around a small box, no vertex inside: only the plane axis decides */
+    ENSURE(cs_tri_box_overlap((double[3]){0, 0, 0}, (double[3]){0.1, 0.1, 0.1},
+                              (double[3]){-10, -10, 0.05}, (double[3]){10, -10, 0.05},
+                              (double[3]){0, 10, 0.05}));
+    ENSURE(!cs_tri_box_overlap((double[3]){0, 0, 0}, (double[3]){0.1, 0.1, 0.1},
+                               (double[3]){-10, -10, 0.15}, (double[3]){10, -10, 0.15},
+                               (double[3]){0, 10, 0.15}));
+}
+
+/* ---------------------------------------------------------------- voxelization */
+
+static int vox(const cs_mesh *m, double h, double origin[3], int32_t **ijk, int *n, char *err,
+               size_t errlen)
+{
+    return cs_voxelize(m->v, m->nv, m->t, m->nt, h, origin, ijk, n, err, errlen);
+}
+
+TEST(voxelize_lattice_aligned_box_exact_count)
+{
+    char err[256];
+    double origin[3];
+    int32_t *ijk;
+    int n;
+    const double h = 0.025;
+    const double offsets[3][3] = {{0, 0, 0}, {0.3, -1.7, 2.25}, {-0.0125, 0.1, 0.0375}};
+    for (int o = 0; o < 3; o++) {
+        cs_mesh m;
+        box_mesh(&m, offsets[o], (double[3]){4 * h, 4 * h, 4 * h});
+        int rc = vox(&m, h, origin, &ijk, &n, err, sizeof err);
+        ENSURE_MSG(rc == 0, "%s", err);
+        free(ijk);
+        ENSURE_MSG(n == 64, "box 4h at offset %d: %d cells", o, n);
+        /* vertices on every lattice line of the faces change nothing */
+        ENSURE(cs_subdivide_edges(&m.v, &m.nv, &m.t, &m.nt, h, err, sizeof err) == 0);
+        rc = vox(&m, h, origin, &ijk, &n, err, sizeof err);
+        cs_mesh_free(&m);
+        ENSURE_MSG(rc == 0, "%s", err);
+        free(ijk);
+        ENSURE_MSG(n == 64, "subdivided box 4h at offset %d: %d cells", o, n);
+    }
+    /* the same box read from a file: float32 coordinates (0.1f = 0.100000001) still give 64 */
+    {
+        char path[] = "/tmp/cs_test_box_XXXXXX.obj";
+        int fd = mkstemps(path, 4);
+        ENSURE(fd >= 0);
+        FILE *f = fdopen(fd, "w");
+        fprintf(f, "v 0.2 0.3 0.1\nv 0.3 0.3 0.1\nv 0.2 0.4 0.1\nv 0.3 0.4 0.1\n"
+                   "v 0.2 0.3 0.2\nv 0.3 0.3 0.2\nv 0.2 0.4 0.2\nv 0.3 0.4 0.2\n"
+                   "f 1 3 4\nf 1 4 2\nf 5 6 8\nf 5 8 7\nf 1 2 6\nf 1 6 5\n"
+                   "f 3 7 8\nf 3 8 4\nf 1 5 7\nf 1 7 3\nf 2 4 8\nf 2 8 6\n");
+        fclose(f);
+        cs_mesh fm;
+        int rc = cs_mesh_load(path, &fm, err, sizeof err);
+        unlink(path);
+        ENSURE_MSG(rc == 0, "%s", err);
+        rc = vox(&fm, h, origin, &ijk, &n, err, sizeof err);
+        cs_mesh_free(&fm);
+        ENSURE_MSG(rc == 0, "%s", err);
+        free(ijk);
+        ENSURE_MSG(n == 64, "float32 box: %d cells", n);
+    }
+    /* 4h x 2h x 3h -> 24 cells; 4.5h per side -> 5^3 */
+    cs_mesh m;
+    box_mesh(&m, (double[3]){0.1, 0.2, 0.3}, (double[3]){4 * h, 2 * h, 3 * h});
+    ENSURE(vox(&m, h, origin, &ijk, &n, err, sizeof err) == 0);
+    cs_mesh_free(&m);
+    free(ijk);
+    ENSURE(n == 24);
+    box_mesh(&m, (double[3]){0, 0, 0}, (double[3]){4.5 * h, 4.5 * h, 4.5 * h});
+    ENSURE(vox(&m, h, origin, &ijk, &n, err, sizeof err) == 0);
+    cs_mesh_free(&m);
+    free(ijk);
+    ENSURE(n == 125);
+    /* a flat box thinner than a cell is kept as one layer */
+    box_mesh(&m, (double[3]){0, 0, 0}, (double[3]){4 * h, 4 * h, 0.1 * h});
+    ENSURE(vox(&m, h, origin, &ijk, &n, err, sizeof err) == 0);
+    cs_mesh_free(&m);
+    free(ijk);
+    ENSURE(n == 16);
+}
+
+/* Every point within 1e-9 h of some kept cell? */
+static int covered(const cs_cubemesh *cm, const double *p)
+{
+    double l[3];
+    for (int k = 0; k < 3; k++)
+        l[k] = (p[k] - cm->origin[k]) / cm->h;
+    for (int a = -1; a <= 1; a++)
+        for (int b = -1; b <= 1; b++)
+            for (int c = -1; c <= 1; c++) {
+                int i = (int)floor(l[0]) + a, j = (int)floor(l[1]) + b, k = (int)floor(l[2]) + c;
+                if (cs_cubemesh_find(cm, i, j, k) < 0)
+                    continue;
+                if (l[0] >= i - 1e-9 && l[0] <= i + 1 + 1e-9 && l[1] >= j - 1e-9 &&
+                    l[1] <= j + 1 + 1e-9 && l[2] >= k - 1e-9 && l[2] <= k + 1 + 1e-9)
+                    return 1;
+            }
+    return 0;
+}
+
+SLOW_TEST(voxelize_sphere_volume_converges)
+{
+    const double r = 0.1, exact = 4.0 / 3.0 * M_PI * r * r * r;
+    cs_mesh m;
+    ENSURE(fine_sphere(&m, r, 0.004) == 0);
+    const double hs[4] = {0.04, 0.02, 0.01, 0.005};
+    double e[4];
+    char err[256];
+    for (int q = 0; q < 4; q++) {
+        double origin[3];
+        int32_t *ijk;
+        int n;
+        if (vox(&m, hs[q], origin, &ijk, &n, err, sizeof err) != 0) {
+            cs_mesh_free(&m);
+            ENSURE_MSG(0, "%s", err);
+        }
+        cs_cubemesh cm;
+        int rc = cs_cubemesh_build(&cm, hs[q], origin, ijk, n, err, sizeof err);
+        free(ijk);
+        if (rc != 0) {
+            cs_mesh_free(&m);
+            ENSURE_MSG(0, "%s", err);
+        }
+        int all = 1;
+        for (int i = 0; i < m.nv && all; i++)
+            all = covered(&cm, m.v + 3 * i);
+        cs_cubemesh_free(&cm);
+        if (!all) {
+            cs_mesh_free(&m);
+            ENSURE_MSG(0, "h = %g: a surface vertex lies in no cell", hs[q]);
+        }
+        e[q] = n * hs[q] * hs[q] * hs[q] - exact;
+        if (e[q] <= 0) {
+            cs_mesh_free(&m);
+            ENSURE_MSG(0, "h = %g: the cells (%g) do not cover the sphere (%g)", hs[q],
+                       n * hs[q] * hs[q] * hs[q], exact);
+        }
+    }
+    cs_mesh_free(&m);
+    /* the kept set overshoots by about a layer of half cells: error ~ area * h */
+    for (int q = 1; q < 4; q++) {
+        double ratio = e[q - 1] / e[q];
+        ENSURE_MSG(ratio > 1.4 && ratio < 3.0, "h %g -> %g: error %g -> %g (ratio %.2f)",
+                   hs[q - 1], hs[q], e[q - 1], e[q], ratio);
+    }
+    ENSURE_MSG(e[3] / exact < 0.2, "relative error %.3f at h = 0.005", e[3] / exact);
+    if (getenv("CS_VERBOSE"))
+        printf("    sphere r = 0.1: relative volume error %.4f %.4f %.4f %.4f at h = 0.04 ... 0.005\n",
+               e[0] / exact, e[1] / exact, e[2] / exact, e[3] / exact);
+}
+
+TEST(voxelize_torus_has_a_hole)
+{
+    char p[512], err[256];
+    cs_mesh m;
+    ENSURE(cs_mesh_load(vox_mesh_path(p, sizeof p, "torus.obj"), &m, err, sizeof err) == 0);
+    double origin[3];
+    int32_t *ijk;
+    int n;
+    const double h = 0.01;
+    int rc = vox(&m, h, origin, &ijk, &n, err, sizeof err);
+    cs_mesh_free(&m);
+    ENSURE_MSG(rc == 0, "%s", err);
+    cs_cubemesh cm;
+    rc = cs_cubemesh_build(&cm, h, origin, ijk, n, err, sizeof err);
+    free(ijk);
+    ENSURE_MSG(rc == 0, "%s", err);
+    /* the hole has radius R - r = 0.06: no cell within 0.04 of the axis at z = 0 */
+    int in_hole = 0, on_ring = 0;
+    for (int c = 0; c < cm.n_cells; c++) {
+        double x = origin[0] + (cm.cell_ijk[3 * c] + 0.5) * h;
+        double y = origin[1] + (cm.cell_ijk[3 * c + 1] + 0.5) * h;
+        double d = sqrt(x * x + y * y);
+        in_hole += d < 0.04;
+        on_ring += fabs(d - 0.1) < 0.005;
+    }
+    int centre = cs_cubemesh_find(&cm, (int)floor((0 - origin[0]) / h),
+                                  (int)floor((0 - origin[1]) / h), (int)floor((0 - origin[2]) / h));
+    double vol = cm.n_cells * h * h * h;
+    cs_cubemesh_free(&cm);
+    ENSURE(centre < 0);
+    ENSURE(in_hole == 0);
+    ENSURE(on_ring > 0);
+    /* torus volume 2 pi^2 R r^2 = 3.158e-3; the cells cover it with a shell of ~h/2 */
+    ENSURE(vol > 2 * M_PI * M_PI * 0.1 * 0.04 * 0.04);
+    ENSURE(vol < 2.0 * 2 * M_PI * M_PI * 0.1 * 0.04 * 0.04);
+}
+
+TEST(voxelize_refuses_open_and_absurd)
+{
+    char p[512], err[256];
+    cs_mesh m;
+    ENSURE(cs_mesh_load(vox_mesh_path(p, sizeof p, "open_sphere.obj"), &m, err, sizeof err) == 0);
+    double origin[3];
+    int32_t *ijk = (int32_t *)&m; /* must be reset */
+    int n = 7;
+    int rc = vox(&m, 0.01, origin, &ijk, &n, err, sizeof err);
+    ENSURE(rc == -1);
+    ENSURE(ijk == NULL && n == 0);
+    ENSURE_MSG(!strcmp(err, "mesh is not closed: 6 boundary edges"), "%s", err);
+    cs_mesh_free(&m);
+
+    ENSURE(cs_mesh_load(vox_mesh_path(p, sizeof p, "icosphere.obj"), &m, err, sizeof err) == 0);
+    rc = vox(&m, 1e-5, origin, &ijk, &n, err, sizeof err);
+    ENSURE(rc == -1);
+    ENSURE_MSG(strstr(err, "h = 1e-05") && strstr(err, "cells"), "%s", err);
+    rc = vox(&m, 0.0, origin, &ijk, &n, err, sizeof err);
+    ENSURE(rc == -1);
+    rc = vox(&m, NAN, origin, &ijk, &n, err, sizeof err);
+    ENSURE(rc == -1);
+    /* a cube larger than the mesh: one cell */
+    rc = vox(&m, 1.0, origin, &ijk, &n, err, sizeof err);
+    cs_mesh_free(&m);
+    ENSURE_MSG(rc == 0, "%s", err);
+    free(ijk);
+    ENSURE(n == 1);
+}
+
+TEST(voxelize_nonmanifold_closed_mesh)
+{
+    /* two 0.05 cubes sharing an edge: closed, not manifold, well defined as a solid */
+    char p[512], err[256];
+    cs_mesh m;
+    ENSURE(cs_mesh_load(vox_mesh_path(p, sizeof p, "nonmanifold.obj"), &m, err, sizeof err) == 0);
+    double origin[3];
+    int32_t *ijk;
+    int n;
+    int rc = vox(&m, 0.0125, origin, &ijk, &n, err, sizeof err);
+    cs_mesh_free(&m);
+    ENSURE_MSG(rc == 0, "%s", err);
+    free(ijk);
+    ENSURE_MSG(n == 128, "%d cells", n);
+}
+
+/* ---------------------------------------------------------------- surface binding */
+
+TEST(surface_bind_and_skin)
+{
+    cs_mesh m;
+    ENSURE(fine_sphere(&m, 0.1, 0.01) == 0);
+    char err[256];
+    double origin[3];
+    int32_t *ijk;
+    int n;
+    const double h = 0.02;
+    ENSURE(vox(&m, h, origin, &ijk, &n, err, sizeof err) == 0);
+    cs_cubemesh cm;
+    int rc = cs_cubemesh_build(&cm, h, origin, ijk, n, err, sizeof err);
+    free(ijk);
+    ENSURE_MSG(rc == 0, "%s", err);
+    cs_surface s;
+    rc = cs_surface_bind(&s, &cm, m.v, m.nv, m.t, m.nt, err, sizeof err);
+    if (rc != 0) {
+        cs_cubemesh_free(&cm);
+        cs_mesh_free(&m);
+        ENSURE_MSG(0, "%s", err);
+    }
+    int bad = 0;
+    for (int i = 0; i < s.n_vertices; i++) {
+        bad += s.vert_cell[i] < 0 || s.vert_cell[i] >= cm.n_cells;
+        for (int k = 0; k < 3; k++)
+            bad += !(s.vert_uvw[3 * i + k] >= 0 && s.vert_uvw[3 * i + k] <= 1);
+    }
+    /* every triangle is listed in the cell its centroid is in, and lists are sorted */
+    for (int t = 0; t < s.n_triangles; t++) {
+        int c = s.tri_cell[t], found = 0;
+        for (int q = s.cell_tri_start[c]; q < s.cell_tri_start[c + 1]; q++)
+            found |= s.cell_tri_list[q] == t;
+        bad += !found;
+    }
+    for (int c = 0; c < cm.n_cells; c++)
+        for (int q = s.cell_tri_start[c] + 1; q < s.cell_tri_start[c + 1]; q++)
+            bad += s.cell_tri_list[q] <= s.cell_tri_list[q - 1];
+    /* at rest: skinning gives back the rest positions */
+    memset(s.pos, 0, (size_t)s.n_vertices * 3 * sizeof *s.pos);
+    cs_surface_skin(&s, &cm, cm.node_rest);
+    double err_rest = 0;
+    for (int i = 0; i < 3 * s.n_vertices; i++)
+        err_rest = fmax(err_rest, fabs(s.pos[i] - m.v[i]));
+    /* an affine node map x -> A x + b is reproduced exactly by trilinear interpolation */
+    const double A[3][3] = {{1.2, 0.3, -0.1}, {-0.2, 0.9, 0.4}, {0.05, -0.3, 1.1}};
+    const double b[3] = {0.5, -1.0, 2.0};
+    double *np = malloc((size_t)cm.n_nodes * 3 * sizeof *np);
+    for (int i = 0; i < cm.n_nodes; i++)
+        for (int r = 0; r < 3; r++)
+            np[3 * i + r] = A[r][0] * cm.node_rest[3 * i] + A[r][1] * cm.node_rest[3 * i + 1] +
+                            A[r][2] * cm.node_rest[3 * i + 2] + b[r];
+    cs_surface_skin(&s, &cm, np);
+    double err_aff = 0;
+    for (int i = 0; i < s.n_vertices; i++)
+        for (int r = 0; r < 3; r++) {
+            const double *x = m.v + 3 * i;
+            double want = A[r][0] * x[0] + A[r][1] * x[1] + A[r][2] * x[2] + b[r];
+            err_aff = fmax(err_aff, fabs(s.pos[3 * i + r] - want));
+        }
+    free(np);
+    cs_surface_free(&s);
+    ENSURE(s.rest == NULL && s.n_vertices == 0);
+    /* a vertex outside every cell is refused */
+    double far[9] = {5, 5, 5, 5.1, 5, 5, 5, 5.1, 5};
+    int32_t ft[3] = {0, 1, 2};
+    rc = cs_surface_bind(&s, &cm, far, 3, ft, 1, err, sizeof err);
+    cs_cubemesh_free(&cm);
+    cs_mesh_free(&m);
+    ENSURE(rc == -1);
+    ENSURE_MSG(strstr(err, "vertex 0") && strstr(err, "no cube"), "%s", err);
+    ENSURE(bad == 0);
+    ENSURE_MSG(err_rest <= 1e-12, "rest error %g", err_rest);
+    ENSURE_MSG(err_aff <= 1e-12, "affine error %g", err_aff);
+}
+
+TEST(surface_bind_on_cell_boundaries)
+{
+    /* a lattice-aligned box: every vertex lies on cell boundaries, the top ones on the outer
+     * faces, where only the lower cell exists */
+    const double h = 0.025;
+    cs_mesh m;
+    char err[256];
+    box_mesh(&m, (double[3]){0.1, 0.1, 0.1}, (double[3]){2 * h, 3 * h, 4 * h});
+    ENSURE(cs_subdivide_edges(&m.v, &m.nv, &m.t, &m.nt, 0.5 * h, err, sizeof err) == 0);
+    double origin[3];
+    int32_t *ijk;
+    int n;
+    ENSURE(vox(&m, h, origin, &ijk, &n, err, sizeof err) == 0);
+    ENSURE(n == 24);
+    cs_cubemesh cm;
+    int rc = cs_cubemesh_build(&cm, h, origin, ijk, n, err, sizeof err);
+    free(ijk);
+    ENSURE(rc == 0);
+    cs_surface s;
+    rc = cs_surface_bind(&s, &cm, m.v, m.nv, m.t, m.nt, err, sizeof err);
+    if (rc == 0) {
+        cs_surface_skin(&s, &cm, cm.node_rest);
+        double e = 0;
+        for (int i = 0; i < 3 * m.nv; i++)
+            e = fmax(e, fabs(s.pos[i] - m.v[i]));
+        cs_surface_free(&s);
+        if (e > 1e-12)
+            rc = 2;
+    }
+    cs_cubemesh_free(&cm);
+    cs_mesh_free(&m);
+    ENSURE_MSG(rc == 0, "rc %d: %s", rc, err);
+}
+
+TEST(surface_of_cells_is_closed_with_the_right_volume)
+{
+    const double h = 0.1;
+    /* an L of 3 cells plus a 2x2x2 block elsewhere with a notch: all manifold */
+    int32_t cells[][3] = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {5, 5, 5}, {6, 5, 5}, {5, 6, 5},
+                          {6, 6, 5}, {5, 5, 6}, {6, 5, 6}, {5, 6, 6}};
+    int n = (int)(sizeof cells / sizeof cells[0]);
+    cs_cubemesh cm;
+    char err[256];
+    ENSURE(cs_cubemesh_build(&cm, h, (double[3]){-0.3, 0.2, 1.0}, &cells[0][0], n, err,
+                             sizeof err) == 0);
+    for (int sub = 1; sub <= 3; sub++) {
+        double *v;
+        int32_t *t;
+        int nv, nt;
+        int rc = cs_surface_of_cells(&cm, sub, &v, &nv, &t, &nt, err, sizeof err);
+        if (rc != 0) {
+            cs_cubemesh_free(&cm);
+            ENSURE_MSG(0, "%s", err);
+        }
+        cs_watertight_report rep;
+        int ok = cs_watertight_check(v, nv, t, nt, &rep, err, sizeof err);
+        double longest = 0;
+        for (int i = 0; i < nt; i++)
+            for (int k = 0; k < 3; k++) {
+                const double *a = v + 3 * t[3 * i + k], *b = v + 3 * t[3 * i + (k + 1) % 3];
+                longest = fmax(longest, sqrt((a[0] - b[0]) * (a[0] - b[0]) +
+                                             (a[1] - b[1]) * (a[1] - b[1]) +
+                                             (a[2] - b[2]) * (a[2] - b[2])));
+            }
+        free(v);
+        free(t);
+        if (!ok) {
+            cs_cubemesh_free(&cm);
+            ENSURE_MSG(0, "sub %d: %s", sub, err);
+        }
+        ENSURE_NEAR(rep.volume, n * h * h * h, 1e-14);
+        /* L: 14 exposed faces, notched block: 24 - 3 + 3 = 24 faces */
+        ENSURE_MSG(nt == (14 + 24) * 2 * sub * sub, "sub %d: %d triangles", sub, nt);
+        ENSURE_NEAR(longest, sqrt(2.0) * h / sub, 1e-12);
+    }
+    cs_cubemesh_free(&cm);
+}
