@@ -125,7 +125,10 @@ static char *dup_str(const char *s)
 static void refuse(cs_bus_t *b, cs_input *x, const char *fmt, const char *detail)
 {
     snprintf(x->error, sizeof x->error, fmt, detail);
-    cs_dlog_warn(b->log, "refused input", "refused %s from client %lld (command %lld): %s",
+    /* Limited per client: one noisy client cannot hide another's errors. */
+    char key[48];
+    snprintf(key, sizeof key, "refused input, client %lld", (long long)x->client_id);
+    cs_dlog_warn(b->log, key, "refused %s from client %lld (command %lld): %s",
                  x->request, (long long)x->client_id, (long long)x->command_id, x->error);
 }
 

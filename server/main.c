@@ -414,8 +414,10 @@ static void apply_inputs(cs_daemon *d, double now)
                 apply_force(d, &in, msg, sizeof msg);
             else
                 apply_command(d, &in, now, msg, sizeof msg);
+            char key[48];
+            snprintf(key, sizeof key, "refused input, client %lld", (long long)in.client_id);
             if (msg[0])
-                cs_dlog_warn(&d->log, "refused input",
+                cs_dlog_warn(&d->log, key,
                              "refused %s from client %lld (command %lld): %s", in.request,
                              (long long)in.client_id, (long long)in.command_id, msg);
             else if (in.kind == CS_INPUT_FORCE)
