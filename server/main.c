@@ -619,7 +619,11 @@ int main(int argc, char **argv)
 
     char err[512] = "";
     if (load_scene(d.opt.scene, &d.scene, &d.world, err, sizeof err) != 0) {
-        fprintf(stderr, "cubesimd: scene %s: %s\n", d.opt.scene, err);
+        /* cs_scene_load's messages usually begin with the path already. */
+        if (strncmp(err, d.opt.scene, strlen(d.opt.scene)) == 0)
+            fprintf(stderr, "cubesimd: %s\n", err);
+        else
+            fprintf(stderr, "cubesimd: scene %s: %s\n", d.opt.scene, err);
         return 2;
     }
     d.have_scene = true;

@@ -1,0 +1,109 @@
+#!/usr/bin/env bash
+# daemon_cli.sh — cubesimd's command line and scene errors: each bad invocation exits 2 with
+# one stderr line naming the problem; good runs exit 0 and write their outputs (--steps,
+# --duration, --static + --dump-nodes on scenes/cantilever.json). Inside a private network
+# namespace, since a run that gets past its scene opens the bus.
+set -u
+source "$(dirname "$0")/lib.sh"
+cs_netns_reexec "$@"
+D="$CS_IT_BIN/cubesimd"
+
+cat >"$CS_TMP/ok.json" <<'JSON'
+{ "dt": 0.01, "gravity": [0, 0, -9.81],
+  "materials": { "m": { "young": 1e4, "poisson": 0.3, "density": 100.0 } },
+  "objects": [ { "name": "cube", "model": "linear", "material": "m", "cube_size": 0.05,
+                 "box": { "min": [0, 0, 0], "size": [0.1, 0.05, 0.05] },
+                 "fixed": [ { "min": [-0.001, -1, -1], "max": [0.001, 1, 1] } ] } ] }
+JSON
+mesh_scene() { # mesh_scene FILE: a scene whose one object is the mesh FILE
+    cat <<JSON
+{ "materials": { "m": { "young": 1e4, "poisson": 0.3, "density": 100.0 } },
+  "objects": [ { "name": "thing", "material": "m", "cube_size": 0.05,
+                 "mesh": { "file": "$1" } } ] }
+JSON
+}
+printf '{ "dt": 0.01, "objects": [ { "name": "a", }\n' >"$CS_TMP/malformed.json"
+mesh_scene missing_mesh.obj >"$CS_TMP/missing.json"
+printf 'ply\nformat ascii 1.0\nelement vertex banana\nend_header\n1 2\n' >"$CS_TMP/rejected.ply"
+mesh_scene rejected.ply >"$CS_TMP/rejected.json"
+head -c 300 /dev/urandom >"$CS_TMP/noise.stl"; printf 'solid x\nfacet normal nonsense\n' >>"$CS_TMP/noise.stl"
+mesh_scene noise.stl >"$CS_TMP/noise.json"
+sed 's/"young": 1e4/"young": "hard"/' "$CS_TMP/ok.json" >"$CS_TMP/illtyped.json"
+
+# expect_exit2 NAME PATTERN ARGS...: exit status 2, exactly one stderr line, matching PATTERN.
+expect_exit2() {
+    local name=$1 pat=$2; shift 2
+    local err rc
+    err=$(timeout 20 "$D" "$@" 2>&1 >/dev/null)
+    rc=$?
+    if [ "$rc" -ne 2 ]; then cs_fail "$name" "exit status $rc, expected 2 (stderr: ${err//$'\n'/ | })"; return; fi
+    if [ "$(grep -c . <<<"$err")" -ne 1 ]; then cs_fail "$name" "not one stderr line: ${err//$'\n'/ | }"; return; fi
+    if ! grep -Eq "^cubesimd: .*($pat)" <<<"$err"; then cs_fail "$name" "stderr '$err' does not match /$pat/"; return; fi
+    cs_pass "$name"
+}
+
+S="$CS_TMP/ok.json"
+expect_exit2 cli-unknown-flag "unknown option '--bogus'" --scene "$S" --bogus
+expect_exit2 cli-stray-argument "unknown argument 'extra'" --scene "$S" extra
+expect_exit2 cli-no-scene '--scene FILE is required' --steps 3
+expect_exit2 cli-missing-value '--scene needs a value' --scene
+expect_exit2 cli-steps-zero "--steps '0'" --scene "$S" --steps 0
+expect_exit2 cli-steps-text "--steps 'ten'" --scene "$S" --steps ten
+expect_exit2 cli-duration-negative "--duration '-1'" --scene "$S" --duration -1
+expect_exit2 cli-duration-nan "--duration 'nan'" --scene "$S" --duration nan
+expect_exit2 cli-steps-and-duration 'exclude each other' --scene "$S" --steps 2 --duration 1
+expect_exit2 cli-static-and-steps '--static cannot be combined' --scene "$S" --static --steps 2
+# LCM itself prints a line about an unknown provider: only our last line is checked here.
+err=$(timeout 20 "$D" --quiet --scene "$S" --lcm nosuch://x --steps 1 2>&1 >/dev/null); rc=$?
+if [ $rc -eq 2 ] && tail -1 <<<"$err" | grep -q "^cubesimd: cannot open the LCM bus at 'nosuch://x'"; then
+    cs_pass cli-bad-lcm-url
+else
+    cs_fail cli-bad-lcm-url "exit $rc, stderr: ${err//$'\n'/ | }"
+fi
+expect_exit2 scene-missing-file 'nothere.json' --scene "$CS_TMP/nothere.json" --steps 1
+expect_exit2 scene-malformed-json 'malformed.json' --scene "$CS_TMP/malformed.json" --steps 1
+expect_exit2 scene-ill-typed-field 'young' --scene "$CS_TMP/illtyped.json" --steps 1
+expect_exit2 scene-missing-mesh 'missing_mesh.obj' --scene "$CS_TMP/missing.json" --steps 1
+expect_exit2 scene-mesh-assimp-rejects 'rejected.ply' --scene "$CS_TMP/rejected.json" --steps 1
+expect_exit2 scene-mesh-noise 'noise.stl' --scene "$CS_TMP/noise.json" --steps 1
+
+out=$("$D" --help 2>&1); rc=$?
+if [ $rc -eq 0 ] && grep -q -- '--dump-nodes' <<<"$out"; then cs_pass cli-help; else cs_fail cli-help "exit $rc"; fi
+
+# --steps: exit 0, outputs written; 2x1x1 cubes -> 3*2*2 = 12 nodes, 10 steps of sagging.
+"$D" --scene "$S" --quiet --steps 10 --dump-nodes "$CS_TMP/n.csv" --export "$CS_TMP/o.obj" 2>"$CS_TMP/err"
+rc=$?
+if [ $rc -eq 0 ] && [ "$(head -1 "$CS_TMP/n.csv")" = "x,y,z,ux,uy,uz" ] && [ "$(wc -l <"$CS_TMP/n.csv")" -eq 13 ] \
+    && grep -Eq '^(g|o) cube' "$CS_TMP/o.obj"; then
+    cs_pass cli-steps-outputs
+else
+    cs_fail cli-steps-outputs "exit $rc, $(wc -l <"$CS_TMP/n.csv" 2>/dev/null) csv lines, stderr: $(head -2 "$CS_TMP/err" | tr '\n' ' ')"
+fi
+# the free end sagged (uz < 0) and the fixed end did not move
+if awk -F, 'NR > 1 && $1 > 0.099 && $6 < 0 { sag = 1 } NR > 1 && $1 < 0.001 && ($4 != 0 || $5 != 0 || $6 != 0) { moved = 1 }
+            END { exit !(sag && !moved) }' "$CS_TMP/n.csv"; then
+    cs_pass cli-steps-physics
+else
+    cs_fail cli-steps-physics "free end did not sag or fixed end moved"
+fi
+if [ ! -s "$CS_TMP/err" ]; then cs_pass cli-quiet; else cs_fail cli-quiet "stderr not empty: $(head -1 "$CS_TMP/err")"; fi
+
+# --duration S is simulated time: 0.05 s at dt 0.01 is 5 steps.
+err=$("$D" --scene "$S" --duration 0.05 2>&1 >/dev/null); rc=$?
+if [ $rc -eq 0 ] && grep -q 'done after 5 steps' <<<"$err"; then cs_pass cli-duration
+else cs_fail cli-duration "exit $rc: $(tail -1 <<<"$err")"; fi
+
+# --static + --dump-nodes on the project's cantilever: header and one row per node.
+C="$CS_ROOT/scenes/cantilever.json"
+read -r h sx sy sz < <(tr -d '\n' <"$C" | sed -n 's/.*"cube_size": *\([0-9.eE+-]*\).*"size": *\[ *\([^],]*\), *\([^],]*\), *\([^]]*\)\].*/\1 \2 \3 \4/p')
+expect=$(awk -v h="$h" -v x="$sx" -v y="$sy" -v z="$sz" 'BEGIN { printf "%d", (int(x/h+0.5)+1)*(int(y/h+0.5)+1)*(int(z/h+0.5)+1) }')
+timeout 400 "$D" --scene "$C" --static --quiet --dump-nodes "$CS_TMP/c.csv" 2>"$CS_TMP/err"
+rc=$?
+rows=$(($(wc -l <"$CS_TMP/c.csv" 2>/dev/null || echo 1) - 1))
+if [ $rc -eq 0 ] && [ "$(head -1 "$CS_TMP/c.csv")" = "x,y,z,ux,uy,uz" ] && [ "$rows" -eq "$expect" ] \
+    && ! grep -Eqv '^-?[0-9]' <(tail -n +2 "$CS_TMP/c.csv"); then
+    cs_pass static-cantilever-dump-nodes
+else
+    cs_fail static-cantilever-dump-nodes "exit $rc, $rows rows (expected $expect), stderr: $(head -1 "$CS_TMP/err")"
+fi
+cs_finish
