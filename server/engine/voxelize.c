@@ -25,7 +25,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "watertight.h"
 
 #define CS_VOX_MAX_CELLS 2e7
 #define CS_SUBDIV_MAX_TRIS 50000000
@@ -35,6 +34,12 @@
 typedef struct {
     int32_t a, b, t; /* a > b */
 } triple;
+
+static int cmp_i64(const void *pa, const void *pb)
+{
+    int64_t a = *(const int64_t *)pa, b = *(const int64_t *)pb;
+    return (a > b) - (a < b);
+}
 
 static int cmp_triple(const void *pa, const void *pb)
 {
@@ -272,6 +277,34 @@ double cs_voxel_tolerance(double h, const double *verts, int nv)
     return tol;
 }
 
+/* Edges used by an odd number of triangles (sorted (lo,hi) pairs), or -1 on out of memory: a
+ * closed surface, manifold or not, uses every edge an even number of times. Counted here
+ * rather than with common/watertight.c so the engine library does not link against common. */
+static int count_boundary_edges(const int32_t *tris, int nt)
+{
+    int64_t *e = malloc((size_t)(nt ? nt : 1) * 3 * sizeof *e);
+    if (!e)
+        return -1;
+    int ne = 0;
+    for (int t = 0; t < nt; t++)
+        for (int k = 0; k < 3; k++) {
+            int64_t a = tris[3 * t + k], b = tris[3 * t + (k + 1) % 3];
+            if (a != b)
+                e[ne++] = a < b ? (a << 32) | b : (b << 32) | a;
+        }
+    qsort(e, (size_t)ne, sizeof *e, cmp_i64);
+    int boundary = 0;
+    for (int i = 0; i < ne;) {
+        int j = i + 1;
+        while (j < ne && e[j] == e[i])
+            j++;
+        boundary += (j - i) % 2; /* odd use: a boundary modulo 2 (1, or a fin on 2) */
+        i = j;
+    }
+    free(e);
+    return boundary;
+}
+
 enum { F_SURF = 1, F_BLOCK_X = 2, F_BLOCK_Y = 4, F_BLOCK_Z = 8, F_OUT = 16 };
 
 int cs_voxelize(const double *verts, int nv, const int32_t *tris, int nt, double h,
@@ -292,11 +325,18 @@ int cs_voxelize(const double *verts, int nv, const int32_t *tris, int nt, double
             snprintf(err, errlen, "voxelize: vertex %d is not finite", i / 3);
             return -1;
         }
-    cs_watertight_report rep;
-    char why[160];
-    if (!cs_watertight_check(verts, nv, tris, nt, &rep, why, sizeof why) &&
-        rep.boundary_edges > 0) {
-        snprintf(err, errlen, "mesh is not closed: %d boundary edges", rep.boundary_edges);
+    for (int i = 0; i < 3 * nt; i++)
+        if (tris[i] < 0 || tris[i] >= nv) {
+            snprintf(err, errlen, "voxelize: triangle %d has a bad vertex index", i / 3);
+            return -1;
+        }
+    int boundary = count_boundary_edges(tris, nt);
+    if (boundary < 0) {
+        snprintf(err, errlen, "voxelize: out of memory");
+        return -1;
+    }
+    if (boundary > 0) {
+        snprintf(err, errlen, "mesh is not closed: %d boundary edges", boundary);
         return -1;
     }
     /* Non-manifold, misoriented or inside-out closed meshes are still well defined here: the
