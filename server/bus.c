@@ -173,16 +173,54 @@ static void validate_force(cs_bus_t *b, cs_input *x)
     }
 }
 
+/*
+ * lcm-gen's decoders trust a string's length prefix: a negative one makes them memcpy through
+ * a NULL malloc, a missing '\0' makes the string unterminated, and a failure after a string
+ * leaks it. So the raw bytes are walked first: `layout` lists fixed field sizes in bytes, with
+ * -1 for a string (int32 length including '\0', then the bytes, the last one '\0'), ending
+ * with 0. The message must be exactly as long as its fields.
+ */
+static bool well_formed(const void *data, uint32_t size, const int *layout)
+{
+    const unsigned char *p = data;
+    size_t pos = 0;
+    for (; *layout; layout++) {
+        if (*layout > 0) {
+            pos += (size_t)*layout;
+            if (pos > size)
+                return false;
+            continue;
+        }
+        if (pos + 4 > size)
+            return false;
+        uint32_t len = ((uint32_t)p[pos] << 24) | ((uint32_t)p[pos + 1] << 16) |
+                       ((uint32_t)p[pos + 2] << 8) | (uint32_t)p[pos + 3];
+        pos += 4;
+        if (len < 1 || len > size - pos || p[pos + len - 1] != 0)
+            return false;
+        pos += len;
+    }
+    return pos == size;
+}
+
+/* force_t: hash, client_id, command_id, object_id, object_name, kind, point, force, target,
+ * stiffness, duration. command_t: hash, client_id, command_id, command, count, argument. */
+static const int force_layout[] = {8, 8, 8, 4, -1, 1, 24, 24, 24, 8, 8, 0};
+static const int command_layout[] = {8, 8, 8, -1, 4, -1, 0};
+
 static void on_force(const lcm_recv_buf_t *rbuf, const char *channel, void *user)
 {
     cs_bus_t *b = user;
     cubesim_force_t m;
     memset(&m, 0, sizeof m);
-    int rc = cubesim_force_t_decode(rbuf->data, 0, (int)rbuf->data_size, &m);
+    int rc = -1;
+    if (well_formed(rbuf->data, rbuf->data_size, force_layout))
+        rc = cubesim_force_t_decode(rbuf->data, 0, (int)rbuf->data_size, &m);
     if (rc < 0) {
+        cubesim_force_t_decode_cleanup(&m); /* what a failed decode left behind */
         cs_dlog_warn(b->log, "undecodable " CS_CH_FORCE,
                      "ignored a message on %s that is not a cubesim.force_t (%u bytes: "
-                     "another type or truncated)",
+                     "another type, truncated or malformed)",
                      channel, (unsigned)rbuf->data_size);
         return;
     }
@@ -235,11 +273,14 @@ static void on_command(const lcm_recv_buf_t *rbuf, const char *channel, void *us
     cs_bus_t *b = user;
     cubesim_command_t m;
     memset(&m, 0, sizeof m);
-    int rc = cubesim_command_t_decode(rbuf->data, 0, (int)rbuf->data_size, &m);
+    int rc = -1;
+    if (well_formed(rbuf->data, rbuf->data_size, command_layout))
+        rc = cubesim_command_t_decode(rbuf->data, 0, (int)rbuf->data_size, &m);
     if (rc < 0) {
+        cubesim_command_t_decode_cleanup(&m);
         cs_dlog_warn(b->log, "undecodable " CS_CH_COMMAND,
                      "ignored a message on %s that is not a cubesim.command_t (%u bytes: "
-                     "another type or truncated)",
+                     "another type, truncated or malformed)",
                      channel, (unsigned)rbuf->data_size);
         return;
     }

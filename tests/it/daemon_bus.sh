@@ -101,10 +101,14 @@ expect_warned daemon-foreign-force CUBESIM_FORCE foreign
 expect_warned daemon-foreign-command CUBESIM_COMMAND foreign
 expect_warned daemon-truncated-force CUBESIM_FORCE truncated
 expect_warned daemon-truncated-command CUBESIM_COMMAND truncated
+expect_warned daemon-badlength-force CUBESIM_FORCE badlength
+expect_warned daemon-badlength-command CUBESIM_COMMAND badlength
+expect_warned daemon-unterminated-force CUBESIM_FORCE unterminated
+expect_warned daemon-unterminated-command CUBESIM_COMMAND unterminated
 
 # A flood of junk is rate-limited: at most 5 lines a second per kind, plus a summary.
 before=$(wc -l <"$CS_TMP/daemon.err")
-for i in $(seq 1 30); do cs_bus truncated CUBESIM_FORCE >/dev/null; done
+cs_bus truncated CUBESIM_FORCE --repeat 30 >/dev/null
 sleep 1.3
 status_line 1 >/dev/null   # the summary is printed on the daemon's next second
 lines=$(tail -n +"$((before + 1))" "$CS_TMP/daemon.err" | grep -c 'ignored a message on CUBESIM_FORCE')
@@ -117,8 +121,10 @@ fi
 # The hash check above is not vacuous: a real force and a few steps change it.
 ack=$(cs_bus force --name block --point 0.1,0.1,0.1 --force 0,5,0 --duration 0.05)
 ack2=$(cs_bus command step --count 10)
-sleep 0.3
-st=$(status_line 2)
+for i in $(seq 1 40); do   # until the 10 steps are done (slow under sanitizers)
+    st=$(status_line 1)
+    grep -q 'paused=1' <<<"$st" && break
+done
 h=$(sed -n 's/^object id=1 name=block hash=\([0-9a-f]*\).*/\1/p' <<<"$st")
 if grep -q '^ack ok=1' <<<"$ack" && grep -q '^ack ok=1' <<<"$ack2" && [ -n "$h" ] && [ "$h" != "$h0" ] \
     && grep -q 'paused=1' <<<"$st"; then

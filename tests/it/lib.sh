@@ -71,7 +71,7 @@ cs_cleanup() {
         kill -KILL "$CS_DAEMON_PID" 2>/dev/null
         wait "$CS_DAEMON_PID" 2>/dev/null
     fi
-    rm -rf "$CS_TMP"
+    if [ -n "${CS_IT_KEEP:-}" ]; then echo "kept $CS_TMP" >&2; else rm -rf "$CS_TMP"; fi
 }
 trap cs_cleanup EXIT
 

@@ -9,6 +9,9 @@
  *       publish, wait for the matching ack, print "ack ok=0|1 request=R message=M"
  *   cs_it_bus ... foreign CHANNEL            publish a cubesim.ack_t (a foreign type) there
  *   cs_it_bus ... truncated CHANNEL          publish half of an encoded force_t/command_t raw
+ *   cs_it_bus ... badlength CHANNEL          ... whole, with its first string's length = -16
+ *   cs_it_bus ... unterminated CHANNEL       ... whole, with that string's '\0' overwritten
+ *       (these four take [--repeat N]: publish N times back to back)
  *   cs_it_bus ... status [--count N]         print the N-th status received (default 1):
  *       "status session=S epoch=E frame=F seq=Q paused=P objects=N" and per object
  *       "object id=I name=NAME hash=H sleeping=Z"
@@ -217,8 +220,15 @@ int main(int argc, char **argv)
             fprintf(stderr, "cs_it_bus: no ack for command %lld within %g s\n",
                     (long long)st.command_id, timeout);
         cubesim_ack_t_unsubscribe(lcm, sub);
-    } else if ((strcmp(verb, "foreign") == 0 || strcmp(verb, "truncated") == 0) && i < argc) {
+    } else if ((strcmp(verb, "foreign") == 0 || strcmp(verb, "truncated") == 0 ||
+                strcmp(verb, "badlength") == 0 || strcmp(verb, "unterminated") == 0) &&
+               i < argc) {
         const char *ch = argv[i];
+        int repeat = 1;
+        if (i + 2 < argc && strcmp(argv[i + 1], "--repeat") == 0)
+            repeat = atoi(argv[i + 2]);
+        /* The first string's length prefix: force_t object_name, command_t command. */
+        int str_at = strstr(ch, "COMMAND") ? 8 + 16 : 8 + 20;
         unsigned char buf[512];
         int n;
         if (verb[0] == 'f') {
@@ -230,16 +240,26 @@ int main(int argc, char **argv)
         } else if (strstr(ch, "COMMAND")) {
             cubesim_command_t c = {.client_id = 1, .command_id = 1, .command = "pause",
                                    .count = 1, .argument = "x"};
-            n = cubesim_command_t_encode(buf, 0, sizeof buf, &c) / 2;
+            n = cubesim_command_t_encode(buf, 0, sizeof buf, &c);
         } else {
             cubesim_force_t f;
             memset(&f, 0, sizeof f);
             f.object_name = "block";
-            n = cubesim_force_t_encode(buf, 0, sizeof buf, &f) / 2;
+            n = cubesim_force_t_encode(buf, 0, sizeof buf, &f);
         }
-        rc = n <= 0 || lcm_publish(lcm, ch, buf, (unsigned)n) < 0;
+        if (n > 0 && verb[0] == 't')
+            n /= 2;
+        if (n > 0 && verb[0] == 'b') /* a length prefix of -16: lcm-gen would memcpy via NULL */
+            buf[str_at] = buf[str_at + 1] = buf[str_at + 2] = 0xff, buf[str_at + 3] = 0xf0;
+        if (n > 0 && verb[0] == 'u') { /* the string's '\0' overwritten */
+            int len = (buf[str_at] << 24) | (buf[str_at + 1] << 16) | (buf[str_at + 2] << 8) |
+                      buf[str_at + 3];
+            buf[str_at + 4 + len - 1] = 'X';
+        }
+        for (int k = 0; k < repeat && !rc; k++)
+            rc = n <= 0 || lcm_publish(lcm, ch, buf, (unsigned)n) < 0;
         if (!rc)
-            printf("published %d bytes on %s\n", n, ch);
+            printf("published %d bytes on %s (%d times)\n", n, ch, repeat);
     } else if (strcmp(verb, "status") == 0) {
         st.status_left = 1;
         if (i + 1 < argc && strcmp(argv[i], "--count") == 0)
