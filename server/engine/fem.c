@@ -155,6 +155,7 @@ void cs_fem_free(cs_fem *fem)
     free(fem->fe);
     free(fem->adj_start);
     free(fem->adj);
+    free(fem->tg);
     memset(fem, 0, sizeof *fem);
 }
 
@@ -300,4 +301,114 @@ void cs_fem_diag_blocks(cs_fem *fem, double *blocks)
                                     T[3 * i + 2] * R[3 * j + 2];
         }
     }
+}
+
+static void cross3(const double a[3], const double b[3], double c[3])
+{
+    c[0] = a[1] * b[2] - a[2] * b[1];
+    c[1] = a[2] * b[0] - a[0] * b[2];
+    c[2] = a[0] * b[1] - a[1] * b[0];
+}
+
+int cs_fem_prepare_tangent(cs_fem *fem, const double *x)
+{
+    if (!fem->tg) {
+        fem->tg = malloc((size_t)fem->n_cells * 33 * sizeof *fem->tg);
+        if (!fem->tg)
+            return -1;
+    }
+    const double h = fem->h, inv4h = 1.0 / (4.0 * h);
+#pragma omp parallel for num_threads(fem->threads) schedule(static)
+    for (int c = 0; c < fem->n_cells; c++) {
+        const int32_t *nd = fem->cell_nodes + 8 * c;
+        const double *R = fem->R + 9 * c;
+        double *G = fem->tg + 33 * c, *ku = G + 9;
+        double F[9] = {0}, S[9], u[24];
+        const double *x0 = x + 3 * nd[0];
+        for (int k = 0; k < 8; k++) {
+            const double *p = x + 3 * nd[k];
+            const double d[3] = {p[0] - x0[0], p[1] - x0[1], p[2] - x0[2]};
+            for (int i = 0; i < 3; i++) {
+                for (int j = 0; j < 3; j++)
+                    F[3 * i + j] += p[i] * SGN[k][j] * inv4h;
+                u[3 * k + i] = R[i] * d[0] + R[3 + i] * d[1] + R[6 + i] * d[2] -
+                               h * CS_CORNER[k][i];
+            }
+        }
+        kmul(fem->K, u, ku);
+        /* S = Rᵀ F, then A = tr(S)·I − S (symmetrized), G = A⁻¹ */
+        for (int i = 0; i < 3; i++)
+            for (int j = 0; j < 3; j++)
+                S[3 * i + j] = R[i] * F[j] + R[3 + i] * F[3 + j] + R[6 + i] * F[6 + j];
+        const double tr = S[0] + S[4] + S[8];
+        double A[9];
+        for (int i = 0; i < 3; i++)
+            for (int j = 0; j < 3; j++)
+                A[3 * i + j] = (i == j ? tr : 0.0) - 0.5 * (S[3 * i + j] + S[3 * j + i]);
+        double cf[9];
+        cf[0] = A[4] * A[8] - A[5] * A[7];
+        cf[1] = A[2] * A[7] - A[1] * A[8];
+        cf[2] = A[1] * A[5] - A[2] * A[4];
+        cf[3] = A[5] * A[6] - A[3] * A[8];
+        cf[4] = A[0] * A[8] - A[2] * A[6];
+        cf[5] = A[2] * A[3] - A[0] * A[5];
+        cf[6] = A[3] * A[7] - A[4] * A[6];
+        cf[7] = A[1] * A[6] - A[0] * A[7];
+        cf[8] = A[0] * A[4] - A[1] * A[3];
+        const double det = A[0] * cf[0] + A[1] * cf[3] + A[2] * cf[6];
+        /* Near-inverted or degenerate elements (tr S − s_i → 0) get no geometric term. */
+        if (det > 0.05)
+            for (int i = 0; i < 9; i++)
+                G[i] = cf[i] / det;
+        else
+            memset(G, 0, 9 * sizeof *G);
+    }
+    return 0;
+}
+
+void cs_fem_release_tangent(cs_fem *fem)
+{
+    free(fem->tg);
+    fem->tg = NULL;
+}
+
+void cs_fem_apply_tangent(cs_fem *fem, const double *p, double *y)
+{
+    const double inv4h = 1.0 / (4.0 * fem->h);
+#pragma omp parallel for num_threads(fem->threads) schedule(static)
+    for (int c = 0; c < fem->n_cells; c++) {
+        const int32_t *nd = fem->cell_nodes + 8 * c;
+        const double *R = fem->R + 9 * c;
+        const double *G = fem->tg + 33 * c, *ku = G + 9;
+        double q[24], kq[24], a[3] = {0, 0, 0}, b[3] = {0, 0, 0};
+        for (int k = 0; k < 8; k++) {
+            const double *d = p + 3 * nd[k];
+            double *qk = q + 3 * k, t[3];
+            for (int i = 0; i < 3; i++)
+                qk[i] = R[i] * d[0] + R[3 + i] * d[1] + R[6 + i] * d[2];
+            cross3(SGN[k], qk, t);
+            for (int i = 0; i < 3; i++)
+                a[i] += inv4h * t[i];
+            cross3(ku + 3 * k, qk, t);
+            for (int i = 0; i < 3; i++)
+                b[i] += t[i];
+        }
+        kmul(fem->K, q, kq);
+        double w1[3], w2[3];
+        for (int i = 0; i < 3; i++) {
+            w1[i] = G[3 * i] * a[0] + G[3 * i + 1] * a[1] + G[3 * i + 2] * a[2];
+            w2[i] = G[3 * i] * b[0] + G[3 * i + 1] * b[1] + G[3 * i + 2] * b[2];
+        }
+        double *out = fem->fe + 24 * c;
+        for (int k = 0; k < 8; k++) {
+            double g1[3], g2[3], l[3];
+            cross3(w1, ku + 3 * k, g1);
+            cross3(w2, SGN[k], g2);
+            for (int i = 0; i < 3; i++)
+                l[i] = kq[3 * k + i] + 0.5 * (g1[i] + inv4h * g2[i]);
+            for (int i = 0; i < 3; i++)
+                out[3 * k + i] = R[3 * i] * l[0] + R[3 * i + 1] * l[1] + R[3 * i + 2] * l[2];
+        }
+    }
+    gather(fem, y, 1.0);
 }

@@ -32,6 +32,7 @@ typedef struct cs_fem {
     double *fe;         /* 24 per cell: scratch of the element pass */
     int32_t *adj_start; /* n_nodes + 1 */
     int32_t *adj;       /* cell*8 + corner, grouped by node */
+    double *tg;         /* 33 per cell while a static solve runs (see cs_fem_prepare_tangent) */
 } cs_fem;
 
 int cs_fem_init(cs_fem *fem, const cs_cubemesh *cm, double young, double poisson,
@@ -52,6 +53,18 @@ void cs_fem_reset_rotations(cs_fem *fem);
 void cs_fem_elastic_force(cs_fem *fem, const double *x, double *f, double *energy);
 /* y = Σ R K Rᵀ p over elements (3 per node, overwritten). */
 void cs_fem_apply_K(cs_fem *fem, const double *p, double *y);
+/*
+ * Geometric stiffness for Newton's method on corotational statics. With F = R S at an
+ * element's centre, dR = R[ω]× where ω = (tr(S)·I − S)⁻¹ axial(RᵀdF − dFᵀR); the force
+ * f = −R K u then changes by −R (ω × (K u)_k) besides the warped term. prepare stores
+ * (tr(S)I − S)⁻¹ and K u per element for positions x (rotations must be current);
+ * apply_tangent computes y = (R K Rᵀ + G_sym) p, G_sym the symmetric part of that term.
+ * Returns -1 on out of memory.
+ */
+int cs_fem_prepare_tangent(cs_fem *fem, const double *x);
+void cs_fem_apply_tangent(cs_fem *fem, const double *p, double *y);
+void cs_fem_release_tangent(cs_fem *fem);
+
 /* The 3×3 diagonal blocks of Σ R K Rᵀ (9 per node, overwritten). */
 void cs_fem_diag_blocks(cs_fem *fem, double *blocks);
 
