@@ -15,6 +15,9 @@
  *   cs_it_bus ... status [--count N]         print the N-th status received (default 1):
  *       "status session=S epoch=E frame=F seq=Q paused=P objects=N" and per object
  *       "object id=I name=NAME hash=H sleeping=Z"
+ *   cs_it_bus ... follow [K]                 keep object 0's surface from snapshot + deltas
+ *       and compare it with each of the next K complete snapshots (key frames), printing
+ *       "follow compared=K deltas=D max_error=E bad=B max_chunks=C vertices=V"
  *   cs_it_bus ... snapshot                   wait for one complete snapshot, print
  *       "snapshot id=I objects=N vertices=V triangles=T chunks=C"
  * Exit status: 0 ok, 2 usage, 3 timeout (nothing matching arrived), 1 LCM failure.
@@ -31,6 +34,7 @@
 
 #include "cubesim_ack_t.h"
 #include "cubesim_command_t.h"
+#include "cubesim_delta_t.h"
 #include "cubesim_force_t.h"
 #include "cubesim_snapshot_t.h"
 #include "cubesim_status_t.h"
@@ -41,6 +45,11 @@ typedef struct state {
     int status_left;
     int snap_id, snap_chunks, snap_seen, snap_objects, snap_v, snap_t, snap_done;
     unsigned char seen[4096];
+    /* follow: one object's float copy, kept from snapshot + deltas */
+    int f_have, f_nv, f_topo, f_snap_building, f_compared, f_want, f_deltas, f_bad, f_chunks;
+    int32_t f_obj;
+    float *f_xyz, *f_snap;
+    double f_maxerr;
 } state;
 
 static double now_s(void)
@@ -117,6 +126,83 @@ static void on_snapshot(const lcm_recv_buf_t *rb, const char *ch, const cubesim_
         st->snap_done = 1;
     }
 }
+
+/*
+ * follow: the first complete snapshot starts the copy (object 0 of it only); every later
+ * complete snapshot (a key frame) is first compared with the copy built from deltas, then
+ * adopted. With the daemon's FIFO ordering the copy must equal the snapshot up to the
+ * publish_epsilon bound.
+ */
+static void f_on_snapshot(const lcm_recv_buf_t *rb, const char *ch, const cubesim_snapshot_t *s,
+                          void *u)
+{
+    state *st = u;
+    if (s->n_objects < 1 || (st->f_have && s->object_id != st->f_obj))
+        return;
+    if (s->snapshot_id != st->snap_id) {
+        if (s->chunk != 0)
+            return;
+        memset(st->seen, 0, sizeof st->seen);
+        st->snap_id = s->snapshot_id;
+        st->snap_chunks = s->n_chunks;
+        st->snap_seen = 0;
+        st->snap_v = s->n_vertices_total;
+        free(st->f_snap);
+        st->f_snap = calloc((size_t)s->n_vertices_total * 3 + 3, sizeof(float));
+        st->f_obj = s->object_id;
+        st->f_topo = s->topology_version;
+    }
+    if (s->chunk < 0 || s->chunk >= (int)sizeof st->seen || st->seen[s->chunk] || !st->f_snap)
+        return;
+    st->seen[s->chunk] = 1;
+    st->snap_seen++;
+    if (s->vertex_offset >= 0 && s->vertex_offset * 3 + s->n_coords <= st->snap_v * 3)
+        memcpy(st->f_snap + 3 * s->vertex_offset, s->xyz, (size_t)s->n_coords * sizeof(float));
+    if (st->snap_seen != st->snap_chunks)
+        return;
+    if (st->f_have && st->f_nv == st->snap_v) {
+        for (int i = 0; i < 3 * st->f_nv; i += 3) {
+            double dx = st->f_xyz[i] - st->f_snap[i], dy = st->f_xyz[i + 1] - st->f_snap[i + 1],
+                   dz = st->f_xyz[i + 2] - st->f_snap[i + 2];
+            double e = sqrt(dx * dx + dy * dy + dz * dz);
+            if (e > st->f_maxerr)
+                st->f_maxerr = e;
+        }
+        st->f_compared++;
+    } else if (st->f_have) {
+        st->f_bad++;
+    }
+    if (s->n_chunks > st->f_chunks)
+        st->f_chunks = s->n_chunks;
+    free(st->f_xyz);
+    st->f_xyz = st->f_snap;
+    st->f_snap = NULL;
+    st->f_nv = st->snap_v;
+    st->f_have = 1;
+    st->snap_id = -1;
+}
+
+static void f_on_delta(const lcm_recv_buf_t *rb, const char *ch, const cubesim_delta_t *d,
+                       void *u)
+{
+    state *st = u;
+    if (!st->f_have || d->object_id != st->f_obj)
+        return;
+    if (d->topology_version != st->f_topo || d->n_vertices_total != st->f_nv) {
+        st->f_bad++;
+        return;
+    }
+    for (int i = 0; i < d->n; i++) {
+        if (d->index[i] < 0 || d->index[i] >= st->f_nv) {
+            st->f_bad++;
+            return;
+        }
+        memcpy(st->f_xyz + 3 * d->index[i], d->xyz + 3 * i, 3 * sizeof(float));
+    }
+    st->f_deltas++;
+}
+
+static int follow_done(const state *st) { return st->f_compared >= st->f_want; }
 
 static int usage(void)
 {
@@ -270,6 +356,22 @@ int main(int argc, char **argv)
         if (rc == 3)
             fprintf(stderr, "cs_it_bus: no status within %g s\n", timeout);
         cubesim_status_t_unsubscribe(lcm, sub);
+    } else if (strcmp(verb, "follow") == 0) {
+        st.f_want = i < argc ? atoi(argv[i]) : 3;
+        st.snap_id = -1;
+        cubesim_snapshot_t_subscription_t *s1 =
+            cubesim_snapshot_t_subscribe(lcm, "CUBESIM_SNAPSHOT", f_on_snapshot, &st);
+        cubesim_delta_t_subscription_t *s2 =
+            cubesim_delta_t_subscribe(lcm, "CUBESIM_DELTA", f_on_delta, &st);
+        cubesim_snapshot_t_subscription_set_queue_capacity(s1, 1000);
+        cubesim_delta_t_subscription_set_queue_capacity(s2, 1000);
+        rc = wait_for(lcm, timeout, follow_done, &st);
+        printf("follow compared=%d deltas=%d max_error=%.9g bad=%d max_chunks=%d vertices=%d\n",
+               st.f_compared, st.f_deltas, st.f_maxerr, st.f_bad, st.f_chunks, st.f_nv);
+        cubesim_snapshot_t_unsubscribe(lcm, s1);
+        cubesim_delta_t_unsubscribe(lcm, s2);
+        free(st.f_xyz);
+        free(st.f_snap);
     } else if (strcmp(verb, "snapshot") == 0) {
         cubesim_snapshot_t_subscription_t *sub =
             cubesim_snapshot_t_subscribe(lcm, "CUBESIM_SNAPSHOT", on_snapshot, &st);
