@@ -508,7 +508,6 @@ static int run_loop(cs_daemon *d)
     new_epoch(d, now);
     publish_status(d, now);
     d->next_status = now + status_period(d);
-    double dt = cs_world_get_def(d->world)->dt;
     struct pollfd pfd = {.fd = cs_bus_fileno(d->bus), .events = POLLIN};
 
     while (!g_stop && !limit_reached(d)) {
@@ -550,7 +549,7 @@ static int run_loop(cs_daemon *d)
                 do_step(d);
             } else if (now >= d->next_step) {
                 do_step(d);
-                d->next_step += dt;
+                d->next_step += cs_world_get_def(d->world)->dt; /* a load may change dt */
                 now = cs_dlog_now();
                 if (now - d->next_step > 0.5) {
                     cs_dlog_warn(&d->log, "behind", "%.2f s behind real time: skipping ahead",

@@ -141,16 +141,27 @@ ep=$(sed -n 's/^status .* epoch=\([0-9]*\) .*/\1/p' <<<"$st")
 if grep -q '^ack ok=1' <<<"$ack" && [ "$ep" = "$((ep0 + 1))" ]; then cs_pass daemon-reset-epoch
 else cs_fail daemon-reset-epoch "ack '$ack', epoch $ep0 -> $ep"; fi
 
+# load: a good scene replaces the world (new epoch, the new object's name in the status).
+sed 's/"name": "block"/"name": "block2"/' "$CS_TMP/block.json" >"$CS_TMP/block2.json"
+ack=$(cs_bus command load --arg "$CS_TMP/block2.json")
+st=$(status_line 2)
+if grep -q '^ack ok=1 request=load' <<<"$ack" && grep -q 'name=block2 ' <<<"$st" \
+    && grep -q "epoch=$((ep0 + 2)) " <<<"$st"; then
+    cs_pass daemon-load-scene
+else
+    cs_fail daemon-load-scene "ack '$ack', status $(tr '\n' ' ' <<<"$st")"
+fi
+
 if cs_stop_daemon TERM; then cs_pass daemon-sigterm-exit0; else cs_fail daemon-sigterm-exit0 "exit status $CS_DAEMON_RC"; fi
 if [ "$(head -1 "$CS_TMP/nodes.csv" 2>/dev/null)" = "x,y,z,ux,uy,uz" ] && [ "$(wc -l <"$CS_TMP/nodes.csv")" -eq 28 ]; then
     cs_pass daemon-sigterm-dump-nodes
 else
     cs_fail daemon-sigterm-dump-nodes "nodes.csv missing or not header + 27 rows"
 fi
-if grep -Eq '^(g|o) block' "$CS_TMP/out.obj" 2>/dev/null && grep -q '^v ' "$CS_TMP/out.obj"; then
+if grep -Eq '^(g|o) block2' "$CS_TMP/out.obj" 2>/dev/null && grep -q '^v ' "$CS_TMP/out.obj"; then
     cs_pass daemon-sigterm-export
 else
-    cs_fail daemon-sigterm-export "out.obj missing or without a 'block' group"
+    cs_fail daemon-sigterm-export "out.obj missing or without a 'block2' group"
 fi
 if grep -q 'stopped by signal' "$CS_TMP/daemon.err"; then cs_pass daemon-sigterm-log
 else cs_fail daemon-sigterm-log "no 'stopped by signal' line"; fi

@@ -93,6 +93,16 @@ err=$("$D" --scene "$S" --duration 0.05 2>&1 >/dev/null); rc=$?
 if [ $rc -eq 0 ] && grep -q 'done after 5 steps' <<<"$err"; then cs_pass cli-duration
 else cs_fail cli-duration "exit $rc: $(tail -1 <<<"$err")"; fi
 
+# --realtime paces steps to the wall clock: 30 steps of 0.01 s take about 0.3 s (not much less).
+t0=$(date +%s.%N)
+"$D" --scene "$S" --quiet --realtime --steps 30 2>/dev/null; rc=$?
+t1=$(date +%s.%N)
+if [ $rc -eq 0 ] && awk -v a="$t0" -v b="$t1" 'BEGIN { d = b - a; exit !(d >= 0.28 && d < 5) }'; then
+    cs_pass cli-realtime-pacing
+else
+    cs_fail cli-realtime-pacing "exit $rc, took $(awk -v a="$t0" -v b="$t1" 'BEGIN { print b - a }') s for 0.3 s of simulated time"
+fi
+
 # --static + --dump-nodes on the project's cantilever: header and one row per node.
 C="$CS_ROOT/scenes/cantilever.json"
 read -r h sx sy sz < <(tr -d '\n' <"$C" | sed -n 's/.*"cube_size": *\([0-9.eE+-]*\).*"size": *\[ *\([^],]*\), *\([^],]*\), *\([^]]*\)\].*/\1 \2 \3 \4/p')
