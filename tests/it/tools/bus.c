@@ -156,7 +156,8 @@ static void f_on_snapshot(const lcm_recv_buf_t *rb, const char *ch, const cubesi
         return;
     st->seen[s->chunk] = 1;
     st->snap_seen++;
-    if (s->vertex_offset >= 0 && s->vertex_offset * 3 + s->n_coords <= st->snap_v * 3)
+    if (s->n_coords > 0 && s->vertex_offset >= 0 &&
+        s->vertex_offset * 3 + s->n_coords <= st->snap_v * 3)
         memcpy(st->f_snap + 3 * s->vertex_offset, s->xyz, (size_t)s->n_coords * sizeof(float));
     if (st->snap_seen != st->snap_chunks)
         return;
