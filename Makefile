@@ -19,7 +19,7 @@ B       := build/san
 OPT     := -O1 -g -fno-omit-frame-pointer -fsanitize=address,undefined -fno-sanitize-recover=all
 else
 B       := build
-OPT     := -O2 -g -march=x86-64-v2
+OPT     := -O3 -g -march=x86-64-v2
 endif
 
 PKGS    := lcm assimp libcjson ccd
