@@ -1,0 +1,33 @@
+#!/usr/bin/env bash
+# make bench: speed of the corotational implicit step against size, 1 and 2 threads.
+# Writes bench/results/blocks.csv, blocks.md (the README table) and blocks.svg (log-log plot).
+# BENCH_SIZES / BENCH_RUNS override the defaults (8,16,32,48 and 5 runs; medians are reported).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+out=bench/results
+mkdir -p "$out"
+sizes=${BENCH_SIZES:-8,16,32,48}
+runs=${BENCH_RUNS:-5}
+echo "bench_blocks: sizes $sizes, $runs runs each, threads 1 and 2 ($(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | xargs))"
+build/bin/bench_blocks --sizes "$sizes" --runs "$runs" --threads 1,2 --csv "$out/blocks.csv" \
+  2> "$out/blocks.growth.txt" | tee "$out/blocks.md"
+cat "$out/blocks.growth.txt"
+# Two-thread speed-up per size.
+awk -F, 'NR>1 { ms[$1","$2]=$5; c[$1]=1 } END { for (k in c) if (ms[k",2"] > 0) printf "  speed-up with 2 threads at %d cubes: %.2fx\n", k, ms[k",1"]/ms[k",2"] }' \
+  "$out/blocks.csv" | sort -t' ' -k6 -n | tee "$out/blocks.speedup.txt"
+if command -v gnuplot >/dev/null; then
+  gnuplot <<GP
+set terminal svg size 640,420
+set output "$out/blocks.svg"
+set datafile separator ","
+set logscale xy
+set xlabel "cubes"
+set ylabel "ms per step (median)"
+set title "corotational implicit Euler step, dt = 1/60 s"
+set key left top
+plot "< awk -F, 'NR>1 && \$2==1' $out/blocks.csv" using 1:5 with linespoints title "1 thread", \
+     "< awk -F, 'NR>1 && \$2==2' $out/blocks.csv" using 1:5 with linespoints title "2 threads", \
+     "< awk -F, 'NR>1 && \$2==1' $out/blocks.csv" using 1:(\$1*0.004) with lines dt 2 title "linear in cubes"
+GP
+  echo "plot: $out/blocks.svg"
+fi
