@@ -43,6 +43,7 @@ CLIENT_LIB_SRC := $(filter-out client/cubesim-%.c,$(wildcard client/*.c))
 UNIT_SRC   := $(wildcard tests/unit/*.c)
 BENCH_SRC  := $(wildcard bench/*.c)
 IT_TOOL_SRC := $(wildcard tests/it/tools/*.c)
+STRESS_TOOL_SRC := $(wildcard tests/stress/*.c)
 
 obj = $(patsubst %.c,$(B)/obj/%.o,$(1))
 
@@ -54,7 +55,8 @@ LIBS       := $(LIB_CLIENT) $(LIB_COMMON) $(LIB_ENGINE) $(LIB_TYPES)
 
 BINS := $(B)/bin/cubesimd $(patsubst client/%.c,$(B)/bin/%,$(CLIENT_SRC)) \
         $(B)/bin/cs_unit_tests $(patsubst bench/%.c,$(B)/bin/%,$(BENCH_SRC)) \
-        $(patsubst tests/it/tools/%.c,$(B)/bin/cs_it_%,$(IT_TOOL_SRC))
+        $(patsubst tests/it/tools/%.c,$(B)/bin/cs_it_%,$(IT_TOOL_SRC)) \
+        $(patsubst tests/stress/%.c,$(B)/bin/cs_stress_%,$(STRESS_TOOL_SRC))
 
 .PHONY: all deps test run bench stress valgrind san clean gen
 all: $(BINS)
@@ -120,7 +122,7 @@ test: deps
 	bash tests/run_all.sh
 
 valgrind: all
-	valgrind --error-exitcode=1 --leak-check=full --errors-for-leak-kinds=definite \
+	valgrind --error-exitcode=1 --leak-check=full --errors-for-leak-kinds=definite --show-possibly-lost=no \
 	  $(B)/bin/cs_unit_tests --quick
 
 run: deps all
@@ -128,6 +130,11 @@ run: deps all
 
 bench: all
 	bash bench/run.sh
+
+# Stress-suite tools (tests/stress/NAME.c -> cs_stress_NAME), used by tests/stress.sh.
+$(B)/bin/cs_stress_%: $(B)/obj/tests/stress/%.o $(LIBS)
+	@mkdir -p $(dir $@)
+	$(CC) $(OPT) -o $@ $^ $(LDLIBS)
 
 stress: all
 	bash tests/stress.sh

@@ -135,7 +135,10 @@ int cs_fem_init(cs_fem *fem, const cs_cubemesh *cm, double young, double poisson
     memset(fem, 0, sizeof *fem);
     fem->h = cm->h;
     fem->corotational = corotational;
-    fem->threads = threads > 0 ? threads : 1;
+    /* Below CS_FEM_PARALLEL_CELLS an object's products take microseconds, less than a
+     * thread barrier costs when the other core is busy (a descheduled worker stalls each
+     * barrier for a scheduler timeslice): small objects run on one thread. */
+    fem->threads = threads > 1 && cm->n_cells >= CS_FEM_PARALLEL_CELLS ? threads : 1;
     cs_cube_stiffness(young, poisson, cm->h, fem->K);
     fem->R = malloc((size_t)cm->n_cells * 9 * sizeof *fem->R);
     fem->q = malloc((size_t)cm->n_cells * 4 * sizeof *fem->q);

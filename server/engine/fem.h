@@ -20,12 +20,15 @@
 #include <stdint.h>
 #include "cubemesh.h"
 
+/* Objects with fewer cells than this are stepped on one thread (see cs_fem_init). */
+#define CS_FEM_PARALLEL_CELLS 2048
+
 typedef struct cs_fem {
     int n_cells, n_nodes;
     const int32_t *cell_nodes; /* 8 per cell, borrowed */
     double h;
     bool corotational;
-    int threads;
+    int threads;        /* worker threads for this object's products (1 when small) */
     double K[24 * 24];
     double *R;          /* 9 per cell, row-major; identity for the linear model */
     double *q;          /* 4 per cell (w,x,y,z): warm start of the rotation extraction */

@@ -345,10 +345,12 @@ TEST(fem_corotational_force_is_rotated_linear_force)
 TEST(fem_products_independent_of_thread_count)
 {
     cs_cubemesh cm;
-    ENSURE(build_block(&cm, 9, 7, 5, 0.1) == 0);
+    ENSURE(build_block(&cm, 16, 12, 11, 0.1) == 0);
+    ENSURE(cm.n_cells >= CS_FEM_PARALLEL_CELLS); /* so that two threads really run */
     cs_fem f1, f2;
     ENSURE(cs_fem_init(&f1, &cm, 1e6, 0.3, true, 1) == 0);
     ENSURE(cs_fem_init(&f2, &cm, 1e6, 0.3, true, 2) == 0);
+    ENSURE(f2.threads == 2);
     const int n = cm.n_nodes;
     double *x = malloc(sizeof(double) * 3 * n), *a = malloc(sizeof(double) * 3 * n),
            *b = malloc(sizeof(double) * 3 * n);

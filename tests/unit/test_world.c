@@ -313,8 +313,10 @@ TEST(world_results_independent_of_thread_count)
         cs_world_def wd = cs_world_def_default();
         wd.threads = t + 1;
         beam b;
-        ENSURE(make_beam(&b, wd, CS_MODEL_COROTATIONAL, mat, 12, 4, 4, 0.025, true, NULL) == 0);
-        for (int s = 0; s < 20; s++)
+        /* 2400 cells: above the size at which an object's products use worker threads. */
+        ENSURE(make_beam(&b, wd, CS_MODEL_COROTATIONAL, mat, 24, 10, 10, 0.025, true, NULL) ==
+               0);
+        for (int s = 0; s < 10; s++)
             cs_world_step(b.w);
         hashes[t] = cs_object_state_hash(b.w, b.id);
         free_beam(&b);
