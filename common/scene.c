@@ -540,7 +540,7 @@ static int parse_cells(sc_ctx *c, const cJSON *cells, const char *path, cs_objec
         int a = 0;
         for (const cJSON *x = e->child; x; x = x->next, a++) {
             char px[SC_PATH];
-            int v;
+            int v = 0;
             join_index(px, pe, a);
             if (int_value(c, x, px, &v, -SC_MAX_INDEX, SC_MAX_INDEX)) {
                 free(sorted);
