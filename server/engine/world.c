@@ -55,6 +55,8 @@ typedef struct cs_object {
     double *f_const;       /* gravity + scene loads, 3 per node */
     double *f, *b, *v1, *blocks;
     uint8_t *mask;         /* per dof: held */
+    uint8_t *smask;        /* per dof: held or in ground contact during this step's solve */
+    uint8_t *contact;      /* per node: 1 constrained by the ground this step, 2 released */
     int n_fixed_nodes;
     double mass;
     cs_cg_work cg;
@@ -217,6 +219,8 @@ static void object_free(cs_object *o)
     free(o->v1);
     free(o->blocks);
     free(o->mask);
+    free(o->smask);
+    free(o->contact);
     cs_cg_work_free(&o->cg);
     free(o);
 }
@@ -390,8 +394,10 @@ static int alloc_state(cs_object *o)
     o->v1 = malloc(n3 * sizeof(double));
     o->blocks = malloc(n3 * 3 * sizeof(double));
     o->mask = calloc(n3, 1);
+    o->smask = calloc(n3, 1);
+    o->contact = calloc((size_t)o->n, 1);
     if (!o->x || !o->v || !o->m || !o->f_const || !o->f || !o->b || !o->v1 || !o->blocks ||
-        !o->mask || cs_cg_work_init(&o->cg, (int)n3) != 0)
+        !o->mask || !o->smask || !o->contact || cs_cg_work_init(&o->cg, (int)n3) != 0)
         return -1;
     return 0;
 }
@@ -689,30 +695,75 @@ static void build_preconditioner(cs_object *o)
     cs_invert_blocks(o->blocks, o->n);
 }
 
-/* Seed 000 has no contact model for the ground; we project: a node below the plane is put
- * back on it, its inward normal velocity removed and its tangential speed reduced by
- * μ·|removed normal velocity| (a Coulomb impulse). */
-static void ground_contact(const cs_world_t *w, cs_object *o)
+/*
+ * Ground contact (seed 000 has no contact model; this is Baraff–Witkin style filtered CG).
+ * A node on or below the plane at the start of a step has its normal velocity constrained
+ * inside the solve (to 0, or to what lifts it back onto the plane), so the implicit system
+ * sees the support. After the solve the reaction force dt·f_c = (A v − b)_z tells whether the
+ * ground pushed (keep, and apply Coulomb friction with that normal force) or would have to
+ * pull (release the node for the next step). A projection after the step catches nodes that
+ * reached the plane during it.
+ */
+static int constrain_ground(const cs_world_t *w, cs_object *o)
+{
+    const size_t n3 = (size_t)o->n * 3;
+    memcpy(o->smask, o->mask, n3);
+    if (!w->def.has_ground)
+        return 0;
+    const double g = w->def.ground_height, dt = w->def.dt, eps = 1e-9 * (1 + fabs(g));
+    int count = 0;
+    for (int i = 0; i < o->n; i++) {
+        const double z = o->x[3 * i + 2];
+        if (o->mask[3 * i + 2] || z > g + eps || o->contact[i] == 2) {
+            o->contact[i] = 0;
+            continue;
+        }
+        o->contact[i] = 1;
+        o->smask[3 * i + 2] = 1;
+        o->v1[3 * i + 2] = (g - z) / dt > 0 ? (g - z) / dt : 0.0;
+        count++;
+    }
+    return count;
+}
+
+static void ground_after_solve(const cs_world_t *w, cs_object *o, int contacts)
 {
     if (!w->def.has_ground)
         return;
-    const double g = w->def.ground_height, mu = w->def.ground_friction;
+    const double dt = w->def.dt, mu = w->def.ground_friction;
+    if (contacts > 0) {
+        double *av = o->cg.q; /* scratch: the solve is done */
+        step_operator(o, o->v1, av);
+        for (int i = 0; i < o->n; i++) {
+            if (o->contact[i] != 1)
+                continue;
+            const double fn = (av[3 * i + 2] - o->b[3 * i + 2]) / dt;
+            if (fn < 0) {
+                o->contact[i] = 2; /* the ground would have to pull: free it next step */
+                continue;
+            }
+            double *v = o->v1 + 3 * i;
+            const double vt = sqrt(v[0] * v[0] + v[1] * v[1]);
+            const double dv = mu * fn * dt / o->m[i];
+            const double sc = vt > dv ? (vt - dv) / vt : 0.0;
+            v[0] *= sc;
+            v[1] *= sc;
+        }
+    }
+}
+
+static void ground_project(const cs_world_t *w, cs_object *o)
+{
+    if (!w->def.has_ground)
+        return;
+    const double g = w->def.ground_height;
     for (int i = 0; i < o->n; i++) {
         double *x = o->x + 3 * i, *v = o->v + 3 * i;
         if (x[2] >= g || o->mask[3 * i + 2])
             continue;
-        double dvn = v[2] < 0 ? -v[2] : 0;
-        /* The penetration depth also counts as removed normal motion. */
-        dvn += (g - x[2]) / w->def.dt;
         x[2] = g;
         if (v[2] < 0)
             v[2] = 0;
-        double vt = sqrt(v[0] * v[0] + v[1] * v[1]);
-        if (vt > 0) {
-            double s = vt > mu * dvn ? (vt - mu * dvn) / vt : 0;
-            v[0] *= s;
-            v[1] *= s;
-        }
     }
 }
 
@@ -746,19 +797,21 @@ static int step_object(cs_world_t *w, cs_object *o, cs_step_stats *st)
     build_preconditioner(o);
     for (size_t d = 0; d < n3; d++)
         o->v1[d] = o->mask[d] ? 0.0 : o->v[d];
+    int contacts = constrain_ground(w, o);
     double t3 = now_ms();
-    cs_cg_result r = cs_pcg(&o->cg, step_operator, o, o->blocks, o->mask, o->b, o->v1,
+    cs_cg_result r = cs_pcg(&o->cg, step_operator, o, o->blocks, o->smask, o->b, o->v1,
                             w->def.cg_tolerance, w->def.cg_max_iterations, o->fem.threads);
     double t4 = now_ms();
     if (!all_finite(o->v1, n3))
         return CS_ERR_DIVERGED;
+    ground_after_solve(w, o, contacts);
     memcpy(o->v, o->v1, n3 * sizeof(double));
     double vmax2 = 0;
     for (size_t d = 0; d < n3; d += 3) {
         for (int a = 0; a < 3; a++)
             o->x[d + a] += dt * o->v[d + a];
     }
-    ground_contact(w, o);
+    ground_project(w, o);
     for (size_t d = 0; d < n3; d += 3) {
         double s = o->v[d] * o->v[d] + o->v[d + 1] * o->v[d + 1] + o->v[d + 2] * o->v[d + 2];
         if (s > vmax2)
@@ -1003,6 +1056,7 @@ void cs_world_reset(cs_world_t *w)
         o->n_inputs = 0;
         o->sleeping = false;
         o->still_steps = 0;
+        memset(o->contact, 0, (size_t)o->n);
         cs_fem_reset_rotations(&o->fem);
         cs_surface_skin(&o->surf, &o->cm, o->x);
     }
