@@ -37,6 +37,7 @@ typedef struct sent_object {
     uint32_t topology_version;
     int nv;
     float *xyz; /* 3·nv: the floats last sent */
+    bool settled; /* asleep, and its last motion already compared and sent */
 } sent_object;
 
 struct cs_bus {
@@ -710,6 +711,7 @@ int32_t cs_bus_queue_snapshot(cs_bus_t *b, const cs_world_t *w, bool coalesce)
         so->xyz = xyz;
         so->nv = nv;
         so->topology_version = info.topology_version;
+        so->settled = info.sleeping; /* the snapshot carries its resting surface */
         for (int j = 0; j < 3 * nv; j++)
             xyz[j] = (float)v[j];
 
@@ -776,8 +778,11 @@ int cs_bus_queue_deltas(cs_bus_t *b, const cs_world_t *w, double eps)
             need_snapshot = true; /* a new object or new topology: deltas cannot say it */
             continue;
         }
-        if (info.sleeping)
+        /* An object moves in the step in which it falls asleep: compare it once more,
+         * then skip it until it wakes. */
+        if (info.sleeping && so->settled)
             continue;
+        so->settled = info.sleeping;
         if (b->scratch_cap < nv) {
             int32_t *ix = realloc(b->scratch_index, (size_t)nv * sizeof *ix);
             if (ix)

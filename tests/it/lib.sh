@@ -57,6 +57,7 @@ cs_netns_reexec() {
         echo "FAIL $CS_TEST_NAME: network namespace: '${un[*]}' failed: ${probe//$'\n'/ }"
         exit 1
     fi
+    rm -rf "$CS_TMP" # exec skips the EXIT trap; the inner run makes its own
     CS_NETNS_INSIDE=1 exec "${un[@]}" -- bash "$0" "$@"
     echo "FAIL $CS_TEST_NAME: network namespace: exec ${un[*]} failed"
     exit 1
