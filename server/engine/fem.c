@@ -13,6 +13,7 @@
 #include <string.h>
 
 #include "cubesim.h"
+#include "mat3.h"
 
 /* Sign pattern (2·corner − 1) of each corner: the gradient directions of the shape functions. */
 static const double SGN[8][3] = {
@@ -354,16 +355,7 @@ int cs_fem_prepare_tangent(cs_fem *fem, const double *x)
             for (int j = 0; j < 3; j++)
                 A[3 * i + j] = (i == j ? tr : 0.0) - 0.5 * (S[3 * i + j] + S[3 * j + i]);
         double cf[9];
-        cf[0] = A[4] * A[8] - A[5] * A[7];
-        cf[1] = A[2] * A[7] - A[1] * A[8];
-        cf[2] = A[1] * A[5] - A[2] * A[4];
-        cf[3] = A[5] * A[6] - A[3] * A[8];
-        cf[4] = A[0] * A[8] - A[2] * A[6];
-        cf[5] = A[2] * A[3] - A[0] * A[5];
-        cf[6] = A[3] * A[7] - A[4] * A[6];
-        cf[7] = A[1] * A[6] - A[0] * A[7];
-        cf[8] = A[0] * A[4] - A[1] * A[3];
-        const double det = A[0] * cf[0] + A[1] * cf[3] + A[2] * cf[6];
+        const double det = cs_mat3_adjugate(A, cf);
         /* Near-inverted or degenerate elements (tr S − s_i → 0) get no geometric term. */
         if (det > 0.05)
             for (int i = 0; i < 9; i++)

@@ -3,6 +3,8 @@
  */
 #include "solver.h"
 
+#include "mat3.h"
+
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -41,16 +43,7 @@ void cs_invert_blocks(double *blocks, int n_nodes)
     for (int i = 0; i < n_nodes; i++) {
         double *m = blocks + 9 * i;
         double c[9];
-        c[0] = m[4] * m[8] - m[5] * m[7];
-        c[1] = m[2] * m[7] - m[1] * m[8];
-        c[2] = m[1] * m[5] - m[2] * m[4];
-        c[3] = m[5] * m[6] - m[3] * m[8];
-        c[4] = m[0] * m[8] - m[2] * m[6];
-        c[5] = m[2] * m[3] - m[0] * m[5];
-        c[6] = m[3] * m[7] - m[4] * m[6];
-        c[7] = m[1] * m[6] - m[0] * m[7];
-        c[8] = m[0] * m[4] - m[1] * m[3];
-        double det = m[0] * c[0] + m[1] * c[3] + m[2] * c[6];
+        const double det = cs_mat3_adjugate(m, c);
         double scale = fabs(m[0]) + fabs(m[4]) + fabs(m[8]);
         if (fabs(det) > 1e-12 * scale * scale * scale && det != 0) {
             for (int k = 0; k < 9; k++)
