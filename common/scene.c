@@ -1,5 +1,5 @@
 /*
- * scene.c — scene files: JSON in SI units (DESIGN.md "Contracts", docs/scene.md) parsed with
+ * scene.c — scene files: JSON in SI units (DESIGN.md "Contracts", README.md "Scene files") parsed with
  * cJSON into a cs_world_def and an array of cs_object_def ready for the engine.
  *
  * Owns: every byte an object def points to (names, mesh arrays, cells, fixed boxes, loads) —

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# scenes/demo.sh — the demonstration behind `make run` (docs/demo.md says what it shows).
+# scenes/demo.sh — the demonstration behind `make run` (README.md, "The demo", says what it shows).
 #
 # Owns the end-to-end walk through daemon and clients, with no terminal and no arguments:
 #   1. a private network namespace (as root `unshare -n`, else `unshare -rn`; lo up; multicast
@@ -10,7 +10,7 @@
 #   4. SIGINT: the daemon stops cleanly and writes build/demo/live.obj;
 #   5. cubesim-replay rebuilds build/demo/replayed.obj from the log alone and --verifies every
 #      frame; the summary compares the two exports vertex by vertex against the stated bound
-#      publish_epsilon + 2^-24·|x| (docs/clients.md, lcmtypes/delta_t.lcm).
+#      publish_epsilon + 2^-24·|x| (README.md, lcmtypes/delta_t.lcm).
 # Exit 0 only if every stage worked; otherwise the stage that failed says why (exit 1).
 #
 # Environment: DEMO_SECONDS (wall seconds the daemon runs, default 6, at least 3),
@@ -167,7 +167,7 @@ echo "      $(tail -1 "$OUT/verify.txt")"
 rframe=$(awk '/^exported frame/ { print $3 }' "$OUT/replay.txt")
 
 # ---- summary -----------------------------------------------------------------------------------
-# publish_epsilon from the scene (default 1e-6 m, docs/scene.md).
+# publish_epsilon from the scene (default 1e-6 m, README.md "Scene files").
 eps=$(tr -d '\n' <"$SCENE" | sed -n 's/.*"publish_epsilon"[[:space:]]*:[[:space:]]*\([-+0-9.eE]*\).*/\1/p')
 eps=${eps:-1e-6}
 # Same faces (topology), then every vertex within eps + 2^-24·|x| (+ the OBJ text's ~1e-9 relative).

@@ -2,7 +2,7 @@
 # daemon_stream.sh — what cubesimd publishes is enough to follow it: a client that joins late
 # takes the next key frame, applies every delta after it, and at each later key frame its
 # copy equals the snapshot — exactly when publish_epsilon = 0, within publish_epsilon
-# otherwise (docs/daemon.md's error bound). A large plate needs several snapshot chunks,
+# otherwise (README.md, CUBESIM_DELTA error bound). A large plate needs several snapshot chunks,
 # all of which must arrive (pacing). Inside a private network namespace.
 set -u
 source "$(dirname "$0")/lib.sh"
