@@ -173,23 +173,29 @@ void cs_fem_reset_rotations(cs_fem *fem)
     }
 }
 
+/* The deformation gradient at a cell's centre: F = (1/4h) Σ_k x_k s_kᵀ. */
+static void centre_gradient(const cs_fem *fem, const double *x, int c, double F[9])
+{
+    const int32_t *nd = fem->cell_nodes + 8 * c;
+    memset(F, 0, 9 * sizeof *F);
+    for (int k = 0; k < 8; k++) {
+        const double *p = x + 3 * nd[k];
+        for (int i = 0; i < 3; i++)
+            for (int j = 0; j < 3; j++)
+                F[3 * i + j] += p[i] * SGN[k][j];
+    }
+    for (int i = 0; i < 9; i++)
+        F[i] /= 4.0 * fem->h;
+}
+
 void cs_fem_update_rotations(cs_fem *fem, const double *x)
 {
     if (!fem->corotational)
         return;
-    const double inv4h = 1.0 / (4.0 * fem->h);
 #pragma omp parallel for num_threads(fem->threads) schedule(static)
     for (int c = 0; c < fem->n_cells; c++) {
-        const int32_t *nd = fem->cell_nodes + 8 * c;
-        double F[9] = {0};
-        for (int k = 0; k < 8; k++) {
-            const double *p = x + 3 * nd[k];
-            for (int i = 0; i < 3; i++)
-                for (int j = 0; j < 3; j++)
-                    F[3 * i + j] += p[i] * SGN[k][j];
-        }
-        for (int i = 0; i < 9; i++)
-            F[i] *= inv4h;
+        double F[9];
+        centre_gradient(fem, x, c, F);
         cs_extract_rotation(F, fem->q + 4 * c, 30);
         cs_quat_to_mat(fem->q + 4 * c, fem->R + 9 * c);
     }
@@ -210,6 +216,36 @@ kmul(const double *restrict K, const double *restrict x, double *restrict y)
     }
     for (int i = 0; i < 24; i++)
         y[i] = acc[i];
+}
+
+double cs_fem_energy(const cs_fem *fem, const double *x)
+{
+    double e_sum = 0;
+    for (int c = 0; c < fem->n_cells; c++) {
+        const int32_t *nd = fem->cell_nodes + 8 * c;
+        double R[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+        if (fem->corotational) {
+            double F[9], q[4];
+            centre_gradient(fem, x, c, F);
+            memcpy(q, fem->q + 4 * c, sizeof q);
+            cs_extract_rotation(F, q, 30);
+            cs_quat_to_mat(q, R);
+        }
+        const double *x0 = x + 3 * nd[0];
+        double u[24], ku[24], e = 0;
+        for (int k = 0; k < 8; k++) {
+            const double *p = x + 3 * nd[k];
+            const double d[3] = {p[0] - x0[0], p[1] - x0[1], p[2] - x0[2]};
+            for (int i = 0; i < 3; i++)
+                u[3 * k + i] = R[i] * d[0] + R[3 + i] * d[1] + R[6 + i] * d[2] -
+                               fem->h * CS_CORNER[k][i];
+        }
+        kmul(fem->K, u, ku);
+        for (int i = 0; i < 24; i++)
+            e += u[i] * ku[i];
+        e_sum += 0.5 * e;
+    }
+    return e_sum;
 }
 
 /* Node pass: out[n] = sign · Σ fe over the node's (cell, corner) slots, in a fixed order. */

@@ -54,6 +54,13 @@ void cs_fem_reset_rotations(cs_fem *fem);
  * the elastic energy ½ Σ uᵀ K u with u = Rᵀ x - X in element-local coordinates.
  */
 void cs_fem_elastic_force(cs_fem *fem, const double *x, double *f, double *energy);
+/*
+ * Elastic energy ½ Σ uᵀ K u at positions x, with each element's rotation extracted afresh
+ * from x (warm-started from, but not written back to, the stored quaternions). Reads only:
+ * asking for the energy never changes what the next step computes.
+ */
+double cs_fem_energy(const cs_fem *fem, const double *x);
+
 /* y = Σ R K Rᵀ p over elements (3 per node, overwritten). */
 void cs_fem_apply_K(cs_fem *fem, const double *p, double *y);
 /*

@@ -1180,12 +1180,7 @@ int cs_object_energy(const cs_world_t *w, cs_object_id id, cs_energy *e)
         eg -= o->m[i] * (w->def.gravity[0] * x[0] + w->def.gravity[1] * x[1] +
                          w->def.gravity[2] * x[2]);
     }
-    /* Elastic energy with the rotations of the current positions; the force buffer of the
-     * last step is scratch here (it is rebuilt at the start of every step). */
-    cs_object *mo = (cs_object *)o;
-    cs_fem_update_rotations(&mo->fem, mo->x);
-    double ee = 0;
-    cs_fem_elastic_force(&mo->fem, mo->x, mo->b, &ee);
+    const double ee = cs_fem_energy(&o->fem, o->x);
     *e = (cs_energy){.kinetic = ek, .elastic = ee, .gravity = eg};
     return CS_OK;
 }

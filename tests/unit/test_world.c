@@ -478,3 +478,28 @@ TEST(world_column_on_ground_sags_by_its_weight)
     ENSURE_NEAR(sink, exact, 0.02 * exact);
     free_beam(&b);
 }
+
+/* Reading the state never changes it: a run that asks for energies (as the daemon does for
+ * its status messages) ends bit-identical to one that does not. */
+TEST(world_energy_query_does_not_change_the_physics)
+{
+    uint64_t hashes[2];
+    for (int ask = 0; ask < 2; ask++) {
+        cs_material mat = cs_material_default();
+        mat.young = 2e4;
+        beam b;
+        ENSURE(make_beam(&b, cs_world_def_default(), CS_MODEL_COROTATIONAL, mat, 10, 3, 3, 0.05,
+                         true, NULL) == 0);
+        for (int s = 0; s < 30; s++) {
+            cs_world_step(b.w);
+            if (ask) {
+                cs_energy e;
+                ENSURE(cs_object_energy(b.w, b.id, &e) == CS_OK);
+                ENSURE(isfinite(e.elastic) && e.elastic >= 0 && e.kinetic >= 0);
+            }
+        }
+        hashes[ask] = cs_object_state_hash(b.w, b.id);
+        free_beam(&b);
+    }
+    ENSURE(hashes[0] == hashes[1]);
+}
