@@ -65,6 +65,10 @@ typedef struct cs_object {
     int still_steps;
     bool sleeping;
     uint32_t topology_version;
+    /* elastic energy of the current positions, valid until they change (status messages
+     * ask for it several times a second; recomputing means a rotation per element) */
+    double elastic_energy;
+    bool elastic_energy_valid;
     /* operator coefficients of the current solve */
     double mcoef, kcoef, dcoef;
 } cs_object;
@@ -812,6 +816,7 @@ static int step_object(cs_world_t *w, cs_object *o, cs_step_stats *st)
             o->x[d + a] += dt * o->v[d + a];
     }
     ground_project(w, o);
+    o->elastic_energy_valid = false;
     for (size_t d = 0; d < n3; d += 3) {
         double s = o->v[d] * o->v[d] + o->v[d + 1] * o->v[d + 1] + o->v[d + 2] * o->v[d + 2];
         if (s > vmax2)
@@ -1018,6 +1023,7 @@ static int solve_static_object(cs_world_t *w, cs_object *o, cs_step_stats *st)
     free(x_save);
     cs_fem_release_tangent(&o->fem);
     cs_surface_skin(&o->surf, &o->cm, o->x);
+    o->elastic_energy_valid = false;
     return rc;
 }
 
@@ -1057,6 +1063,7 @@ void cs_world_reset(cs_world_t *w)
         o->sleeping = false;
         o->still_steps = 0;
         memset(o->contact, 0, (size_t)o->n);
+        o->elastic_energy_valid = false;
         cs_fem_reset_rotations(&o->fem);
         cs_surface_skin(&o->surf, &o->cm, o->x);
     }
@@ -1180,7 +1187,12 @@ int cs_object_energy(const cs_world_t *w, cs_object_id id, cs_energy *e)
         eg -= o->m[i] * (w->def.gravity[0] * x[0] + w->def.gravity[1] * x[1] +
                          w->def.gravity[2] * x[2]);
     }
-    const double ee = cs_fem_energy(&o->fem, o->x);
+    cs_object *mo = (cs_object *)o; /* the cache is not part of the observable state */
+    if (!mo->elastic_energy_valid) {
+        mo->elastic_energy = cs_fem_energy(&o->fem, o->x);
+        mo->elastic_energy_valid = true;
+    }
+    const double ee = o->elastic_energy;
     *e = (cs_energy){.kinetic = ek, .elastic = ee, .gravity = eg};
     return CS_OK;
 }
