@@ -935,7 +935,7 @@ static int solve_static_object(cs_world_t *w, cs_object *o, cs_step_stats *st)
     o->kcoef = 1;
     o->dcoef = 0;
     double load = 0, dl = 1;
-    int total_newton = 0, rc = CS_OK;
+    int rc = CS_OK;
     while (load < 1) {
         double target = load + dl > 1 ? 1 : load + dl;
         memcpy(x_save, o->x, (size_t)n3 * sizeof(double));
@@ -968,7 +968,6 @@ static int solve_static_object(cs_world_t *w, cs_object *o, cs_step_stats *st)
                            w->def.cg_max_iterations * 4, o->fem.threads);
                 st->cg_iterations += r.iterations;
             }
-            total_newton++;
             if (!all_finite(dx, (size_t)n3))
                 break;
             /* Backtracking (Armijo) on the total potential energy, the natural merit function
@@ -995,8 +994,6 @@ static int solve_static_object(cs_world_t *w, cs_object *o, cs_step_stats *st)
             if (!isfinite(rn_new))
                 break; /* no acceptable step: give up at this load level */
             rn = static_residual(o, target, res, NULL);
-            if (getenv("CS_DEBUG_STATIC"))
-                fprintf(stderr, "load %.4f it %d rn %.3e s %.3g cg %d\n", target, it, rn / fnorm, s, r.iterations);
             if (it > 8 && rn > 0.999 * rn_prev)
                 break; /* stalled: retry with a smaller load increment */
             rn_prev = rn;
@@ -1019,7 +1016,6 @@ static int solve_static_object(cs_world_t *w, cs_object *o, cs_step_stats *st)
     if (rc != CS_OK)
         st->converged = false;
     st->objects_stepped++;
-    (void)total_newton;
     free(x_save);
     cs_fem_release_tangent(&o->fem);
     cs_surface_skin(&o->surf, &o->cm, o->x);
