@@ -48,13 +48,18 @@ st_cleanup() {
 }
 trap st_cleanup EXIT
 
+# The binaries are copied first: others rebuilding build/bin during the run (a shared
+# checkout) made a push exit 126 once, a binary half written.
+mkdir -p "$CS_TMP/bin"
 for b in cubesimd cubesim-push cubesim-log cubesim-replay cs_it_bus cs_stress_probe; do
-    if [ ! -x "$BIN/$b" ]; then
+    if [ ! -x "$BIN/$b" ] || ! cp "$BIN/$b" "$CS_TMP/bin/$b"; then
         echo "FAIL stress: $BIN/$b missing (run make)"
         echo "0 passed, 1 failed"
         exit 1
     fi
 done
+BIN=$CS_TMP/bin
+CS_IT_BIN=$BIN
 
 # start_daemon LABEL PREFIX-WORDS... -- DAEMON-ARGS...: cubesimd (optionally under a wrapper
 # such as valgrind) in the background, stderr to $CS_TMP/LABEL.err; waits up to WAIT_S (default
