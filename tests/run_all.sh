@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Runs every test: the unit tests (in the sanitizer build unless CS_UNIT_BIN says otherwise)
-# and every integration script tests/it/*.sh. Each prints "PASS name" / "FAIL name" lines;
+# and every integration script tests/it/*.sh (release and sanitizer binaries). Each prints "PASS name" / "FAIL name" lines;
 # this script totals them and ends with the line "N passed, N failed".
 set -u
 cd "$(dirname "$0")/.."
@@ -17,17 +17,23 @@ else
   echo "FAIL unit-runner (no $unit)" | tee -a "$log"
 fi
 
-for t in tests/it/*.sh; do
-  [ -e "$t" ] || continue
-  echo "== $t"
-  one=$(mktemp)
-  timeout 600 bash "$t" 2>&1 | tee "$one"
-  rc=${PIPESTATUS[0]}
-  cat "$one" >> "$log"
-  if [ "$rc" -ne 0 ] && ! grep -q '^FAIL ' "$one"; then
-    echo "FAIL $(basename "$t" .sh) (exit $rc with no FAIL line)" | tee -a "$log"
-  fi
-  rm -f "$one"
+# Integration scripts run twice: against the release binaries, then against the ASan/UBSan
+# build (lines prefixed "san:"), so the daemon's and clients' bus paths run under the
+# sanitizers too. CS_IT_BUILDS overrides the list of binary folders.
+for bin in ${CS_IT_BUILDS:-build/bin build/san/bin}; do
+  tag=""; [ "$bin" = build/bin ] || tag="san:"
+  for t in tests/it/*.sh; do
+    [ -e "$t" ] || continue
+    echo "== $t ($bin)"
+    one=$(mktemp)
+    CS_IT_BIN="$PWD/$bin" timeout 600 bash "$t" 2>&1 | sed -e "s/^PASS /PASS $tag/" -e "s/^FAIL /FAIL $tag/" | tee "$one"
+    rc=${PIPESTATUS[0]}
+    cat "$one" >> "$log"
+    if [ "$rc" -ne 0 ] && ! grep -q '^FAIL ' "$one"; then
+      echo "FAIL $tag$(basename "$t" .sh) (exit $rc with no FAIL line)" | tee -a "$log"
+    fi
+    rm -f "$one"
+  done
 done
 
 p=$(grep -c '^PASS ' "$log")
