@@ -88,8 +88,23 @@ void cs_extract_rotation(const double A[9], double q[4], int max_iter)
         const double wn = sqrt(om[0] * om[0] + om[1] * om[1] + om[2] * om[2]);
         if (wn < 1e-12)
             break;
-        const double half = 0.5 * wn, sh = sin(half) / wn;
-        const double d[4] = {cos(half), om[0] * sh, om[1] * sh, om[2] * sh};
+        /* The update quaternion exp(ω/2). For small steps (the warm-started case) the
+         * first-order [1, ω/2], normalized below, avoids sin/cos; it rotates by
+         * 2·atan(|ω|/2) instead of |ω|, which changes how fast the iteration converges, not
+         * where: it stops where ω = 0. */
+        double d[4];
+        if (wn < 0.3) {
+            d[0] = 1.0;
+            d[1] = 0.5 * om[0];
+            d[2] = 0.5 * om[1];
+            d[3] = 0.5 * om[2];
+        } else {
+            const double half = 0.5 * wn, sh = sin(half) / wn;
+            d[0] = cos(half);
+            d[1] = om[0] * sh;
+            d[2] = om[1] * sh;
+            d[3] = om[2] * sh;
+        }
         const double n[4] = {
             d[0] * q[0] - d[1] * q[1] - d[2] * q[2] - d[3] * q[3],
             d[0] * q[1] + d[1] * q[0] + d[2] * q[3] - d[3] * q[2],
