@@ -681,67 +681,80 @@ static int parse_aabb(sc_ctx *c, const cJSON *e, const char *path, cs_aabb *out)
     return 0;
 }
 
-static int parse_fixed(sc_ctx *c, const cJSON *obj, const char *path, cs_object_def *d,
-                       cs_scene_object_store *st)
+/* One entry of "fixed" (a box) or of "loads" (a box and a force); item points at the
+ * entry's slot in the array being filled. */
+typedef int (*sc_entry_fn)(sc_ctx *c, const cJSON *e, const char *path, void *item);
+
+static int parse_fixed_entry(sc_ctx *c, const cJSON *e, const char *path, void *item)
 {
-    static const char *const keys[] = {"min", "max", NULL};
+    return parse_aabb(c, e, path, item);
+}
+
+static int parse_load_entry(sc_ctx *c, const cJSON *e, const char *path, void *item)
+{
+    cs_load *ld = item;
+    return parse_aabb(c, e, path, &ld->box) || get_vec(c, e, path, "force", ld->force, 3, ANY, 1)
+               ? -1
+               : 0;
+}
+
+/*
+ * The optional array `key` of objects, each holding only `keys`: allocates *out (n elements
+ * of `size` bytes, owned by the caller's store; NULL when absent or empty), sets *n, and
+ * parses every entry with `entry`.
+ */
+static int parse_entries(sc_ctx *c, const cJSON *obj, const char *path, const char *key,
+                         const char *const *keys, size_t size, sc_entry_fn entry, void **out,
+                         int *n)
+{
     const cJSON *arr;
     char p[SC_PATH];
-    if (get_array(c, obj, path, "fixed", &arr, 0))
+    *n = 0;
+    if (get_array(c, obj, path, key, &arr, 0))
         return -1;
-    if (!arr)
+    if (!arr || cJSON_GetArraySize(arr) == 0)
         return 0;
-    join_key(p, path, "fixed");
-    int n = cJSON_GetArraySize(arr);
-    if (n == 0)
-        return 0;
-    st->fixed = calloc((size_t)n, sizeof *st->fixed);
-    if (!st->fixed)
+    join_key(p, path, key);
+    const int count = cJSON_GetArraySize(arr);
+    char *items = calloc((size_t)count, size);
+    if (!items)
         return fail(c, p, "out of memory");
+    *out = items;
     int i = 0;
     for (const cJSON *e = arr->child; e; e = e->next, i++) {
         char pe[SC_PATH];
         join_index(pe, p, i);
         if (!cJSON_IsObject(e))
             return fail(c, pe, "expected an object, got %s", type_name(e));
-        if (check_keys(c, e, pe, keys) || parse_aabb(c, e, pe, &st->fixed[i]))
+        if (check_keys(c, e, pe, keys) || entry(c, e, pe, items + (size_t)i * size))
             return -1;
     }
-    d->fixed = st->fixed;
-    d->n_fixed = n;
+    *n = count;
     return 0;
+}
+
+static int parse_fixed(sc_ctx *c, const cJSON *obj, const char *path, cs_object_def *d,
+                       cs_scene_object_store *st)
+{
+    static const char *const keys[] = {"min", "max", NULL};
+    void *items = NULL;
+    int rc = parse_entries(c, obj, path, "fixed", keys, sizeof *st->fixed, parse_fixed_entry,
+                           &items, &d->n_fixed);
+    st->fixed = items;
+    d->fixed = st->fixed;
+    return rc;
 }
 
 static int parse_loads(sc_ctx *c, const cJSON *obj, const char *path, cs_object_def *d,
                        cs_scene_object_store *st)
 {
     static const char *const keys[] = {"min", "max", "force", NULL};
-    const cJSON *arr;
-    char p[SC_PATH];
-    if (get_array(c, obj, path, "loads", &arr, 0))
-        return -1;
-    if (!arr)
-        return 0;
-    join_key(p, path, "loads");
-    int n = cJSON_GetArraySize(arr);
-    if (n == 0)
-        return 0;
-    st->loads = calloc((size_t)n, sizeof *st->loads);
-    if (!st->loads)
-        return fail(c, p, "out of memory");
-    int i = 0;
-    for (const cJSON *e = arr->child; e; e = e->next, i++) {
-        char pe[SC_PATH];
-        join_index(pe, p, i);
-        if (!cJSON_IsObject(e))
-            return fail(c, pe, "expected an object, got %s", type_name(e));
-        if (check_keys(c, e, pe, keys) || parse_aabb(c, e, pe, &st->loads[i].box) ||
-            get_vec(c, e, pe, "force", st->loads[i].force, 3, ANY, 1))
-            return -1;
-    }
+    void *items = NULL;
+    int rc = parse_entries(c, obj, path, "loads", keys, sizeof *st->loads, parse_load_entry,
+                           &items, &d->n_loads);
+    st->loads = items;
     d->loads = st->loads;
-    d->n_loads = n;
-    return 0;
+    return rc;
 }
 
 /* ---------------------------------------------------------------- objects */
