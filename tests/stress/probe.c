@@ -28,6 +28,7 @@
 
 #include <lcm/lcm.h>
 
+#include "../it/tools/tool_util.h"
 #include "cubesim_ack_t.h"
 #include "cubesim_force_t.h"
 #include "cubesim_status_t.h"
@@ -45,30 +46,6 @@ typedef struct probe {
     double e_first, e_last, e_max, ke_max, ke_last;
     int done;
 } probe;
-
-static double now_s(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
-
-static int parse3(const char *s, double v[3])
-{
-    char *end = NULL;
-    for (int i = 0; i < 3; i++) {
-        v[i] = strtod(s, &end);
-        if (end == s)
-            return -1;
-        s = end;
-        if (i < 2) {
-            if (*s != ',')
-                return -1;
-            s++;
-        }
-    }
-    return *s ? -1 : 0;
-}
 
 static void on_ack(const lcm_recv_buf_t *rb, const char *ch, const cubesim_ack_t *a, void *u)
 {

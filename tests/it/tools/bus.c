@@ -32,6 +32,7 @@
 
 #include <lcm/lcm.h>
 
+#include "tool_util.h"
 #include "cubesim_ack_t.h"
 #include "cubesim_command_t.h"
 #include "cubesim_delta_t.h"
@@ -51,30 +52,6 @@ typedef struct state {
     float *f_xyz, *f_snap;
     double f_maxerr;
 } state;
-
-static double now_s(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
-
-static int parse3(const char *s, double v[3])
-{
-    char *end = NULL;
-    for (int i = 0; i < 3; i++) {
-        v[i] = strtod(s, &end);
-        if (end == s)
-            return -1;
-        s = end;
-        if (i < 2) {
-            if (*s != ',')
-                return -1;
-            s++;
-        }
-    }
-    return *s ? -1 : 0;
-}
 
 static void on_ack(const lcm_recv_buf_t *rb, const char *ch, const cubesim_ack_t *a, void *u)
 {
