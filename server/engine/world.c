@@ -939,7 +939,7 @@ static int solve_static_object(cs_world_t *w, cs_object *o, cs_step_stats *st)
     while (load < 1) {
         double target = load + dl > 1 ? 1 : load + dl;
         memcpy(x_save, o->x, (size_t)n3 * sizeof(double));
-        double rn = static_residual(o, target, res, NULL), rn_prev = INFINITY;
+        double pot, rn = static_residual(o, target, res, &pot), rn_prev = INFINITY;
         bool ok = false;
         for (int it = 0; it < 60 && isfinite(rn); it++) {
             double ltol = (target < 1 ? 1e3 : 1.0) * tol;
@@ -949,8 +949,9 @@ static int solve_static_object(cs_world_t *w, cs_object *o, cs_step_stats *st)
             }
             build_preconditioner(o);
             memset(dx, 0, (size_t)n3 * sizeof(double));
-            /* Inexact Newton: the tangent itself is approximate (no geometric stiffness), so
-             * solving it beyond 1e-3 is wasted; near the target a looser solve suffices. */
+            /* Inexact Newton: the tangent itself is approximate (its geometric part is
+             * symmetrized), so solving it beyond 1e-3 is wasted; near the target a looser
+             * solve suffices. */
             double ctol = fmin(0.1, fmax(1e-3, 0.5 * ltol / rn));
             /* Newton with the geometric stiffness where it is positive definite; where CG
              * meets a direction of negative curvature (compression, near buckling), the
@@ -975,16 +976,15 @@ static int solve_static_object(cs_world_t *w, cs_object *o, cs_step_stats *st)
              * the first linear step of a slender beam leaves O(θ²) axial stretch. A step
              * that lowers the residual is accepted too, since the corotated forces are only
              * approximately the gradient of that energy. */
-            double slope = 0, pot0, pot1 = 0;
+            double slope = 0, pot1 = 0;
             for (int d = 0; d < n3; d++)
                 slope -= res[d] * dx[d]; /* dΠ/ds at s = 0, negative for a descent step */
-            static_residual(o, target, o->cg.q, &pot0);
             double s = 1.0, rn_new = INFINITY;
             for (int ls = 0; ls < 12; ls++) {
                 for (int d = 0; d < n3; d++)
                     o->x[d] += s * dx[d];
                 rn_new = static_residual(o, target, o->cg.q, &pot1);
-                if (isfinite(rn_new) && (pot1 <= pot0 + 1e-4 * s * slope || rn_new < rn))
+                if (isfinite(rn_new) && (pot1 <= pot + 1e-4 * s * slope || rn_new < rn))
                     break;
                 for (int d = 0; d < n3; d++)
                     o->x[d] -= s * dx[d];
@@ -993,7 +993,10 @@ static int solve_static_object(cs_world_t *w, cs_object *o, cs_step_stats *st)
             }
             if (!isfinite(rn_new))
                 break; /* no acceptable step: give up at this load level */
-            rn = static_residual(o, target, res, NULL);
+            /* The accepted trial point's residual (and rotations) are already computed. */
+            memcpy(res, o->cg.q, (size_t)n3 * sizeof(double));
+            rn = rn_new;
+            pot = pot1;
             if (it > 8 && rn > 0.999 * rn_prev)
                 break; /* stalled: retry with a smaller load increment */
             rn_prev = rn;
