@@ -51,7 +51,7 @@ LIB_ENGINE := $(B)/lib/libcsengine.a
 LIB_COMMON := $(B)/lib/libcscommon.a
 LIB_TYPES  := $(B)/lib/libcstypes.a
 LIB_CLIENT := $(B)/lib/libcsclient.a
-LIBS       := $(LIB_CLIENT) $(LIB_COMMON) $(LIB_ENGINE) $(LIB_TYPES)
+LIBS       := $(LIB_CLIENT) $(LIB_ENGINE) $(LIB_COMMON) $(LIB_TYPES)
 
 BINS := $(B)/bin/cubesimd $(patsubst client/%.c,$(B)/bin/%,$(CLIENT_SRC)) \
         $(B)/bin/cs_unit_tests $(patsubst bench/%.c,$(B)/bin/%,$(BENCH_SRC)) \

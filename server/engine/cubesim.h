@@ -26,6 +26,8 @@
 #include <stdint.h>
 #include <stdbool.h>
 
+#include "topo.h"
+
 #ifdef __cplusplus
 extern "C" {
 #endif
@@ -89,6 +91,9 @@ typedef struct cs_object_def {
     cs_material material;    /* default cs_material_default() */
     double cube_size;        /* h [m], > 0; default 0.1 */
     bool fracture;           /* default false */
+    double fracture_radius;  /* cells whose centre lies within this distance [m] of an
+                                overstressed cell's centre are labelled by the splitting
+                                plane (seed 000 §2.3); >= 0; 0 = 1.5·cube_size (default) */
 
     cs_geometry_kind geometry;
     /* CS_GEOMETRY_MESH: world-space surface (already scaled/placed), borrowed during create. */
@@ -121,6 +126,8 @@ typedef struct cs_world_def {
     double sleep_speed;      /* an object whose fastest node is slower than this [m/s] ... */
     int sleep_steps;         /* ... for this many steps in a row sleeps; 0 = never; default 30 */
     double max_force;        /* |force| above this [N] is refused; default 1e9 */
+    int max_fractures;       /* fracture events per object per step, >= 1; default 4 */
+    uint64_t seed;           /* of the random corner offsets of closing surfaces; default 1 */
 } cs_world_def;
 
 cs_world_def cs_world_def_default(void);
@@ -215,6 +222,57 @@ typedef struct cs_step_stats {
     bool converged;
 } cs_step_stats;
 const cs_step_stats *cs_world_last_stats(const cs_world_t *w);
+
+/* ---------------------------------------------------------------- fracture (seed 000 §2.3, §3) */
+
+typedef enum cs_event_kind {
+    CS_EVENT_FRACTURE = 1,  /* an object was split along a plane (cells separated) */
+    CS_EVENT_NEW_PIECE = 2  /* a face-connected part became an object of its own */
+} cs_event_kind;
+
+typedef struct cs_event {
+    cs_event_kind kind;
+    cs_object_id object;  /* FRACTURE: the object that broke; NEW_PIECE: the new piece */
+    cs_object_id parent;  /* NEW_PIECE: the object it broke off; else CS_NULL_OBJECT */
+    int64_t frame;        /* the frame (step count) in which it happened */
+    double point[3];      /* FRACTURE: centre of the overstressed cell, world space [m] */
+    double normal[3];     /* FRACTURE: normal of the splitting plane (the stress direction) */
+    double stress;        /* FRACTURE: largest principal tensile stress [Pa]; 0 when forced */
+    int faces_cut;        /* FRACTURE: cube faces separated */
+    int closing_triangles;/* FRACTURE: triangles added to close the surfaces */
+    int fallback_loops;   /* FRACTURE: boundary loops the §3.2 polygons left open, closed by
+                             a fan around a new vertex instead (0 when §3.2 closed all) */
+} cs_event;
+
+/* Events of the last step or forced fracture, in order; *count set. Valid until the next
+ * mutating call. */
+const cs_event *cs_world_events(const cs_world_t *w, int *count);
+
+/*
+ * Surface topology changes of the last step or forced fracture, in the order they must be
+ * applied (topo.h): splits within objects, then new pieces (from_version 0). Positions in
+ * vnew_xyz are current. Valid until the next mutating call.
+ */
+const cs_topo_change *cs_world_topology_changes(const cs_world_t *w, int *count);
+
+/*
+ * Force a fracture as if the cell nearest to `point` were overstressed in direction `normal`:
+ * cells within `radius` [m] (0: the object's fracture_radius) are labelled by the plane through
+ * that cell's centre and separated (seed 000 §2.3). Works whether or not the object has
+ * fracture enabled. Returns CS_OK (also when no face was cut), or an error with err set.
+ */
+int cs_world_fracture(cs_world_t *w, cs_object_id id, const double point[3],
+                      const double normal[3], double radius, char *err, size_t errlen);
+
+/* Separate exactly one face: the one between cell (i,j,k) and its neighbour at +1 along
+ * `axis` (both must exist and still be joined there). Returns CS_OK or an error (err set). */
+int cs_world_cut_face(cs_world_t *w, cs_object_id id, const int32_t ijk[3], int axis,
+                      char *err, size_t errlen);
+
+/* Largest principal stress of every cell at the current positions (corotated small strain,
+ * σ = C ε at the cell centre): value [Pa] and unit direction, 1 and 3 per cell; n cells. */
+int cs_object_principal_stress(const cs_world_t *w, cs_object_id id, double *sigma,
+                               double *dir, int n);
 
 /* The 24×24 element stiffness matrix of a cube (row-major, seed 000 App. A corner order). */
 void cs_cube_stiffness(double young, double poisson, double h, double K[24 * 24]);

@@ -20,69 +20,8 @@
 #include <string.h>
 #include <time.h>
 
-#include "cubemesh.h"
-#include "fem.h"
-#include "solver.h"
-#include "surface.h"
 #include "voxelize.h"
-
-#define CS_MAX_INPUTS 1024
-#define CS_MAX_NAME 255
-
-typedef enum { CS_INPUT_FORCE = 0, CS_INPUT_DRAG = 1 } cs_input_kind;
-
-typedef struct cs_input {
-    cs_input_kind kind;
-    int32_t cell;
-    double w[8];          /* trilinear weight of each corner of `cell` */
-    double force[3];      /* CS_INPUT_FORCE */
-    double target[3];     /* CS_INPUT_DRAG */
-    double stiffness;
-    int steps_left;
-} cs_input;
-
-typedef struct cs_object {
-    cs_object_id id;
-    char *name;
-    cs_model model;
-    cs_material mat;
-    bool fracture;
-    cs_cubemesh cm;
-    cs_surface surf;
-    cs_fem fem;
-    int n;                 /* nodes */
-    double *x, *v, *m;     /* 3, 3, 1 per node */
-    double *f_const;       /* gravity + scene loads, 3 per node */
-    double *f, *b, *v1, *blocks;
-    uint8_t *mask;         /* per dof: held */
-    uint8_t *smask;        /* per dof: held or in ground contact during this step's solve */
-    uint8_t *contact;      /* per node: 1 constrained by the ground this step, 2 released */
-    int n_fixed_nodes;
-    double mass;
-    cs_cg_work cg;
-    cs_input inputs[CS_MAX_INPUTS];
-    int n_inputs;
-    int still_steps;
-    bool sleeping;
-    uint32_t topology_version;
-    /* elastic energy of the current positions, valid until they change (status messages
-     * ask for it several times a second; recomputing means a rotation per element) */
-    double elastic_energy;
-    bool elastic_energy_valid;
-    /* operator coefficients of the current solve */
-    double mcoef, kcoef, dcoef;
-} cs_object;
-
-struct cs_world {
-    cs_world_def def;
-    int threads;
-    cs_object **objects;
-    int n_objects, cap_objects;
-    cs_object_id next_id;
-    double time;
-    int64_t frame;
-    cs_step_stats stats;
-};
+#include "world_internal.h"
 
 /* ---------------------------------------------------------------- small helpers */
 
@@ -165,7 +104,8 @@ cs_world_def cs_world_def_default(void)
     return (cs_world_def){.dt = 1.0 / 60.0, .gravity = {0, 0, -9.81}, .has_ground = false,
                           .ground_height = 0.0, .ground_friction = 0.5, .cg_tolerance = 1e-6,
                           .cg_max_iterations = 500, .threads = 0, .sleep_speed = 5e-4,
-                          .sleep_steps = 30, .max_force = 1e9};
+                          .sleep_steps = 30, .max_force = 1e9, .max_fractures = 4,
+                          .seed = 1};
 }
 
 /* ---------------------------------------------------------------- world lifetime */
@@ -194,6 +134,8 @@ int cs_world_create(const cs_world_def *def, cs_world_t **out, char *err, size_t
         return fail(err, errlen, CS_ERR_INVALID, "sleep speed and steps must be >= 0");
     if (!(def->max_force > 0 && isfinite(def->max_force)))
         return fail(err, errlen, CS_ERR_INVALID, "max_force must be positive and finite");
+    if (def->max_fractures < 1 || def->max_fractures > 1000000)
+        return fail(err, errlen, CS_ERR_INVALID, "max_fractures must be in [1, 1e6]");
     cs_world_t *w = calloc(1, sizeof *w);
     if (!w)
         return fail(err, errlen, CS_ERR_NOMEM, "out of memory creating a world");
@@ -206,11 +148,12 @@ int cs_world_create(const cs_world_def *def, cs_world_t **out, char *err, size_t
     return CS_OK;
 }
 
-static void object_free(cs_object *o)
+void cs_object_free_internal(cs_object *o)
 {
     if (!o)
         return;
     free(o->name);
+    free(o->corner_vertex);
     cs_cubemesh_free(&o->cm);
     cs_surface_free(&o->surf);
     cs_fem_free(&o->fem);
@@ -234,12 +177,13 @@ void cs_world_destroy(cs_world_t *w)
     if (!w)
         return;
     for (int i = 0; i < w->n_objects; i++)
-        object_free(w->objects[i]);
+        cs_object_free_internal(w->objects[i]);
     free(w->objects);
+    cs_world_fracture_free(w);
     free(w);
 }
 
-static cs_object *find(const cs_world_t *w, cs_object_id id)
+cs_object *cs_world_find_internal(const cs_world_t *w, cs_object_id id)
 {
     if (!w || id == CS_NULL_OBJECT)
         return NULL;
@@ -386,7 +330,7 @@ out:
     return rc;
 }
 
-static int alloc_state(cs_object *o)
+int cs_object_alloc_state(cs_object *o)
 {
     size_t n3 = (size_t)o->n * 3;
     o->x = malloc(n3 * sizeof(double));
@@ -427,6 +371,9 @@ int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *i
     int rc = check_material(&def->material, err, errlen);
     if (rc)
         return rc;
+    if (!(def->fracture_radius >= 0 && isfinite(def->fracture_radius)))
+        return fail(err, errlen, CS_ERR_INVALID, "fracture_radius must be >= 0 m, got %g",
+                    def->fracture_radius);
     for (int i = 0; i < def->n_fixed; i++)
         if (!finite3(def->fixed[i].min) || !finite3(def->fixed[i].max))
             return fail(err, errlen, CS_ERR_INVALID, "fixed[%d]: values must be finite", i);
@@ -438,6 +385,7 @@ int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *i
     o->model = def->model;
     o->mat = def->material;
     o->fracture = def->fracture;
+    o->fracture_radius = def->fracture_radius > 0 ? def->fracture_radius : 1.5 * def->cube_size;
     if (!o->name) {
         rc = fail(err, errlen, CS_ERR_NOMEM, "out of memory");
         goto fail;
@@ -446,7 +394,7 @@ int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *i
     if (rc)
         goto fail;
     o->n = o->cm.n_nodes;
-    if (alloc_state(o) != 0 ||
+    if (cs_object_alloc_state(o) != 0 ||
         cs_fem_init(&o->fem, &o->cm, def->material.young, def->material.poisson,
                     def->model == CS_MODEL_COROTATIONAL, w->threads) != 0) {
         rc = fail(err, errlen, CS_ERR_NOMEM, "out of memory for %d nodes", o->n);
@@ -474,31 +422,39 @@ int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *i
                 break;
             }
     cs_surface_skin(&o->surf, &o->cm, o->x);
+    if (cs_world_append_object(w, o) != 0) {
+        rc = fail(err, errlen, CS_ERR_NOMEM, "out of memory");
+        goto fail;
+    }
+    if (id)
+        *id = o->id;
+    return CS_OK;
+fail:
+    cs_object_free_internal(o);
+    return rc;
+}
+
+/* Give o the next id and append it; returns 0, or -1 (out of memory; o untouched). */
+int cs_world_append_object(cs_world_t *w, cs_object *o)
+{
     if (w->n_objects == w->cap_objects) {
         int cap = w->cap_objects ? 2 * w->cap_objects : 8;
         cs_object **grown = realloc(w->objects, (size_t)cap * sizeof *grown);
-        if (!grown) {
-            rc = fail(err, errlen, CS_ERR_NOMEM, "out of memory");
-            goto fail;
-        }
+        if (!grown)
+            return -1;
         w->objects = grown;
         w->cap_objects = cap;
     }
     o->id = w->next_id++;
     w->objects[w->n_objects++] = o;
-    if (id)
-        *id = o->id;
-    return CS_OK;
-fail:
-    object_free(o);
-    return rc;
+    return 0;
 }
 
 int cs_world_remove_object(cs_world_t *w, cs_object_id id)
 {
     for (int i = 0; w && i < w->n_objects; i++)
         if (w->objects[i]->id == id) {
-            object_free(w->objects[i]);
+            cs_object_free_internal(w->objects[i]);
             memmove(w->objects + i, w->objects + i + 1,
                     (size_t)(w->n_objects - i - 1) * sizeof *w->objects);
             w->n_objects--;
@@ -550,7 +506,7 @@ static void nearest_material_point(const cs_object *o, const double p[3], int32_
 static int add_input(cs_world_t *w, cs_object_id id, cs_input *in, const double point[3],
                      double seconds, char *err, size_t errlen)
 {
-    cs_object *o = find(w, id);
+    cs_object *o = cs_world_find_internal(w, id);
     if (!o)
         return fail(err, errlen, CS_ERR_UNKNOWN_OBJECT, "no object with id %u", (unsigned)id);
     if (!finite3(point))
@@ -595,7 +551,7 @@ int cs_world_drag(cs_world_t *w, cs_object_id id, const double grab[3], const do
         return fail(err, errlen, CS_ERR_INVALID, "drag stiffness must be > 0 N/m, got %g",
                     stiffness);
     /* The largest force the spring could exert over the object's extent must stay sane. */
-    cs_object *o = find(w, id);
+    cs_object *o = cs_world_find_internal(w, id);
     if (o) {
         double d = norm3((double[3]){target[0] - grab[0], target[1] - grab[1],
                                      target[2] - grab[2]});
@@ -861,7 +817,9 @@ int cs_world_step(cs_world_t *w)
     cs_step_stats st = {.converged = true};
     double t0 = now_ms();
     int rc = CS_OK;
-    for (int i = 0; i < w->n_objects; i++) {
+    cs_fracture_clear_step(w);
+    const int n_before = w->n_objects; /* pieces made in this step start stepping next step */
+    for (int i = 0; i < n_before; i++) {
         cs_object *o = w->objects[i];
         if (!needs_step(o)) {
             expire_inputs(o);
@@ -874,6 +832,12 @@ int cs_world_step(cs_world_t *w)
             memset(o->v, 0, (size_t)o->n * 3 * sizeof(double));
             o->n_inputs = 0;
             rc = r;
+            continue;
+        }
+        if (o->fracture) {
+            r = cs_fracture_after_step(w, o);
+            if (r != CS_OK && rc == CS_OK)
+                rc = r;
         }
     }
     w->time += w->def.dt;
@@ -1033,6 +997,7 @@ int cs_world_solve_static(cs_world_t *w)
     cs_step_stats st = {.converged = true};
     double t0 = now_ms();
     int rc = CS_OK;
+    cs_fracture_clear_step(w);
     for (int i = 0; i < w->n_objects; i++) {
         cs_object *o = w->objects[i];
         if (o->n_fixed_nodes == 0 || o->n_fixed_nodes == o->n)
@@ -1054,6 +1019,7 @@ void cs_world_reset(cs_world_t *w)
 {
     if (!w)
         return;
+    cs_fracture_clear_step(w);
     for (int i = 0; i < w->n_objects; i++) {
         cs_object *o = w->objects[i];
         memcpy(o->x, o->cm.node_rest, (size_t)o->n * 3 * sizeof(double));
@@ -1093,7 +1059,7 @@ const cs_step_stats *cs_world_last_stats(const cs_world_t *w)
 
 int cs_object_get_info(const cs_world_t *w, cs_object_id id, cs_object_info *info)
 {
-    const cs_object *o = find(w, id);
+    const cs_object *o = cs_world_find_internal(w, id);
     if (!o || !info)
         return CS_ERR_UNKNOWN_OBJECT;
     *info = (cs_object_info){
@@ -1110,7 +1076,7 @@ int cs_object_get_info(const cs_world_t *w, cs_object_id id, cs_object_info *inf
 int cs_object_nodes(const cs_world_t *w, cs_object_id id, const double **rest,
                     const double **pos, const double **vel, int *n)
 {
-    const cs_object *o = find(w, id);
+    const cs_object *o = cs_world_find_internal(w, id);
     if (!o)
         return CS_ERR_UNKNOWN_OBJECT;
     if (rest)
@@ -1127,7 +1093,7 @@ int cs_object_nodes(const cs_world_t *w, cs_object_id id, const double **rest,
 int cs_object_cells(const cs_world_t *w, cs_object_id id, const int32_t **ijk,
                     const int32_t **nodes, int *n)
 {
-    const cs_object *o = find(w, id);
+    const cs_object *o = cs_world_find_internal(w, id);
     if (!o)
         return CS_ERR_UNKNOWN_OBJECT;
     if (ijk)
@@ -1142,7 +1108,7 @@ int cs_object_cells(const cs_world_t *w, cs_object_id id, const int32_t **ijk,
 int cs_object_surface(const cs_world_t *w, cs_object_id id, const double **vertices, int *nv,
                       const int32_t **triangles, int *nt)
 {
-    const cs_object *o = find(w, id);
+    const cs_object *o = cs_world_find_internal(w, id);
     if (!o)
         return CS_ERR_UNKNOWN_OBJECT;
     if (vertices)
@@ -1158,7 +1124,7 @@ int cs_object_surface(const cs_world_t *w, cs_object_id id, const double **verti
 
 uint64_t cs_object_state_hash(const cs_world_t *w, cs_object_id id)
 {
-    const cs_object *o = find(w, id);
+    const cs_object *o = cs_world_find_internal(w, id);
     if (!o)
         return 0;
     uint64_t hsh = 14695981039346656037ULL;
@@ -1176,7 +1142,7 @@ uint64_t cs_object_state_hash(const cs_world_t *w, cs_object_id id)
 
 int cs_object_energy(const cs_world_t *w, cs_object_id id, cs_energy *e)
 {
-    const cs_object *o = find(w, id);
+    const cs_object *o = cs_world_find_internal(w, id);
     if (!o || !e)
         return CS_ERR_UNKNOWN_OBJECT;
     double ek = 0, eg = 0;
