@@ -134,3 +134,33 @@ int cs_watertight_check(const double *v, int nv, const int32_t *t, int nt,
     }
     return 1;
 }
+
+int cs_check_pieces(const cs_piece_view *pieces, int n, double expected_volume,
+                    double rel_tol, double *total_volume, char *err, size_t errlen)
+{
+    double total = 0;
+    int ok = 1;
+    for (int i = 0; i < n && ok; i++) {
+        const cs_piece_view *p = &pieces[i];
+        char why[200];
+        cs_watertight_report rep;
+        if (!cs_watertight_check(p->v, p->nv, p->t, p->nt, &rep, why, sizeof why)) {
+            if (err && errlen)
+                snprintf(err, errlen, "piece %d (%s): %s", i, p->name ? p->name : "unnamed",
+                         why);
+            ok = 0;
+        }
+        total += rep.volume;
+    }
+    if (total_volume)
+        *total_volume = total;
+    if (ok && isfinite(expected_volume) &&
+        fabs(total - expected_volume) > rel_tol * fabs(expected_volume)) {
+        if (err && errlen)
+            snprintf(err, errlen, "pieces enclose %.9g m^3 in all, expected %.9g m^3 (relative "
+                     "error %.3g > %.3g)", total, expected_volume,
+                     fabs(total - expected_volume) / fabs(expected_volume), rel_tol);
+        ok = 0;
+    }
+    return ok;
+}

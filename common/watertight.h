@@ -24,6 +24,25 @@ typedef struct cs_watertight_report {
 int cs_watertight_check(const double *v, int nv, const int32_t *t, int nt,
                         cs_watertight_report *rep, char *err, size_t errlen);
 
+/* One piece of a fractured object: a view of its surface (borrowed). */
+typedef struct cs_piece_view {
+    const char *name;       /* for messages; may be NULL */
+    const double *v;        /* 3 per vertex */
+    int nv;
+    const int32_t *t;       /* 3 per triangle */
+    int nt;
+} cs_piece_view;
+
+/*
+ * The fracture checker (issue: fracture), used by the tests and `cubesim-replay --verify`:
+ * every piece passes cs_watertight_check, and the pieces' volumes add up to
+ * `expected_volume` within |sum - expected| <= rel_tol·|expected| (skipped if expected_volume
+ * is not finite). Returns 1 if all holds, else 0 with one line in err naming the piece and the
+ * problem. *total_volume (if non-NULL) receives the sum.
+ */
+int cs_check_pieces(const cs_piece_view *pieces, int n, double expected_volume,
+                    double rel_tol, double *total_volume, char *err, size_t errlen);
+
 /* Signed volume enclosed by a triangle surface. */
 double cs_mesh_volume(const double *v, const int32_t *t, int nt);
 
