@@ -8,6 +8,10 @@ binary ones (STL, glTF) describe exactly the same points (assimp reads everythin
   twopart.obj                       the icosphere and a cube as two `o` objects (merge test)
   two_nodes.gltf                    one cube mesh used by two translated nodes (node transforms)
   torus.obj                         R = 0.1 m, r = 0.04 m (a genus-1 solid: it has a hole)
+  star.obj                          a twisted five-pointed star prism (strongly concave: the
+                                    notches between the arms are deep and narrow, so cells in
+                                    them straddle the surface and faces between neighbouring
+                                    cells lie outside it)
   open_sphere.obj                   the icosphere without the triangles around its top vertex
   nonmanifold.obj                   two cubes sharing one edge (closed, not manifold)
   garbage.obj                       binary junk that assimp rejects
@@ -84,6 +88,32 @@ def torus(R, r, nu, nv):
             pn = i * nv + (j + 1) % nv
             qn = ((i + 1) % nu) * nv + (j + 1) % nv
             f += [(p, q, qn), (p, qn, pn)]
+    return v, f
+
+
+def twisted_star(points, r_out, r_in, height, layers, twist_deg):
+    """A star polygon of `points` arms (outer radius r_out, notch radius r_in) extruded along z
+    over `height` in `layers` slices, each slice turned by twist_deg/layers about z; the two
+    caps are fans around a centre vertex (the star is star-shaped about it). Centred at the
+    origin. Counter-clockwise seen from outside."""
+    n = 2 * points
+    v, f = [], []
+    for l in range(layers + 1):
+        z = height * (l / layers - 0.5)
+        turn = math.radians(twist_deg) * l / layers
+        for k in range(n):
+            a = 2 * math.pi * k / n + turn
+            r = r_out if k % 2 == 0 else r_in
+            v.append((f32(r * math.cos(a)), f32(r * math.sin(a)), f32(z)))
+    for l in range(layers):
+        for k in range(n):
+            p, q = l * n + k, l * n + (k + 1) % n
+            f += [(p, q, q + n), (p, q + n, p + n)]
+    bottom, top = len(v), len(v) + 1
+    v += [(0.0, 0.0, f32(-height / 2)), (0.0, 0.0, f32(height / 2))]
+    for k in range(n):
+        f.append((bottom, (k + 1) % n, k))
+        f.append((top, layers * n + k, layers * n + (k + 1) % n))
     return v, f
 
 
@@ -185,6 +215,7 @@ def main():
     cv, cf = cube((0.0, 0.0, 0.0), 0.05)
     write_gltf(p("two_nodes.gltf"), cv, cf, [(0, 0, 0), (0.1, 0, 0)])
     write_obj(p("torus.obj"), [(None, torus(0.1, 0.04, 32, 16))])
+    write_obj(p("star.obj"), [(None, twisted_star(5, 0.1, 0.03, 0.12, 12, 72.0))])
     top = max(range(len(v)), key=lambda i: v[i][2])
     write_obj(p("open_sphere.obj"), [(None, (v, [t for t in f if top not in t]))])
     # Two unit cubes meeting along the edge x = y = 0.05: that edge has four triangles.
