@@ -9,7 +9,7 @@
 #   make valgrind unit tests under valgrind
 #   make san      the address/undefined-sanitizer build into build/san/
 
-PACKAGES := build-essential pkg-config liblcm-dev liblcm-bin libglib2.0-dev libassimp-dev \
+PACKAGES := build-essential pkg-config liblcm-dev liblcm-bin libglib2.0-dev libassimp-dev assimp-testmodels \
             libcjson-dev libccd-dev iproute2 util-linux valgrind gnuplot-nox
 
 CC      ?= cc

@@ -1,0 +1,1193 @@
+/*
+ * test_fracture_meshes.c — forced fracture on real and synthetic meshes (issue 3: fracture with
+ * watertight closing surfaces), through the public API only.
+ *
+ * Shapes (each at 2–3 cube sizes, see `shapes` below): a box given as cells, the icosphere,
+ * the torus, the twisted star prism (scenes/meshes/star.obj, strongly concave), and two
+ * real models from Debian's assimp-testmodels read through assimp (`make deps` installs it):
+ * HUMAN.blend (a human figure, 8560 triangles) and Ogre/TheThing (a creature, 2656 triangles).
+ * Both are closed, consistently oriented, one component, without self-intersections (the
+ * COLLADA duck is edge-closed but has six self-intersecting triangle pairs, so it is not used).
+ *
+ * Two kinds of run, each checked after every call (or every `stride` calls, see cut_case):
+ *  - random: a fixed-seed sequence of cs_world_fracture calls at random points of the rest
+ *    bounding box, random unit normals and radii in [h, 3h], each on the object holding the
+ *    cell nearest to the point;
+ *  - cut: cs_world_cut_face on every interior face of the original cell set, one after
+ *    another, until every cell is an object of its own.
+ * Checks: every object passes cs_check_pieces and the volumes add up to the original
+ * surface's volume (see check_world for why 1e-9 is the right tolerance); every topology change
+ * passes cs_topo_check against the client-side mirror, and applying the changes to the mirror
+ * (common/topo.h, as a client does) reproduces the engine's surfaces exactly: same versions,
+ * same triangle arrays, bit-identical vertex positions; NEW_PIECE events match the new-object
+ * changes. At the end of a cut run: as many objects as cells, one cell each.
+ *
+ * No check leaves its test early: a failure names the shape, the cube size, the kind of run and
+ * the call index, and the run goes on (after 5 failures in one run the rest of that run is
+ * skipped: its state no longer means much), so one run shows every shape's state.
+ *
+ * The harness itself is checked without the engine's fracture (fracture_meshes_harness_*):
+ * the mirror against hand-made changes that split a 2×1×1 box into two cubes, and the setup
+ * (loading, voxelization, interior face lists, rest volumes) of every shape and size.
+ */
+#include <math.h>
+#include <stdarg.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "check.h"
+#include "cubesim.h"
+#include "mesh.h"
+#include "topo.h"
+#include "watertight.h"
+
+#ifndef CS_SOURCE_DIR
+#define CS_SOURCE_DIR "."
+#endif
+#define MODELS_DIR "/usr/share/assimp/models" /* Debian assimp-testmodels */
+
+#define MAX_FAILS_PER_RUN 5
+#define VOLUME_REL_TOL 1e-9
+
+/* ---------------------------------------------------------------- shapes */
+
+typedef enum { SHAPE_BOX, SHAPE_REPO_MESH, SHAPE_SYSTEM_MESH } shape_kind;
+
+typedef struct shape {
+    const char *name;
+    shape_kind kind;
+    const char *file;   /* under scenes/meshes/ or MODELS_DIR */
+    double scale;       /* file units -> metres */
+    double box_size[3]; /* SHAPE_BOX: extent [m], a whole number of cubes at every h */
+    double h[3];        /* cube sizes, largest first; 0 = unused */
+    int n_cut_sizes;    /* the exhaustive cut runs on the first n_cut_sizes sizes only */
+} shape;
+
+/*
+ * Cube sizes give from a few dozen to about two thousand cells (measured counts in the
+ * comments: cells at each h). The exhaustive cut runs on the smaller sizes only: its cost
+ * grows with cells × faces (every cut rebuilds the cell → object map).
+ */
+static const shape shapes[] = {
+    /* 24, 192, 1536 cells */
+    {"box", SHAPE_BOX, NULL, 1, {0.2, 0.15, 0.1}, {0.05, 0.025, 0.0125}, 2},
+    /* icosphere r = 0.1 m, 320 triangles: 64, 408, 2728 cells */
+    {"icosphere", SHAPE_REPO_MESH, "icosphere.obj", 1, {0}, {0.05, 0.025, 0.0125}, 2},
+    /* torus R = 0.1 m, r = 0.04 m, 1024 triangles: 88, 592, 2317 cells */
+    {"torus", SHAPE_REPO_MESH, "torus.obj", 1, {0}, {0.04, 0.02, 0.0125}, 2},
+    /* twisted star prism, 0.2 × 0.2 × 0.12 m, 260 triangles: 65, 348, 1956 cells */
+    {"star", SHAPE_REPO_MESH, "star.obj", 1, {0}, {0.04, 0.02, 0.01}, 2},
+    /* HUMAN.blend: 4.69 × 1.58 × 10.7 units, scaled to 0.094 × 0.032 × 0.214 m, 8560
+     * triangles: 226, 582, 1919 cells */
+    {"human", SHAPE_SYSTEM_MESH, "BLEND/HUMAN.blend", 0.02, {0}, {0.012, 0.008, 0.005}, 2},
+    /* TheThing: 0.99 × 0.46 × 0.46 units, scaled to 0.198 × 0.092 × 0.092 m, 2656 triangles:
+     * 219, 808, 3423 cells */
+    {"thing", SHAPE_SYSTEM_MESH, "Ogre/TheThing/Mesh.mesh.xml", 0.2, {0}, {0.02, 0.012, 0.007},
+     2},
+};
+#define N_SHAPES ((int)(sizeof shapes / sizeof shapes[0]))
+
+static const shape *find_shape(const char *name)
+{
+    for (int i = 0; i < N_SHAPES; i++)
+        if (!strcmp(shapes[i].name, name))
+            return &shapes[i];
+    return NULL;
+}
+
+/* ---------------------------------------------------------------- failure reporting */
+
+/* One run: a shape at one cube size, one kind of run. Failures carry `where` and the call. */
+typedef struct run_ctx {
+    char where[160]; /* "star h=0.02 cut every face" */
+    const char *unit; /* what the index counts: "fracture", "face" */
+    int fails;
+    int stopped;
+} run_ctx;
+
+static void run_init(run_ctx *r, const char *shape_name, double h, const char *kind,
+                     const char *unit)
+{
+    memset(r, 0, sizeof *r);
+    r->unit = unit;
+    snprintf(r->where, sizeof r->where, "%s h=%g %s", shape_name, h, kind);
+}
+
+/* Report one failure of run r at `call` (-1: not tied to a call); after MAX_FAILS_PER_RUN
+ * the run is marked stopped. Returns 0 so callers can write `return run_fail(...)`. */
+#define run_fail(r, call, ...) run_fail_at(__FILE__, __LINE__, r, call, __VA_ARGS__)
+static int run_fail_at(const char *file, int line, run_ctx *r, long call, const char *fmt, ...)
+{
+    char msg[600];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(msg, sizeof msg, fmt, ap);
+    va_end(ap);
+    if (r->stopped)
+        return 0;
+    if (call >= 0)
+        cs_test_fail(file, line, "[%s, %s %ld] %s", r->where, r->unit, call, msg);
+    else
+        cs_test_fail(file, line, "[%s] %s", r->where, msg);
+    if (++r->fails >= MAX_FAILS_PER_RUN) {
+        cs_test_fail(file, line, "[%s] %d failures: the rest of this run is skipped", r->where,
+                     r->fails);
+        r->stopped = 1;
+    }
+    return 0;
+}
+
+/* ---------------------------------------------------------------- the client-side mirror */
+
+/* One object's surface as a client holds it: what snapshots and topology changes built. */
+typedef struct mobj {
+    cs_object_id id;
+    uint32_t version;
+    double *v;
+    int nv, cap_v;
+    int32_t *t;
+    int nt, cap_t;
+} mobj;
+
+typedef struct mirror {
+    mobj *o;
+    int n, cap;
+    int *slot; /* slot[id] = index into o + 1, 0 if absent (ids are small: never reused) */
+    int cap_slot;
+} mirror;
+
+static void mirror_free(mirror *m)
+{
+    for (int i = 0; i < m->n; i++) {
+        free(m->o[i].v);
+        free(m->o[i].t);
+    }
+    free(m->o);
+    free(m->slot);
+    memset(m, 0, sizeof *m);
+}
+
+static mobj *mirror_find(const mirror *m, cs_object_id id)
+{
+    if (id < (cs_object_id)m->cap_slot)
+        return m->slot[id] ? &m->o[m->slot[id] - 1] : NULL;
+    for (int i = 0; i < m->n; i++) /* ids beyond the index (not expected) */
+        if (m->o[i].id == id)
+            return &m->o[i];
+    return NULL;
+}
+
+static int grow(void **p, int *cap, int need, size_t elem)
+{
+    if (need <= *cap)
+        return 0;
+    int c = *cap ? *cap : 16;
+    while (c < need)
+        c *= 2;
+    void *q = realloc(*p, (size_t)c * elem);
+    if (!q)
+        return -1;
+    *p = q;
+    *cap = c;
+    return 0;
+}
+
+static mobj *mirror_add(mirror *m, cs_object_id id, uint32_t version)
+{
+    if (grow((void **)&m->o, &m->cap, m->n + 1, sizeof *m->o))
+        return NULL;
+    if (id < (1u << 22)) {
+        int old = m->cap_slot;
+        if (grow((void **)&m->slot, &m->cap_slot, (int)id + 1, sizeof *m->slot))
+            return NULL;
+        memset(m->slot + old, 0, sizeof *m->slot * (size_t)(m->cap_slot - old));
+        m->slot[id] = m->n + 1;
+    }
+    mobj *o = &m->o[m->n++];
+    memset(o, 0, sizeof *o);
+    o->id = id;
+    o->version = version;
+    return o;
+}
+
+static int mobj_set(mobj *o, const double *v, int nv, const int32_t *t, int nt)
+{
+    if (grow((void **)&o->v, &o->cap_v, nv, 3 * sizeof *o->v) ||
+        grow((void **)&o->t, &o->cap_t, nt, 3 * sizeof *o->t))
+        return -1;
+    if (nv)
+        memcpy(o->v, v, (size_t)nv * 3 * sizeof *v);
+    if (nt)
+        memcpy(o->t, t, (size_t)nt * 3 * sizeof *t);
+    o->nv = nv;
+    o->nt = nt;
+    return 0;
+}
+
+/*
+ * Apply changes in order, as a client would: a change with from_version 0 makes a new object
+ * (unknown so far) from empty arrays; any other must find its object at from_version. Every
+ * change goes through cs_topo_check first. Returns 0, or -1 with err naming the change.
+ */
+static int mirror_apply(mirror *m, const cs_topo_change *ch, int n, char *err, size_t errlen)
+{
+    for (int i = 0; i < n; i++) {
+        const cs_topo_change *c = &ch[i];
+        cs_object_id id = (cs_object_id)c->object_id;
+        mobj *o = mirror_find(m, id);
+        char why[300];
+        if (c->from_version == 0) {
+            if (o) {
+                snprintf(err, errlen, "change %d: new piece %u is already an object", i,
+                         (unsigned)id);
+                return -1;
+            }
+            o = mirror_add(m, id, 0);
+            if (!o) {
+                snprintf(err, errlen, "change %d: out of memory", i);
+                return -1;
+            }
+        } else if (!o) {
+            snprintf(err, errlen, "change %d: object %u is unknown to the mirror", i,
+                     (unsigned)id);
+            return -1;
+        } else if (o->version != c->from_version) {
+            snprintf(err, errlen, "change %d: object %u is at version %u, change is from %u", i,
+                     (unsigned)id, (unsigned)o->version, (unsigned)c->from_version);
+            return -1;
+        }
+        if (cs_topo_check(c, o->nv, o->nt, why, sizeof why) != 0) {
+            snprintf(err, errlen, "change %d (object %u, version %u -> %u): %s", i,
+                     (unsigned)id, (unsigned)c->from_version, (unsigned)c->to_version, why);
+            return -1;
+        }
+        int need_t = o->nt > c->n_triangles_total ? o->nt : c->n_triangles_total;
+        if (grow((void **)&o->v, &o->cap_v, c->n_vertices_total > o->nv ? c->n_vertices_total
+                                                                          : o->nv,
+                 3 * sizeof *o->v) ||
+            grow((void **)&o->t, &o->cap_t, need_t, 3 * sizeof *o->t)) {
+            snprintf(err, errlen, "change %d: out of memory", i);
+            return -1;
+        }
+        o->nv = cs_topo_remove_vertices(c, o->v, 3 * sizeof *o->v, o->nv);
+        if (c->n_vnew)
+            memcpy(o->v + 3 * (size_t)o->nv, c->vnew_xyz, (size_t)c->n_vnew * 3 * sizeof *o->v);
+        o->nv += c->n_vnew;
+        o->nt = cs_topo_apply_triangles(c, o->t, o->nt);
+        o->version = c->to_version;
+    }
+    return 0;
+}
+
+/* Where the reference surfaces come from: the engine, or hand-made arrays in the self-test. */
+typedef int (*surface_fn)(void *ctx, cs_object_id id, const double **v, int *nv,
+                          const int32_t **t, int *nt, uint32_t *version);
+
+static int world_surface(void *ctx, cs_object_id id, const double **v, int *nv,
+                         const int32_t **t, int *nt, uint32_t *version)
+{
+    cs_world_t *w = ctx;
+    cs_object_info info;
+    if (cs_object_get_info(w, id, &info) != CS_OK ||
+        cs_object_surface(w, id, v, nv, t, nt) != CS_OK)
+        return -1;
+    *version = info.topology_version;
+    return 0;
+}
+
+/*
+ * The mirror holds exactly the objects `ids`, each at the reference's topology version with
+ * the same triangle array and bit-identical vertex positions. Returns 0 or -1 with err.
+ */
+static int mirror_compare(const mirror *m, const cs_object_id *ids, int n, surface_fn get,
+                          void *ctx, char *err, size_t errlen)
+{
+    if (m->n != n) {
+        snprintf(err, errlen, "mirror holds %d objects, the world %d", m->n, n);
+        return -1;
+    }
+    for (int i = 0; i < n; i++) {
+        const mobj *o = mirror_find(m, ids[i]);
+        const double *v;
+        const int32_t *t;
+        int nv, nt;
+        uint32_t ver;
+        if (!o) {
+            snprintf(err, errlen, "object %u is not in the mirror", (unsigned)ids[i]);
+            return -1;
+        }
+        if (get(ctx, ids[i], &v, &nv, &t, &nt, &ver) != 0) {
+            snprintf(err, errlen, "object %u: cannot read its surface", (unsigned)ids[i]);
+            return -1;
+        }
+        if (ver != o->version || nv != o->nv || nt != o->nt) {
+            snprintf(err, errlen, "object %u: version %u, %d vertices, %d triangles; mirror: "
+                     "version %u, %d, %d", (unsigned)ids[i], (unsigned)ver, nv, nt,
+                     (unsigned)o->version, o->nv, o->nt);
+            return -1;
+        }
+        for (int k = 0; k < 3 * nt; k++)
+            if (t[k] != o->t[k]) {
+                snprintf(err, errlen, "object %u: triangle %d is (%d %d %d), mirror (%d %d %d)",
+                         (unsigned)ids[i], k / 3, (int)t[k / 3 * 3], (int)t[k / 3 * 3 + 1],
+                         (int)t[k / 3 * 3 + 2], (int)o->t[k / 3 * 3], (int)o->t[k / 3 * 3 + 1],
+                         (int)o->t[k / 3 * 3 + 2]);
+                return -1;
+            }
+        for (int k = 0; k < 3 * nv; k++)
+            if (memcmp(&v[k], &o->v[k], sizeof v[k]) != 0) {
+                snprintf(err, errlen, "object %u: vertex %d coordinate %d is %.17g, mirror "
+                         "%.17g", (unsigned)ids[i], k / 3, k % 3, v[k], o->v[k]);
+                return -1;
+            }
+    }
+    return 0;
+}
+
+/* ---------------------------------------------------------------- worlds and checks */
+
+/* Live object ids, malloc'd into *ids; returns the count or -1. */
+static int world_ids(const cs_world_t *w, cs_object_id **ids, int *cap)
+{
+    for (;;) {
+        int n = cs_world_object_ids(w, *ids, *cap);
+        if (n <= *cap)
+            return n;
+        if (grow((void **)ids, cap, n, sizeof **ids))
+            return -1;
+    }
+}
+
+/* The mirror from the world as a snapshot would give it. */
+static int mirror_from_world(mirror *m, const cs_world_t *w, const cs_object_id *ids, int n)
+{
+    for (int i = 0; i < n; i++) {
+        const double *v;
+        const int32_t *t;
+        int nv, nt;
+        uint32_t ver;
+        mobj *o;
+        if (world_surface((void *)w, ids[i], &v, &nv, &t, &nt, &ver) != 0 ||
+            !(o = mirror_add(m, ids[i], ver)) || mobj_set(o, v, nv, t, nt) != 0)
+            return -1;
+    }
+    return 0;
+}
+
+/*
+ * Every object passes cs_check_pieces and their volumes add up to `volume`, the original
+ * surface's. Why 1e-9: nothing has stepped, so every vertex is at its rest position (a
+ * vertex duplicated by a split keeps the position of its original). The pieces' surfaces are
+ * the original triangles, shared out among the pieces, plus closing triangles that come in
+ * pairs: t for one side of a cut face and its reverse t' for the other, over vertices at the
+ * same rest positions. The signed-tetrahedron volumes of t and t' cancel exactly, so the sum
+ * over all pieces is the original sum plus rounding (summation order: ~1e-15 relative per
+ * term, far below 1e-9). A closing triangle missing, or on one side only, changes the sum by
+ * its tetrahedron's volume — about h³/10 and more, ~1e-3 relative for a thousand cells.
+ */
+static int check_world(run_ctx *r, long call, const cs_world_t *w, const cs_object_id *ids, int n,
+                       double volume)
+{
+    cs_piece_view *pv = calloc((size_t)(n ? n : 1), sizeof *pv);
+    char *names = malloc((size_t)(n ? n : 1) * 24);
+    if (!pv || !names) {
+        free(pv);
+        free(names);
+        return run_fail(r, call, "out of memory");
+    }
+    for (int i = 0; i < n; i++) {
+        cs_object_info info;
+        if (cs_object_get_info(w, ids[i], &info) != CS_OK ||
+            cs_object_surface(w, ids[i], &pv[i].v, &pv[i].nv, &pv[i].t, &pv[i].nt) != CS_OK) {
+            free(pv);
+            free(names);
+            return run_fail(r, call, "object %u: no info or surface", (unsigned)ids[i]);
+        }
+        snprintf(names + 24 * i, 24, "id %u", (unsigned)ids[i]);
+        pv[i].name = names + 24 * i;
+    }
+    char err[400];
+    double total = 0;
+    int ok = cs_check_pieces(pv, n, volume, VOLUME_REL_TOL, &total, err, sizeof err);
+    free(pv);
+    free(names);
+    if (!ok)
+        return run_fail(r, call, "%d pieces: %s", n, err);
+    return 1;
+}
+
+/* NEW_PIECE events and new-object topology changes describe the same pieces. */
+static int check_events(run_ctx *r, long call, const cs_world_t *w, const cs_topo_change *ch,
+                        int nch)
+{
+    int nev = 0, new_pieces = 0, new_changes = 0;
+    const cs_event *ev = cs_world_events(w, &nev);
+    for (int i = 0; i < nev; i++)
+        if (ev[i].kind == CS_EVENT_NEW_PIECE) {
+            new_pieces++;
+            int found = 0;
+            for (int k = 0; k < nch; k++)
+                found |= ch[k].from_version == 0 && (cs_object_id)ch[k].object_id ==
+                         ev[i].object && (cs_object_id)ch[k].parent_id == ev[i].parent;
+            if (!found)
+                return run_fail(r, call, "NEW_PIECE event for %u (parent %u) has no new-object "
+                                "topology change", (unsigned)ev[i].object,
+                                (unsigned)ev[i].parent);
+        }
+    for (int k = 0; k < nch; k++)
+        new_changes += ch[k].from_version == 0;
+    if (new_pieces != new_changes)
+        return run_fail(r, call, "%d NEW_PIECE events, %d new-object topology changes",
+                        new_pieces, new_changes);
+    return 1;
+}
+
+/* A world holding the shape at cube size h (fracture enabled, no gravity). */
+typedef struct setup {
+    cs_world_t *w;
+    cs_object_id id;
+    double volume;        /* rest surface volume */
+    double lo[3], hi[3];  /* rest surface bounding box */
+    double origin[3];     /* lattice origin of the original object */
+    int n_cells;
+    int32_t *cells;       /* original cells, 3 each (copied) */
+    int n_faces;
+    int32_t *faces;       /* interior faces: cell index (into cells) and axis, 2 each */
+    int *nbr;             /* per face: the index of the +axis neighbour */
+} setup;
+
+static void setup_free(setup *s)
+{
+    cs_world_destroy(s->w);
+    free(s->cells);
+    free(s->faces);
+    free(s->nbr);
+    memset(s, 0, sizeof *s);
+}
+
+static const char *source_dir(void)
+{
+    const char *root = getenv("CS_SOURCE_DIR");
+    return root && *root ? root : CS_SOURCE_DIR;
+}
+
+/* Hash of original lattice cells -> index into setup.cells (open addressing). */
+typedef struct cell_map {
+    int32_t *key; /* 3 per slot */
+    int *val;     /* -1 empty */
+    int cap;      /* power of two */
+} cell_map;
+
+static uint32_t cell_hash(const int32_t *k)
+{
+    uint32_t h = 2166136261u;
+    for (int a = 0; a < 3; a++)
+        h = (h ^ (uint32_t)k[a]) * 16777619u;
+    return h;
+}
+
+static int map_init(cell_map *m, const int32_t *cells, int n)
+{
+    m->cap = 16;
+    while (m->cap < 2 * n)
+        m->cap *= 2;
+    m->key = malloc((size_t)m->cap * 3 * sizeof *m->key);
+    m->val = malloc((size_t)m->cap * sizeof *m->val);
+    if (!m->key || !m->val)
+        return -1;
+    for (int i = 0; i < m->cap; i++)
+        m->val[i] = -1;
+    for (int c = 0; c < n; c++) {
+        uint32_t s = cell_hash(cells + 3 * c) & (uint32_t)(m->cap - 1);
+        while (m->val[s] >= 0)
+            s = (s + 1) & (uint32_t)(m->cap - 1);
+        memcpy(m->key + 3 * s, cells + 3 * c, 3 * sizeof *m->key);
+        m->val[s] = c;
+    }
+    return 0;
+}
+
+static int map_get(const cell_map *m, const int32_t *k)
+{
+    uint32_t s = cell_hash(k) & (uint32_t)(m->cap - 1);
+    while (m->val[s] >= 0) {
+        if (!memcmp(m->key + 3 * s, k, 3 * sizeof *k))
+            return m->val[s];
+        s = (s + 1) & (uint32_t)(m->cap - 1);
+    }
+    return -1;
+}
+
+static void map_free(cell_map *m)
+{
+    free(m->key);
+    free(m->val);
+}
+
+/* Build the world; on failure returns -1 with err set (the setup is freed). */
+static int setup_make(setup *s, const shape *sh, double h, char *err, size_t errlen)
+{
+    memset(s, 0, sizeof *s);
+    cs_world_def wd = cs_world_def_default();
+    wd.gravity[0] = wd.gravity[1] = wd.gravity[2] = 0;
+    wd.threads = 1;
+    if (cs_world_create(&wd, &s->w, err, errlen) != CS_OK)
+        return -1;
+    cs_object_def d = cs_object_def_default();
+    d.name = sh->name;
+    d.cube_size = h;
+    d.fracture = true;
+    cs_mesh m = {0};
+    int32_t *ijk = NULL;
+    int rc;
+    if (sh->kind == SHAPE_BOX) {
+        int n[3], c = 0;
+        for (int a = 0; a < 3; a++)
+            n[a] = (int)lround(sh->box_size[a] / h);
+        ijk = malloc(sizeof *ijk * 3 * (size_t)(n[0] * n[1] * n[2]));
+        for (int k = 0; ijk && k < n[2]; k++)
+            for (int j = 0; j < n[1]; j++)
+                for (int i = 0; i < n[0]; i++, c++) {
+                    ijk[3 * c] = i;
+                    ijk[3 * c + 1] = j;
+                    ijk[3 * c + 2] = k;
+                }
+        d.geometry = CS_GEOMETRY_CELLS;
+        d.cells_ijk = ijk;
+        d.n_cells = c;
+        for (int a = 0; a < 3; a++)
+            d.cells_origin[a] = -0.5 * sh->box_size[a];
+    } else {
+        char path[600];
+        if (sh->kind == SHAPE_REPO_MESH)
+            snprintf(path, sizeof path, "%s/scenes/meshes/%s", source_dir(), sh->file);
+        else
+            snprintf(path, sizeof path, "%s/%s", MODELS_DIR, sh->file);
+        if (cs_mesh_load(path, &m, err, errlen) != 0) {
+            setup_free(s);
+            if (sh->kind == SHAPE_SYSTEM_MESH) {
+                size_t l = strlen(err);
+                snprintf(err + l, errlen - l, " (install assimp-testmodels: make deps)");
+            }
+            return -1;
+        }
+        double zero[3] = {0, 0, 0};
+        cs_mesh_transform(&m, sh->scale, zero, zero);
+        d.geometry = CS_GEOMETRY_MESH;
+        d.mesh_vertices = m.v;
+        d.n_mesh_vertices = m.nv;
+        d.mesh_triangles = m.t;
+        d.n_mesh_triangles = m.nt;
+    }
+    rc = cs_world_add_object(s->w, &d, &s->id, err, errlen);
+    free(ijk);
+    cs_mesh_free(&m);
+    if (rc != CS_OK) {
+        setup_free(s);
+        return -1;
+    }
+    cs_object_info info;
+    const double *v;
+    const int32_t *t, *cells;
+    int nv, nt;
+    cs_object_get_info(s->w, s->id, &info);
+    cs_object_surface(s->w, s->id, &v, &nv, &t, &nt);
+    cs_object_cells(s->w, s->id, &cells, NULL, &s->n_cells);
+    memcpy(s->origin, info.origin, sizeof s->origin);
+    s->volume = cs_mesh_volume(v, t, nt);
+    for (int a = 0; a < 3; a++) {
+        s->lo[a] = INFINITY;
+        s->hi[a] = -INFINITY;
+    }
+    for (int i = 0; i < nv; i++)
+        for (int a = 0; a < 3; a++) {
+            s->lo[a] = fmin(s->lo[a], v[3 * i + a]);
+            s->hi[a] = fmax(s->hi[a], v[3 * i + a]);
+        }
+    s->cells = malloc(sizeof *s->cells * 3 * (size_t)s->n_cells);
+    s->faces = malloc(sizeof *s->faces * 2 * 3 * (size_t)s->n_cells);
+    s->nbr = malloc(sizeof *s->nbr * 3 * (size_t)s->n_cells);
+    cell_map cm = {0};
+    if (!s->cells || !s->faces || !s->nbr) {
+        snprintf(err, errlen, "out of memory");
+        setup_free(s);
+        return -1;
+    }
+    memcpy(s->cells, cells, sizeof *s->cells * 3 * (size_t)s->n_cells);
+    if (map_init(&cm, s->cells, s->n_cells) != 0) {
+        map_free(&cm);
+        snprintf(err, errlen, "out of memory");
+        setup_free(s);
+        return -1;
+    }
+    for (int c = 0; c < s->n_cells; c++)
+        for (int a = 0; a < 3; a++) {
+            int32_t k[3] = {s->cells[3 * c], s->cells[3 * c + 1], s->cells[3 * c + 2]};
+            k[a]++;
+            int nb = map_get(&cm, k);
+            if (nb >= 0) {
+                s->faces[2 * s->n_faces] = c;
+                s->faces[2 * s->n_faces + 1] = a;
+                s->nbr[s->n_faces++] = nb;
+            }
+        }
+    map_free(&cm);
+    return 0;
+}
+
+/*
+ * owner[c] = the object holding original cell c now, found by iterating every object's cells
+ * (a piece may have its own lattice origin: its indices are shifted back to the original
+ * lattice). local[3c..] = the cell's indices in its holder's lattice. Returns 0, or -1 with
+ * err (a cell held twice or by no one, an origin off the lattice).
+ */
+static int find_owners(const setup *s, const cell_map *cm, const cs_object_id *ids, int n,
+                       cs_object_id *owner, int32_t *local, char *err, size_t errlen)
+{
+    memset(owner, 0, sizeof *owner * (size_t)s->n_cells);
+    double h = 0;
+    for (int i = 0; i < n; i++) {
+        cs_object_info info;
+        const int32_t *ijk;
+        int nc;
+        if (cs_object_get_info(s->w, ids[i], &info) != CS_OK ||
+            cs_object_cells(s->w, ids[i], &ijk, NULL, &nc) != CS_OK) {
+            snprintf(err, errlen, "object %u: no info or cells", (unsigned)ids[i]);
+            return -1;
+        }
+        h = info.cube_size;
+        int32_t off[3];
+        for (int a = 0; a < 3; a++) {
+            double o = (info.origin[a] - s->origin[a]) / h;
+            off[a] = (int32_t)lround(o);
+            if (fabs(o - off[a]) > 1e-6) {
+                snprintf(err, errlen, "object %u: origin %.17g is off the original lattice "
+                         "along %c", (unsigned)ids[i], info.origin[a], 'x' + a);
+                return -1;
+            }
+        }
+        for (int c = 0; c < nc; c++) {
+            int32_t k[3] = {ijk[3 * c] + off[0], ijk[3 * c + 1] + off[1],
+                            ijk[3 * c + 2] + off[2]};
+            int oc = map_get(cm, k);
+            if (oc < 0 || owner[oc]) {
+                snprintf(err, errlen, "object %u: cell (%d %d %d) %s", (unsigned)ids[i], k[0],
+                         k[1], k[2], oc < 0 ? "was not a cell of the original"
+                                            : "is held by another object too");
+                return -1;
+            }
+            owner[oc] = ids[i];
+            memcpy(local + 3 * oc, ijk + 3 * c, 3 * sizeof *local);
+        }
+    }
+    for (int c = 0; c < s->n_cells; c++)
+        if (!owner[c]) {
+            snprintf(err, errlen, "cell (%d %d %d) is held by no object", s->cells[3 * c],
+                     s->cells[3 * c + 1], s->cells[3 * c + 2]);
+            return -1;
+        }
+    return 0;
+}
+
+/* After a mutating call: topology changes into the mirror, events, and (if `full`) every
+ * object's checker and the mirror against the world. */
+static void after_call(run_ctx *r, long call, const setup *s, mirror *mir, cs_object_id **ids,
+                       int *cap, int *n_ids, int full)
+{
+    int nch = 0;
+    const cs_topo_change *ch = cs_world_topology_changes(s->w, &nch);
+    char err[600];
+    if (nch && !ch) {
+        run_fail(r, call, "%d topology changes but no array", nch);
+        return;
+    }
+    if (mirror_apply(mir, ch, nch, err, sizeof err) != 0)
+        run_fail(r, call, "topology changes: %s", err);
+    check_events(r, call, s->w, ch, nch);
+    *n_ids = world_ids(s->w, ids, cap);
+    if (full && *n_ids > 0) {
+        check_world(r, call, s->w, *ids, *n_ids, s->volume);
+        if (mirror_compare(mir, *ids, *n_ids, world_surface, s->w, err, sizeof err) != 0)
+            run_fail(r, call, "mirror differs from the engine: %s", err);
+    }
+}
+
+/* ---------------------------------------------------------------- the runs */
+
+static uint64_t splitmix(uint64_t *x)
+{
+    uint64_t z = (*x += 0x9E3779B97F4A7C15ull);
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+    return z ^ (z >> 31);
+}
+
+static double unif(uint64_t *x)
+{
+    return (double)(splitmix(x) >> 11) * 0x1.0p-53;
+}
+
+#define N_RANDOM_FRACTURES 24
+
+static void random_case(const shape *sh, double h, uint64_t seed)
+{
+    run_ctx r;
+    run_init(&r, sh->name, h, "random fractures", "fracture");
+    setup s;
+    char err[600];
+    if (setup_make(&s, sh, h, err, sizeof err) != 0) {
+        run_fail(&r, -1, "setup: %s", err);
+        return;
+    }
+    mirror mir = {0};
+    cs_object_id *ids = NULL;
+    int cap = 0, n = world_ids(s.w, &ids, &cap);
+    if (mirror_from_world(&mir, s.w, ids, n) != 0)
+        run_fail(&r, -1, "cannot mirror the world");
+    check_world(&r, -1, s.w, ids, n, s.volume);
+    for (long call = 0; call < N_RANDOM_FRACTURES && !r.stopped; call++) {
+        double p[3], nrm[3], len = 0;
+        for (int a = 0; a < 3; a++)
+            p[a] = s.lo[a] + unif(&seed) * (s.hi[a] - s.lo[a]);
+        do { /* uniform direction: rejection from the cube */
+            len = 0;
+            for (int a = 0; a < 3; a++) {
+                nrm[a] = 2 * unif(&seed) - 1;
+                len += nrm[a] * nrm[a];
+            }
+        } while (len > 1 || len < 1e-6);
+        for (int a = 0; a < 3; a++)
+            nrm[a] /= sqrt(len);
+        double radius = h * (1 + 2 * unif(&seed));
+        /* the object holding the cell whose rest centre is nearest to p */
+        cs_object_id target = CS_NULL_OBJECT;
+        double best = INFINITY;
+        for (int i = 0; i < n; i++) {
+            cs_object_info info;
+            const int32_t *ijk;
+            int nc;
+            if (cs_object_get_info(s.w, ids[i], &info) != CS_OK ||
+                cs_object_cells(s.w, ids[i], &ijk, NULL, &nc) != CS_OK)
+                continue;
+            for (int c = 0; c < nc; c++) {
+                double d2 = 0;
+                for (int a = 0; a < 3; a++) {
+                    double x = info.origin[a] + h * (ijk[3 * c + a] + 0.5) - p[a];
+                    d2 += x * x;
+                }
+                if (d2 < best) {
+                    best = d2;
+                    target = ids[i];
+                }
+            }
+        }
+        err[0] = 0;
+        int rc = cs_world_fracture(s.w, target, p, nrm, radius, err, sizeof err);
+        if (rc != CS_OK) {
+            run_fail(&r, call, "cs_world_fracture(object %u, point (%.4g %.4g %.4g), normal "
+                     "(%.3f %.3f %.3f), radius %.4g) returned %d (%s): %s", (unsigned)target,
+                     p[0], p[1], p[2], nrm[0], nrm[1], nrm[2], radius, rc, cs_status_str(rc),
+                     err);
+            continue;
+        }
+        after_call(&r, call, &s, &mir, &ids, &cap, &n, 1);
+    }
+    free(ids);
+    mirror_free(&mir);
+    setup_free(&s);
+}
+
+/* Checks of the world are made every `stride` cuts and after the last: each costs a sort of
+ * every piece's edges. MAX_CHECKS bounds them per run. */
+#define MAX_CHECKS 200
+
+static void cut_case(const shape *sh, double h)
+{
+    run_ctx r;
+    run_init(&r, sh->name, h, "cut every face", "face");
+    setup s;
+    char err[600];
+    if (setup_make(&s, sh, h, err, sizeof err) != 0) {
+        run_fail(&r, -1, "setup: %s", err);
+        return;
+    }
+    mirror mir = {0};
+    cell_map cm = {0};
+    cs_object_id *ids = NULL, *owner = malloc(sizeof *owner * (size_t)s.n_cells);
+    int32_t *local = malloc(sizeof *local * 3 * (size_t)s.n_cells);
+    int cap = 0, n = world_ids(s.w, &ids, &cap);
+    if (!owner || !local || map_init(&cm, s.cells, s.n_cells) != 0 ||
+        mirror_from_world(&mir, s.w, ids, n) != 0)
+        run_fail(&r, -1, "out of memory");
+    int stride = (s.n_faces + MAX_CHECKS - 1) / MAX_CHECKS;
+    long skipped = 0;
+    for (long f = 0; f < s.n_faces && !r.stopped; f++) {
+        int c1 = s.faces[2 * f], axis = s.faces[2 * f + 1], c2 = s.nbr[f];
+        if (find_owners(&s, &cm, ids, n, owner, local, err, sizeof err) != 0) {
+            run_fail(&r, f, "before cutting face (%d %d %d)+%c: %s", s.cells[3 * c1],
+                     s.cells[3 * c1 + 1], s.cells[3 * c1 + 2], 'x' + axis, err);
+            break;
+        }
+        if (owner[c1] != owner[c2]) {
+            skipped++;
+            continue; /* already apart: the two cells are in different pieces */
+        }
+        err[0] = 0;
+        int rc = cs_world_cut_face(s.w, owner[c1], local + 3 * c1, axis, err, sizeof err);
+        if (rc != CS_OK) {
+            run_fail(&r, f, "cs_world_cut_face(object %u, (%d %d %d), axis %d) returned %d "
+                     "(%s): %s", (unsigned)owner[c1], local[3 * c1], local[3 * c1 + 1],
+                     local[3 * c1 + 2], axis, rc, cs_status_str(rc), err);
+            continue;
+        }
+        after_call(&r, f, &s, &mir, &ids, &cap, &n, f % stride == 0 || f == s.n_faces - 1);
+    }
+    if (!r.stopped) {
+        /* the end: every cell alone, every piece closed, the volumes adding up */
+        if (n != s.n_cells)
+            run_fail(&r, -1, "after all %d faces (%ld already apart): %d objects for %d cells",
+                     s.n_faces, skipped, n, s.n_cells);
+        for (int i = 0; i < n; i++) {
+            cs_object_info info;
+            if (cs_object_get_info(s.w, ids[i], &info) != CS_OK || info.n_cells != 1) {
+                run_fail(&r, -1, "after all faces: object %u has %d cells", (unsigned)ids[i],
+                         info.n_cells);
+                break;
+            }
+        }
+        check_world(&r, -1, s.w, ids, n, s.volume);
+        if (mirror_compare(&mir, ids, n, world_surface, s.w, err, sizeof err) != 0)
+            run_fail(&r, -1, "after all faces, the mirror differs from the engine: %s", err);
+    }
+    map_free(&cm);
+    free(owner);
+    free(local);
+    free(ids);
+    mirror_free(&mir);
+    setup_free(&s);
+}
+
+static void random_runs(const char *name)
+{
+    const shape *sh = find_shape(name);
+    for (int k = 0; k < 3 && sh->h[k] > 0; k++)
+        random_case(sh, sh->h[k], 0x5eedf00dull + 7919u * (uint64_t)k + (uint64_t)(sh - shapes));
+}
+
+static void cut_runs(const char *name)
+{
+    const shape *sh = find_shape(name);
+    for (int k = 0; k < sh->n_cut_sizes && sh->h[k] > 0; k++)
+        cut_case(sh, sh->h[k]);
+}
+
+TEST(fracture_meshes_random_box) { random_runs("box"); }
+TEST(fracture_meshes_random_icosphere) { random_runs("icosphere"); }
+TEST(fracture_meshes_random_torus) { random_runs("torus"); }
+TEST(fracture_meshes_random_star) { random_runs("star"); }
+TEST(fracture_meshes_random_human) { random_runs("human"); }
+TEST(fracture_meshes_random_thing) { random_runs("thing"); }
+TEST(fracture_meshes_cut_box) { cut_runs("box"); }
+TEST(fracture_meshes_cut_icosphere) { cut_runs("icosphere"); }
+TEST(fracture_meshes_cut_torus) { cut_runs("torus"); }
+TEST(fracture_meshes_cut_star) { cut_runs("star"); }
+TEST(fracture_meshes_cut_human) { cut_runs("human"); }
+TEST(fracture_meshes_cut_thing) { cut_runs("thing"); }
+
+/* ---------------------------------------------------------------- the harness, checked */
+
+/* Every shape at every size: it loads and voxelizes, the rest surface passes the checker with
+ * its own volume (equal to the input mesh's up to rounding), the interior faces are what the
+ * cells say (the box: the closed-form count), and the cell → object map finds the original. */
+TEST(fracture_meshes_harness_setup)
+{
+    for (int i = 0; i < N_SHAPES; i++)
+        for (int k = 0; k < 3 && shapes[i].h[k] > 0; k++) {
+            const shape *sh = &shapes[i];
+            double h = sh->h[k];
+            run_ctx r;
+            run_init(&r, sh->name, h, "setup", "-");
+            setup s;
+            char err[600];
+            if (setup_make(&s, sh, h, err, sizeof err) != 0) {
+                run_fail(&r, -1, "%s", err);
+                continue;
+            }
+            cs_object_id *ids = NULL;
+            int cap = 0, n = world_ids(s.w, &ids, &cap);
+            if (n != 1)
+                run_fail(&r, -1, "%d objects", n);
+            check_world(&r, -1, s.w, ids, n, s.volume);
+            if (sh->kind == SHAPE_BOX) {
+                int nx = (int)lround(sh->box_size[0] / h), ny = (int)lround(sh->box_size[1] / h),
+                    nz = (int)lround(sh->box_size[2] / h);
+                int want = (nx - 1) * ny * nz + nx * (ny - 1) * nz + nx * ny * (nz - 1);
+                if (s.n_faces != want || s.n_cells != nx * ny * nz)
+                    run_fail(&r, -1, "%d cells, %d interior faces; expected %d, %d", s.n_cells,
+                             s.n_faces, nx * ny * nz, want);
+                double vb = sh->box_size[0] * sh->box_size[1] * sh->box_size[2];
+                if (fabs(s.volume - vb) > 1e-12 * vb)
+                    run_fail(&r, -1, "surface volume %.17g, box %.17g", s.volume, vb);
+            } else {
+                char path[600];
+                cs_mesh m;
+                if (sh->kind == SHAPE_REPO_MESH)
+                    snprintf(path, sizeof path, "%s/scenes/meshes/%s", source_dir(), sh->file);
+                else
+                    snprintf(path, sizeof path, "%s/%s", MODELS_DIR, sh->file);
+                if (cs_mesh_load(path, &m, err, sizeof err) == 0) {
+                    double zero[3] = {0, 0, 0};
+                    cs_mesh_transform(&m, sh->scale, zero, zero);
+                    double vm = cs_mesh_volume(m.v, m.t, m.nt);
+                    if (fabs(s.volume - vm) > VOLUME_REL_TOL * vm)
+                        run_fail(&r, -1, "engine rest surface encloses %.17g, the file %.17g",
+                                 s.volume, vm);
+                    cs_mesh_free(&m);
+                }
+            }
+            /* each cell's faces: at most 3 interior ones going +axis */
+            if (s.n_faces > 3 * s.n_cells || s.n_faces < s.n_cells - 1)
+                run_fail(&r, -1, "%d interior faces for %d cells", s.n_faces, s.n_cells);
+            cell_map cm = {0};
+            cs_object_id *owner = malloc(sizeof *owner * (size_t)s.n_cells);
+            int32_t *local = malloc(sizeof *local * 3 * (size_t)s.n_cells);
+            if (map_init(&cm, s.cells, s.n_cells) == 0 && owner && local) {
+                if (find_owners(&s, &cm, ids, n, owner, local, err, sizeof err) != 0)
+                    run_fail(&r, -1, "owners: %s", err);
+                else
+                    for (int c = 0; c < s.n_cells; c++)
+                        if (owner[c] != s.id || memcmp(local + 3 * c, s.cells + 3 * c,
+                                                       3 * sizeof *local)) {
+                            run_fail(&r, -1, "cell %d: owner %u", c, (unsigned)owner[c]);
+                            break;
+                        }
+            }
+            cs_object_info info;
+            cs_object_get_info(s.w, s.id, &info);
+            printf("    %-9s h=%-6g %5d cells %5d interior faces %6d surface triangles, "
+                   "bbox %.3f x %.3f x %.3f m\n", sh->name, h, s.n_cells, s.n_faces,
+                   info.n_surface_triangles, s.hi[0] - s.lo[0], s.hi[1] - s.lo[1],
+                   s.hi[2] - s.lo[2]);
+            map_free(&cm);
+            free(owner);
+            free(local);
+            free(ids);
+            setup_free(&s);
+        }
+}
+
+/* ---- the mirror against hand-made changes: a 2×1×1 box of unit cubes split at x = 1 */
+
+/* corner (x, y, z) of the 3×2×2 lattice of the box */
+static int32_t box_vid(int x, int y, int z)
+{
+    return (int32_t)(x + 3 * (y + 2 * z));
+}
+
+/* Append the unit square face of cell [x0, x0+1]×[0,1]×[0,1] on `axis` at side `hi` (0 low,
+ * 1 high), outward, as two triangles of corner ids (through remap if non-NULL). */
+static int add_face(int32_t *t, int nt, int x0, int axis, int hi, const int32_t *remap)
+{
+    int b = (axis + 1) % 3, c = (axis + 2) % 3;
+    int32_t q[4];
+    const int uv[4][2] = {{0, 0}, {1, 0}, {1, 1}, {0, 1}};
+    for (int k = 0; k < 4; k++) {
+        int p[3];
+        p[axis] = hi;
+        p[b] = uv[k][0];
+        p[c] = uv[k][1];
+        int32_t id = box_vid(x0 + p[0], p[1], p[2]);
+        q[k] = remap ? remap[id] : id;
+    }
+    /* (b, c, axis) is right-handed, so (0,0),(1,0),(1,1) turns about +axis */
+    if (!hi) {
+        int32_t tmp = q[1];
+        q[1] = q[3];
+        q[3] = tmp;
+    }
+    int32_t tri[6] = {q[0], q[1], q[2], q[0], q[2], q[3]};
+    memcpy(t + 3 * nt, tri, sizeof tri);
+    return nt + 2;
+}
+
+typedef struct fake_src {
+    cs_object_id id[2];
+    uint32_t ver[2];
+    double *v[2];
+    int nv[2];
+    int32_t *t[2];
+    int nt[2];
+} fake_src;
+
+static int fake_surface(void *ctx, cs_object_id id, const double **v, int *nv,
+                        const int32_t **t, int *nt, uint32_t *version)
+{
+    fake_src *f = ctx;
+    for (int i = 0; i < 2; i++)
+        if (f->id[i] == id) {
+            *v = f->v[i];
+            *nv = f->nv[i];
+            *t = f->t[i];
+            *nt = f->nt[i];
+            *version = f->ver[i];
+            return 0;
+        }
+    return -1;
+}
+
+TEST(fracture_meshes_harness_mirror)
+{
+    /* before: 12 corners, cube 0's five outer faces (triangles 0..9), then cube 1's (10..19) */
+    double v0[36];
+    for (int z = 0; z < 2; z++)
+        for (int y = 0; y < 2; y++)
+            for (int x = 0; x < 3; x++) {
+                double *p = v0 + 3 * box_vid(x, y, z);
+                p[0] = x, p[1] = y, p[2] = z;
+            }
+    int32_t t0[60];
+    int nt0 = 0;
+    const int faces[5][2] = {{1, 0}, {1, 1}, {2, 0}, {2, 1}, {0, -1}};
+    for (int cell = 0; cell < 2; cell++)
+        for (int k = 0; k < 5; k++) {
+            int axis = faces[k][0], hi = faces[k][1];
+            if (hi < 0)
+                hi = cell; /* the x face: low for cube 0, high for cube 1 */
+            nt0 = add_face(t0, nt0, cell, axis, hi, NULL);
+        }
+    ENSURE(nt0 == 20);
+    char err[600];
+    ENSURE_MSG(cs_watertight_check(v0, 12, t0, 20, NULL, err, sizeof err), "before: %s", err);
+
+    /* change A (object 1, version 1 -> 2): drop the x = 2 corners (swap-remove 11, 8, 5, 2:
+     * old 10 lands in 2 and old 9 in 5), drop cube 1's triangles, rewire cube 0's triangles
+     * that used a moved corner, and close the cut face x = 1 facing +x */
+    const int32_t vremove[4] = {11, 8, 5, 2}, tremove[10] = {19, 18, 17, 16, 15, 14, 13, 12, 11,
+                                                             10};
+    int32_t remap[12];
+    for (int i = 0; i < 12; i++)
+        remap[i] = i;
+    remap[10] = 2;
+    remap[9] = 5;
+    int32_t tset_index[10], tset_tri[30];
+    int n_tset = 0;
+    for (int i = 0; i < 10; i++) {
+        const int32_t *tr = t0 + 3 * i;
+        if (remap[tr[0]] != tr[0] || remap[tr[1]] != tr[1] || remap[tr[2]] != tr[2]) {
+            tset_index[n_tset] = i;
+            for (int k = 0; k < 3; k++)
+                tset_tri[3 * n_tset + k] = remap[tr[k]];
+            n_tset++;
+        }
+    }
+    ENSURE(n_tset > 0);
+    int32_t tnew_a[6];
+    add_face(tnew_a, 0, 0, 0, 1, remap);
+    /* change B (new object 2, parent 1): cube 1 whole, its own 8 corners (x - 1) + 2(y + 2z) */
+    double vnew_b[24];
+    int32_t local[12], tnew_b[36];
+    for (int i = 0; i < 12; i++)
+        local[i] = -1;
+    for (int z = 0; z < 2; z++)
+        for (int y = 0; y < 2; y++)
+            for (int x = 1; x < 3; x++) {
+                int32_t l = (x - 1) + 2 * (y + 2 * z);
+                local[box_vid(x, y, z)] = l;
+                vnew_b[3 * l] = x, vnew_b[3 * l + 1] = y, vnew_b[3 * l + 2] = z;
+            }
+    int ntb = 0;
+    for (int axis = 0; axis < 3; axis++)
+        for (int hi = 0; hi < 2; hi++)
+            ntb = add_face(tnew_b, ntb, 1, axis, hi, local);
+    cs_topo_change ch[2] = {
+        {.object_id = 1, .from_version = 1, .to_version = 2, .n_vertices_total = 8,
+         .n_triangles_total = 12, .n_vremove = 4, .vremove = vremove, .n_tremove = 10,
+         .tremove = tremove, .n_tset = n_tset, .tset_index = tset_index, .tset_tri = tset_tri,
+         .n_tnew = 2, .tnew = tnew_a},
+        {.object_id = 2, .parent_id = 1, .name = "box.1", .model = "corotational",
+         .from_version = 0, .to_version = 1, .n_vertices_total = 8, .n_triangles_total = 12,
+         .n_vnew = 8, .vnew_xyz = vnew_b, .n_tnew = 12, .tnew = tnew_b},
+    };
+    mirror m = {0};
+    mobj *o = mirror_add(&m, 1, 1);
+    ENSURE(o && mobj_set(o, v0, 12, t0, 20) == 0);
+    int applied = mirror_apply(&m, ch, 2, err, sizeof err);
+    if (applied != 0)
+        cs_test_fail(__FILE__, __LINE__, "apply: %s", err);
+    /* the result: two closed unit cubes, [0,1] and [1,2] along x, volumes adding up to 2 */
+    mobj *a = mirror_find(&m, 1), *b = mirror_find(&m, 2);
+    if (applied == 0 && a && b) {
+        cs_piece_view pv[2] = {{"a", a->v, a->nv, a->t, a->nt}, {"b", b->v, b->nv, b->t, b->nt}};
+        if (!cs_check_pieces(pv, 2, 2.0, 1e-15, NULL, err, sizeof err))
+            cs_test_fail(__FILE__, __LINE__, "after: %s", err);
+        if (a->nv != 8 || a->nt != 12 || b->nv != 8 || b->nt != 12 || a->version != 2 ||
+            b->version != 1)
+            cs_test_fail(__FILE__, __LINE__, "counts %d/%d v%u and %d/%d v%u", a->nv, a->nt,
+                         (unsigned)a->version, b->nv, b->nt, (unsigned)b->version);
+        for (int i = 0; i < a->nv && i < b->nv; i++)
+            if (a->v[3 * i] > 1 || b->v[3 * i] < 1)
+                cs_test_fail(__FILE__, __LINE__, "vertex %d on the wrong side", i);
+
+        /* compare: equal to copies of itself; one ulp, one index, one version away is not */
+        fake_src f = {{1, 2}, {2, 1}, {NULL, NULL}, {8, 8}, {NULL, NULL}, {12, 12}};
+        for (int i = 0; i < 2; i++) {
+            mobj *src = i ? b : a;
+            f.v[i] = malloc(sizeof(double) * 24);
+            f.t[i] = malloc(sizeof(int32_t) * 36);
+            memcpy(f.v[i], src->v, sizeof(double) * 24);
+            memcpy(f.t[i], src->t, sizeof(int32_t) * 36);
+        }
+        cs_object_id ids[2] = {2, 1};
+        if (mirror_compare(&m, ids, 2, fake_surface, &f, err, sizeof err) != 0)
+            cs_test_fail(__FILE__, __LINE__, "compare with itself: %s", err);
+        f.v[1][7] = nextafter(f.v[1][7], 10.0);
+        if (mirror_compare(&m, ids, 2, fake_surface, &f, err, sizeof err) == 0)
+            cs_test_fail(__FILE__, __LINE__, "compare missed a vertex one ulp away");
+        f.v[1][7] = b->v[7];
+        int32_t keep = f.t[0][5];
+        f.t[0][5] = (keep + 1) % 8;
+        if (mirror_compare(&m, ids, 2, fake_surface, &f, err, sizeof err) == 0)
+            cs_test_fail(__FILE__, __LINE__, "compare missed a changed triangle");
+        f.t[0][5] = keep;
+        f.ver[0] = 3;
+        if (mirror_compare(&m, ids, 2, fake_surface, &f, err, sizeof err) == 0)
+            cs_test_fail(__FILE__, __LINE__, "compare missed a version");
+        f.ver[0] = 2;
+        if (mirror_compare(&m, ids, 1, fake_surface, &f, err, sizeof err) == 0)
+            cs_test_fail(__FILE__, __LINE__, "compare missed an extra object");
+        for (int i = 0; i < 2; i++) {
+            free(f.v[i]);
+            free(f.t[i]);
+        }
+    } else {
+        cs_test_fail(__FILE__, __LINE__, "objects after apply: %p %p", (void *)a, (void *)b);
+    }
+    mirror_free(&m);
+
+    /* refusals: a change from the wrong version, a known id as a new piece, a bad change */
+    const struct {
+        const char *what;
+        int which; /* 0: change A, 1: change B */
+        uint32_t from;
+        int ascending;
+    } bad[] = {{"wrong from_version", 0, 3, 0}, {"new piece with a known id", 1, 0, 0},
+               {"vremove not descending", 0, 1, 1}};
+    for (int k = 0; k < 3; k++) {
+        mirror mb = {0};
+        mobj *ob = mirror_add(&mb, 1, 1);
+        ENSURE(ob && mobj_set(ob, v0, 12, t0, 20) == 0);
+        cs_topo_change c = ch[bad[k].which];
+        const int32_t asc[4] = {2, 5, 8, 11};
+        c.from_version = bad[k].from;
+        if (bad[k].ascending)
+            c.vremove = asc;
+        if (bad[k].which == 1)
+            c.object_id = 1;
+        if (mirror_apply(&mb, &c, 1, err, sizeof err) == 0)
+            cs_test_fail(__FILE__, __LINE__, "mirror accepted a change with %s", bad[k].what);
+        mirror_free(&mb);
+    }
+}
