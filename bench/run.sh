@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# make bench: speed of the corotational implicit step against size, 1 and 2 threads.
+# make bench: speed of the corotational implicit step against size, 1 and 2 threads, and the
+# cost of a fracture event against surface triangles (bench_fracture, at the end).
 # Writes bench/results/blocks.csv, blocks.md (the README table) and blocks.svg (log-log plot).
 # BENCH_SIZES / BENCH_RUNS override the defaults (8,16,32,48 and 5 runs; medians are reported).
 set -euo pipefail
@@ -30,4 +31,35 @@ plot "< awk -F, 'NR>1 && \$2==1' $out/blocks.csv" using 1:5 with linespoints tit
      "< awk -F, 'NR>1 && \$2==1' $out/blocks.csv" using 1:(\$1*0.004) with lines dt 2 title "linear in cubes"
 GP
   echo "plot: $out/blocks.svg"
+fi
+
+# Fracture: the cost of one fracture event against surface triangles at a fixed cube count.
+# Writes bench/results/fracture.csv, fracture.md, fracture.growth.txt and fracture.svg.
+# BENCH_FRACTURE_LEVELS / BENCH_FRACTURE_RUNS override the defaults (4..8: 1k..256k triangles).
+flevels=${BENCH_FRACTURE_LEVELS:-4,5,6,7,8}
+fruns=${BENCH_FRACTURE_RUNS:-$runs}
+echo "bench_fracture: sphere levels $flevels (4·4^L triangles), $fruns runs each"
+build/bin/bench_fracture --levels "$flevels" --runs "$fruns" --csv "$out/fracture.csv" \
+  2> "$out/fracture.growth.txt" | tee "$out/fracture.md"
+cat "$out/fracture.growth.txt"
+if command -v gnuplot >/dev/null; then
+  if awk -F, 'NR>1 && ($5+0 > 0 || $6+0 > 0) { found=1 } END { exit !found }' "$out/fracture.csv"; then
+    gnuplot <<GP
+set terminal svg size 640,420
+set output "$out/fracture.svg"
+set datafile separator ","
+set datafile missing "nan"
+set logscale xy
+set xlabel "surface triangles"
+set ylabel "ms (median)"
+set title "one fracture event at a fixed cube count"
+set key left top
+plot "$out/fracture.csv" every ::1 using 2:5 with linespoints title "cs_world_fracture", \
+     "$out/fracture.csv" every ::1 using 2:6 with linespoints title "loaded step that breaks", \
+     "$out/fracture.csv" every ::1 using 2:7 with linespoints title "loaded step, intact"
+GP
+    echo "plot: $out/fracture.svg"
+  else
+    echo "no fracture plot: no size fractured (is the engine's fracture built?)"
+  fi
 fi
