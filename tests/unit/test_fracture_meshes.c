@@ -824,13 +824,15 @@ static void cut_case(const shape *sh, double h)
         run_fail(&r, -1, "out of memory");
     int stride = (s.n_faces + MAX_CHECKS - 1) / MAX_CHECKS;
     long skipped = 0;
+    int stale = 1; /* the owner map must be rebuilt (after every successful cut) */
     for (long f = 0; f < s.n_faces && !r.stopped; f++) {
         int c1 = s.faces[2 * f], axis = s.faces[2 * f + 1], c2 = s.nbr[f];
-        if (find_owners(&s, &cm, ids, n, owner, local, err, sizeof err) != 0) {
+        if (stale && find_owners(&s, &cm, ids, n, owner, local, err, sizeof err) != 0) {
             run_fail(&r, f, "before cutting face (%d %d %d)+%c: %s", s.cells[3 * c1],
                      s.cells[3 * c1 + 1], s.cells[3 * c1 + 2], 'x' + axis, err);
             break;
         }
+        stale = 0;
         if (owner[c1] != owner[c2]) {
             skipped++;
             continue; /* already apart: the two cells are in different pieces */
@@ -843,6 +845,7 @@ static void cut_case(const shape *sh, double h)
                      local[3 * c1 + 2], axis, rc, cs_status_str(rc), err);
             continue;
         }
+        stale = 1;
         after_call(&r, f, &s, &mir, &ids, &cap, &n, f % stride == 0 || f == s.n_faces - 1);
     }
     if (!r.stopped) {
@@ -851,7 +854,7 @@ static void cut_case(const shape *sh, double h)
             run_fail(&r, -1, "after all %d faces (%ld already apart): %d objects for %d cells",
                      s.n_faces, skipped, n, s.n_cells);
         for (int i = 0; i < n; i++) {
-            cs_object_info info;
+            cs_object_info info = {0};
             if (cs_object_get_info(s.w, ids[i], &info) != CS_OK || info.n_cells != 1) {
                 run_fail(&r, -1, "after all faces: object %u has %d cells", (unsigned)ids[i],
                          info.n_cells);
