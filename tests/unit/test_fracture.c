@@ -97,7 +97,9 @@ static int mirror_apply(mirror *m, const cs_world_t *w, char *why, size_t n)
             return -1;
         int nv = cs_topo_remove_vertices(&c[i], o->xyz, 3 * sizeof(double), o->nv);
         o->xyz = realloc(o->xyz, (size_t)(c[i].n_vertices_total + 1) * 3 * sizeof(double));
-        memcpy(o->xyz + 3 * (size_t)nv, c[i].vnew_xyz, (size_t)c[i].n_vnew * 3 * sizeof(double));
+        if (c[i].n_vnew)
+            memcpy(o->xyz + 3 * (size_t)nv, c[i].vnew_xyz,
+                   (size_t)c[i].n_vnew * 3 * sizeof(double));
         int cap = o->nt > c[i].n_triangles_total ? o->nt : c[i].n_triangles_total;
         o->tris = realloc(o->tris, (size_t)(cap + 1) * 3 * sizeof(int32_t));
         o->nt = cs_topo_apply_triangles(&c[i], o->tris, o->nt);
