@@ -776,15 +776,56 @@ static bool seg_tri(const double p[3], const double q[3], const double *a, const
 }
 
 /*
- * The corner vertex of `node` (seed 000 §3.2: corner nodes get their own coordinates, the
- * lattice point plus a random delta fixed per lattice point, chosen so that it does not cross
- * the surface): made on first use, bound to `cell`. Returns its index or -1.
+ * The rest position of the corner vertex of `node` (seed 000 §3.2: corner nodes get their own
+ * coordinates, the lattice point plus a random delta fixed per lattice point, chosen so that
+ * it does not cross the surface).
  */
-static int32_t corner_vertex(cs_world_t *w, surf_edit *e, int32_t node, int32_t cell)
+/* A vertex of the mesh's own triangles lying exactly on node's lattice point (meshes made of
+ * cube faces have them), or -1: the closing surface must end on it, not beside it. */
+static int32_t surface_vertex_at(const surf_edit *e, int32_t node)
 {
-    cs_object *o = e->o;
-    if (o->corner_vertex[node] >= 0)
-        return o->corner_vertex[node];
+    const cs_object *o = e->o;
+    const cs_cubemesh *cm = &o->cm;
+    const cs_surface *s = &o->surf;
+    const double *p = cm->node_rest + 3 * (size_t)node, tol = 1e-9 * cm->h;
+    int32_t li[3];
+    for (int k = 0; k < 3; k++)
+        li[k] = (int32_t)llround((p[k] - cm->origin[k]) / cm->h);
+    for (int dz = -1; dz <= 0; dz++)
+        for (int dy = -1; dy <= 0; dy++)
+            for (int dx = -1; dx <= 0; dx++) {
+                int32_t c = cs_cubemesh_find(cm, li[0] + dx, li[1] + dy, li[2] + dz);
+                if (c < 0)
+                    continue;
+                for (int k = s->cell_tri_start[c]; k < s->cell_tri_start[c + 1]; k++) {
+                    int32_t t = s->cell_tri_list[k];
+                    if (t >= e->nt0 || o->tri_kind[t] != 0)
+                        continue;
+                    for (int j = 0; j < 3; j++) {
+                        int32_t v = s->tris[3 * (size_t)t + j];
+                        const double *q = sv_rest(e, v);
+                        if (fabs(q[0] - p[0]) <= tol && fabs(q[1] - p[1]) <= tol &&
+                            fabs(q[2] - p[2]) <= tol)
+                            return v;
+                    }
+                }
+            }
+    return -1;
+}
+
+static void corner_position(const cs_world_t *w, const surf_edit *e, int32_t node,
+                            double out[3])
+{
+    const cs_object *o = e->o;
+    if (o->corner_vertex[node] >= 0) {
+        memcpy(out, sv_rest(e, o->corner_vertex[node]), 3 * sizeof(double));
+        return;
+    }
+    int32_t sv = surface_vertex_at(e, node);
+    if (sv >= 0) {
+        memcpy(out, sv_rest(e, sv), 3 * sizeof(double));
+        return;
+    }
     const cs_cubemesh *cm = &o->cm;
     const double *p = cm->node_rest + 3 * (size_t)node;
     int64_t li[3];
@@ -812,7 +853,9 @@ static int32_t corner_vertex(cs_world_t *w, surf_edit *e, int32_t node, int32_t 
                         continue;
                     for (int k = s->cell_tri_start[c]; k < s->cell_tri_start[c + 1]; k++) {
                         int32_t t = s->cell_tri_list[k];
-                        if (t >= e->nt0)
+                        /* the mesh's own triangles only: they never move at rest, so a
+                         * lattice point gets the same offset in every event */
+                        if (t >= e->nt0 || o->tri_kind[t] != 0)
                             continue;
                         const int32_t *tri = s->tris + 3 * (size_t)t;
                         if (seg_tri(p, q, sv_rest(e, tri[0]), sv_rest(e, tri[1]),
@@ -827,7 +870,29 @@ static int32_t corner_vertex(cs_world_t *w, surf_edit *e, int32_t node, int32_t 
         for (int k = 0; k < 3; k++)
             d[k] = tries == 3 ? 0.0 : 0.5 * d[k];
     }
-    double q[3] = {p[0] + d[0], p[1] + d[1], p[2] + d[2]};
+    for (int k = 0; k < 3; k++)
+        out[k] = p[k] + d[k];
+}
+
+/* The corner vertex of `node`: the mesh's vertex on it if there is one (the copy on cell's
+ * side), else made on first use and bound to `cell`. Returns its index or -1. */
+static int32_t corner_vertex(cs_world_t *w, surf_edit *e, const families *fam, int32_t node,
+                             int32_t cell)
+{
+    cs_object *o = e->o;
+    if (o->corner_vertex[node] >= 0)
+        return o->corner_vertex[node];
+    int32_t sv = surface_vertex_at(e, node);
+    if (sv >= 0) {
+        int32_t orig = sv;
+        for (int32_t f = family_of(fam, e->nv0, sv); f >= 0;) {
+            orig = fam->mcopy.a[fam->fstart.a[f]]; /* a family's first member is the original */
+            break;
+        }
+        return o->corner_vertex[node] = copy_for_cell(o, fam, e->nv0, orig, cell);
+    }
+    double q[3];
+    corner_position(w, e, node, q);
     int32_t v = sv_append(e, q, cell);
     if (v < 0)
         return -1;
@@ -1000,15 +1065,13 @@ static int refresh_node_state(cs_world_t *w, cs_object *o, int n_old, const ivec
 
 /* ---------------------------------------------------------------- step 3: surface (§3.1) */
 
-/* Are triangles t and u (sharing an edge) separated by this event? */
-static bool tri_cut(const cs_object *o, const int32_t *cn0, const int8_t *label, int32_t ct,
-                    int32_t cu)
+/* Are triangles t and u (sharing an edge) separated by this event? Their cells shared a node
+ * before and share none now: the node split separated them (the surface opens exactly where
+ * the cube mesh did). */
+static bool tri_cut(const cs_object *o, const int32_t *cn0, int32_t ct, int32_t cu)
 {
     if (ct == cu)
         return false;
-    if (label[ct] * label[cu] < 0)
-        return true;
-    /* cells that shared a node before and share none now were separated by the node split */
     const int32_t *a = cn0 + 8 * (size_t)ct, *b = cn0 + 8 * (size_t)cu;
     bool before = false;
     for (int i = 0; i < 8 && !before; i++)
@@ -1036,7 +1099,7 @@ static double dist2_cell(const cs_cubemesh *cm, int32_t c, const double p[3])
  * rewired triangles.
  */
 static int split_surface(cs_object *o, surf_edit *e, const int32_t *cn0, const int32_t *tris0,
-                         const int8_t *label, const uint8_t *affected_cell, families *fam)
+                         const uint8_t *affected_cell, families *fam)
 {
     cs_surface *s = &o->surf;
     const int nv = e->nv0, nt = e->nt0;
@@ -1092,7 +1155,7 @@ static int split_surface(cs_object *o, surf_edit *e, const int32_t *cn0, const i
                                 adjacent = true;
                                 break;
                             }
-                    if (adjacent && !tri_cut(o, cn0, label, s->tri_cell[T[a]], s->tri_cell[T[b]]))
+                    if (adjacent && !tri_cut(o, cn0, s->tri_cell[T[a]], s->tri_cell[T[b]]))
                         uf_union(parent, a, b);
                 }
             /* groups in order of their root; the group whose cells hold the vertex's binding
@@ -1198,8 +1261,6 @@ out:
 
 /* ---------------------------------------------------------------- step 4: closing (§3.2) */
 
-#define CORNER_SENTINEL (INT32_MAX - 8)
-
 /* The square of crack face f and its corner nodes on each side, corner k in the positive
  * sense about n_f (closing.h). */
 static void face_setup(const cs_object *o, const crack_face *f, cs_close_face *cf,
@@ -1230,7 +1291,6 @@ static void face_setup(const cs_object *o, const crack_face *f, cs_close_face *c
         node1[k] = cm->cell_nodes[8 * (size_t)f->c1 + corner_id(off[0], off[1], off[2])];
         off[ax] = 1 - off[ax];
         node2[k] = cm->cell_nodes[8 * (size_t)f->c2 + corner_id(off[0], off[1], off[2])];
-        cf->corner_vertex[k] = CORNER_SENTINEL + k;
     }
 }
 
@@ -1238,7 +1298,8 @@ static void face_setup(const cs_object *o, const crack_face *f, cs_close_face *c
 typedef struct patch_list {
     ivec tri;    /* 3 per triangle */
     ivec cell;   /* per triangle */
-    ivec group;  /* per triangle: patch group (face·2 + side) */
+    ivec group;  /* per triangle: the crack face; t and t' are kept or dropped together so
+                    that the two sides stay mirror images */
 } patch_list;
 
 static int close_faces(cs_world_t *w, cs_object *o, surf_edit *e, const int32_t *tris0,
@@ -1250,12 +1311,22 @@ static int close_faces(cs_world_t *w, cs_object *o, surf_edit *e, const int32_t 
     uint8_t *side = NULL;
     int32_t *out = NULL;
     int cap_side = 0, rc = -1;
+    /* the rest positions closing.c sees: the surface's, then the four corners of the face at
+     * hand (ids nv0 .. nv0+3) */
+    double *xr = malloc(((size_t)e->nv0 + 4) * 3 * sizeof *xr);
+    if (!xr)
+        return -1;
+    memcpy(xr, s->rest, (size_t)e->nv0 * 3 * sizeof *xr);
     for (int i = 0; i < nF; i++) {
         const crack_face *f = &F[i];
         cs_close_face cf;
         int32_t n1[4], n2[4];
         double centre[3];
         face_setup(o, f, &cf, n1, n2, centre);
+        for (int k = 0; k < 4; k++) {
+            cf.corner_vertex[k] = e->nv0 + k;
+            corner_position(w, e, n1[k], xr + 3 * ((size_t)e->nv0 + k));
+        }
         cand.n = 0;
         for (int k = s->cell_tri_start[f->c1]; k < s->cell_tri_start[f->c1 + 1]; k++) {
             int32_t t = s->cell_tri_list[k];
@@ -1269,9 +1340,10 @@ static int close_faces(cs_world_t *w, cs_object *o, surf_edit *e, const int32_t 
         }
         for (int k = 0; k < cand.n; k++) {
             int32_t ct = s->tri_cell[cand.a[k]];
-            side[k] = label[ct] > 0 || ct == f->c1 ||
-                      (label[ct] == 0 && cells_share_node(&o->cm, ct, f->c1) &&
-                       !cells_share_node(&o->cm, ct, f->c2));
+            /* on c1's side: attached to c1 and not to c2 (after the split); where that
+             * does not decide, the plane's label */
+            bool s1 = cells_share_node(&o->cm, ct, f->c1), s2 = cells_share_node(&o->cm, ct, f->c2);
+            side[k] = s1 != s2 ? s1 : label[ct] == label[f->c1] && label[ct] != 0;
         }
         /* a cell no mesh triangle meets lies inside the surface (seed 000 §2.1) */
         bool inside = cand.n == 0 || inside_surface(e, centre);
@@ -1283,7 +1355,7 @@ static int close_faces(cs_world_t *w, cs_object *o, surf_edit *e, const int32_t 
             goto out;
         out = grown;
         char why[160];
-        int nt = cs_close_face_triangles(&cf, s->rest, tris0, cand.a, cand.n, side, out, cap,
+        int nt = cs_close_face_triangles(&cf, xr, tris0, cand.a, cand.n, side, out, cap,
                                          why, sizeof why);
         if (nt < 0)
             continue; /* the repair closes what is left open */
@@ -1294,9 +1366,9 @@ static int close_faces(cs_world_t *w, cs_object *o, surf_edit *e, const int32_t 
                 int32_t m[3];
                 for (int k = 0; k < 3; k++) {
                     int32_t id = out[3 * t + k];
-                    if (id >= CORNER_SENTINEL && id < CORNER_SENTINEL + 4)
-                        m[k] = corner_vertex(w, e, nodes[id - CORNER_SENTINEL], cell);
-                    else if (id >= 0 && id < e->nv0 + e->vcell.n)
+                    if (id >= e->nv0 && id < e->nv0 + 4)
+                        m[k] = corner_vertex(w, e, fam, nodes[id - e->nv0], cell);
+                    else if (id >= 0 && id < e->nv0)
                         m[k] = copy_for_cell(o, fam, e->nv0, id, cell);
                     else
                         m[k] = -1;
@@ -1308,7 +1380,7 @@ static int close_faces(cs_world_t *w, cs_object *o, surf_edit *e, const int32_t 
                 /* t for c1 as given (normal along n_f); t' for c2 reversed */
                 if ((sd == 0 ? ivec_push3(&pl->tri, m[0], m[1], m[2])
                              : ivec_push3(&pl->tri, m[0], m[2], m[1])) ||
-                    ivec_push(&pl->cell, cell) || ivec_push(&pl->group, 2 * i + sd))
+                    ivec_push(&pl->cell, cell) || ivec_push(&pl->group, i))
                     goto out;
             next_tri:;
             }
@@ -1316,6 +1388,7 @@ static int close_faces(cs_world_t *w, cs_object *o, surf_edit *e, const int32_t 
     }
     rc = 0;
 out:
+    free(xr);
     free(cand.a);
     free(side);
     free(out);
@@ -1790,6 +1863,13 @@ static cs_object *make_piece(cs_world_t *w, const cs_object *o, const int32_t *c
         for (int i = 0; i < nc; i++)
             p->cell_cut[i] = o->cell_cut[cells[i]];
     }
+    if (o->cell_open) {
+        p->cell_open = malloc((size_t)(nc ? nc : 1));
+        if (!p->cell_open)
+            goto fail;
+        for (int i = 0; i < nc; i++)
+            p->cell_open[i] = o->cell_open[cells[i]];
+    }
     for (int i = 0; i < nc; i++) {
         const int32_t c = cells[i];
         memcpy(pm->cell_ijk + 3 * (size_t)i, cm->cell_ijk + 3 * (size_t)c, 3 * sizeof(int32_t));
@@ -2144,6 +2224,57 @@ out:
 
 /* ---------------------------------------------------------------- one fracture event */
 
+_Static_assert(sizeof(crack_face) == 4 * sizeof(int32_t), "crack_face is four int32");
+
+/* Bit of a face in cs_object.cell_open (the same layout as cell_cut). */
+static bool face_open(const cs_object *o, int32_t c, int axis, int dir)
+{
+    return o->cell_open && (o->cell_open[c] & face_bit(axis, dir));
+}
+
+/*
+ * The faces of the affected cells that this event opened fully: not open before, and the two
+ * cells now share none of the face's four nodes. These get closing surfaces (§3.2); c1 is the
+ * cell on the plane's + side (or the lower one). A face whose rim nodes stay shared is still
+ * held there: it opens (and is closed) in the event that separates its last node.
+ */
+static int opened_faces(cs_object *o, const int8_t *label, const uint8_t *affected, ivec *out)
+{
+    const cs_cubemesh *cm = &o->cm;
+    if (!o->cell_open && !(o->cell_open = calloc((size_t)cm->n_cells, 1)))
+        return -1;
+    for (int c = 0; c < cm->n_cells; c++) {
+        if (!affected[c])
+            continue;
+        const int32_t *q = cm->cell_ijk + 3 * (size_t)c;
+        for (int axis = 0; axis < 3; axis++) {
+            int32_t nb[3] = {q[0], q[1], q[2]};
+            nb[axis]++;
+            int32_t d = cs_cubemesh_find(cm, nb[0], nb[1], nb[2]);
+            if (d < 0 || face_open(o, c, axis, 1))
+                continue;
+            int cs[4];
+            face_corners(axis, 1, cs);
+            bool shared = false;
+            for (int k = 0; k < 4 && !shared; k++) {
+                int32_t nc_ = cm->cell_nodes[8 * (size_t)c + cs[k]];
+                for (int j = 0; j < 8; j++)
+                    shared |= cm->cell_nodes[8 * (size_t)d + j] == nc_;
+            }
+            if (shared)
+                continue;
+            o->cell_open[c] |= face_bit(axis, 1);
+            o->cell_open[d] |= face_bit(axis, -1);
+            /* c is below d: c1 = c unless d is on the + side */
+            bool c_first = label[c] >= label[d];
+            if (ivec_push(out, c_first ? c : d) || ivec_push(out, c_first ? d : c) ||
+                ivec_push(out, axis) || ivec_push(out, c_first ? 1 : 0))
+                return -1;
+        }
+    }
+    return 0;
+}
+
 /* The cell of c's corner at the lattice point of node position p, or -1. */
 static int corner_at(const cs_cubemesh *cm, int32_t c, const double p[3])
 {
@@ -2167,7 +2298,8 @@ static int fracture_event(cs_world_t *w, cs_object *o, const int8_t *label, int3
 {
     cs_cubemesh *cm = &o->cm;
     const int nc = cm->n_cells, n_old = o->n;
-    ivec Fv = {0}, touched = {0}, newsrc = {0};
+    ivec Fv = {0}, touched = {0}, newsrc = {0}, Ov = {0};
+    crack_face *O = NULL;
     pairkey *fset = NULL;
     int32_t *cn0 = NULL, *tris0 = NULL;
     uint8_t *affected = NULL;
@@ -2236,22 +2368,24 @@ static int fracture_event(cs_world_t *w, cs_object *o, const int8_t *label, int3
     if (split_nodes(o, F, nF, fset, label, &touched, &newsrc) < 0 ||
         refresh_node_state(w, o, n_old, &newsrc) != 0)
         goto out_f;
-    /* 3. surface */
+    /* 3. surface: the cells around split nodes; the faces they opened fully */
     affected = calloc((size_t)nc, 1);
     if (!affected)
         goto out_f;
-    for (int c = 0; c < nc; c++)
-        affected[c] = label[c] != 0;
     for (int i = 0; i < touched.n; i++) {
         int32_t nd = touched.a[i];
         for (int a = o->fem.adj_start[nd]; a < o->fem.adj_start[nd + 1]; a++)
             affected[o->fem.adj[a] / 8] = 1;
     }
+    if (opened_faces(o, label, affected, &Ov) != 0)
+        goto out_f;
+    const int nO = Ov.n / 4;
+    O = (crack_face *)Ov.a; /* 4 int32 per face, laid out as crack_face */
     e.o = o;
     e.nv0 = o->surf.n_vertices;
     e.nt0 = o->surf.n_triangles;
     e.rewired = calloc((size_t)(e.nt0 ? e.nt0 : 1), 1);
-    if (!e.rewired || split_surface(o, &e, cn0, tris0, label, affected, &fam) != 0)
+    if (!e.rewired || split_surface(o, &e, cn0, tris0, affected, &fam) != 0)
         goto out_f;
     /* corner vertices of split nodes: each node copy takes the vertex copy on its side */
     for (int i = 0; i < touched.n; i++) {
@@ -2278,7 +2412,7 @@ static int fracture_event(cs_world_t *w, cs_object *o, const int8_t *label, int3
         }
     }
     /* 4. closing surfaces, 5. repair */
-    if (close_faces(w, o, &e, tris0, F, nF, label, &fam, &pl) != 0)
+    if (close_faces(w, o, &e, tris0, O, nO, label, &fam, &pl) != 0)
         goto out_f;
     int fans = 0, closing = 0;
     if (repair_and_commit(w, o, &e, &pl, &fans, &closing, true) != 0)
@@ -2304,6 +2438,7 @@ out_f:
     free(F);
 out:
     free(Fv.a);
+    free(Ov.a);
     free(touched.a);
     free(newsrc.a);
     free(fset);

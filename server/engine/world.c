@@ -156,6 +156,7 @@ void cs_object_free_internal(cs_object *o)
     free(o->corner_vertex);
     free(o->tri_kind);
     free(o->cell_cut);
+    free(o->cell_open);
     cs_cubemesh_free(&o->cm);
     cs_surface_free(&o->surf);
     cs_fem_free(&o->fem);
