@@ -907,7 +907,7 @@ static int32_t corner_vertex(cs_world_t *w, surf_edit *e, const families *fam, i
  * split (the kept original and its copies); node_src[n] is the node each node came from.
  */
 static int split_nodes(cs_object *o, const crack_face *F, int nF, const pairkey *fset,
-                       const int8_t *label, ivec *touched, ivec *newsrc_out)
+                       const int8_t *label, bool paper, ivec *touched, ivec *newsrc_out)
 {
     cs_cubemesh *cm = &o->cm;
     const int n0 = cm->n_nodes;
@@ -950,6 +950,18 @@ static int split_nodes(cs_object *o, const crack_face *F, int nF, const pairkey 
                 if (face_joined(o, cells[a], cells[b], axis, dir))
                     uf_union(parent, a, b);
             }
+        if (paper) {
+            /* §2.3 as written: every − cell at the node is relinked to one duplicate; + and
+             * unlabelled cells keep it (at the rim the − cells tear from their unlabelled
+             * neighbours there, so that the crack opens at once) */
+            int minus = -1, rest = -1;
+            for (int a = 0; a < m; a++) {
+                int *first = label[cells[a]] < 0 ? &minus : &rest;
+                if (*first < 0)
+                    *first = a;
+                parent[a] = *first;
+            }
+        }
         /* the group of a + cell keeps the node; the others (the minus side) get copies */
         int keep = -1;
         for (int a = 0; a < m && keep < 0; a++)
@@ -2293,8 +2305,8 @@ static int corner_at(const cs_cubemesh *cm, int32_t c, const double p[3])
  * pieces, record changes and events. *cut receives the number of faces separated (0: nothing
  * was joined across the labels, nothing changed).
  */
-static int fracture_event(cs_world_t *w, cs_object *o, const int8_t *label, int32_t centre,
-                          const double normal[3], double stress, int *cut)
+static int fracture_event(cs_world_t *w, cs_object *o, const int8_t *label, bool paper,
+                          int32_t centre, const double normal[3], double stress, int *cut)
 {
     cs_cubemesh *cm = &o->cm;
     const int nc = cm->n_cells, n_old = o->n;
@@ -2365,7 +2377,7 @@ static int fracture_event(cs_world_t *w, cs_object *o, const int8_t *label, int3
             o->corner_vertex[i] = -1;
     }
     /* 2. nodes */
-    if (split_nodes(o, F, nF, fset, label, &touched, &newsrc) < 0 ||
+    if (split_nodes(o, F, nF, fset, label, paper, &touched, &newsrc) < 0 ||
         refresh_node_state(w, o, n_old, &newsrc) != 0)
         goto out_f;
     /* 3. surface: the cells around split nodes; the faces they opened fully */
@@ -2525,7 +2537,7 @@ int cs_fracture_after_step(cs_world_t *w, cs_object *o)
             if (label[c])
                 done[c] = 1;
         int cut = 0;
-        rc = fracture_event(w, o, label, best, dir + 3 * (size_t)best, sig[best], &cut);
+        rc = fracture_event(w, o, label, true, best, dir + 3 * (size_t)best, sig[best], &cut);
         free(label);
         if (rc != CS_OK || w->n_objects != n_objects)
             break; /* pieces renumbered o's cells: the rest waits for the next step */
@@ -2574,7 +2586,7 @@ int cs_world_fracture(cs_world_t *w, cs_object_id id, const double point[3],
     if (!label)
         return fail(err, errlen, CS_ERR_NOMEM, "out of memory");
     int cut = 0;
-    int rc = fracture_event(w, o, label, best, n, 0.0, &cut);
+    int rc = fracture_event(w, o, label, true, best, n, 0.0, &cut);
     free(label);
     if (rc != CS_OK)
         return fail(err, errlen, rc, "fracture of '%s' failed: %s", o->name, cs_status_str(rc));
@@ -2611,7 +2623,7 @@ int cs_world_cut_face(cs_world_t *w, cs_object_id id, const int32_t ijk[3], int 
     double n[3] = {0, 0, 0};
     n[axis] = -1; /* from the + cell towards the − cell is +axis: the + side lies below */
     int cut = 0;
-    int rc = fracture_event(w, o, label, a, n, 0.0, &cut);
+    int rc = fracture_event(w, o, label, false, a, n, 0.0, &cut);
     free(label);
     if (rc != CS_OK)
         return fail(err, errlen, rc, "cut of '%s' failed: %s", o->name, cs_status_str(rc));
