@@ -4,30 +4,33 @@
  *
  * One fracture event on an object, given a ± label per cell (cells of a neighbourhood on the
  * two sides of a splitting plane; unlabelled cells take no part):
- *   1. crack faces F: faces between a + and a − cell that are still joined;
- *   2. cube mesh (§2.3): every node on F is shared by cells that F separates; around such a
- *      node the cells are grouped by the faces that still join them (not in F, all four nodes
- *      shared), the group with a + cell keeps the node and every other group (the minus side)
- *      is relinked to a duplicate. Where the cells stay joined around a node (the rim of the
- *      crack) nothing is duplicated, so the crack ends there instead of tearing a hinge;
+ *   1. crack faces F: faces between a + and a − cell that are still joined; each is marked cut;
+ *   2. cube mesh (§2.3): a stress fracture (or cs_world_fracture) follows the paper: every node
+ *      of F is duplicated and the − cells there relinked to the duplicate, so the crack opens
+ *      at once (at its rim the − cells tear from their unlabelled neighbours). A single cut
+ *      face (cs_world_cut_face) duplicates a node only where the cut faces separate the cells
+ *      around it, so cutting one face does exactly that;
  *   3. surface (§3.1): each triangle belongs to the cell its centroid lies in; two triangles
- *      sharing an edge are separated when their cells lie on opposite sides, or stopped sharing
- *      nodes; around each vertex the triangles are grouped by the edges that still join them,
- *      and every group beyond the first gets its own copy of the vertex, skinned to a cell of
- *      its own side;
- *   4. closing surface (§3.2, closing.c): per face of F, the region of f inside the surface as
- *      triangles between surface vertices and corner vertices (a random offset per lattice
- *      point, that never crosses the surface), t for the + cell and its reverse t' for the −
- *      cell;
+ *      sharing an edge are separated when their cells shared a node before and share none now;
+ *      around each vertex the triangles are grouped by the edges that still join them, and
+ *      every group beyond the first gets its own copy of the vertex, skinned to a cell of its
+ *      own side;
+ *   4. closing surface (§3.2, closing.c): per face that this event opened fully (its four nodes
+ *      separated), the region of f inside the surface as triangles between surface vertices
+ *      and corner vertices (a random offset per lattice point that never crosses the surface;
+ *      a mesh vertex lying on the lattice point is used instead), t for c1 and its reverse t'
+ *      for c2;
  *   5. repair: the §3.2 rules for assigning surface vertices to nodes are heuristics and can
  *      leave the closing triangles not matching the fracture line exactly (seed 000 does not
- *      claim otherwise). Every closing patch that would make an edge used twice in one
- *      direction, or that is degenerate, is dropped; every boundary loop left is closed by a fan
- *      around a new vertex. The surface is then closed and consistently oriented by
- *      construction, whatever the geometry; the event reports how many loops needed the fan;
- *   6. pieces (§2.4): cells are grouped by shared nodes (which, after step 2, is face
- *      connectivity); the largest group stays the object, every other one becomes a new object
- *      with its own cube mesh, surface, state and id.
+ *      claim otherwise). A face's pair t, t' that would make an edge used twice in one
+ *      direction, or that is degenerate, is dropped; where boundary loops pass a vertex twice
+ *      the vertex is split so that every loop is simple; every loop left is closed by one
+ *      triangle or a fan around a new vertex placed by the loop alone (the two sides of a
+ *      crack close twin loops identically, so their volumes cancel). The surface is then
+ *      closed and consistently oriented by construction; the event reports the fans;
+ *   6. pieces (§2.4): cells are grouped by shared nodes (face connectivity after step 2); the
+ *      largest group stays the object, every other one becomes a new object with its own cube
+ *      mesh, surface, state (positions, velocities, inputs) and id.
  * Steps 3–5 make one topology change (vertices and triangles appended, triangles rewired);
  * step 6 makes one more for the object (swap-removals) and one per new piece (from version 0).
  * The engine applies each change to its own arrays exactly as topo.c applies it for a client.
