@@ -519,7 +519,9 @@ int cs_surface_state_apply_delta(cs_surface_state *st, const cs_ss_delta *d, cha
     }
     cs_ss_object *o = find_mut(st, d->object_id);
     if (!o) {
+        /* Perhaps a piece whose topology message was lost: ask for a snapshot. */
         snprintf(err, errlen, "delta for unknown object %" PRId32, d->object_id);
+        st->stale = 1;
         return CS_SS_REJECTED;
     }
     if (d->topology_version != o->topology_version) {

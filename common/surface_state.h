@@ -166,8 +166,9 @@ int cs_surface_state_apply_chunk(cs_surface_state *st, const cs_ss_chunk *c, cha
  * Apply one delta (absolute float32 positions). Tracks header.seq first: a gap marks the
  * state stale and adds to deltas_lost. Returns CS_SS_APPLIED, CS_SS_IGNORED (no valid state,
  * another session or epoch, a frame older than the state, or a topology_version other than
- * the object's — err then says which), or CS_SS_REJECTED (unknown object, counts that
- * disagree, index out of range, non-finite coordinate).
+ * the object's — err then says which, and the state is marked stale), or CS_SS_REJECTED
+ * (unknown object — also marked stale: it may be a piece whose topology change was lost —,
+ * counts that disagree, index out of range, non-finite coordinate).
  */
 int cs_surface_state_apply_delta(cs_surface_state *st, const cs_ss_delta *d, char *err,
                                  size_t errlen);
