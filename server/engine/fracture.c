@@ -1,29 +1,267 @@
 /*
  * fracture.c — fracture of the cube mesh and of the embedded surface (seed 000 §2.3, §3.1,
- * §3.2): stress test, splitting plane, node duplication, surface splitting, closing surfaces,
- * connected pieces, and the topology changes that tell clients about it.
+ * §3.2), and the topology changes (topo.h) that tell clients about it.
+ *
+ * One fracture event on an object, given a ± label per cell (cells of a neighbourhood on the
+ * two sides of a splitting plane; unlabelled cells take no part):
+ *   1. crack faces F: faces between a + and a − cell that are still joined;
+ *   2. cube mesh (§2.3): every node on F is shared by cells that F separates; around such a
+ *      node the cells are grouped by the faces that still join them (not in F, all four nodes
+ *      shared), the group with a + cell keeps the node and every other group (the minus side)
+ *      is relinked to a duplicate. Where the cells stay joined around a node (the rim of the
+ *      crack) nothing is duplicated, so the crack ends there instead of tearing a hinge;
+ *   3. surface (§3.1): each triangle belongs to the cell its centroid lies in; two triangles
+ *      sharing an edge are separated when their cells lie on opposite sides, or stopped sharing
+ *      nodes; around each vertex the triangles are grouped by the edges that still join them,
+ *      and every group beyond the first gets its own copy of the vertex, skinned to a cell of
+ *      its own side;
+ *   4. closing surface (§3.2, closing.c): per face of F, the region of f inside the surface as
+ *      triangles between surface vertices and corner vertices (a random offset per lattice
+ *      point, that never crosses the surface), t for the + cell and its reverse t' for the −
+ *      cell;
+ *   5. repair: the §3.2 rules for assigning surface vertices to nodes are heuristics and can
+ *      leave the closing triangles not matching the fracture line exactly (seed 000 does not
+ *      claim otherwise). Every closing patch that would make an edge used twice in one
+ *      direction, or that is degenerate, is dropped; every boundary loop left is closed by a fan
+ *      around a new vertex. The surface is then closed and consistently oriented by
+ *      construction, whatever the geometry; the event reports how many loops needed the fan;
+ *   6. pieces (§2.4): cells are grouped by shared nodes (which, after step 2, is face
+ *      connectivity); the largest group stays the object, every other one becomes a new object
+ *      with its own cube mesh, surface, state and id.
+ * Steps 3–5 make one topology change (vertices and triangles appended, triangles rewired);
+ * step 6 makes one more for the object (swap-removals) and one per new piece (from version 0).
+ * The engine applies each change to its own arrays exactly as topo.c applies it for a client.
+ *
+ * All surface geometry decisions use rest positions, as §3.2 prescribes.
  */
 #include <math.h>
+#include <stdarg.h>
+#include <stdint.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
+#include "closing.h"
+#include "voxelize.h"
 #include "world_internal.h"
+
+/* ---------------------------------------------------------------- small helpers */
+
+static int fail(char *err, size_t errlen, int code, const char *fmt, ...)
+{
+    if (err && errlen) {
+        va_list ap;
+        va_start(ap, fmt);
+        vsnprintf(err, errlen, fmt, ap);
+        va_end(ap);
+    }
+    return code;
+}
+
+typedef struct ivec {
+    int32_t *a;
+    int n, cap;
+} ivec;
+
+static int ivec_push(ivec *v, int32_t x)
+{
+    if (v->n == v->cap) {
+        int cap = v->cap ? 2 * v->cap : 64;
+        int32_t *g = realloc(v->a, (size_t)cap * sizeof *g);
+        if (!g)
+            return -1;
+        v->a = g;
+        v->cap = cap;
+    }
+    v->a[v->n++] = x;
+    return 0;
+}
+
+static int ivec_push3(ivec *v, int32_t a, int32_t b, int32_t c)
+{
+    return ivec_push(v, a) || ivec_push(v, b) || ivec_push(v, c) ? -1 : 0;
+}
+
+typedef struct dvec {
+    double *a;
+    int n, cap;
+} dvec;
+
+static int dvec_push(dvec *v, double x)
+{
+    if (v->n == v->cap) {
+        int cap = v->cap ? 2 * v->cap : 64;
+        double *g = realloc(v->a, (size_t)cap * sizeof *g);
+        if (!g)
+            return -1;
+        v->a = g;
+        v->cap = cap;
+    }
+    v->a[v->n++] = x;
+    return 0;
+}
+
+static int uf_find(int32_t *p, int32_t x)
+{
+    while (p[x] != x) {
+        p[x] = p[p[x]];
+        x = p[x];
+    }
+    return x;
+}
+
+static void uf_union(int32_t *p, int32_t a, int32_t b)
+{
+    a = uf_find(p, a);
+    b = uf_find(p, b);
+    if (a != b)
+        p[a < b ? b : a] = a < b ? a : b; /* the smaller index is the root: deterministic */
+}
+
+/* realloc to exactly n elements (at least one) */
+static int resize(void *pp, size_t elem, size_t n)
+{
+    void **p = pp;
+    void *g = realloc(*p, (n ? n : 1) * elem);
+    if (!g)
+        return -1;
+    *p = g;
+    return 0;
+}
+
+/* Corner index of lattice offset (x,y,z) in seed 000 App. A order. */
+static const int CORNER_ID[2][2][2] = {{{0, 4}, {3, 7}}, {{1, 5}, {2, 6}}};
+
+static int corner_id(int x, int y, int z)
+{
+    return CORNER_ID[x][y][z];
+}
+
+/* SplitMix64: the deterministic per-lattice-point random offsets of corner vertices. */
+static uint64_t mix64(uint64_t x)
+{
+    x += 0x9e3779b97f4a7c15ULL;
+    x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ULL;
+    x = (x ^ (x >> 27)) * 0x94d049bb133111ebULL;
+    return x ^ (x >> 31);
+}
+
+/* ---------------------------------------------------------------- stress (§2.3) */
+
+/* Symmetric 3×3 eigen-decomposition by cyclic Jacobi rotations; returns the largest eigenvalue
+ * and its unit eigenvector. */
+static double max_eigen(const double S[9], double dir[3])
+{
+    double a[3][3], v[3][3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++)
+            a[i][j] = 0.5 * (S[3 * i + j] + S[3 * j + i]);
+    for (int sweep = 0; sweep < 50; sweep++) {
+        double off = fabs(a[0][1]) + fabs(a[0][2]) + fabs(a[1][2]);
+        double scale = fabs(a[0][0]) + fabs(a[1][1]) + fabs(a[2][2]);
+        if (off <= 1e-15 * scale || off == 0)
+            break;
+        for (int p = 0; p < 2; p++)
+            for (int q = p + 1; q < 3; q++) {
+                if (a[p][q] == 0)
+                    continue;
+                double theta = (a[q][q] - a[p][p]) / (2 * a[p][q]);
+                double t = (theta >= 0 ? 1.0 : -1.0) / (fabs(theta) + sqrt(theta * theta + 1));
+                double c = 1 / sqrt(t * t + 1), s = t * c;
+                for (int k = 0; k < 3; k++) { /* A <- A J */
+                    double akp = a[k][p], akq = a[k][q];
+                    a[k][p] = c * akp - s * akq;
+                    a[k][q] = s * akp + c * akq;
+                }
+                for (int k = 0; k < 3; k++) { /* A <- Jᵀ A */
+                    double apk = a[p][k], aqk = a[q][k];
+                    a[p][k] = c * apk - s * aqk;
+                    a[q][k] = s * apk + c * aqk;
+                }
+                for (int k = 0; k < 3; k++) {
+                    double vkp = v[k][p], vkq = v[k][q];
+                    v[k][p] = c * vkp - s * vkq;
+                    v[k][q] = s * vkp + c * vkq;
+                }
+            }
+    }
+    int best = 0;
+    for (int i = 1; i < 3; i++)
+        if (a[i][i] > a[best][best])
+            best = i;
+    double n = sqrt(v[0][best] * v[0][best] + v[1][best] * v[1][best] + v[2][best] * v[2][best]);
+    for (int k = 0; k < 3; k++)
+        dir[k] = v[k][best] / n;
+    return a[best][best];
+}
+
+/*
+ * Largest principal stress of cell c: the small strain of the element-local displacement
+ * u = Rᵀ(x − x₀) − X at the cell centre (where ∂N_k/∂x = s_k/(4h), s_k = ±1), σ = λ tr(ε) I +
+ * 2μ ε, its largest eigenvalue, and the direction rotated back to world space.
+ */
+static double cell_max_stress(const cs_object *o, int c, double dir[3])
+{
+    const double h = o->cm.h, E = o->mat.young, nu = o->mat.poisson;
+    const double lambda = E * nu / ((1 + nu) * (1 - 2 * nu)), mu = E / (2 * (1 + nu));
+    const int32_t *nd = o->cm.cell_nodes + 8 * (size_t)c;
+    const double *R = o->fem.R + 9 * (size_t)c;
+    const double *x0 = o->x + 3 * (size_t)nd[0];
+    double G[9] = {0};
+    for (int k = 0; k < 8; k++) {
+        const double *p = o->x + 3 * (size_t)nd[k];
+        const double d[3] = {p[0] - x0[0], p[1] - x0[1], p[2] - x0[2]};
+        double u[3], g[3];
+        for (int i = 0; i < 3; i++) {
+            u[i] = R[i] * d[0] + R[3 + i] * d[1] + R[6 + i] * d[2] - h * CS_CORNER[k][i];
+            g[i] = (2.0 * CS_CORNER[k][i] - 1.0) / (4.0 * h);
+        }
+        for (int i = 0; i < 3; i++)
+            for (int j = 0; j < 3; j++)
+                G[3 * i + j] += u[i] * g[j];
+    }
+    double S[9];
+    const double tr = G[0] + G[4] + G[8];
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++)
+            S[3 * i + j] = mu * (G[3 * i + j] + G[3 * j + i]) + (i == j ? lambda * tr : 0.0);
+    double dl[3];
+    double s = max_eigen(S, dl);
+    for (int i = 0; i < 3; i++)
+        dir[i] = R[3 * i] * dl[0] + R[3 * i + 1] * dl[1] + R[3 * i + 2] * dl[2];
+    return s;
+}
+
+int cs_object_principal_stress(const cs_world_t *w, cs_object_id id, double *sigma,
+                               double *dir, int n)
+{
+    const cs_object *o = cs_world_find_internal(w, id);
+    if (!o)
+        return CS_ERR_UNKNOWN_OBJECT;
+    if (!sigma || !dir || n < 0)
+        return CS_ERR_INVALID;
+    for (int c = 0; c < o->cm.n_cells && c < n; c++)
+        sigma[c] = cell_max_stress(o, c, dir + 3 * (size_t)c);
+    return CS_OK;
+}
+
+/* ---------------------------------------------------------------- events and changes */
 
 void cs_fracture_clear_step(cs_world_t *w)
 {
     w->n_events = 0;
+    for (int i = 0; i < w->topo.n_blocks; i++)
+        free(w->topo.blocks[i]);
+    w->topo.n_blocks = 0;
+    w->topo.n = 0;
 }
 
 void cs_world_fracture_free(cs_world_t *w)
 {
+    cs_fracture_clear_step(w);
     free(w->events);
-}
-
-int cs_fracture_after_step(cs_world_t *w, cs_object *o)
-{
-    (void)w;
-    (void)o;
-    return CS_OK;
+    free(w->topo.items);
+    free(w->topo.blocks);
 }
 
 const cs_event *cs_world_events(const cs_world_t *w, int *count)
@@ -40,23 +278,2204 @@ const cs_topo_change *cs_world_topology_changes(const cs_world_t *w, int *count)
     return w ? w->topo.items : NULL;
 }
 
+static int push_event(cs_world_t *w, const cs_event *e)
+{
+    if (w->n_events == w->cap_events) {
+        int cap = w->cap_events ? 2 * w->cap_events : 8;
+        cs_event *g = realloc(w->events, (size_t)cap * sizeof *g);
+        if (!g)
+            return -1;
+        w->events = g;
+        w->cap_events = cap;
+    }
+    w->events[w->n_events++] = *e;
+    return 0;
+}
+
+/* Keep a copy of n bytes in the change list's arena; NULL on out of memory (or n == 0). */
+static void *keep(cs_world_t *w, const void *src, size_t n)
+{
+    if (n == 0)
+        return NULL;
+    cs_topo_list *t = &w->topo;
+    if (t->n_blocks == t->cap_blocks) {
+        int cap = t->cap_blocks ? 2 * t->cap_blocks : 16;
+        void **g = realloc(t->blocks, (size_t)cap * sizeof *g);
+        if (!g)
+            return NULL;
+        t->blocks = g;
+        t->cap_blocks = cap;
+    }
+    void *p = malloc(n);
+    if (!p)
+        return NULL;
+    memcpy(p, src, n);
+    t->blocks[t->n_blocks++] = p;
+    return p;
+}
+
+/* Append a change whose arrays are copied into the arena. */
+static int push_change(cs_world_t *w, const cs_topo_change *c)
+{
+    cs_topo_list *t = &w->topo;
+    if (t->n == t->cap) {
+        int cap = t->cap ? 2 * t->cap : 8;
+        cs_topo_change *g = realloc(t->items, (size_t)cap * sizeof *g);
+        if (!g)
+            return -1;
+        t->items = g;
+        t->cap = cap;
+    }
+    cs_topo_change k = *c;
+#define KEEP(field, count, elem)                                                               \
+    do {                                                                                       \
+        k.field = keep(w, c->field, (size_t)(count) * (elem));                                 \
+        if ((count) > 0 && !k.field)                                                           \
+            return -1;                                                                         \
+    } while (0)
+    KEEP(vremove, c->n_vremove, sizeof(int32_t));
+    KEEP(vnew_xyz, c->n_vnew, 3 * sizeof(double));
+    KEEP(tremove, c->n_tremove, sizeof(int32_t));
+    KEEP(tset_index, c->n_tset, sizeof(int32_t));
+    KEEP(tset_tri, c->n_tset, 3 * sizeof(int32_t));
+    KEEP(tnew, c->n_tnew, 3 * sizeof(int32_t));
+#undef KEEP
+    if (c->name) {
+        k.name = keep(w, c->name, strlen(c->name) + 1);
+        if (!k.name)
+            return -1;
+    }
+    if (c->model) {
+        k.model = keep(w, c->model, strlen(c->model) + 1);
+        if (!k.model)
+            return -1;
+    }
+    t->items[t->n++] = k;
+    return 0;
+}
+
+/* ---------------------------------------------------------------- cube-mesh queries */
+
+static bool cells_share_node(const cs_cubemesh *cm, int32_t a, int32_t b)
+{
+    if (a == b)
+        return true;
+    const int32_t *na = cm->cell_nodes + 8 * (size_t)a, *nb = cm->cell_nodes + 8 * (size_t)b;
+    for (int i = 0; i < 8; i++)
+        for (int j = 0; j < 8; j++)
+            if (na[i] == nb[j])
+                return true;
+    return false;
+}
+
+/* Axis along which a and b are face neighbours (b = a + e_axis·dir), or -1. */
+static int face_axis(const cs_cubemesh *cm, int32_t a, int32_t b, int *dir)
+{
+    const int32_t *p = cm->cell_ijk + 3 * (size_t)a, *q = cm->cell_ijk + 3 * (size_t)b;
+    int axis = -1;
+    for (int k = 0; k < 3; k++) {
+        int d = q[k] - p[k];
+        if (d == 0)
+            continue;
+        if ((d != 1 && d != -1) || axis >= 0)
+            return -1;
+        axis = k;
+        *dir = d;
+    }
+    return axis;
+}
+
+/* The 4 corners of cell's face on side `hi` (0/1) of `axis`. */
+static void face_corners(int axis, int hi, int out[4])
+{
+    int n = 0;
+    for (int k = 0; k < 8; k++)
+        if (CS_CORNER[k][axis] == hi)
+            out[n++] = k;
+}
+
+/* Bit of cell's face on side dir (±1) of axis in cs_object.cell_cut. */
+static uint8_t face_bit(int axis, int dir)
+{
+    return (uint8_t)(1u << (2 * axis + (dir > 0)));
+}
+
+/* Are a and b (face neighbours, b at +dir along axis) joined: not cut by an earlier fracture
+ * and sharing all four nodes of their face? (A cut whose rim kept every node shared is an
+ * inner slit: the nodes alone do not show it.) */
+static bool face_joined(const cs_object *o, int32_t a, int32_t b, int axis, int dir)
+{
+    const cs_cubemesh *cm = &o->cm;
+    if (o->cell_cut && (o->cell_cut[a] & face_bit(axis, dir)))
+        return false;
+    int ca[4];
+    face_corners(axis, dir > 0 ? 1 : 0, ca);
+    for (int i = 0; i < 4; i++) {
+        int x = CS_CORNER[ca[i]][0], y = CS_CORNER[ca[i]][1], z = CS_CORNER[ca[i]][2];
+        int off[3] = {x, y, z};
+        off[axis] = 1 - off[axis];
+        if (cm->cell_nodes[8 * (size_t)a + ca[i]] !=
+            cm->cell_nodes[8 * (size_t)b + corner_id(off[0], off[1], off[2])])
+            return false;
+    }
+    return true;
+}
+
+/* ---------------------------------------------------------------- the crack */
+
+typedef struct crack_face {
+    int32_t c1, c2; /* c1: + side (keeps its nodes), c2: − side */
+    int axis;
+    int c1_below;   /* c1 lies below the face along axis */
+} crack_face;
+
+typedef struct pairkey {
+    int32_t a, b;
+} pairkey;
+
+static int cmp_pair(const void *x, const void *y)
+{
+    const pairkey *p = x, *q = y;
+    if (p->a != q->a)
+        return p->a < q->a ? -1 : 1;
+    return (p->b > q->b) - (p->b < q->b);
+}
+
+static bool in_pairs(const pairkey *s, int n, int32_t a, int32_t b)
+{
+    pairkey k = {a < b ? a : b, a < b ? b : a};
+    return bsearch(&k, s, (size_t)n, sizeof k, cmp_pair) != NULL;
+}
+
+/* ---------------------------------------------------------------- edge counting */
+
+/* Open-addressing map of directed edges (a,b) -> count. */
+typedef struct edge_map {
+    uint64_t *keys;
+    int32_t *count;
+    size_t cap; /* power of two */
+} edge_map;
+
+#define EDGE_EMPTY UINT64_MAX
+
+static uint64_t edge_key(int32_t a, int32_t b)
+{
+    return ((uint64_t)(uint32_t)a << 32) | (uint32_t)b;
+}
+
+static int edge_map_init(edge_map *m, size_t expected)
+{
+    size_t cap = 64;
+    while (cap < 2 * expected + 16)
+        cap <<= 1;
+    m->cap = cap;
+    m->keys = malloc(cap * sizeof *m->keys);
+    m->count = calloc(cap, sizeof *m->count);
+    if (!m->keys || !m->count)
+        return -1;
+    memset(m->keys, 0xff, cap * sizeof *m->keys);
+    return 0;
+}
+
+static void edge_map_free(edge_map *m)
+{
+    free(m->keys);
+    free(m->count);
+    memset(m, 0, sizeof *m);
+}
+
+static int32_t *edge_slot(edge_map *m, uint64_t k, bool insert)
+{
+    size_t i = (size_t)(mix64(k) & (m->cap - 1));
+    for (;;) {
+        if (m->keys[i] == k)
+            return &m->count[i];
+        if (m->keys[i] == EDGE_EMPTY) {
+            if (!insert)
+                return NULL;
+            m->keys[i] = k;
+            return &m->count[i];
+        }
+        i = (i + 1) & (m->cap - 1);
+    }
+}
+
+static int32_t edge_get(edge_map *m, int32_t a, int32_t b)
+{
+    int32_t *s = edge_slot(m, edge_key(a, b), false);
+    return s ? *s : 0;
+}
+
+static void edge_add(edge_map *m, int32_t a, int32_t b, int32_t d)
+{
+    *edge_slot(m, edge_key(a, b), true) += d;
+}
+
+static void tri_edges_add(edge_map *m, const int32_t *t, int32_t d)
+{
+    edge_add(m, t[0], t[1], d);
+    edge_add(m, t[1], t[2], d);
+    edge_add(m, t[2], t[0], d);
+}
+
+/* ---------------------------------------------------------------- surface editing state */
+
+/*
+ * The surface being edited: the engine's arrays plus room to append. New vertices are
+ * appended with their binding; triangles rewired in place are flagged.
+ */
+typedef struct surf_edit {
+    cs_object *o;
+    int nv0, nt0;     /* counts before the event */
+    dvec rest, pos;   /* appended vertices: 3 each */
+    ivec vcell;       /* appended vertices: bound cell */
+    dvec uvw;         /* appended vertices: 3 each */
+    ivec tnew;        /* appended triangles: 3 each */
+    ivec tnew_cell;   /* cell of each appended triangle */
+    uint8_t *rewired; /* per original triangle */
+} surf_edit;
+
+static const double *sv_rest(const surf_edit *e, int32_t v)
+{
+    return v < e->nv0 ? e->o->surf.rest + 3 * (size_t)v : e->rest.a + 3 * (size_t)(v - e->nv0);
+}
+
+
+/* Skin a rest position p to `cell` at current node positions x. */
+static void skin_point(const cs_object *o, int32_t cell, const double p[3], double uvw[3],
+                       double out[3])
+{
+    const cs_cubemesh *cm = &o->cm;
+    const int32_t *ijk = cm->cell_ijk + 3 * (size_t)cell;
+    for (int k = 0; k < 3; k++)
+        uvw[k] = (p[k] - cm->origin[k]) / cm->h - ijk[k];
+    const int32_t *nd = cm->cell_nodes + 8 * (size_t)cell;
+    out[0] = out[1] = out[2] = 0;
+    for (int k = 0; k < 8; k++) {
+        double wk = (CS_CORNER[k][0] ? uvw[0] : 1 - uvw[0]) *
+                    (CS_CORNER[k][1] ? uvw[1] : 1 - uvw[1]) *
+                    (CS_CORNER[k][2] ? uvw[2] : 1 - uvw[2]);
+        for (int a = 0; a < 3; a++)
+            out[a] += wk * o->x[3 * (size_t)nd[k] + a];
+    }
+}
+
+/* Append a vertex at rest position p bound to `cell`; returns its index or -1. */
+static int32_t sv_append(surf_edit *e, const double p[3], int32_t cell)
+{
+    double uvw[3], x[3];
+    skin_point(e->o, cell, p, uvw, x);
+    for (int k = 0; k < 3; k++)
+        if (dvec_push(&e->rest, p[k]) || dvec_push(&e->pos, x[k]) || dvec_push(&e->uvw, uvw[k]))
+            return -1;
+    if (ivec_push(&e->vcell, cell))
+        return -1;
+    return e->nv0 + e->vcell.n - 1;
+}
+
+static void surf_edit_free(surf_edit *e)
+{
+    free(e->rest.a);
+    free(e->pos.a);
+    free(e->vcell.a);
+    free(e->uvw.a);
+    free(e->tnew.a);
+    free(e->tnew_cell.a);
+    free(e->rewired);
+}
+
+/* ---------------------------------------------------------------- generalized winding number */
+
+/* Is p inside the object's closed rest surface? (winding number of the surface at p > ½;
+ * robust to the coincident reversed layers that closing surfaces make) */
+static bool inside_surface(const surf_edit *e, const double p[3])
+{
+    const cs_surface *s = &e->o->surf;
+    double total = 0;
+    for (int t = 0; t < e->nt0; t++) {
+        const int32_t *tri = s->tris + 3 * (size_t)t;
+        double a[3], b[3], c[3];
+        const double *ra = sv_rest(e, tri[0]), *rb = sv_rest(e, tri[1]), *rc = sv_rest(e, tri[2]);
+        for (int k = 0; k < 3; k++) {
+            a[k] = ra[k] - p[k];
+            b[k] = rb[k] - p[k];
+            c[k] = rc[k] - p[k];
+        }
+        double la = sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
+        double lb = sqrt(b[0] * b[0] + b[1] * b[1] + b[2] * b[2]);
+        double lc = sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]);
+        double det = a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) +
+                     a[2] * (b[0] * c[1] - b[1] * c[0]);
+        double ab = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+        double bc = b[0] * c[0] + b[1] * c[1] + b[2] * c[2];
+        double ca = c[0] * a[0] + c[1] * a[1] + c[2] * a[2];
+        double den = la * lb * lc + ab * lc + bc * la + ca * lb;
+        total += 2 * atan2(det, den);
+    }
+    return total / (4 * M_PI) > 0.5;
+}
+
+/* ---------------------------------------------------------------- cell lists (Table 1) */
+
+/* Rebuild the per-cell triangle lists of s (the triangles intersecting each cell). */
+static int rebuild_cell_lists(cs_surface *s, const cs_cubemesh *cm)
+{
+    const double h = cm->h, tol = 1e-9 * h, half[3] = {0.5 * h + tol, 0.5 * h + tol,
+                                                       0.5 * h + tol};
+    int32_t *start = calloc((size_t)cm->n_cells + 1, sizeof *start);
+    ivec pc = {0}, pt = {0};
+    if (!start)
+        return -1;
+    for (int t = 0; t < s->n_triangles; t++) {
+        const int32_t *tri = s->tris + 3 * (size_t)t;
+        const double *a = s->rest + 3 * (size_t)tri[0], *b = s->rest + 3 * (size_t)tri[1],
+                     *c = s->rest + 3 * (size_t)tri[2];
+        int r0[3], r1[3];
+        for (int k = 0; k < 3; k++) {
+            double lo = fmin(a[k], fmin(b[k], c[k])), hi = fmax(a[k], fmax(b[k], c[k]));
+            r0[k] = (int)floor((lo - cm->origin[k]) / h - 1e-6);
+            r1[k] = (int)floor((hi - cm->origin[k]) / h + 1e-6);
+        }
+        for (int k = r0[2]; k <= r1[2]; k++)
+            for (int j = r0[1]; j <= r1[1]; j++)
+                for (int i = r0[0]; i <= r1[0]; i++) {
+                    int32_t cell = cs_cubemesh_find(cm, i, j, k);
+                    if (cell < 0)
+                        continue;
+                    double cc[3] = {cm->origin[0] + (i + 0.5) * h, cm->origin[1] + (j + 0.5) * h,
+                                    cm->origin[2] + (k + 0.5) * h};
+                    if (cell != s->tri_cell[t] && !cs_tri_box_overlap(cc, half, a, b, c))
+                        continue;
+                    if (ivec_push(&pc, cell) || ivec_push(&pt, t))
+                        goto oom;
+                }
+    }
+    int32_t *list = malloc((size_t)(pc.n ? pc.n : 1) * sizeof *list);
+    int32_t *fill = malloc((size_t)(cm->n_cells ? cm->n_cells : 1) * sizeof *fill);
+    if (!list || !fill) {
+        free(list);
+        free(fill);
+        goto oom;
+    }
+    for (int p = 0; p < pc.n; p++)
+        start[pc.a[p] + 1]++;
+    for (int c = 0; c < cm->n_cells; c++)
+        start[c + 1] += start[c];
+    memcpy(fill, start, (size_t)cm->n_cells * sizeof *fill);
+    for (int p = 0; p < pc.n; p++)
+        list[fill[pc.a[p]]++] = pt.a[p];
+    free(fill);
+    free(pc.a);
+    free(pt.a);
+    free(s->cell_tri_start);
+    free(s->cell_tri_list);
+    s->cell_tri_start = start;
+    s->cell_tri_list = list;
+    return 0;
+oom:
+    free(start);
+    free(pc.a);
+    free(pt.a);
+    return -1;
+}
+
+/* ---------------------------------------------------------------- vertex families */
+
+/*
+ * The copies of one surface vertex made by this event, each with the cells of the triangles
+ * of its group (the side it belongs to). Used to pick, for a closing triangle of cell c, the
+ * copy that lies on c's side.
+ */
+typedef struct families {
+    ivec of_old;   /* per vertex < nv0: family or -1 (allocated lazily to nv0) */
+    ivec of_new;   /* per appended vertex: family or -1 */
+    ivec fstart;   /* per family: first member in mcopy */
+    ivec mcopy;    /* members: vertex copy */
+    ivec mcstart;  /* per member: first cell in mcells (one past the last member is next) */
+    ivec mcells;   /* cells of each member's group */
+} families;
+
+static int32_t family_of(const families *f, int nv0, int32_t v)
+{
+    if (v < nv0)
+        return f->of_old.a[v];
+    int i = v - nv0;
+    return i < f->of_new.n ? f->of_new.a[i] : -1;
+}
+
+/* The copy of v's family attached to cell c: a member whose group has c or a cell sharing a
+ * node with c; else the member whose group's cells are nearest to c; v itself if no family. */
+static int32_t copy_for_cell(const cs_object *o, const families *f, int nv0, int32_t v,
+                             int32_t c)
+{
+    int32_t fam = family_of(f, nv0, v);
+    if (fam < 0)
+        return v;
+    int m0 = f->fstart.a[fam], m1 = fam + 1 < f->fstart.n ? f->fstart.a[fam + 1] : f->mcopy.n;
+    int32_t best = v;
+    long bestd = -1;
+    const int32_t *cc = o->cm.cell_ijk + 3 * (size_t)c;
+    for (int m = m0; m < m1; m++) {
+        int c0 = f->mcstart.a[m], c1 = m + 1 < f->mcstart.n ? f->mcstart.a[m + 1] : f->mcells.n;
+        for (int k = c0; k < c1; k++) {
+            int32_t g = f->mcells.a[k];
+            if (g == c || cells_share_node(&o->cm, g, c))
+                return f->mcopy.a[m];
+            const int32_t *gc = o->cm.cell_ijk + 3 * (size_t)g;
+            long d = labs((long)gc[0] - cc[0]) + labs((long)gc[1] - cc[1]) +
+                     labs((long)gc[2] - cc[2]);
+            if (bestd < 0 || d < bestd) {
+                bestd = d;
+                best = f->mcopy.a[m];
+            }
+        }
+    }
+    return best;
+}
+
+static void families_free(families *f)
+{
+    free(f->of_old.a);
+    free(f->of_new.a);
+    free(f->fstart.a);
+    free(f->mcopy.a);
+    free(f->mcstart.a);
+    free(f->mcells.a);
+}
+
+/* ---------------------------------------------------------------- corner vertices */
+
+/* Segment p→q against triangle (a,b,c): do they intersect? (Möller–Trumbore) */
+static bool seg_tri(const double p[3], const double q[3], const double *a, const double *b,
+                    const double *c)
+{
+    double d[3], e1[3], e2[3], s[3], pv[3], qv[3];
+    for (int k = 0; k < 3; k++) {
+        d[k] = q[k] - p[k];
+        e1[k] = b[k] - a[k];
+        e2[k] = c[k] - a[k];
+        s[k] = p[k] - a[k];
+    }
+    pv[0] = d[1] * e2[2] - d[2] * e2[1];
+    pv[1] = d[2] * e2[0] - d[0] * e2[2];
+    pv[2] = d[0] * e2[1] - d[1] * e2[0];
+    double det = e1[0] * pv[0] + e1[1] * pv[1] + e1[2] * pv[2];
+    if (fabs(det) < 1e-300)
+        return false;
+    double u = (s[0] * pv[0] + s[1] * pv[1] + s[2] * pv[2]) / det;
+    if (u < -1e-12 || u > 1 + 1e-12)
+        return false;
+    qv[0] = s[1] * e1[2] - s[2] * e1[1];
+    qv[1] = s[2] * e1[0] - s[0] * e1[2];
+    qv[2] = s[0] * e1[1] - s[1] * e1[0];
+    double v = (d[0] * qv[0] + d[1] * qv[1] + d[2] * qv[2]) / det;
+    if (v < -1e-12 || u + v > 1 + 1e-12)
+        return false;
+    double t = (e2[0] * qv[0] + e2[1] * qv[1] + e2[2] * qv[2]) / det;
+    return t >= -1e-12 && t <= 1 + 1e-12;
+}
+
+/*
+ * The corner vertex of `node` (seed 000 §3.2: corner nodes get their own coordinates, the
+ * lattice point plus a random delta fixed per lattice point, chosen so that it does not cross
+ * the surface): made on first use, bound to `cell`. Returns its index or -1.
+ */
+static int32_t corner_vertex(cs_world_t *w, surf_edit *e, int32_t node, int32_t cell)
+{
+    cs_object *o = e->o;
+    if (o->corner_vertex[node] >= 0)
+        return o->corner_vertex[node];
+    const cs_cubemesh *cm = &o->cm;
+    const double *p = cm->node_rest + 3 * (size_t)node;
+    int64_t li[3];
+    for (int k = 0; k < 3; k++)
+        li[k] = llround((p[k] - cm->origin[k]) / cm->h);
+    uint64_t r = mix64(w->def.seed ^ mix64((uint64_t)li[0] * 73856093u ^
+                                           (uint64_t)li[1] * 19349663u ^
+                                           (uint64_t)li[2] * 83492791u));
+    double d[3];
+    for (int k = 0; k < 3; k++) {
+        r = mix64(r);
+        d[k] = 0.15 * cm->h * ((double)(r >> 11) / 9007199254740992.0 * 2.0 - 1.0);
+    }
+    /* shrink the offset until it crosses no surface triangle near the corner */
+    const cs_surface *s = &o->surf;
+    for (int tries = 0; tries < 5; tries++) {
+        double q[3] = {p[0] + d[0], p[1] + d[1], p[2] + d[2]};
+        bool crosses = false;
+        for (int dz = -1; dz <= 0 && !crosses; dz++)
+            for (int dy = -1; dy <= 0 && !crosses; dy++)
+                for (int dx = -1; dx <= 0 && !crosses; dx++) {
+                    int32_t c = cs_cubemesh_find(cm, (int32_t)li[0] + dx, (int32_t)li[1] + dy,
+                                                 (int32_t)li[2] + dz);
+                    if (c < 0)
+                        continue;
+                    for (int k = s->cell_tri_start[c]; k < s->cell_tri_start[c + 1]; k++) {
+                        int32_t t = s->cell_tri_list[k];
+                        if (t >= e->nt0)
+                            continue;
+                        const int32_t *tri = s->tris + 3 * (size_t)t;
+                        if (seg_tri(p, q, sv_rest(e, tri[0]), sv_rest(e, tri[1]),
+                                    sv_rest(e, tri[2]))) {
+                            crosses = true;
+                            break;
+                        }
+                    }
+                }
+        if (!crosses)
+            break;
+        for (int k = 0; k < 3; k++)
+            d[k] = tries == 3 ? 0.0 : 0.5 * d[k];
+    }
+    double q[3] = {p[0] + d[0], p[1] + d[1], p[2] + d[2]};
+    int32_t v = sv_append(e, q, cell);
+    if (v < 0)
+        return -1;
+    o->corner_vertex[node] = v;
+    return v;
+}
+
+/* ---------------------------------------------------------------- step 2: nodes (§2.3) */
+
+/*
+ * Duplicate the nodes that the crack faces separate. *split_nodes receives every node that was
+ * split (the kept original and its copies); node_src[n] is the node each node came from.
+ */
+static int split_nodes(cs_object *o, const crack_face *F, int nF, const pairkey *fset,
+                       const int8_t *label, ivec *touched, ivec *newsrc_out)
+{
+    cs_cubemesh *cm = &o->cm;
+    const int n0 = cm->n_nodes;
+    uint8_t *seen = calloc((size_t)n0, 1);
+    ivec cand = {0}, newsrc = {0};
+    int rc = -1;
+    if (!seen)
+        return -1;
+    for (int i = 0; i < nF; i++) {
+        int cs[4];
+        int dir = F[i].c1_below ? 1 : -1;
+        face_corners(F[i].axis, dir > 0 ? 1 : 0, cs);
+        for (int k = 0; k < 4; k++) {
+            int32_t nd = cm->cell_nodes[8 * (size_t)F[i].c1 + cs[k]];
+            if (!seen[nd]) {
+                seen[nd] = 1;
+                if (ivec_push(&cand, nd))
+                    goto out;
+            }
+        }
+    }
+    for (int i = 0; i < cand.n; i++) {
+        const int32_t nd = cand.a[i];
+        int32_t cells[64], corner[64], parent[64] = {0};
+        int m = 0;
+        for (int a = o->fem.adj_start[nd]; a < o->fem.adj_start[nd + 1] && m < 64; a++) {
+            cells[m] = o->fem.adj[a] / 8;
+            corner[m] = o->fem.adj[a] % 8;
+            parent[m] = m;
+            m++;
+        }
+        if (m == 0)
+            continue;
+        for (int a = 0; a < m; a++)
+            for (int b = a + 1; b < m; b++) {
+                int dir;
+                int axis = face_axis(cm, cells[a], cells[b], &dir);
+                if (axis < 0 || in_pairs(fset, nF, cells[a], cells[b]))
+                    continue;
+                if (face_joined(o, cells[a], cells[b], axis, dir))
+                    uf_union(parent, a, b);
+            }
+        /* the group of a + cell keeps the node; the others (the minus side) get copies */
+        int keep = -1;
+        for (int a = 0; a < m && keep < 0; a++)
+            if (label[cells[a]] > 0)
+                keep = uf_find(parent, a);
+        if (keep < 0)
+            keep = uf_find(parent, 0);
+        int32_t copy_of_root[64];
+        for (int a = 0; a < m; a++)
+            copy_of_root[a] = -1;
+        bool split = false;
+        for (int a = 0; a < m; a++) {
+            int r = uf_find(parent, a);
+            if (r == keep)
+                continue;
+            if (copy_of_root[r] < 0) {
+                copy_of_root[r] = n0 + newsrc.n;
+                if (ivec_push(&newsrc, nd) || ivec_push(touched, copy_of_root[r]))
+                    goto out;
+                split = true;
+            }
+            cm->cell_nodes[8 * (size_t)cells[a] + corner[a]] = copy_of_root[r];
+        }
+        if (split && ivec_push(touched, nd))
+            goto out;
+    }
+    if (newsrc.n > 0) {
+        const int n1 = n0 + newsrc.n;
+        if (resize(&cm->node_rest, 3 * sizeof(double), (size_t)n1) ||
+            resize(&o->x, 3 * sizeof(double), (size_t)n1) ||
+            resize(&o->v, 3 * sizeof(double), (size_t)n1) ||
+            resize(&o->mask, 3, (size_t)n1) || resize(&o->contact, 1, (size_t)n1) ||
+            resize(&o->corner_vertex, sizeof(int32_t), (size_t)n1))
+            goto out;
+        for (int j = 0; j < newsrc.n; j++) {
+            const int32_t s = newsrc.a[j], d = n0 + j;
+            memcpy(cm->node_rest + 3 * (size_t)d, cm->node_rest + 3 * (size_t)s,
+                   3 * sizeof(double));
+            memcpy(o->x + 3 * (size_t)d, o->x + 3 * (size_t)s, 3 * sizeof(double));
+            memcpy(o->v + 3 * (size_t)d, o->v + 3 * (size_t)s, 3 * sizeof(double));
+            memcpy(o->mask + 3 * (size_t)d, o->mask + 3 * (size_t)s, 3);
+            o->contact[d] = o->contact[s];
+            o->corner_vertex[d] = -1; /* assigned when the surface is split */
+        }
+        cm->n_nodes = n1;
+    }
+    rc = newsrc.n;
+    *newsrc_out = newsrc;
+    newsrc = (ivec){0};
+out:
+    free(seen);
+    free(cand.a);
+    free(newsrc.a);
+    return rc;
+}
+
+/* After nodes changed: masses, constant forces (gravity plus the old nodes' load shares split
+ * by mass) and every per-node work array at the new size. */
+static int refresh_node_state(cs_world_t *w, cs_object *o, int n_old, const ivec *newsrc)
+{
+    const cs_cubemesh *cm = &o->cm;
+    const int n1 = cm->n_nodes;
+    const double *g = w->def.gravity;
+    double *load = malloc((size_t)n_old * 3 * sizeof *load);
+    double *m_old = malloc((size_t)n_old * sizeof *m_old);
+    if (!load || !m_old) {
+        free(load);
+        free(m_old);
+        return -1;
+    }
+    for (int i = 0; i < n_old; i++) {
+        m_old[i] = o->m[i];
+        for (int a = 0; a < 3; a++)
+            load[3 * i + a] = o->f_const[3 * i + a] - o->m[i] * g[a];
+    }
+    if (resize(&o->m, sizeof(double), (size_t)n1) ||
+        resize(&o->f_const, 3 * sizeof(double), (size_t)n1) ||
+        resize(&o->f, 3 * sizeof(double), (size_t)n1) ||
+        resize(&o->b, 3 * sizeof(double), (size_t)n1) ||
+        resize(&o->v1, 3 * sizeof(double), (size_t)n1) ||
+        resize(&o->blocks, 9 * sizeof(double), (size_t)n1) ||
+        resize(&o->smask, 3, (size_t)n1)) {
+        free(load);
+        free(m_old);
+        return -1;
+    }
+    const double mc = o->mat.density * cm->h * cm->h * cm->h;
+    memset(o->m, 0, (size_t)n1 * sizeof(double));
+    for (int c = 0; c < cm->n_cells; c++)
+        for (int k = 0; k < 8; k++)
+            o->m[cm->cell_nodes[8 * (size_t)c + k]] += mc / 8.0;
+    /* A split node's cells are shared out among its copies, so their masses add up to the
+     * old node's: each copy takes the load share of its mass fraction. */
+    for (int i = 0; i < n1; i++) {
+        const int32_t src = i < n_old ? i : newsrc->a[i - n_old];
+        const double share = m_old[src] > 0 ? o->m[i] / m_old[src] : 0.0;
+        for (int a = 0; a < 3; a++)
+            o->f_const[3 * i + a] = o->m[i] * g[a] + share * load[3 * src + a];
+    }
+    free(load);
+    free(m_old);
+    o->n = n1;
+    o->n_fixed_nodes = 0;
+    for (int i = 0; i < n1; i++)
+        if (o->mask[3 * i] && o->mask[3 * i + 1] && o->mask[3 * i + 2])
+            o->n_fixed_nodes++;
+    cs_cg_work_free(&o->cg);
+    if (cs_cg_work_init(&o->cg, 3 * n1) != 0 || cs_fem_relink(&o->fem, cm) != 0)
+        return -1;
+    o->elastic_energy_valid = false;
+    return 0;
+}
+
+/* ---------------------------------------------------------------- step 3: surface (§3.1) */
+
+/* Are triangles t and u (sharing an edge) separated by this event? */
+static bool tri_cut(const cs_object *o, const int32_t *cn0, const int8_t *label, int32_t ct,
+                    int32_t cu)
+{
+    if (ct == cu)
+        return false;
+    if (label[ct] * label[cu] < 0)
+        return true;
+    /* cells that shared a node before and share none now were separated by the node split */
+    const int32_t *a = cn0 + 8 * (size_t)ct, *b = cn0 + 8 * (size_t)cu;
+    bool before = false;
+    for (int i = 0; i < 8 && !before; i++)
+        for (int j = 0; j < 8; j++)
+            if (a[i] == b[j]) {
+                before = true;
+                break;
+            }
+    return before && !cells_share_node(&o->cm, ct, cu);
+}
+
+static double dist2_cell(const cs_cubemesh *cm, int32_t c, const double p[3])
+{
+    double d = 0;
+    for (int k = 0; k < 3; k++) {
+        double x = cm->origin[k] + cm->h * (cm->cell_ijk[3 * (size_t)c + k] + 0.5) - p[k];
+        d += x * x;
+    }
+    return d;
+}
+
+/*
+ * Split the surface along the crack: vertex groups by uncut edges, one copy per group beyond
+ * the first, rebinding to a cell of the group's side. Fills fam (vertex families) and marks
+ * rewired triangles.
+ */
+static int split_surface(cs_object *o, surf_edit *e, const int32_t *cn0, const int32_t *tris0,
+                         const int8_t *label, const uint8_t *affected_cell, families *fam)
+{
+    cs_surface *s = &o->surf;
+    const int nv = e->nv0, nt = e->nt0;
+    int32_t *vstart = calloc((size_t)nv + 1, sizeof *vstart), *vtris = NULL;
+    uint8_t *vdone = calloc((size_t)nv, 1);
+    int rc = -1;
+    if (!vstart || !vdone)
+        goto out;
+    fam->of_old.a = malloc((size_t)(nv ? nv : 1) * sizeof(int32_t));
+    if (!fam->of_old.a)
+        goto out;
+    fam->of_old.n = fam->of_old.cap = nv;
+    for (int i = 0; i < nv; i++)
+        fam->of_old.a[i] = -1;
+    for (int i = 0; i < 3 * nt; i++)
+        vstart[tris0[i] + 1]++;
+    for (int i = 0; i < nv; i++)
+        vstart[i + 1] += vstart[i];
+    vtris = malloc((size_t)(nt ? nt : 1) * 3 * sizeof *vtris);
+    int32_t *fill = malloc((size_t)(nv ? nv : 1) * sizeof *fill);
+    if (!vtris || !fill) {
+        free(fill);
+        goto out;
+    }
+    memcpy(fill, vstart, (size_t)nv * sizeof *fill);
+    for (int t = 0; t < nt; t++)
+        for (int k = 0; k < 3; k++)
+            vtris[fill[tris0[3 * t + k]]++] = t;
+    free(fill);
+
+    for (int t0 = 0; t0 < nt; t0++) {
+        if (!affected_cell[s->tri_cell[t0]])
+            continue;
+        for (int k0 = 0; k0 < 3; k0++) {
+            const int32_t v = tris0[3 * t0 + k0];
+            if (vdone[v])
+                continue;
+            vdone[v] = 1;
+            const int m = vstart[v + 1] - vstart[v];
+            const int32_t *T = vtris + vstart[v];
+            int32_t pbuf[64], *parent = m <= 64 ? pbuf : malloc((size_t)m * sizeof *parent);
+            if (!parent)
+                goto out;
+            for (int a = 0; a < m; a++)
+                parent[a] = a;
+            for (int a = 0; a < m; a++)
+                for (int b = a + 1; b < m; b++) {
+                    const int32_t *ta = tris0 + 3 * (size_t)T[a], *tb = tris0 + 3 * (size_t)T[b];
+                    bool adjacent = false;
+                    for (int i = 0; i < 3 && !adjacent; i++)
+                        for (int j = 0; j < 3; j++)
+                            if (ta[i] != v && ta[i] == tb[j]) {
+                                adjacent = true;
+                                break;
+                            }
+                    if (adjacent && !tri_cut(o, cn0, label, s->tri_cell[T[a]], s->tri_cell[T[b]]))
+                        uf_union(parent, a, b);
+                }
+            /* groups in order of their root; the group whose cells hold the vertex's binding
+             * keeps the vertex */
+            int n_groups = 0, keep = -1;
+            int32_t roots[64];
+            for (int a = 0; a < m; a++) {
+                int r = uf_find(parent, a);
+                bool known = false;
+                for (int g = 0; g < n_groups; g++)
+                    known |= roots[g] == r;
+                if (!known && n_groups < 64)
+                    roots[n_groups++] = r;
+            }
+            const int32_t vc = s->vert_cell[v];
+            for (int g = 0; g < n_groups && keep < 0; g++)
+                for (int a = 0; a < m; a++)
+                    if (uf_find(parent, a) == roots[g] && s->tri_cell[T[a]] == vc) {
+                        keep = g;
+                        break;
+                    }
+            for (int g = 0; g < n_groups && keep < 0; g++)
+                for (int a = 0; a < m; a++)
+                    if (uf_find(parent, a) == roots[g] &&
+                        cells_share_node(&o->cm, s->tri_cell[T[a]], vc)) {
+                        keep = g;
+                        break;
+                    }
+            if (keep < 0)
+                keep = 0;
+            const int32_t famid = fam->fstart.n;
+            if (ivec_push(&fam->fstart, fam->mcopy.n))
+                goto out_p;
+            fam->of_old.a[v] = famid;
+            for (int gi = 0; gi < n_groups; gi++) {
+                /* keep first so that the family's first member is v */
+                const int g = gi == 0 ? keep : (gi <= keep ? gi - 1 : gi);
+                /* bound cell: v's own if its side, else the group's cell nearest to v */
+                int32_t bind = -1;
+                double bd = INFINITY;
+                bool own = false;
+                if (ivec_push(&fam->mcstart, fam->mcells.n))
+                    goto out_p;
+                for (int a = 0; a < m; a++) {
+                    if (uf_find(parent, a) != roots[g])
+                        continue;
+                    int32_t c = s->tri_cell[T[a]];
+                    if (ivec_push(&fam->mcells, c))
+                        goto out_p;
+                    if (c == vc || cells_share_node(&o->cm, c, vc))
+                        own = true;
+                    double d = dist2_cell(&o->cm, c, s->rest + 3 * (size_t)v);
+                    if (d < bd) {
+                        bd = d;
+                        bind = c;
+                    }
+                }
+                int32_t copy = v;
+                if (gi == 0) {
+                    if (!own) { /* rebind v to its side (its position follows at the next skin) */
+                        double uvw[3], x[3];
+                        skin_point(o, bind, s->rest + 3 * (size_t)v, uvw, x);
+                        s->vert_cell[v] = bind;
+                        memcpy(s->vert_uvw + 3 * (size_t)v, uvw, sizeof uvw);
+                    }
+                } else {
+                    copy = sv_append(e, s->rest + 3 * (size_t)v, bind);
+                    if (copy < 0)
+                        goto out_p;
+                    while (e->vcell.n > fam->of_new.n)
+                        if (ivec_push(&fam->of_new, -1))
+                            goto out_p;
+                    fam->of_new.a[copy - nv] = famid;
+                    for (int a = 0; a < m; a++) {
+                        if (uf_find(parent, a) != roots[g])
+                            continue;
+                        int32_t *tri = s->tris + 3 * (size_t)T[a];
+                        for (int k = 0; k < 3; k++)
+                            if (tris0[3 * (size_t)T[a] + k] == v)
+                                tri[k] = copy;
+                        e->rewired[T[a]] = 1;
+                    }
+                }
+                if (ivec_push(&fam->mcopy, copy))
+                    goto out_p;
+            }
+            if (parent != pbuf)
+                free(parent);
+            continue;
+        out_p:
+            if (parent != pbuf)
+                free(parent);
+            goto out;
+        }
+    }
+    rc = 0;
+out:
+    free(vstart);
+    free(vtris);
+    free(vdone);
+    return rc;
+}
+
+/* ---------------------------------------------------------------- step 4: closing (§3.2) */
+
+#define CORNER_SENTINEL (INT32_MAX - 8)
+
+/* The square of crack face f and its corner nodes on each side, corner k in the positive
+ * sense about n_f (closing.h). */
+static void face_setup(const cs_object *o, const crack_face *f, cs_close_face *cf,
+                       int32_t node1[4], int32_t node2[4], double centre[3])
+{
+    const cs_cubemesh *cm = &o->cm;
+    const int ax = f->axis, u = (ax + 1) % 3, v = (ax + 2) % 3;
+    const int32_t *ijk = cm->cell_ijk + 3 * (size_t)f->c1;
+    memset(cf, 0, sizeof *cf);
+    cf->axis = ax;
+    cf->c1_below = f->c1_below;
+    cf->plane = cm->origin[ax] + cm->h * (ijk[ax] + (f->c1_below ? 1 : 0));
+    for (int k = 0; k < 3; k++) {
+        cf->lo[k] = cm->origin[k] + cm->h * ijk[k];
+        cf->hi[k] = cf->lo[k] + cm->h;
+        centre[k] = cf->lo[k] + 0.5 * cm->h;
+    }
+    centre[ax] = cf->plane;
+    /* (u,v) offsets of the corners in the positive sense about +e_ax, reversed about -e_ax */
+    static const int pos_uv[4][2] = {{0, 0}, {1, 0}, {1, 1}, {0, 1}};
+    static const int neg_uv[4][2] = {{0, 0}, {0, 1}, {1, 1}, {1, 0}};
+    for (int k = 0; k < 4; k++) {
+        const int *uv = f->c1_below ? pos_uv[k] : neg_uv[k];
+        int off[3];
+        off[ax] = f->c1_below ? 1 : 0;
+        off[u] = uv[0];
+        off[v] = uv[1];
+        node1[k] = cm->cell_nodes[8 * (size_t)f->c1 + corner_id(off[0], off[1], off[2])];
+        off[ax] = 1 - off[ax];
+        node2[k] = cm->cell_nodes[8 * (size_t)f->c2 + corner_id(off[0], off[1], off[2])];
+        cf->corner_vertex[k] = CORNER_SENTINEL + k;
+    }
+}
+
+/* A patch: the closing triangles of one crack face for one side. */
+typedef struct patch_list {
+    ivec tri;    /* 3 per triangle */
+    ivec cell;   /* per triangle */
+    ivec group;  /* per triangle: patch group (face·2 + side) */
+} patch_list;
+
+static int close_faces(cs_world_t *w, cs_object *o, surf_edit *e, const int32_t *tris0,
+                       const crack_face *F, int nF, const int8_t *label, const families *fam,
+                       patch_list *pl)
+{
+    const cs_surface *s = &o->surf;
+    ivec cand = {0};
+    uint8_t *side = NULL;
+    int32_t *out = NULL;
+    int cap_side = 0, rc = -1;
+    for (int i = 0; i < nF; i++) {
+        const crack_face *f = &F[i];
+        cs_close_face cf;
+        int32_t n1[4], n2[4];
+        double centre[3];
+        face_setup(o, f, &cf, n1, n2, centre);
+        cand.n = 0;
+        for (int k = s->cell_tri_start[f->c1]; k < s->cell_tri_start[f->c1 + 1]; k++) {
+            int32_t t = s->cell_tri_list[k];
+            if (t < e->nt0 && o->tri_kind[t] == 0 && ivec_push(&cand, t))
+                goto out;
+        }
+        if (cand.n > cap_side) {
+            cap_side = cand.n;
+            if (resize(&side, 1, (size_t)cap_side))
+                goto out;
+        }
+        for (int k = 0; k < cand.n; k++) {
+            int32_t ct = s->tri_cell[cand.a[k]];
+            side[k] = label[ct] > 0 || ct == f->c1 ||
+                      (label[ct] == 0 && cells_share_node(&o->cm, ct, f->c1) &&
+                       !cells_share_node(&o->cm, ct, f->c2));
+        }
+        /* a cell no mesh triangle meets lies inside the surface (seed 000 §2.1) */
+        bool inside = cand.n == 0 || inside_surface(e, centre);
+        for (int k = 0; k < 4; k++)
+            cf.corner_inside[k] = inside;
+        int cap = 8 * cand.n + 16;
+        int32_t *grown = realloc(out, (size_t)cap * 3 * sizeof *out);
+        if (!grown)
+            goto out;
+        out = grown;
+        char why[160];
+        int nt = cs_close_face_triangles(&cf, s->rest, tris0, cand.a, cand.n, side, out, cap,
+                                         why, sizeof why);
+        if (nt < 0)
+            continue; /* the repair closes what is left open */
+        for (int sd = 0; sd < 2; sd++) {
+            const int32_t cell = sd == 0 ? f->c1 : f->c2;
+            const int32_t *nodes = sd == 0 ? n1 : n2;
+            for (int t = 0; t < nt; t++) {
+                int32_t m[3];
+                for (int k = 0; k < 3; k++) {
+                    int32_t id = out[3 * t + k];
+                    if (id >= CORNER_SENTINEL && id < CORNER_SENTINEL + 4)
+                        m[k] = corner_vertex(w, e, nodes[id - CORNER_SENTINEL], cell);
+                    else if (id >= 0 && id < e->nv0 + e->vcell.n)
+                        m[k] = copy_for_cell(o, fam, e->nv0, id, cell);
+                    else
+                        m[k] = -1;
+                    if (m[k] < 0)
+                        goto next_tri;
+                }
+                if (m[0] == m[1] || m[1] == m[2] || m[0] == m[2])
+                    continue;
+                /* t for c1 as given (normal along n_f); t' for c2 reversed */
+                if ((sd == 0 ? ivec_push3(&pl->tri, m[0], m[1], m[2])
+                             : ivec_push3(&pl->tri, m[0], m[2], m[1])) ||
+                    ivec_push(&pl->cell, cell) || ivec_push(&pl->group, 2 * i + sd))
+                    goto out;
+            next_tri:;
+            }
+        }
+    }
+    rc = 0;
+out:
+    free(cand.a);
+    free(side);
+    free(out);
+    return rc;
+}
+
+/* ---------------------------------------------------------------- step 5: repair */
+
+static bool tri_degenerate(const double *a, const double *b, const double *c)
+{
+    double e1[3], e2[3], x[3];
+    for (int k = 0; k < 3; k++) {
+        e1[k] = b[k] - a[k];
+        e2[k] = c[k] - a[k];
+    }
+    x[0] = e1[1] * e2[2] - e1[2] * e2[1];
+    x[1] = e1[2] * e2[0] - e1[0] * e2[2];
+    x[2] = e1[0] * e2[1] - e1[1] * e2[0];
+    double l1 = e1[0] * e1[0] + e1[1] * e1[1] + e1[2] * e1[2];
+    double l2 = e2[0] * e2[0] + e2[1] * e2[1] + e2[2] * e2[2];
+    return x[0] * x[0] + x[1] * x[1] + x[2] * x[2] <= 1e-20 * l1 * l2;
+}
+
+static int cmp64(const void *x, const void *y)
+{
+    int64_t a = *(const int64_t *)x, b = *(const int64_t *)y;
+    return (a > b) - (a < b);
+}
+
+/* Triangle i of the edit: an original (rewired) one or an appended one. */
+static int32_t *edit_tri(surf_edit *e, ivec *tri, int i)
+{
+    return i < e->nt0 ? e->o->surf.tris + 3 * (size_t)i : tri->a + 3 * (size_t)(i - e->nt0);
+}
+
+static int32_t edit_tri_cell(const surf_edit *e, const ivec *cell, int i)
+{
+    return i < e->nt0 ? e->o->surf.tri_cell[i] : cell->a[i - e->nt0];
+}
+
+static bool is_boundary(edge_map *em, int32_t a, int32_t b)
+{
+    return edge_get(em, a, b) == 1 && edge_get(em, b, a) == 0;
+}
+
+/*
+ * Split boundary pinch vertices: where boundary loops pass a vertex more than once, the
+ * triangles around it form separate fans joined only at that vertex. Each fan beyond the
+ * first gets its own copy, so that every boundary loop is simple and its closure is fixed by
+ * the loop alone (the two sides of a crack then close their twin loops identically).
+ */
+static int split_pinches(surf_edit *e, edge_map *em, ivec *tri, const ivec *cell)
+{
+    for (int round = 0; round < 4; round++) {
+        const int nt = e->nt0 + cell->n, nvt = e->nv0 + e->vcell.n;
+        int32_t *outdeg = calloc((size_t)nvt, sizeof *outdeg);
+        ivec pv = {0}, pt = {0};
+        int pinches = 0, rc = -1;
+        if (!outdeg)
+            return -1;
+        for (int t = 0; t < nt; t++) {
+            const int32_t *q = edit_tri(e, tri, t);
+            for (int k = 0; k < 3; k++)
+                if (is_boundary(em, q[k], q[(k + 1) % 3]) && ++outdeg[q[k]] == 2)
+                    pinches++;
+        }
+        if (pinches == 0) {
+            free(outdeg);
+            return 0;
+        }
+        for (int t = 0; t < nt; t++) {
+            const int32_t *q = edit_tri(e, tri, t);
+            for (int k = 0; k < 3; k++)
+                if (outdeg[q[k]] >= 2 && (ivec_push(&pv, q[k]) || ivec_push(&pt, t)))
+                    goto done;
+        }
+        /* group the incident triangles of each pinch vertex: pairs sorted by (vertex,
+         * triangle) by insertion (pinches are few) */
+        {
+            for (int i = 1; i < pv.n; i++) {
+                int32_t x = pv.a[i], y = pt.a[i];
+                int j = i - 1;
+                while (j >= 0 && (pv.a[j] > x || (pv.a[j] == x && pt.a[j] > y))) {
+                    pv.a[j + 1] = pv.a[j];
+                    pt.a[j + 1] = pt.a[j];
+                    j--;
+                }
+                pv.a[j + 1] = x;
+                pt.a[j + 1] = y;
+            }
+        }
+        for (int i = 0; i < pv.n;) {
+            int j = i;
+            while (j < pv.n && pv.a[j] == pv.a[i])
+                j++;
+            const int32_t v = pv.a[i];
+            const int m = j - i;
+            int32_t *parent = malloc((size_t)m * sizeof *parent);
+            if (!parent)
+                goto done;
+            for (int a = 0; a < m; a++)
+                parent[a] = a;
+            for (int a = 0; a < m; a++)
+                for (int b = a + 1; b < m; b++) {
+                    const int32_t *qa = edit_tri(e, tri, pt.a[i + a]);
+                    const int32_t *qb = edit_tri(e, tri, pt.a[i + b]);
+                    for (int x = 0; x < 3; x++)
+                        for (int y = 0; y < 3; y++)
+                            if (qa[x] != v && qa[x] == qb[y] && !is_boundary(em, v, qa[x]) &&
+                                !is_boundary(em, qa[x], v))
+                                uf_union(parent, a, b);
+                }
+            int32_t root0 = uf_find(parent, 0);
+            int32_t roots[64], copies[64];
+            int nr = 0;
+            for (int a = 0; a < m; a++) {
+                int32_t r = uf_find(parent, a);
+                if (r == root0)
+                    continue;
+                int g = 0;
+                while (g < nr && roots[g] != r)
+                    g++;
+                if (g == nr) {
+                    if (nr == 64)
+                        continue;
+                    roots[nr] = r;
+                    copies[nr] = sv_append(e, sv_rest(e, v), edit_tri_cell(e, cell, pt.a[i + a]));
+                    if (copies[nr++] < 0) {
+                        free(parent);
+                        goto done;
+                    }
+                }
+                int32_t *q = edit_tri(e, tri, pt.a[i + a]);
+                tri_edges_add(em, q, -1);
+                for (int k = 0; k < 3; k++)
+                    if (q[k] == v)
+                        q[k] = copies[g];
+                tri_edges_add(em, q, 1);
+                if (pt.a[i + a] < e->nt0)
+                    e->rewired[pt.a[i + a]] = 1;
+            }
+            free(parent);
+            i = j;
+        }
+        rc = 0;
+    done:
+        free(outdeg);
+        free(pv.a);
+        free(pt.a);
+        if (rc)
+            return -1;
+    }
+    return 0;
+}
+
+/*
+ * Close the boundary loops of the edit's triangles (directed edges used once whose reverse is
+ * unused; simple after split_pinches): one triangle for three edges, else a fan around a new
+ * vertex; each closing triangle takes the cell of the triangle across its boundary edge.
+ * Appends to e (vertices) and tri/cell. Returns the number of fans, or -1.
+ */
+static int close_loops(cs_world_t *w, surf_edit *e, edge_map *em, ivec *tri, ivec *cell,
+                       int32_t *n_loops)
+{
+    ivec bsrc = {0}, bdst = {0}, bcell = {0}, walk = {0}, walk_e = {0};
+    int fans = 0, rc = -1;
+    *n_loops = 0;
+    const int nt = e->nt0 + cell->n;
+    for (int t = 0; t < nt; t++) {
+        const int32_t *q = edit_tri(e, tri, t);
+        for (int k = 0; k < 3; k++) {
+            int32_t a = q[k], b = q[(k + 1) % 3];
+            if (is_boundary(em, a, b) &&
+                (ivec_push(&bsrc, a) || ivec_push(&bdst, b) ||
+                 ivec_push(&bcell, edit_tri_cell(e, cell, t))))
+                goto out;
+        }
+    }
+    if (bsrc.n == 0) {
+        rc = 0;
+        goto out;
+    }
+    const int nb = bsrc.n;
+    int64_t *key = malloc((size_t)nb * sizeof *key);
+    uint8_t *used = calloc((size_t)nb, 1);
+    if (!key || !used) {
+        free(key);
+        free(used);
+        goto out;
+    }
+    for (int i = 0; i < nb; i++)
+        key[i] = ((int64_t)bsrc.a[i] << 32) | (uint32_t)i;
+    qsort(key, (size_t)nb, sizeof *key, cmp64);
+    for (int s0 = 0; s0 < nb; s0++) {
+        int start = (int)(key[s0] & 0xffffffff);
+        if (used[start])
+            continue;
+        walk.n = walk_e.n = 0;
+        int cur = start;
+        bool ok = true;
+        for (;;) {
+            used[cur] = 1;
+            if (ivec_push(&walk, bsrc.a[cur]) || ivec_push(&walk_e, cur))
+                goto out2;
+            int32_t next_v = bdst.a[cur];
+            if (next_v == bsrc.a[start])
+                break;
+            int lo = 0, hi = nb;
+            int64_t want = (int64_t)next_v << 32;
+            while (lo < hi) {
+                int mid = (lo + hi) / 2;
+                if (key[mid] < want)
+                    lo = mid + 1;
+                else
+                    hi = mid;
+            }
+            int found = -1;
+            for (int j = lo; j < nb && (key[j] >> 32) == next_v; j++)
+                if (!used[key[j] & 0xffffffff]) {
+                    found = (int)(key[j] & 0xffffffff);
+                    break;
+                }
+            if (found < 0) {
+                ok = false;
+                break;
+            }
+            cur = found;
+        }
+        const int k = walk.n;
+        if (!ok || k < 3)
+            continue; /* cannot happen for oriented triangles without pinches */
+        const int32_t *cyc = walk.a;
+        (*n_loops)++;
+        if (k == 3 && !tri_degenerate(sv_rest(e, cyc[0]), sv_rest(e, cyc[2]), sv_rest(e, cyc[1]))) {
+            if (ivec_push3(tri, cyc[0], cyc[2], cyc[1]) ||
+                ivec_push(cell, bcell.a[walk_e.a[0]]))
+                goto out2;
+            continue;
+        }
+        double c[3] = {0, 0, 0};
+        for (int j = 0; j < k; j++)
+            for (int a = 0; a < 3; a++)
+                c[a] += sv_rest(e, cyc[j])[a] / k;
+        /* a small offset off the loop's mean keeps the fan from being flat; it depends only
+         * on where the loop is, so the two sides of a crack that close twin loops get the
+         * same apex and their volumes cancel */
+        uint64_t r = w->def.seed;
+        for (int a = 0; a < 3; a++)
+            r = mix64(r ^ (uint64_t)llround(c[a] / e->o->cm.h * 1e6));
+        for (int a = 0; a < 3; a++) {
+            r = mix64(r);
+            c[a] += 1e-3 * e->o->cm.h * ((double)(r >> 11) / 9007199254740992.0 - 0.5);
+        }
+        int32_t cv = sv_append(e, c, bcell.a[walk_e.a[0]]);
+        if (cv < 0)
+            goto out2;
+        for (int j = 0; j < k; j++)
+            if (ivec_push3(tri, cv, cyc[(j + 1) % k], cyc[j]) ||
+                ivec_push(cell, bcell.a[walk_e.a[j]]))
+                goto out2;
+        fans++;
+    }
+    rc = fans;
+out2:
+    free(key);
+    free(used);
+out:
+    free(bsrc.a);
+    free(bdst.a);
+    free(bcell.a);
+    free(walk.a);
+    free(walk_e.a);
+    return rc;
+}
+
+/* Append the edit's vertices and the given triangles to the object's surface; record the
+ * change (rewired and appended) and bump the topology version. */
+static int commit_edit(cs_world_t *w, cs_object *o, surf_edit *e, const ivec *tri,
+                       const ivec *cell, bool record)
+{
+    cs_surface *s = &o->surf;
+    const int nva = e->vcell.n, nta = cell->n;
+    const int nv1 = e->nv0 + nva, nt1 = e->nt0 + nta;
+    if (resize(&s->rest, 3 * sizeof(double), (size_t)nv1) ||
+        resize(&s->pos, 3 * sizeof(double), (size_t)nv1) ||
+        resize(&s->vert_uvw, 3 * sizeof(double), (size_t)nv1) ||
+        resize(&s->vert_cell, sizeof(int32_t), (size_t)nv1) ||
+        resize(&s->tris, 3 * sizeof(int32_t), (size_t)nt1) ||
+        resize(&s->tri_cell, sizeof(int32_t), (size_t)nt1) || resize(&o->tri_kind, 1, (size_t)nt1))
+        return -1;
+    if (nva) {
+        memcpy(s->rest + 3 * (size_t)e->nv0, e->rest.a, (size_t)nva * 3 * sizeof(double));
+        memcpy(s->vert_uvw + 3 * (size_t)e->nv0, e->uvw.a, (size_t)nva * 3 * sizeof(double));
+        memcpy(s->vert_cell + e->nv0, e->vcell.a, (size_t)nva * sizeof(int32_t));
+    }
+    if (nta) {
+        memcpy(s->tris + 3 * (size_t)e->nt0, tri->a, (size_t)nta * 3 * sizeof(int32_t));
+        memcpy(s->tri_cell + e->nt0, cell->a, (size_t)nta * sizeof(int32_t));
+        memset(o->tri_kind + e->nt0, 1, (size_t)nta);
+    }
+    s->n_vertices = nv1;
+    s->n_triangles = nt1;
+    cs_surface_skin(s, &o->cm, o->x);
+    if (!record)
+        return rebuild_cell_lists(s, &o->cm);
+    ivec tset_i = {0}, tset_t = {0};
+    int rc = -1;
+    for (int t = 0; t < e->nt0; t++)
+        if (e->rewired[t] && (ivec_push(&tset_i, t) ||
+                              ivec_push3(&tset_t, s->tris[3 * t], s->tris[3 * t + 1],
+                                         s->tris[3 * t + 2])))
+            goto out;
+    cs_topo_change c = {
+        .object_id = (int32_t)o->id, .from_version = o->topology_version,
+        .to_version = o->topology_version + 1, .n_vertices_total = nv1,
+        .n_triangles_total = nt1, .n_vnew = nva, .vnew_xyz = s->pos + 3 * (size_t)e->nv0,
+        .n_tset = tset_i.n, .tset_index = tset_i.a, .tset_tri = tset_t.a, .n_tnew = nta,
+        .tnew = s->tris + 3 * (size_t)e->nt0};
+    if (push_change(w, &c))
+        goto out;
+    o->topology_version++;
+    rc = rebuild_cell_lists(s, &o->cm);
+out:
+    free(tset_i.a);
+    free(tset_t.a);
+    return rc;
+}
+
+static bool any_rewired(const surf_edit *e)
+{
+    for (int t = 0; t < e->nt0; t++)
+        if (e->rewired[t])
+            return true;
+    return false;
+}
+
+/* Accept closing patches greedily (a patch group is dropped if it is degenerate or would use a
+ * directed edge twice), then close what is left open. Commits the edit. */
+static int repair_and_commit(cs_world_t *w, cs_object *o, surf_edit *e, const patch_list *pl,
+                             int *fans, int *closing, bool record)
+{
+    const cs_surface *s = &o->surf;
+    edge_map em;
+    ivec tri = {0}, cell = {0};
+    int rc = -1;
+    if (edge_map_init(&em, (size_t)3 * (e->nt0 + pl->cell.n) + 64))
+        return -1;
+    for (int t = 0; t < e->nt0; t++)
+        tri_edges_add(&em, s->tris + 3 * (size_t)t, 1);
+    for (int i = 0; i < pl->cell.n;) {
+        int j = i;
+        while (j < pl->cell.n && pl->group.a[j] == pl->group.a[i])
+            j++;
+        bool ok = true;
+        for (int t = i; t < j && ok; t++) {
+            const int32_t *q = pl->tri.a + 3 * (size_t)t;
+            if (tri_degenerate(sv_rest(e, q[0]), sv_rest(e, q[1]), sv_rest(e, q[2])))
+                ok = false;
+        }
+        for (int t = i; t < j; t++)
+            tri_edges_add(&em, pl->tri.a + 3 * (size_t)t, 1);
+        for (int t = i; t < j && ok; t++) {
+            const int32_t *q = pl->tri.a + 3 * (size_t)t;
+            for (int k = 0; k < 3; k++) {
+                int32_t a = q[k], b = q[(k + 1) % 3];
+                if (edge_get(&em, a, b) > 1 || edge_get(&em, a, b) + edge_get(&em, b, a) > 2)
+                    ok = false;
+            }
+        }
+        if (!ok) {
+            for (int t = i; t < j; t++)
+                tri_edges_add(&em, pl->tri.a + 3 * (size_t)t, -1);
+        } else {
+            for (int t = i; t < j; t++)
+                if (ivec_push3(&tri, pl->tri.a[3 * t], pl->tri.a[3 * t + 1],
+                               pl->tri.a[3 * t + 2]) ||
+                    ivec_push(&cell, pl->cell.a[t]))
+                    goto out;
+        }
+        i = j;
+    }
+    /* the loops left open: over the original (rewired) triangles and the accepted patches */
+    {
+        int32_t loops = 0;
+        if (split_pinches(e, &em, &tri, &cell) != 0)
+            goto out;
+        int f = close_loops(w, e, &em, &tri, &cell, &loops);
+        if (f < 0)
+            goto out;
+        *fans = f;
+    }
+    *closing = cell.n;
+    if (cell.n == 0 && e->vcell.n == 0 && !record)
+        rc = 0;
+    else if (cell.n == 0 && e->vcell.n == 0 && !any_rewired(e))
+        rc = 0; /* nothing changed: no change to record */
+    else
+        rc = commit_edit(w, o, e, &tri, &cell, record);
+out:
+    edge_map_free(&em);
+    free(tri.a);
+    free(cell.a);
+    return rc;
+}
+
+/* ---------------------------------------------------------------- step 6: pieces */
+
+/* A surface edit of an object with nothing pending (for closing loops only). */
+static int surf_edit_begin(surf_edit *e, cs_object *o)
+{
+    memset(e, 0, sizeof *e);
+    e->o = o;
+    e->nv0 = o->surf.n_vertices;
+    e->nt0 = o->surf.n_triangles;
+    e->rewired = calloc((size_t)(e->nt0 ? e->nt0 : 1), 1);
+    return e->rewired ? 0 : -1;
+}
+
+/* Close whatever boundary loops o's surface has (none, normally). */
+static int close_open_loops(cs_world_t *w, cs_object *o, bool record, int *fans)
+{
+    surf_edit e;
+    patch_list none = {0};
+    int closing = 0;
+    if (surf_edit_begin(&e, o))
+        return -1;
+    int rc = repair_and_commit(w, o, &e, &none, fans, &closing, record);
+    surf_edit_free(&e);
+    return rc;
+}
+
+/*
+ * A new object holding cells `cells` (n of them, indices into o) with their nodes, state and
+ * surface triangles (those whose centroid cell is among them).
+ */
+static cs_object *make_piece(cs_world_t *w, const cs_object *o, const int32_t *cells, int nc,
+                             const int32_t *cell_map)
+{
+    const cs_cubemesh *cm = &o->cm;
+    const cs_surface *s = &o->surf;
+    cs_object *p = calloc(1, sizeof *p);
+    int32_t *nmap = malloc((size_t)o->n * sizeof *nmap);
+    int32_t *vmap = malloc((size_t)(s->n_vertices ? s->n_vertices : 1) * sizeof *vmap);
+    ivec tl = {0}, vl = {0}, nl = {0};
+    if (!p || !nmap || !vmap)
+        goto fail;
+    for (int i = 0; i < o->n; i++)
+        nmap[i] = -1;
+    for (int i = 0; i < s->n_vertices; i++)
+        vmap[i] = -1;
+    p->model = o->model;
+    p->mat = o->mat;
+    p->fracture = o->fracture;
+    p->fracture_radius = o->fracture_radius;
+    /* cube mesh */
+    cs_cubemesh *pm = &p->cm;
+    pm->h = cm->h;
+    memcpy(pm->origin, cm->origin, sizeof pm->origin);
+    pm->n_cells = nc;
+    pm->cell_ijk = malloc((size_t)nc * 3 * sizeof(int32_t));
+    pm->cell_nodes = malloc((size_t)nc * 8 * sizeof(int32_t));
+    if (!pm->cell_ijk || !pm->cell_nodes || cs_ijk_hash_init(&pm->cells, nc) != 0)
+        goto fail;
+    if (o->cell_cut) {
+        p->cell_cut = malloc((size_t)(nc ? nc : 1));
+        if (!p->cell_cut)
+            goto fail;
+        for (int i = 0; i < nc; i++)
+            p->cell_cut[i] = o->cell_cut[cells[i]];
+    }
+    for (int i = 0; i < nc; i++) {
+        const int32_t c = cells[i];
+        memcpy(pm->cell_ijk + 3 * (size_t)i, cm->cell_ijk + 3 * (size_t)c, 3 * sizeof(int32_t));
+        for (int k = 0; k < 8; k++) {
+            int32_t nd = cm->cell_nodes[8 * (size_t)c + k];
+            if (nmap[nd] < 0) {
+                nmap[nd] = nl.n;
+                if (ivec_push(&nl, nd))
+                    goto fail;
+            }
+            pm->cell_nodes[8 * (size_t)i + k] = nmap[nd];
+        }
+        const int32_t *q = pm->cell_ijk + 3 * (size_t)i;
+        if (cs_ijk_hash_put(&pm->cells, q[0], q[1], q[2], i) != 0)
+            goto fail;
+    }
+    pm->n_nodes = p->n = nl.n;
+    pm->node_rest = malloc((size_t)p->n * 3 * sizeof(double));
+    p->corner_vertex = malloc((size_t)p->n * sizeof(int32_t));
+    if (!pm->node_rest || !p->corner_vertex || cs_object_alloc_state(p) != 0)
+        goto fail;
+    for (int i = 0; i < p->n; i++) {
+        const int32_t nd = nl.a[i];
+        memcpy(pm->node_rest + 3 * (size_t)i, cm->node_rest + 3 * (size_t)nd, 3 * sizeof(double));
+        memcpy(p->x + 3 * (size_t)i, o->x + 3 * (size_t)nd, 3 * sizeof(double));
+        memcpy(p->v + 3 * (size_t)i, o->v + 3 * (size_t)nd, 3 * sizeof(double));
+        memcpy(p->f_const + 3 * (size_t)i, o->f_const + 3 * (size_t)nd, 3 * sizeof(double));
+        memcpy(p->mask + 3 * (size_t)i, o->mask + 3 * (size_t)nd, 3);
+        p->m[i] = o->m[nd];
+        p->mass += p->m[i];
+        p->contact[i] = o->contact[nd];
+        if (p->mask[3 * i] && p->mask[3 * i + 1] && p->mask[3 * i + 2])
+            p->n_fixed_nodes++;
+    }
+    /* surface */
+    for (int t = 0; t < s->n_triangles; t++) {
+        if (cell_map[s->tri_cell[t]] < 0)
+            continue;
+        if (ivec_push(&tl, t))
+            goto fail;
+        for (int k = 0; k < 3; k++) {
+            int32_t v = s->tris[3 * (size_t)t + k];
+            if (vmap[v] < 0) {
+                vmap[v] = vl.n;
+                if (ivec_push(&vl, v))
+                    goto fail;
+            }
+        }
+    }
+    cs_surface *ps = &p->surf;
+    const int nv = vl.n, nt = tl.n;
+    ps->n_vertices = nv;
+    ps->n_triangles = nt;
+    ps->rest = malloc((size_t)(nv ? nv : 1) * 3 * sizeof(double));
+    ps->pos = malloc((size_t)(nv ? nv : 1) * 3 * sizeof(double));
+    ps->vert_uvw = malloc((size_t)(nv ? nv : 1) * 3 * sizeof(double));
+    ps->vert_cell = malloc((size_t)(nv ? nv : 1) * sizeof(int32_t));
+    ps->tris = malloc((size_t)(nt ? nt : 1) * 3 * sizeof(int32_t));
+    ps->tri_cell = malloc((size_t)(nt ? nt : 1) * sizeof(int32_t));
+    p->tri_kind = malloc((size_t)(nt ? nt : 1));
+    if (!ps->rest || !ps->pos || !ps->vert_uvw || !ps->vert_cell || !ps->tris || !ps->tri_cell ||
+        !p->tri_kind)
+        goto fail;
+    for (int i = 0; i < nt; i++) {
+        const int32_t t = tl.a[i];
+        for (int k = 0; k < 3; k++)
+            ps->tris[3 * i + k] = vmap[s->tris[3 * (size_t)t + k]];
+        ps->tri_cell[i] = cell_map[s->tri_cell[t]];
+        p->tri_kind[i] = o->tri_kind[t];
+    }
+    for (int i = 0; i < nv; i++) {
+        const int32_t v = vl.a[i];
+        memcpy(ps->rest + 3 * (size_t)i, s->rest + 3 * (size_t)v, 3 * sizeof(double));
+        memcpy(ps->vert_uvw + 3 * (size_t)i, s->vert_uvw + 3 * (size_t)v, 3 * sizeof(double));
+        ps->vert_cell[i] = cell_map[s->vert_cell[v]];
+    }
+    /* a vertex bound to a cell of another piece follows a cell of this one */
+    for (int i = 0; i < nt; i++)
+        for (int k = 0; k < 3; k++) {
+            int32_t v = ps->tris[3 * i + k];
+            if (ps->vert_cell[v] >= 0)
+                continue;
+            double x[3];
+            ps->vert_cell[v] = ps->tri_cell[i];
+            skin_point(p, ps->tri_cell[i], ps->rest + 3 * (size_t)v, ps->vert_uvw + 3 * (size_t)v,
+                       x);
+        }
+    for (int i = 0; i < p->n; i++) {
+        int32_t cv = o->corner_vertex ? o->corner_vertex[nl.a[i]] : -1;
+        p->corner_vertex[i] = cv >= 0 ? vmap[cv] : -1;
+    }
+    cs_surface_skin(ps, pm, p->x);
+    ps->cell_tri_start = NULL;
+    ps->cell_tri_list = NULL;
+    if (rebuild_cell_lists(ps, pm) != 0)
+        goto fail;
+    if (cs_fem_init(&p->fem, pm, p->mat.young, p->mat.poisson,
+                    p->model == CS_MODEL_COROTATIONAL, w->threads) != 0)
+        goto fail;
+    for (int i = 0; i < nc; i++) {
+        memcpy(p->fem.R + 9 * (size_t)i, o->fem.R + 9 * (size_t)cells[i], 9 * sizeof(double));
+        memcpy(p->fem.q + 4 * (size_t)i, o->fem.q + 4 * (size_t)cells[i], 4 * sizeof(double));
+    }
+    /* inputs acting on its cells move with it */
+    for (int i = 0; i < o->n_inputs; i++)
+        if (cell_map[o->inputs[i].cell] >= 0) {
+            p->inputs[p->n_inputs] = o->inputs[i];
+            p->inputs[p->n_inputs++].cell = cell_map[o->inputs[i].cell];
+        }
+    free(nmap);
+    free(vmap);
+    free(tl.a);
+    free(vl.a);
+    free(nl.a);
+    return p;
+fail:
+    free(nmap);
+    free(vmap);
+    free(tl.a);
+    free(vl.a);
+    free(nl.a);
+    cs_object_free_internal(p);
+    return NULL;
+}
+
+/* A name not yet used in the world: "<base>.<k>". */
+static char *piece_name(const cs_world_t *w, const char *base)
+{
+    size_t n = strlen(base) + 24;
+    char *s = malloc(n);
+    if (!s)
+        return NULL;
+    for (unsigned k = 1;; k++) {
+        snprintf(s, n, "%.*s.%u", CS_MAX_NAME - 12, base, k);
+        if (cs_world_find_object(w, s) == CS_NULL_OBJECT)
+            return s;
+    }
+}
+
+/* Make o hold only the cells with cell_map >= 0 (the kept component): its cube mesh, nodes
+ * and state are rebuilt, its surface loses the other pieces' triangles and vertices by one
+ * recorded change (swap-removals and rewired triangles). */
+static int keep_cells(cs_world_t *w, cs_object *o, const int32_t *kept, int nk,
+                      const int32_t *cell_map)
+{
+    cs_surface *s = &o->surf;
+    const int nv = s->n_vertices, nt = s->n_triangles;
+    cs_object *p = make_piece(w, o, kept, nk, cell_map);
+    uint8_t *used = calloc((size_t)(nv ? nv : 1), 1);
+    int32_t *vid = malloc((size_t)(nv ? nv : 1) * sizeof *vid);
+    int32_t *newidx = malloc((size_t)(nv ? nv : 1) * sizeof *newidx);
+    int32_t *tid = malloc((size_t)(nt ? nt : 1) * sizeof *tid);
+    ivec vrem = {0}, trem = {0}, tsi = {0}, tst = {0};
+    int rc = -1;
+    if (!p || !used || !vid || !newidx || !tid)
+        goto out;
+    for (int t = 0; t < nt; t++)
+        if (cell_map[s->tri_cell[t]] >= 0)
+            for (int k = 0; k < 3; k++)
+                used[s->tris[3 * (size_t)t + k]] = 1;
+    for (int t = nt - 1; t >= 0; t--)
+        if (cell_map[s->tri_cell[t]] < 0 && ivec_push(&trem, t))
+            goto out;
+    for (int v = nv - 1; v >= 0; v--)
+        if (!used[v] && ivec_push(&vrem, v))
+            goto out;
+    cs_topo_change c = {.object_id = (int32_t)o->id, .from_version = o->topology_version,
+                        .to_version = o->topology_version + 1,
+                        .n_vertices_total = nv - vrem.n, .n_triangles_total = nt - trem.n,
+                        .n_vremove = vrem.n, .vremove = vrem.a, .n_tremove = trem.n,
+                        .tremove = trem.a};
+    for (int v = 0; v < nv; v++) {
+        vid[v] = v;
+        newidx[v] = -1;
+    }
+    int nv1 = cs_topo_remove_vertices(&c, vid, sizeof *vid, nv);
+    for (int i = 0; i < nv1; i++)
+        newidx[vid[i]] = i;
+    for (int t = 0; t < nt; t++)
+        tid[t] = t;
+    int nt1 = cs_topo_remove_triangles(&c, tid, sizeof *tid, nt);
+    for (int j = 0; j < nt1; j++) {
+        const int32_t *q = s->tris + 3 * (size_t)tid[j];
+        int32_t r[3] = {newidx[q[0]], newidx[q[1]], newidx[q[2]]};
+        if ((r[0] != q[0] || r[1] != q[1] || r[2] != q[2]) &&
+            (ivec_push(&tsi, j) || ivec_push3(&tst, r[0], r[1], r[2])))
+            goto out;
+    }
+    c.n_tset = tsi.n;
+    c.tset_index = tsi.a;
+    c.tset_tri = tst.a;
+    /* the same change on the engine's own arrays */
+    cs_topo_remove_vertices(&c, s->rest, 3 * sizeof(double), nv);
+    cs_topo_remove_vertices(&c, s->pos, 3 * sizeof(double), nv);
+    cs_topo_remove_vertices(&c, s->vert_uvw, 3 * sizeof(double), nv);
+    cs_topo_remove_vertices(&c, s->vert_cell, sizeof(int32_t), nv);
+    cs_topo_remove_triangles(&c, s->tri_cell, sizeof(int32_t), nt);
+    cs_topo_remove_triangles(&c, o->tri_kind, 1, nt);
+    cs_topo_apply_triangles(&c, s->tris, nt);
+    s->n_vertices = nv1;
+    s->n_triangles = nt1;
+    for (int t = 0; t < nt1; t++)
+        s->tri_cell[t] = cell_map[s->tri_cell[t]];
+    for (int v = 0; v < nv1; v++)
+        s->vert_cell[v] = cell_map[s->vert_cell[v]];
+    for (int t = 0; t < nt1; t++)
+        for (int k = 0; k < 3; k++) {
+            int32_t v = s->tris[3 * (size_t)t + k];
+            double x[3];
+            if (s->vert_cell[v] < 0) {
+                s->vert_cell[v] = s->tri_cell[t];
+                skin_point(p, s->tri_cell[t], s->rest + 3 * (size_t)v,
+                           s->vert_uvw + 3 * (size_t)v, x);
+            }
+        }
+    /* corner vertices of the kept nodes, renumbered */
+    for (int i = 0; i < nk; i++)
+        for (int k = 0; k < 8; k++) {
+            int32_t old = o->cm.cell_nodes[8 * (size_t)kept[i] + k];
+            int32_t cv = o->corner_vertex ? o->corner_vertex[old] : -1;
+            p->corner_vertex[p->cm.cell_nodes[8 * (size_t)i + k]] = cv >= 0 ? newidx[cv] : -1;
+        }
+    if (push_change(w, &c))
+        goto out;
+    o->topology_version++;
+    /* o takes p's cube mesh, nodes, state and inputs; p takes o's old ones to free them */
+    {
+        cs_object tmp = *o;
+        cs_surface surf_o = o->surf;
+        uint8_t *kind_o = o->tri_kind;
+        *o = *p;
+        o->id = tmp.id;
+        o->name = tmp.name;
+        o->topology_version = tmp.topology_version;
+        o->surf = surf_o;
+        o->tri_kind = kind_o;
+        o->still_steps = 0;
+        o->sleeping = false;
+        o->elastic_energy_valid = false;
+        tmp.name = NULL;
+        tmp.surf = p->surf;
+        tmp.tri_kind = p->tri_kind;
+        *p = tmp;
+    }
+    cs_surface_skin(&o->surf, &o->cm, o->x);
+    if (rebuild_cell_lists(&o->surf, &o->cm) != 0)
+        goto out;
+    int fans = 0;
+    rc = close_open_loops(w, o, true, &fans);
+out:
+    cs_object_free_internal(p);
+    free(used);
+    free(vid);
+    free(newidx);
+    free(tid);
+    free(vrem.a);
+    free(trem.a);
+    free(tsi.a);
+    free(tst.a);
+    return rc;
+}
+
+/* Split o into face-connected pieces (cells sharing nodes): the largest stays o, every other
+ * becomes a new object announced by an event and a from-version-0 change. */
+static int split_pieces(cs_world_t *w, cs_object *o)
+{
+    const cs_cubemesh *cm = &o->cm;
+    const int nc = cm->n_cells;
+    int32_t *parent = malloc((size_t)o->n * sizeof *parent);
+    int32_t *comp = malloc((size_t)nc * sizeof *comp);
+    int32_t *count = calloc((size_t)nc, sizeof *count);
+    int32_t *cmap = malloc((size_t)nc * sizeof *cmap);
+    int32_t *list = malloc((size_t)nc * sizeof *list);
+    int rc = -1;
+    if (!parent || !comp || !count || !cmap || !list)
+        goto out;
+    for (int i = 0; i < o->n; i++)
+        parent[i] = i;
+    for (int c = 0; c < nc; c++)
+        for (int k = 1; k < 8; k++)
+            uf_union(parent, cm->cell_nodes[8 * (size_t)c], cm->cell_nodes[8 * (size_t)c + k]);
+    /* components numbered by their first cell */
+    int ncomp = 0;
+    int32_t *root_comp = malloc((size_t)o->n * sizeof *root_comp);
+    if (!root_comp)
+        goto out;
+    for (int i = 0; i < o->n; i++)
+        root_comp[i] = -1;
+    for (int c = 0; c < nc; c++) {
+        int r = uf_find(parent, cm->cell_nodes[8 * (size_t)c]);
+        if (root_comp[r] < 0)
+            root_comp[r] = ncomp++;
+        comp[c] = root_comp[r];
+        count[comp[c]]++;
+    }
+    free(root_comp);
+    if (ncomp <= 1) {
+        rc = 0;
+        goto out;
+    }
+    int keep = 0;
+    for (int k = 1; k < ncomp; k++)
+        if (count[k] > count[keep])
+            keep = k;
+    for (int k = 0; k < ncomp; k++) {
+        if (k == keep)
+            continue;
+        int n = 0;
+        for (int c = 0; c < nc; c++) {
+            cmap[c] = comp[c] == k ? n : -1;
+            if (comp[c] == k)
+                list[n++] = c;
+        }
+        cs_object *p = make_piece(w, o, list, n, cmap);
+        if (!p)
+            goto out;
+        p->name = piece_name(w, o->name);
+        if (!p->name || cs_world_append_object(w, p) != 0) {
+            cs_object_free_internal(p);
+            goto out;
+        }
+        int fans = 0;
+        if (close_open_loops(w, p, false, &fans) != 0)
+            goto out;
+        p->topology_version = 1;
+        cs_topo_change ch = {.object_id = (int32_t)p->id, .parent_id = (int32_t)o->id,
+                             .name = p->name, .model = cs_model_name(p->model),
+                             .from_version = 0, .to_version = 1,
+                             .n_vertices_total = p->surf.n_vertices,
+                             .n_triangles_total = p->surf.n_triangles,
+                             .n_vnew = p->surf.n_vertices, .vnew_xyz = p->surf.pos,
+                             .n_tnew = p->surf.n_triangles, .tnew = p->surf.tris};
+        cs_event ev = {.kind = CS_EVENT_NEW_PIECE, .object = p->id, .parent = o->id,
+                       .frame = w->frame};
+        if (push_change(w, &ch) || push_event(w, &ev))
+            goto out;
+    }
+    int n = 0;
+    for (int c = 0; c < nc; c++) {
+        cmap[c] = comp[c] == keep ? n : -1;
+        if (comp[c] == keep)
+            list[n++] = c;
+    }
+    rc = keep_cells(w, o, list, n, cmap);
+out:
+    free(parent);
+    free(comp);
+    free(count);
+    free(cmap);
+    free(list);
+    return rc;
+}
+
+/* ---------------------------------------------------------------- one fracture event */
+
+/* The cell of c's corner at the lattice point of node position p, or -1. */
+static int corner_at(const cs_cubemesh *cm, int32_t c, const double p[3])
+{
+    int off[3];
+    for (int k = 0; k < 3; k++) {
+        long l = lround((p[k] - cm->origin[k]) / cm->h) - cm->cell_ijk[3 * (size_t)c + k];
+        if (l < 0 || l > 1)
+            return -1;
+        off[k] = (int)l;
+    }
+    return corner_id(off[0], off[1], off[2]);
+}
+
+/*
+ * Separate the cells of o labelled +1 from those labelled -1 (seed 000 §2.3 and §3), make the
+ * pieces, record changes and events. *cut receives the number of faces separated (0: nothing
+ * was joined across the labels, nothing changed).
+ */
+static int fracture_event(cs_world_t *w, cs_object *o, const int8_t *label, int32_t centre,
+                          const double normal[3], double stress, int *cut)
+{
+    cs_cubemesh *cm = &o->cm;
+    const int nc = cm->n_cells, n_old = o->n;
+    ivec Fv = {0}, touched = {0}, newsrc = {0};
+    pairkey *fset = NULL;
+    int32_t *cn0 = NULL, *tris0 = NULL;
+    uint8_t *affected = NULL;
+    surf_edit e = {0};
+    families fam = {0};
+    patch_list pl = {0};
+    int rc = CS_ERR_NOMEM;
+    *cut = 0;
+    /* 1. crack faces */
+    for (int c = 0; c < nc; c++) {
+        if (label[c] <= 0)
+            continue;
+        const int32_t *q = cm->cell_ijk + 3 * (size_t)c;
+        for (int axis = 0; axis < 3; axis++)
+            for (int dir = -1; dir <= 1; dir += 2) {
+                int32_t nb[3] = {q[0], q[1], q[2]};
+                nb[axis] += dir;
+                int32_t d = cs_cubemesh_find(cm, nb[0], nb[1], nb[2]);
+                if (d < 0 || label[d] >= 0 || !face_joined(o, c, d, axis, dir))
+                    continue;
+                if (ivec_push(&Fv, c) || ivec_push(&Fv, d) || ivec_push(&Fv, axis) ||
+                    ivec_push(&Fv, dir > 0))
+                    goto out;
+            }
+    }
+    const int nF = Fv.n / 4;
+    if (nF == 0) {
+        rc = CS_OK;
+        goto out;
+    }
+    crack_face *F = (crack_face *)NULL;
+    F = malloc((size_t)nF * sizeof *F);
+    fset = malloc((size_t)nF * sizeof *fset);
+    if (!F || !fset) {
+        free(F);
+        goto out;
+    }
+    for (int i = 0; i < nF; i++) {
+        F[i] = (crack_face){Fv.a[4 * i], Fv.a[4 * i + 1], Fv.a[4 * i + 2], Fv.a[4 * i + 3]};
+        fset[i] = (pairkey){F[i].c1 < F[i].c2 ? F[i].c1 : F[i].c2,
+                            F[i].c1 < F[i].c2 ? F[i].c2 : F[i].c1};
+    }
+    qsort(fset, (size_t)nF, sizeof *fset, cmp_pair);
+    if (!o->cell_cut && !(o->cell_cut = calloc((size_t)nc, 1)))
+        goto out_f;
+    for (int i = 0; i < nF; i++) {
+        const int dir = F[i].c1_below ? 1 : -1;
+        o->cell_cut[F[i].c1] |= face_bit(F[i].axis, dir);
+        o->cell_cut[F[i].c2] |= face_bit(F[i].axis, -dir);
+    }
+    /* state before: cell links and triangles */
+    cn0 = malloc((size_t)nc * 8 * sizeof *cn0);
+    tris0 = malloc((size_t)(o->surf.n_triangles ? o->surf.n_triangles : 1) * 3 * sizeof *tris0);
+    if (!cn0 || !tris0)
+        goto out_f;
+    memcpy(cn0, cm->cell_nodes, (size_t)nc * 8 * sizeof *cn0);
+    memcpy(tris0, o->surf.tris, (size_t)o->surf.n_triangles * 3 * sizeof *tris0);
+    if (!o->corner_vertex) {
+        o->corner_vertex = malloc((size_t)o->n * sizeof *o->corner_vertex);
+        if (!o->corner_vertex)
+            goto out_f;
+        for (int i = 0; i < o->n; i++)
+            o->corner_vertex[i] = -1;
+    }
+    /* 2. nodes */
+    if (split_nodes(o, F, nF, fset, label, &touched, &newsrc) < 0 ||
+        refresh_node_state(w, o, n_old, &newsrc) != 0)
+        goto out_f;
+    /* 3. surface */
+    affected = calloc((size_t)nc, 1);
+    if (!affected)
+        goto out_f;
+    for (int c = 0; c < nc; c++)
+        affected[c] = label[c] != 0;
+    for (int i = 0; i < touched.n; i++) {
+        int32_t nd = touched.a[i];
+        for (int a = o->fem.adj_start[nd]; a < o->fem.adj_start[nd + 1]; a++)
+            affected[o->fem.adj[a] / 8] = 1;
+    }
+    e.o = o;
+    e.nv0 = o->surf.n_vertices;
+    e.nt0 = o->surf.n_triangles;
+    e.rewired = calloc((size_t)(e.nt0 ? e.nt0 : 1), 1);
+    if (!e.rewired || split_surface(o, &e, cn0, tris0, label, affected, &fam) != 0)
+        goto out_f;
+    /* corner vertices of split nodes: each node copy takes the vertex copy on its side */
+    for (int i = 0; i < touched.n; i++) {
+        int32_t nd = touched.a[i];
+        int32_t cv = nd < n_old ? o->corner_vertex[nd] : -1;
+        if (cv < 0)
+            continue;
+        int32_t f = family_of(&fam, e.nv0, cv);
+        if (f < 0)
+            continue;
+        int m0 = fam.fstart.a[f], m1 = f + 1 < fam.fstart.n ? fam.fstart.a[f + 1] : fam.mcopy.n;
+        const double *p = cm->node_rest + 3 * (size_t)nd;
+        for (int m = m0; m < m1; m++) {
+            int c0 = fam.mcstart.a[m], c1 = m + 1 < fam.mcstart.n ? fam.mcstart.a[m + 1]
+                                                                  : fam.mcells.n;
+            for (int k = c0; k < c1; k++) {
+                int corner = corner_at(cm, fam.mcells.a[k], p);
+                if (corner >= 0) {
+                    o->corner_vertex[cm->cell_nodes[8 * (size_t)fam.mcells.a[k] + corner]] =
+                        fam.mcopy.a[m];
+                    break;
+                }
+            }
+        }
+    }
+    /* 4. closing surfaces, 5. repair */
+    if (close_faces(w, o, &e, tris0, F, nF, label, &fam, &pl) != 0)
+        goto out_f;
+    int fans = 0, closing = 0;
+    if (repair_and_commit(w, o, &e, &pl, &fans, &closing, true) != 0)
+        goto out_f;
+    cs_event ev = {.kind = CS_EVENT_FRACTURE, .object = o->id, .frame = w->frame,
+                   .normal = {normal[0], normal[1], normal[2]}, .stress = stress,
+                   .faces_cut = nF, .closing_triangles = closing, .fallback_loops = fans};
+    {
+        const int32_t *nd = cm->cell_nodes + 8 * (size_t)centre;
+        for (int k = 0; k < 8; k++)
+            for (int a = 0; a < 3; a++)
+                ev.point[a] += o->x[3 * (size_t)nd[k] + a] / 8.0;
+    }
+    if (push_event(w, &ev))
+        goto out_f;
+    *cut = nF;
+    o->sleeping = false;
+    o->still_steps = 0;
+    o->elastic_energy_valid = false;
+    /* 6. pieces */
+    rc = split_pieces(w, o) == 0 ? CS_OK : CS_ERR_NOMEM;
+out_f:
+    free(F);
+out:
+    free(Fv.a);
+    free(touched.a);
+    free(newsrc.a);
+    free(fset);
+    free(cn0);
+    free(tris0);
+    free(affected);
+    surf_edit_free(&e);
+    families_free(&fam);
+    free(pl.tri.a);
+    free(pl.cell.a);
+    free(pl.group.a);
+    return rc;
+}
+
+/* ---------------------------------------------------------------- drivers */
+
+/* Current centre of cell c. */
+static void cell_centre(const cs_object *o, int32_t c, double p[3])
+{
+    const int32_t *nd = o->cm.cell_nodes + 8 * (size_t)c;
+    p[0] = p[1] = p[2] = 0;
+    for (int k = 0; k < 8; k++)
+        for (int a = 0; a < 3; a++)
+            p[a] += o->x[3 * (size_t)nd[k] + a] / 8.0;
+}
+
+/* §2.3: label the cells within `radius` of cell `centre` by the side of the plane through its
+ * centre with normal n on which their centres lie (+ on the positive side and on the plane). */
+static int8_t *plane_labels(const cs_object *o, int32_t centre, const double n[3], double radius)
+{
+    const int nc = o->cm.n_cells;
+    int8_t *label = calloc((size_t)nc, 1);
+    if (!label)
+        return NULL;
+    double c0[3];
+    cell_centre(o, centre, c0);
+    const double r2 = radius * radius;
+    for (int c = 0; c < nc; c++) {
+        double p[3];
+        cell_centre(o, c, p);
+        double d[3] = {p[0] - c0[0], p[1] - c0[1], p[2] - c0[2]};
+        if (d[0] * d[0] + d[1] * d[1] + d[2] * d[2] > r2)
+            continue;
+        label[c] = d[0] * n[0] + d[1] * n[1] + d[2] * n[2] >= 0 ? 1 : -1;
+    }
+    return label;
+}
+
+static double effective_radius(const cs_object *o, double radius)
+{
+    double r = radius > 0 ? radius : o->fracture_radius;
+    return fmax(r, 1.01 * o->cm.h); /* at least the face neighbours take part */
+}
+
+int cs_fracture_after_step(cs_world_t *w, cs_object *o)
+{
+    const int nc = o->cm.n_cells;
+    if (nc < 2 || !(o->mat.strength < 1e299))
+        return CS_OK;
+    double *sig = malloc((size_t)nc * sizeof *sig), *dir = malloc((size_t)nc * 3 * sizeof *dir);
+    uint8_t *done = calloc((size_t)nc, 1);
+    int rc = CS_OK;
+    if (!sig || !dir || !done) {
+        rc = CS_ERR_NOMEM;
+        goto out;
+    }
+    for (int c = 0; c < nc; c++)
+        sig[c] = cell_max_stress(o, c, dir + 3 * (size_t)c);
+    const int n_objects = w->n_objects;
+    for (int k = 0; k < w->def.max_fractures; k++) {
+        int best = -1;
+        for (int c = 0; c < nc; c++)
+            if (!done[c] && sig[c] > o->mat.strength && (best < 0 || sig[c] > sig[best]))
+                best = c;
+        if (best < 0)
+            break;
+        int8_t *label = plane_labels(o, best, dir + 3 * (size_t)best,
+                                     effective_radius(o, 0));
+        if (!label) {
+            rc = CS_ERR_NOMEM;
+            break;
+        }
+        for (int c = 0; c < nc; c++)
+            if (label[c])
+                done[c] = 1;
+        int cut = 0;
+        rc = fracture_event(w, o, label, best, dir + 3 * (size_t)best, sig[best], &cut);
+        free(label);
+        if (rc != CS_OK || w->n_objects != n_objects)
+            break; /* pieces renumbered o's cells: the rest waits for the next step */
+    }
+out:
+    free(sig);
+    free(dir);
+    free(done);
+    return rc;
+}
+
 int cs_world_fracture(cs_world_t *w, cs_object_id id, const double point[3],
                       const double normal[3], double radius, char *err, size_t errlen)
 {
-    (void)w; (void)id; (void)point; (void)normal; (void)radius; (void)err; (void)errlen;
-    return CS_ERR_INVALID;
+    if (!w || !point || !normal)
+        return fail(err, errlen, CS_ERR_INVALID, "NULL argument");
+    cs_object *o = cs_world_find_internal(w, id);
+    if (!o)
+        return fail(err, errlen, CS_ERR_UNKNOWN_OBJECT, "no object with id %u", (unsigned)id);
+    double nn = 0;
+    for (int a = 0; a < 3; a++) {
+        if (!isfinite(point[a]) || !isfinite(normal[a]))
+            return fail(err, errlen, CS_ERR_INVALID, "fracture point and normal must be finite");
+        nn += normal[a] * normal[a];
+    }
+    if (!(nn > 1e-24))
+        return fail(err, errlen, CS_ERR_INVALID, "fracture normal must not be zero");
+    if (!(radius >= 0 && isfinite(radius)))
+        return fail(err, errlen, CS_ERR_INVALID, "fracture radius must be >= 0 m, got %g",
+                    radius);
+    cs_fracture_clear_step(w);
+    const double n[3] = {normal[0] / sqrt(nn), normal[1] / sqrt(nn), normal[2] / sqrt(nn)};
+    int best = -1;
+    double bd = INFINITY;
+    for (int c = 0; c < o->cm.n_cells; c++) {
+        double p[3];
+        cell_centre(o, c, p);
+        double d = (p[0] - point[0]) * (p[0] - point[0]) + (p[1] - point[1]) * (p[1] - point[1]) +
+                   (p[2] - point[2]) * (p[2] - point[2]);
+        if (d < bd) {
+            bd = d;
+            best = c;
+        }
+    }
+    int8_t *label = plane_labels(o, best, n, effective_radius(o, radius));
+    if (!label)
+        return fail(err, errlen, CS_ERR_NOMEM, "out of memory");
+    int cut = 0;
+    int rc = fracture_event(w, o, label, best, n, 0.0, &cut);
+    free(label);
+    if (rc != CS_OK)
+        return fail(err, errlen, rc, "fracture of '%s' failed: %s", o->name, cs_status_str(rc));
+    return CS_OK;
 }
 
 int cs_world_cut_face(cs_world_t *w, cs_object_id id, const int32_t ijk[3], int axis,
                       char *err, size_t errlen)
 {
-    (void)w; (void)id; (void)ijk; (void)axis; (void)err; (void)errlen;
-    return CS_ERR_INVALID;
-}
-
-int cs_object_principal_stress(const cs_world_t *w, cs_object_id id, double *sigma,
-                               double *dir, int n)
-{
-    (void)w; (void)id; (void)sigma; (void)dir; (void)n;
-    return CS_ERR_INVALID;
+    if (!w || !ijk)
+        return fail(err, errlen, CS_ERR_INVALID, "NULL argument");
+    cs_object *o = cs_world_find_internal(w, id);
+    if (!o)
+        return fail(err, errlen, CS_ERR_UNKNOWN_OBJECT, "no object with id %u", (unsigned)id);
+    if (axis < 0 || axis > 2)
+        return fail(err, errlen, CS_ERR_INVALID, "axis must be 0, 1 or 2, got %d", axis);
+    int32_t a = cs_cubemesh_find(&o->cm, ijk[0], ijk[1], ijk[2]);
+    int32_t nb[3] = {ijk[0], ijk[1], ijk[2]};
+    nb[axis]++;
+    int32_t b = cs_cubemesh_find(&o->cm, nb[0], nb[1], nb[2]);
+    if (a < 0 || b < 0)
+        return fail(err, errlen, CS_ERR_INVALID,
+                    "object '%s' has no cells (%d,%d,%d) and its +%c neighbour", o->name,
+                    ijk[0], ijk[1], ijk[2], "xyz"[axis]);
+    if (!face_joined(o, a, b, axis, 1))
+        return fail(err, errlen, CS_ERR_INVALID, "the face after cell (%d,%d,%d) along %c is "
+                    "already cut", ijk[0], ijk[1], ijk[2], "xyz"[axis]);
+    cs_fracture_clear_step(w);
+    int8_t *label = calloc((size_t)o->cm.n_cells, 1);
+    if (!label)
+        return fail(err, errlen, CS_ERR_NOMEM, "out of memory");
+    label[a] = 1;
+    label[b] = -1;
+    double n[3] = {0, 0, 0};
+    n[axis] = -1; /* from the + cell towards the − cell is +axis: the + side lies below */
+    int cut = 0;
+    int rc = fracture_event(w, o, label, a, n, 0.0, &cut);
+    free(label);
+    if (rc != CS_OK)
+        return fail(err, errlen, rc, "cut of '%s' failed: %s", o->name, cs_status_str(rc));
+    return CS_OK;
 }

@@ -154,6 +154,8 @@ void cs_object_free_internal(cs_object *o)
         return;
     free(o->name);
     free(o->corner_vertex);
+    free(o->tri_kind);
+    free(o->cell_cut);
     cs_cubemesh_free(&o->cm);
     cs_surface_free(&o->surf);
     cs_fem_free(&o->fem);
@@ -385,6 +387,7 @@ int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *i
     o->model = def->model;
     o->mat = def->material;
     o->fracture = def->fracture;
+    o->topology_version = 1; /* 0 means "no such object yet" in a topology change */
     o->fracture_radius = def->fracture_radius > 0 ? def->fracture_radius : 1.5 * def->cube_size;
     if (!o->name) {
         rc = fail(err, errlen, CS_ERR_NOMEM, "out of memory");
@@ -401,6 +404,11 @@ int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *i
         goto fail;
     }
     memcpy(o->x, o->cm.node_rest, (size_t)o->n * 3 * sizeof(double));
+    o->tri_kind = calloc((size_t)(o->surf.n_triangles ? o->surf.n_triangles : 1), 1);
+    if (!o->tri_kind) {
+        rc = fail(err, errlen, CS_ERR_NOMEM, "out of memory");
+        goto fail;
+    }
     /* Lumped mass: ρh³, an eighth to each corner; gravity on every cube's mass. */
     const double h = def->cube_size, mc = def->material.density * h * h * h;
     for (int c = 0; c < o->cm.n_cells; c++)

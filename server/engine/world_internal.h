@@ -37,6 +37,9 @@ typedef struct cs_object {
     cs_material mat;
     bool fracture;
     double fracture_radius;  /* [m], > 0 */
+    uint8_t *cell_cut;       /* per cell: bit 2·axis + (side > 0) set where a fracture cut
+                                that face; NULL until the first fracture */
+    uint8_t *tri_kind;       /* per surface triangle: 0 from the mesh, 1 made by fracture */
     int32_t *corner_vertex;  /* per node: the surface vertex made for it as a closing-surface
                                 corner (seed 000 §3.2), or -1; NULL until the first fracture */
     cs_cubemesh cm;
