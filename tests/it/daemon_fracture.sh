@@ -4,7 +4,8 @@
 # while cubesim-log records; the daemon publishes the topology changes, and the log alone
 # rebuilds surfaces that pass `cubesim-replay --verify` at every frame and equal the daemon's
 # own --export at the end. The scene has "fracture": true and a weak material, so the pull
-# may break it further on its own.
+# may break it further on its own (strength 1e5 Pa: about four times the clamp's bending stress
+# under its own weight, so it holds until pulled).
 #   fracture_ack              cubesim-push fracture gets "ok"
 #   fracture_logged           the daemon logs one "fracture: ..." info line per event
 #   fracture_status_pieces    status and snapshot messages list the new piece(s)
@@ -32,7 +33,7 @@ cat > beam.json <<'JSON'
   "publish_epsilon": 1e-5, "max_fractures": 4,
   "ground": { "height": -0.3 },
   "materials": { "weak": { "young": 20000.0, "poisson": 0.3, "density": 500.0,
-                           "damping": [1.0, 0.005], "strength": 400.0 } },
+                           "damping": [1.0, 0.005], "strength": 1.0e5 } },
   "objects": [
     { "name": "beam", "model": "corotational", "material": "weak", "cube_size": 0.05,
       "fracture": true, "fracture_radius": 0.08,
@@ -65,7 +66,7 @@ if ! cs_start_daemon --scene beam.json --realtime --export live.obj; then
 fi
 before=$(cs_bus --timeout 5 command snapshot >/dev/null; cs_bus --timeout 5 snapshot)
 sleep 0.3
-out=$("$B/cubesim-push" --lcm "$U" --timeout 5 fracture beam --at 0.2 0.05 0.05 --normal 1 0 0)
+out=$("$B/cubesim-push" --lcm "$U" --timeout 5 fracture beam --at 0.2 0.05 0.05 --normal 1 0 0 --radius 0.15)
 rc=$?
 if [ "$out" = "fracture: invalid argument" ]; then
     echo "SKIP daemon_fracture: the engine does not fracture yet (cs_world_fracture is the stub:" \
@@ -84,11 +85,14 @@ sobj=$(sed -n 's/.*objects=\([0-9]*\).*/\1/p' <<<"$snap")
 [ "${nobj:-0}" -ge 2 ] && [ "${sobj:-0}" -ge 2 ] && cs_pass "fracture_status_pieces ($nobj objects)" \
     || cs_fail fracture_status_pieces "status: $(tr '\n' '|' <<<"$st") snapshot: $snap"
 
-# Pull the broken-off piece (the newest object) away from the clamped part.
+# Pull the broken-off piece (the newest object) away, and pull the clamped part's free end
+# hard enough (up to about 250 N at 0.17 m) to break it on its own (stress test, seed 000 §2.3).
 if [ -n "$piece" ] && [ "$piece" != 1 ]; then
     "$B/cubesim-push" --lcm "$U" --timeout 3 drag "#$piece" --at 0.35 0.05 0.05 --to 0.9 0.05 0.3 \
         --stiffness 20 --for 1.0 >/dev/null || cs_fail fracture_drag "drag of #$piece refused"
 fi
+"$B/cubesim-push" --lcm "$U" --timeout 3 drag beam --at 0.17 0.05 0.05 --to 0.17 0.05 0.6 \
+    --stiffness 500 --for 1.0 >/dev/null || cs_fail fracture_drag "drag of the beam refused"
 sleep 1.5
 n=$(grep -c 'cubesimd: fracture: ' daemon.err)
 [ "$n" -ge 1 ] && cs_pass "fracture_logged ($n events)" || cs_fail fracture_logged "no 'fracture:' line in the daemon log"
