@@ -1618,7 +1618,11 @@ static int commit_edit(cs_world_t *w, cs_object *o, surf_edit *e, const ivec *tr
     }
     s->n_vertices = nv1;
     s->n_triangles = nt1;
-    cs_surface_skin(s, &o->cm, o->x);
+    /* Only the new vertices get positions now. A vertex rebound to a cell of its side keeps
+     * the position it had (and clients hold) until the next step skins it, so the recorded
+     * change is exactly what the engine holds. */
+    if (nva)
+        memcpy(s->pos + 3 * (size_t)e->nv0, e->pos.a, (size_t)nva * 3 * sizeof(double));
     if (!record)
         return rebuild_cell_lists(s, &o->cm);
     ivec tset_i = {0}, tset_t = {0};
@@ -2030,7 +2034,6 @@ static int keep_cells(cs_world_t *w, cs_object *o, const int32_t *kept, int nk,
         tmp.tri_kind = p->tri_kind;
         *p = tmp;
     }
-    cs_surface_skin(&o->surf, &o->cm, o->x);
     if (rebuild_cell_lists(&o->surf, &o->cm) != 0)
         goto out;
     int fans = 0;
