@@ -576,6 +576,21 @@ static int32_t sv_append(surf_edit *e, const double p[3], int32_t cell)
     return e->nv0 + e->vcell.n - 1;
 }
 
+/* Append a copy of vertex v bound to `cell`. It starts where v is now (not where the new
+ * binding would put it), so the surface does not jump at the fracture and the two sides'
+ * closing triangles coincide at this instant too; the next skin moves it with its side. */
+static int32_t sv_append_copy(surf_edit *e, int32_t v, int32_t cell)
+{
+    double p[3], x[3];
+    memcpy(p, sv_rest(e, v), sizeof p);
+    memcpy(x, v < e->nv0 ? e->o->surf.pos + 3 * (size_t)v : e->pos.a + 3 * (size_t)(v - e->nv0),
+           sizeof x);
+    int32_t c = sv_append(e, p, cell);
+    if (c >= 0)
+        memcpy(e->pos.a + 3 * (size_t)(c - e->nv0), x, sizeof x);
+    return c;
+}
+
 static void surf_edit_free(surf_edit *e)
 {
     free(e->rest.a);
@@ -1237,7 +1252,7 @@ static int split_surface(cs_object *o, surf_edit *e, const int32_t *cn0, const i
                         memcpy(s->vert_uvw + 3 * (size_t)v, uvw, sizeof uvw);
                     }
                 } else {
-                    copy = sv_append(e, s->rest + 3 * (size_t)v, bind);
+                    copy = sv_append_copy(e, v, bind);
                     if (copy < 0)
                         goto out_p;
                     while (e->vcell.n > fam->of_new.n)
@@ -1530,7 +1545,7 @@ static int split_pinches(surf_edit *e, edge_map *em, ivec *tri, const ivec *cell
                     if (nr == 64)
                         continue;
                     roots[nr] = r;
-                    copies[nr] = sv_append(e, sv_rest(e, v), edit_tri_cell(e, cell, pt.a[i + a]));
+                    copies[nr] = sv_append_copy(e, v, edit_tri_cell(e, cell, pt.a[i + a]));
                     if (copies[nr++] < 0) {
                         free(parent);
                         goto done;
