@@ -18,14 +18,21 @@
  *
  * Degeneracies, by symbolic perturbation (closing.h): a vertex on the plane lies just on c2's
  * side, so a crossing point there is that vertex exactly, displaced by ε'·off towards the c1
- * end of its edge (off is kept: it directs the zero-length segment of a triangle whose lone
- * vertex is on the plane, and it is the geometry of a cycle that collapsed to one point). f's
- * square is shrunk by ε (ε' << ε): a point on an edge line is outside; of the two edge lines
- * the one across the smaller world axis moves more, which decides clips through a corner;
- * boundary nodes at one position are ordered by where the shrunk line meets their segments.
- * Crossing points are computed from the edge's endpoints in index order, so the two triangles
- * of an edge agree bit for bit; inside-the-square is decided on the points themselves, never
- * on rounded clip parameters.
+ * end of its edge (off is kept: it is the geometry of a cycle that collapsed to one point; the
+ * zero-length segment of a triangle whose lone vertex is on — or rounds onto — the plane is
+ * directed by the limit of P2 - P1). The lattice lines through f's edges are moved by -ε
+ * (ε' << ε), so f's square is [lo, hi) and neighbouring faces tile the plane; of the two
+ * axes the smaller world axis's ε dominates, which decides clips through a corner; boundary
+ * nodes at one position are ordered by where the moved line meets their segments. Crossing
+ * points are computed from the edge's endpoints in index order, so the two triangles of an
+ * edge agree bit for bit; inside-the-square is decided on the points themselves, never on
+ * rounded clip parameters.
+ *
+ * Where the §3.2 heuristics leave freedom we take the choice that keeps the result closed:
+ * a merged node of a vertex lying on the plane sits at the vertex itself; the ear cutter is
+ * steered away from diagonals that repeat a mesh edge and from triangles whose surface
+ * vertices are in a line (taken only if nothing else is left); boundary nodes follow
+ * f->boundary_rule (closing.h).
  *
  * Ear cutting: vertices lying strictly between their neighbours on a straight line are taken
  * out first, the rest is ear-cut, and each taken-out run is fanned back into the one triangle
@@ -336,9 +343,10 @@ static void crossing_point(const frame *fr, const double *rest, int32_t i, int32
         pt[k] = a[ax[k]] + lam * (b[ax[k]] - a[ax[k]]);
 }
 
-static int strictly_inside(const frame *fr, const double *p)
+/* In f's square with the lattice lines moved by -ε: [lo, hi) in both axes. */
+static int in_square(const frame *fr, const double *p)
 {
-    return p[0] > fr->lo[0] && p[0] < fr->hi[0] && p[1] > fr->lo[1] && p[1] < fr->hi[1];
+    return p[0] >= fr->lo[0] && p[0] < fr->hi[0] && p[1] >= fr->lo[1] && p[1] < fr->hi[1];
 }
 
 /* ---------------------------------------------------------------- nodes */
@@ -348,7 +356,9 @@ enum { NODE_EDGE, NODE_BOUND, NODE_CORNER };
 typedef struct {
     double p[2];      /* position on f */
     double q[2];      /* after the one-third move */
-    double off[2];    /* symbolic displacement (see crossing_point) */
+    double off[2];    /* symbolic displacement by ε' (see crossing_point) */
+    double soff[2];   /* symbolic displacement by ε (the moved lattice lines): boundary
+                         nodes and corners; zero for edge nodes */
     double along;     /* boundary nodes: coordinate along the walk on their edge of f */
     double slope;     /* boundary nodes: order among nodes at one position */
     int kind;
@@ -358,6 +368,7 @@ typedef struct {
     int bedge;        /* boundary nodes: edge of f (0..3); corners: corner index */
     int32_t e[2];     /* edge nodes: the mesh edge, smaller index first */
     int32_t tri_v[3]; /* the triangle's vertices (edge and boundary nodes) */
+    int32_t lxy[3];   /* its lone vertex L and the other ends X, Y of its crossing edges */
     int32_t vert;     /* assigned surface vertex */
     int out;          /* next node on its polygon, -1 if none yet */
 } node;
@@ -418,24 +429,25 @@ static int clip_segment(const frame *fr, const double *s, const double *e, clip_
     *ce = (clip_t){0, {0, 0}, -1};
     *cl = (clip_t){1, {0, 0}, -1};
     double d[2] = {e[0] - s[0], e[1] - s[1]};
-    int s_in = strictly_inside(fr, s), e_in = strictly_inside(fr, e);
+    int s_in = in_square(fr, s), e_in = in_square(fr, e);
     for (int j = 0; j < 2; j++)
         for (int hi = 0; hi < 2; hi++) {
             double bound = hi ? fr->hi[j] : fr->lo[j];
-            /* violated: on the line or beyond it */
-            int s_bad = hi ? s[j] >= bound : s[j] <= bound;
-            int e_bad = hi ? e[j] >= bound : e[j] <= bound;
+            /* violated: beyond the line moved by -ε (so a point on a lo line is inside, a
+             * point on a hi line outside) */
+            int s_bad = hi ? s[j] >= bound : s[j] < bound;
+            int e_bad = hi ? e[j] >= bound : e[j] < bound;
             if (s_bad && e_bad)
                 return 0;
             if (!s_bad && !e_bad)
                 continue;
+            /* λ = (bound - ε - s)/d: the symbolic part is -1/d */
             clip_t c = {(bound - s[j]) / d[j], {0, 0}, edge_of(j, hi)};
+            c.c[fr->rank[j]] = -1.0 / d[j];
             if (s_bad) {
-                c.c[fr->rank[j]] = 1.0 / fabs(d[j]);
                 if (clip_less(ce, &c))
                     *ce = c;
             } else {
-                c.c[fr->rank[j]] = -1.0 / fabs(d[j]);
                 if (clip_less(&c, cl))
                     *cl = c;
             }
@@ -463,7 +475,13 @@ static void fill_boundary(const frame *fr, node *nd, const double *s, const doub
     double din[2] = {entering ? e[0] - s[0] : s[0] - e[0], entering ? e[1] - s[1] : s[1] - e[1]};
     double dn = EDGE_N[edge][0] * din[0] + EDGE_N[edge][1] * din[1];
     double dt = EDGE_T[edge][0] * din[0] + EDGE_T[edge][1] * din[1];
-    nd->slope = dn > 0 ? dt / dn : 0;
+    /* the line moves by -ε along its axis: outwards for a lo edge (0, 3), inwards for hi */
+    nd->slope = dn > 0 ? (edge == 0 || edge == 3 ? -dt / dn : dt / dn) : 0;
+    /* s + λ(e - s) on the line moved by -ε along axis j: p - ε (e - s)/(e - s)_j */
+    int j = (edge == 1 || edge == 3) ? 0 : 1;
+    double d[2] = {e[0] - s[0], e[1] - s[1]};
+    nd->soff[0] = -d[0] / d[j];
+    nd->soff[1] = -d[1] / d[j];
 }
 
 /* Walk order of boundary nodes and corners (corners first on their edge). */
@@ -645,6 +663,14 @@ static int flat_tri_veto(const void *ctx, int a, int b, int c)
     return !(nn > 1e-20 * uu * ww);
 }
 
+/* §3.2 rule for a node made by mesh edge (a, b): c1's triangle takes the end off c1's side,
+ * the other side's triangle the end on it. */
+static int32_t edge_rule(const frame *fr, const double *rest, int32_t a, int32_t b, int c1)
+{
+    int a_c1 = side_dist(fr, rest + 3 * (size_t)a) < 0;
+    return (c1 != 0) == a_c1 ? b : a;
+}
+
 /* Corner k of f as node slot i; returns i, or -1 if the caller named no vertex for it. */
 static int add_corner(const cs_close_face *f, const frame *fr, node *nd, int i, int k)
 {
@@ -660,6 +686,7 @@ static int add_corner(const cs_close_face *f, const frame *fr, node *nd, int i, 
     x->vert = f->corner_vertex[k];
     x->p[0] = (k == 1 || k == 2) ? fr->hi[0] : fr->lo[0];
     x->p[1] = (k >= 2) ? fr->hi[1] : fr->lo[1];
+    x->soff[0] = x->soff[1] = -1;
     return i;
 }
 
@@ -691,12 +718,18 @@ static int extract_cycles(node *nd, int nn, int *indeg, int *order, int *start, 
     return 0;
 }
 
-static double node_ring_area(const node *nd, const int *cy, int n, int use_off)
+/* Layout of a node: 0 its position, 1 its ε' offset, 2 its ε offset. */
+static const double *node_xy(const node *x, int layout)
+{
+    return layout == 0 ? x->p : layout == 1 ? x->off : x->soff;
+}
+
+static double node_ring_area(const node *nd, const int *cy, int n, int layout)
 {
     double a = 0;
     for (int i = 0; i < n; i++) {
-        const double *p = use_off ? nd[cy[i]].off : nd[cy[i]].p;
-        const double *q = use_off ? nd[cy[(i + 1) % n]].off : nd[cy[(i + 1) % n]].p;
+        const double *p = node_xy(nd + cy[i], layout);
+        const double *q = node_xy(nd + cy[(i + 1) % n], layout);
         a += p[0] * q[1] - p[1] * q[0];
     }
     return 0.5 * a;
@@ -818,7 +851,7 @@ int cs_close_face_triangles(const cs_close_face *f, const double *rest, const in
         int32_t es = s > 0 ? X : Y, ee = s > 0 ? Y : X;
         clip_t ce, cl;
         if (zero_len) {
-            if (!strictly_inside(&fr, p1))
+            if (!in_square(&fr, p1))
                 continue;
             ce = (clip_t){0, {0, 0}, -1};
             cl = (clip_t){1, {0, 0}, -1};
@@ -834,6 +867,9 @@ int cs_close_face_triangles(const cs_close_face *f, const double *rest, const in
             x->out = -1;
             x->vert = -1;
             memcpy(x->tri_v, t, sizeof x->tri_v);
+            x->lxy[0] = L;
+            x->lxy[1] = X;
+            x->lxy[2] = Y;
             const clip_t *cc = k ? &cl : &ce;
             if (cc->edge < 0) {
                 int32_t ev = k ? ee : es;
@@ -969,10 +1005,18 @@ int cs_close_face_triangles(const cs_close_face *f, const double *rest, const in
     for (int i = 0; i < n_seg_nodes; i++) {
         node *x = nd + i;
         if (x->kind == NODE_EDGE) {
-            const double *pa = rest + 3 * (size_t)x->e[0];
-            int a_c1 = side_dist(&fr, pa) < 0;
-            /* c1's triangle takes the end off c1's side, the other side's the end on it */
-            x->vert = (c1_side[x->cand] != 0) == a_c1 ? x->e[1] : x->e[0];
+            x->vert = edge_rule(&fr, rest, x->e[0], x->e[1], c1_side[x->cand]);
+        } else if (f->boundary_rule == CS_CLOSE_BOUNDARY_SHARED) {
+            /* the vertex the edge rule gives the crossing edge whose point lies on the
+             * upper side of f's edge line: the face on the other side of that line sees the
+             * same triangle, the same line and the same points, and agrees */
+            int j = (x->bedge == 1 || x->bedge == 3) ? 0 : 1;
+            double line = (x->bedge == 1 || x->bedge == 2) ? fr.hi[j] : fr.lo[j];
+            double pa[2], pb[2], oo[2];
+            crossing_point(&fr, rest, x->lxy[0], x->lxy[1], pa, oo);
+            crossing_point(&fr, rest, x->lxy[0], x->lxy[2], pb, oo);
+            int use_b = pb[j] >= line && !(pa[j] >= line);
+            x->vert = edge_rule(&fr, rest, x->lxy[0], x->lxy[use_b ? 2 : 1], c1_side[x->cand]);
         } else {
             const node *o = nd + x->other;
             if (o->kind == NODE_EDGE) {
@@ -1009,12 +1053,19 @@ int cs_close_face_triangles(const cs_close_face *f, const double *rest, const in
     for (int c = 0; c < n_cyc; c++) {
         int s0 = cyc_start[c], len = cyc_start[c + 1] - s0;
         int *cy = order + s0;
-        /* a cycle collapsed to one point (a vertex touching the plane) is laid out by its
-         * symbolic offsets */
-        int use_off = 1;
+        /* a cycle collapsed to one point (a vertex touching the plane, maybe on f's edge
+         * line) is laid out by its symbolic offsets: by ε if it reaches f's boundary (ε'
+         * << ε puts its edge nodes all at the point), else by ε' */
+        int use_off = 1, layout = 0;
         for (int i = 1; i < len && use_off; i++)
             use_off = same_pt(nd[cy[i]].p, nd[cy[0]].p);
-        double ar = node_ring_area(nd, cy, len, use_off);
+        if (use_off) {
+            layout = 1;
+            for (int i = 0; i < len; i++)
+                if (nd[cy[i]].kind != NODE_EDGE)
+                    layout = 2;
+        }
+        double ar = node_ring_area(nd, cy, len, layout);
         if (ar == 0)
             continue;
         /* start at a vertex change so that no run wraps around */
@@ -1031,7 +1082,7 @@ int cs_close_face_triangles(const cs_close_face *f, const double *rest, const in
                 j++;
             int keep = cy[(st + i + (j - i - 1) / 2) % len];
             pol[n_pol_nodes] = keep;
-            const double *src = use_off ? nd[keep].off : nd[keep].q;
+            const double *src = use_off ? node_xy(nd + keep, layout) : nd[keep].q;
             qxy[2 * keep] = src[0];
             qxy[2 * keep + 1] = src[1];
             if (!use_off && nd[keep].kind != NODE_CORNER) {
