@@ -625,7 +625,10 @@ TEST(closing_box_with_vertices_on_the_plane)
 /*
  * A flat crack across a box: a 3×3×3 block (sub = 1) split between layers z < 1 and z > 1,
  * all nine faces closed separately. Corner nodes on the box surface use the surface vertex
- * there (the box's own corner), the others one new vertex per lattice node.
+ * there (the box's own corner), the others one new vertex per lattice node. (With sub >= 2
+ * the rim vertices between lattice points on the box's upper x and y sides stay open: those
+ * sides lie on upper edge lines of faces, which count as outside, and the faces' corners
+ * stand in for them.)
  */
 TEST(closing_flat_crack_across_a_box)
 {
@@ -671,22 +674,25 @@ TEST(closing_flat_crack_across_a_box)
                     f.corner_vertex[k] = node_vert[i + a][j + b];
                     f.corner_inside[k] = 1;
                 }
+                f.boundary_rule = CS_CLOSE_BOUNDARY_SHARED;
                 int n = cs_close_face_triangles(&f, m.v, m.t, cand, nt, side, cl + 3 * ncl, 64,
                                                 err, sizeof err);
-                if (n != 2)
+                if (n < 2 && !bad) {
                     bad = 1;
-                else
+                    snprintf(msg, sizeof msg, "face (%d,%d) gave %d: %s", i, j, n, err);
+                } else if (n > 0) {
                     ncl += n;
+                }
             }
         int save = m.nt;
         m.nt = nt;
-        int ok = !bad && halves_closed(&m, side, cl, ncl, msg, sizeof msg);
+        int ok = bad || halves_closed(&m, side, cl, ncl, msg, sizeof msg);
         m.nt = save;
         free(cand);
         free(side);
         free(cl);
         tm_free(&m);
-        ENSURE_MSG(!bad, "below %d: a face did not give 2 triangles: %s", below, err);
+        ENSURE_MSG(!bad, "below %d: %s", below, msg);
         ENSURE_MSG(ok, "below %d: %s", below, msg);
     }
 }
@@ -798,4 +804,87 @@ TEST(closing_survives_random_soup)
         tm_free(&m);
         ENSURE(n >= -1);
     }
+}
+
+/*
+ * The strong case: a sphere bigger than a cell, cracked along a lattice plane through all the
+ * faces it covers, each face closed on its own. With the shared boundary rule the closings of
+ * neighbouring faces meet and both halves are closed — also with vertices on the crack plane
+ * (z = 0) and a vertex exactly on a lattice line (r = 2.9 puts one at x = 3). (Without the
+ * offsets, r = 2.9 makes one closing triangle flat: two lattice corners and the sphere's top
+ * point happen to lie on one line.)
+ */
+TEST(closing_sphere_across_many_faces_closes)
+{
+    const double radii[] = {0.7, 1.3, 2.2, 2.9};
+    const double heights[] = {0.37, 0.0, -0.5};
+    char err[256], msg[400];
+    for (int lev = 2; lev <= 3; lev++)
+        for (int ri = 0; ri < 4; ri++)
+            for (int hi = 0; hi < 3; hi++)
+                for (int below = 0; below < 2; below++) {
+                    double r = radii[ri], cz = heights[hi];
+                    tmesh m;
+                    icosphere(&m, lev, r, (double[3]){0.1, 0.2, cz});
+                    int nt = m.nt;
+                    face_spec fs0 = {2, below, 0.0, {0, 0, 0}, {0, 0, 0}};
+                    uint8_t *side = malloc((size_t)nt);
+                    int32_t *cand = malloc((size_t)nt * sizeof *cand);
+                    for (int t = 0; t < nt; t++) {
+                        cand[t] = t;
+                        side[t] = centroid_side(&m, t, &fs0);
+                    }
+                    /* corner vertices at the lattice nodes plus a small offset (§3.2's
+                     * random delta vectors) */
+                    int32_t nodev[10][10];
+                    for (int i = 0; i < 10; i++)
+                        for (int j = 0; j < 10; j++)
+                            nodev[i][j] = tm_vert(&m, i - 5 + 0.013 * sin(7.0 * i + j),
+                                                  j - 5 + 0.011 * cos(3.0 * i - 5.0 * j),
+                                                  0.009 * sin(i + 11.0 * j));
+                    int cap = 20000, ncl = 0, fail = 0;
+                    int32_t *cl = malloc(3 * (size_t)cap * sizeof *cl);
+                    for (int i = -5; i < 4 && !fail; i++)
+                        for (int j = -5; j < 4 && !fail; j++) {
+                            cs_close_face f;
+                            memset(&f, 0, sizeof f);
+                            f.axis = 2;
+                            f.c1_below = below;
+                            f.plane = 0;
+                            f.lo[0] = i;
+                            f.lo[1] = j;
+                            f.hi[0] = i + 1;
+                            f.hi[1] = j + 1;
+                            f.boundary_rule = CS_CLOSE_BOUNDARY_SHARED;
+                            int ci[4] = {0, 1, 1, 0}, cj[4] = {0, 0, 1, 1};
+                            for (int k = 0; k < 4; k++) {
+                                int a = i + (below ? ci[k] : cj[k]), b = j + (below ? cj[k] : ci[k]);
+                                f.corner_vertex[k] = nodev[a + 5][b + 5];
+                                double x = a - 0.1, y = b - 0.2;
+                                f.corner_inside[k] = x * x + y * y + cz * cz < r * r;
+                            }
+                            int n = cs_close_face_triangles(&f, m.v, m.t, cand, nt, side,
+                                                            cl + 3 * ncl, cap - ncl, err,
+                                                            sizeof err);
+                            if (n < 0) {
+                                fail = 1;
+                                snprintf(msg, sizeof msg, "face (%d,%d): %s", i, j, err);
+                            } else {
+                                ncl += n;
+                            }
+                        }
+                    int crosses = 0;
+                    for (int t = 0; t < nt; t++)
+                        crosses |= side[t] ? 1 : 2;
+                    int save = m.nt;
+                    m.nt = nt;
+                    int ok = fail || crosses != 3 || halves_closed(&m, side, cl, ncl, msg, sizeof msg);
+                    m.nt = save;
+                    free(side);
+                    free(cand);
+                    free(cl);
+                    tm_free(&m);
+                    ENSURE_MSG(!fail && ok, "level %d r %g z %g below %d: %s", lev, r, cz, below,
+                               msg);
+                }
 }
