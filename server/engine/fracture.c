@@ -1302,6 +1302,10 @@ static void face_setup(const cs_object *o, const crack_face *f, cs_close_face *c
     memset(cf, 0, sizeof *cf);
     cf->axis = ax;
     cf->c1_below = f->c1_below;
+    /* the boundary-node rule that depends only on the triangle and f's edge line, so that the
+     * closings of two opened faces sharing an edge meet (§3.2's own rule picks the vertex by
+     * the other node in each face and leaves cracks across several faces open) */
+    cf->boundary_rule = CS_CLOSE_BOUNDARY_SHARED;
     cf->plane = cm->origin[ax] + cm->h * (ijk[ax] + (f->c1_below ? 1 : 0));
     for (int k = 0; k < 3; k++) {
         cf->lo[k] = cm->origin[k] + cm->h * ijk[k];
