@@ -100,7 +100,8 @@ $(B)/bin/cubesim-%: $(B)/obj/client/cubesim-%.o $(LIBS)
 	@mkdir -p $(dir $@)
 	$(CC) $(OPT) -o $@ $^ $(LDLIBS)
 
-$(B)/bin/cs_unit_tests: $(call obj,$(UNIT_SRC)) $(LIBS)
+# The unit tests also drive the daemon's bus adapter (server/bus.c) through LCM's file provider.
+$(B)/bin/cs_unit_tests: $(call obj,$(UNIT_SRC)) $(call obj,server/bus.c server/dlog.c) $(LIBS)
 	@mkdir -p $(dir $@)
 	$(CC) $(OPT) -o $@ $^ $(LDLIBS)
 

@@ -18,6 +18,7 @@
 #include "cubesim_delta_t.h"
 #include "cubesim_snapshot_t.h"
 #include "cubesim_status_t.h"
+#include "cubesim_topology_t.h"
 
 #define CS_LOG_SYNC 0xEDA1DA01u
 #define CS_LOG_MAX_CHANNEL 1024
@@ -64,7 +65,8 @@ int cs_msg_header(const void *data, int len, cubesim_header_t *h)
         return 0;
     int64_t fp = be64(data);
     if (fp != __cubesim_ack_t_get_hash() && fp != __cubesim_delta_t_get_hash() &&
-        fp != __cubesim_snapshot_t_get_hash() && fp != __cubesim_status_t_get_hash())
+        fp != __cubesim_snapshot_t_get_hash() && fp != __cubesim_status_t_get_hash() &&
+        fp != __cubesim_topology_t_get_hash())
         return 0;
     if (__cubesim_header_t_decode_array(data, 8, len - 8, h, 1) < 0)
         return 0;

@@ -19,6 +19,7 @@
 
 #define CS_CH_SNAPSHOT "CUBESIM_SNAPSHOT"
 #define CS_CH_DELTA "CUBESIM_DELTA"
+#define CS_CH_TOPOLOGY "CUBESIM_TOPOLOGY"
 #define CS_CH_STATUS "CUBESIM_STATUS"
 #define CS_CH_ACK "CUBESIM_ACK"
 #define CS_CH_FORCE "CUBESIM_FORCE"
@@ -31,8 +32,8 @@ double cs_mono_s(void);
 /* A random non-zero 63-bit id (getrandom, falling back to time and pid). */
 int64_t cs_random_id(void);
 
-/* If `data` is a message of a type that carries header_t (ack, delta, snapshot, status, by
- * fingerprint), decode its header into *h and return 1; else 0. */
+/* If `data` is a message of a type that carries header_t (ack, delta, snapshot, status,
+ * topology, by fingerprint), decode its header into *h and return 1; else 0. */
 int cs_msg_header(const void *data, int len, cubesim_header_t *h);
 
 /* Parse a finite double / an int in [lo, hi]; 0 on success, -1 otherwise. */

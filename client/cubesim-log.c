@@ -7,7 +7,9 @@
  * Records every channel matching REGEX (default "CUBESIM_.*", LCM's anchored regex) with the
  * receive time as the event timestamp. Unless --passive, it asks the daemon for a snapshot at
  * start (so a late logger's file can rebuild the surfaces without waiting for a key frame)
- * and again, at most once a second, after it detects lost deltas or a daemon restart.
+ * and again, at most once a second, after it detects lost deltas or topology changes (a
+ * lost CUBESIM_TOPOLOGY message leaves every later delta of that object unusable until the
+ * next snapshot) or a daemon restart.
  * On SIGINT, SIGTERM or after --duration it prints per channel: messages, messages lost
  * (gaps in header.seq), daemon restarts (session_id changes). Exit 0, 2 on usage/file/bus error.
  */
@@ -36,7 +38,7 @@ typedef struct logger {
     int64_t bytes;
     int write_failed;
     cs_seq_table seq;
-    int want_snapshot;   /* a delta loss or restart was seen since the last request */
+    int want_snapshot;   /* a delta/topology loss or restart was seen since the last request */
 } logger;
 
 static void on_message(const lcm_recv_buf_t *rbuf, const char *channel, void *user)
@@ -66,7 +68,8 @@ static void on_message(const lcm_recv_buf_t *rbuf, const char *channel, void *us
     cs_seq_table_note(&lg->seq, channel, has ? &h : NULL);
     for (int i = 0; i < lg->seq.n; i++)
         if (!strcmp(lg->seq.t[i].channel, channel) &&
-            ((!strcmp(channel, CS_CH_DELTA) && lg->seq.t[i].lost > lost0) ||
+            (((!strcmp(channel, CS_CH_DELTA) || !strcmp(channel, CS_CH_TOPOLOGY)) &&
+              lg->seq.t[i].lost > lost0) ||
              lg->seq.t[i].restarts > restarts0))
             lg->want_snapshot = 1;
 }

@@ -7,6 +7,7 @@
  *   cubesim-push pause|resume|reset|snapshot
  *   cubesim-push step N
  *   cubesim-push load SCENE
+ *   cubesim-push fracture OBJECT --at X Y Z --normal NX NY NZ [--radius R]
  *   options: --lcm URL, --timeout S (default 2), --no-wait
  *
  * OBJECT is a name or #id. The client id is random per run, command ids count up from 1.
@@ -50,6 +51,7 @@ static void usage(FILE *f)
             "       cubesim-push pause|resume|reset|snapshot\n"
             "       cubesim-push step N\n"
             "       cubesim-push load SCENE\n"
+            "       cubesim-push fracture OBJECT --at X Y Z --normal NX NY NZ [--radius R]\n"
             "options: --lcm URL  --timeout S (default 2)  --no-wait\n"
             "OBJECT is a name or #id. Exit 0 ok, 1 error ack, 2 usage/bus error, 3 no ack.\n");
 }
@@ -74,8 +76,9 @@ static int parse3(char **argv, int argc, int *i, double v[3], const char *flag)
 int main(int argc, char **argv)
 {
     const char *url = NULL, *verb = NULL, *object = NULL, *arg = NULL;
-    double timeout = 2.0, at[3], force[3], to[3], stiffness = 100.0, seconds = 0.0;
-    int have_at = 0, have_force = 0, have_to = 0, no_wait = 0;
+    double timeout = 2.0, at[3], force[3], to[3], normal[3], stiffness = 100.0, seconds = 0.0;
+    double radius = 0.0;
+    int have_at = 0, have_force = 0, have_to = 0, have_normal = 0, have_radius = 0, no_wait = 0;
     long count = 0;
 
     for (int i = 1; i < argc; i++) {
@@ -104,6 +107,16 @@ int main(int argc, char **argv)
             if (parse3(argv, argc, &i, to, a))
                 return 2;
             have_to = 1;
+        } else if (!strcmp(a, "--normal")) {
+            if (parse3(argv, argc, &i, normal, a))
+                return 2;
+            have_normal = 1;
+        } else if (!strcmp(a, "--radius") && i + 1 < argc) {
+            if (cs_parse_double(argv[++i], &radius) || radius < 0) {
+                fprintf(stderr, "cubesim-push: --radius: '%s' is not a distance >= 0\n", argv[i]);
+                return 2;
+            }
+            have_radius = 1;
         } else if (!strcmp(a, "--stiffness") && i + 1 < argc) {
             if (cs_parse_double(argv[++i], &stiffness) || stiffness <= 0) {
                 fprintf(stderr, "cubesim-push: --stiffness: '%s' is not a number > 0\n", argv[i]);
@@ -132,13 +145,46 @@ int main(int argc, char **argv)
     }
 
     int is_force = !strcmp(verb, "force"), is_drag = !strcmp(verb, "drag");
+    int is_fracture = !strcmp(verb, "fracture");
+    char fracture_arg[512];
     cubesim_force_t fm;
     cubesim_command_t cm;
     memset(&fm, 0, sizeof fm);
     memset(&cm, 0, sizeof cm);
     int64_t client_id = cs_random_id(), command_id = 1;
 
-    if (is_force || is_drag) {
+    if ((have_normal || have_radius) && !is_fracture) {
+        fprintf(stderr, "cubesim-push: --normal and --radius go with fracture\n");
+        return 2;
+    }
+    if (is_fracture) {
+        object = arg;
+        if (!object || !*object || strpbrk(object, " \t\n")) {
+            fprintf(stderr, "cubesim-push: fracture needs an OBJECT (a name without blanks, or "
+                            "#id)\n");
+            return 2;
+        }
+        if (!have_at || !have_normal || have_force || have_to) {
+            fprintf(stderr, "cubesim-push: fracture needs --at X Y Z and --normal NX NY NZ (and "
+                            "no --force/--to)\n");
+            return 2;
+        }
+        if (normal[0] == 0 && normal[1] == 0 && normal[2] == 0) {
+            fprintf(stderr, "cubesim-push: fracture: --normal must not be zero\n");
+            return 2;
+        }
+        int len = snprintf(fracture_arg, sizeof fracture_arg,
+                           "%s %.17g %.17g %.17g %.17g %.17g %.17g %.17g", object, at[0], at[1],
+                           at[2], normal[0], normal[1], normal[2], radius);
+        if (len < 0 || len >= (int)sizeof fracture_arg) {
+            fprintf(stderr, "cubesim-push: fracture: the object name is too long\n");
+            return 2;
+        }
+        cm.client_id = client_id;
+        cm.command_id = command_id;
+        cm.command = "fracture";
+        cm.argument = fracture_arg;
+    } else if (is_force || is_drag) {
         object = arg;
         if (!object || !*object) {
             fprintf(stderr, "cubesim-push: %s needs an OBJECT (name or #id)\n", verb);

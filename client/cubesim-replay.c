@@ -5,17 +5,21 @@
  *   cubesim-replay LOG [--speed X] [--loop] [--start S] [--channels REGEX] [--lcm URL]
  *                      [--paused] [--quiet]
  *   cubesim-replay LOG --export FILE [--frame N]
- *   cubesim-replay LOG --verify
+ *   cubesim-replay LOG --verify [--volume-tol R]
  *
  * Playback republishes every event whose channel matches REGEX (anchored, POSIX extended;
  * default: all) with the log's timing divided by X (0: as fast as possible), from S seconds
  * after the first event. When stdin is a terminal or a pipe it takes single-key commands:
  * p pause/resume, s publish one message (while paused), q quit; SIGINT/SIGTERM quit too.
  *
- * Rebuild reads only CUBESIM_SNAPSHOT and CUBESIM_DELTA and feeds common/surface_state: the
- * surfaces at frame N are the last complete snapshot of the last session/epoch with frame
- * <= N plus every delta of frame <= N after it. --verify checks every object's surface with
- * cs_watertight_check after each frame that changed it.
+ * Rebuild reads only CUBESIM_SNAPSHOT, CUBESIM_TOPOLOGY and CUBESIM_DELTA and feeds
+ * common/surface_state: the surfaces at frame N are the last complete snapshot of the last
+ * session/epoch with frame <= N plus every topology change and delta of frame <= N after it.
+ * --verify checks, after each frame that changed the surfaces, every object as a piece with
+ * cs_check_pieces (closed, oriented, non-degenerate, positive volume); in a frame where a
+ * topology change (fracture) was applied, the pieces that descend from one original object
+ * must also enclose the volume they enclosed in the previous checked frame, within
+ * CS_VERIFY_VOLUME_TOL.
  *
  * Exit: 0 ok; 1 verify failures, export failure or frame not in the log; 2 usage error or a
  * log that is unreadable, foreign, corrupt, truncated or holds no complete snapshot.
@@ -23,6 +27,7 @@
 #include <errno.h>
 #include <inttypes.h>
 #include <limits.h>
+#include <math.h>
 #include <lcm/lcm.h>
 #include <poll.h>
 #include <regex.h>
@@ -37,9 +42,26 @@
 #include "client_util.h"
 #include "cubesim_delta_t.h"
 #include "cubesim_snapshot_t.h"
+#include "cubesim_topology_t.h"
 #include "mesh.h"
 #include "surface_state.h"
 #include "watertight.h"
+
+/*
+ * Relative tolerance on the volume of an object's pieces across a fracture. A fracture cuts
+ * along triangle boundaries and closes both sides with the same generated surface, so the
+ * volume is conserved exactly in exact arithmetic; what the check has to allow for is
+ * (a) float32 positions (about 2^-24 relative per coordinate, ~1e-7 in volume), (b) vertices
+ * that moved less than publish_epsilon and were not resent, and (c) the elastic motion between
+ * the previous checked frame and this one (one publish interval; usually one step), in which
+ * a soft solid's volume changes by its volumetric strain rate times the interval — well under
+ * 1e-4 for the materials and time steps the scenes use. 1e-3 covers all three with a margin
+ * while still catching a lost or duplicated closing surface (which changes the volume by a
+ * whole layer of cubes: ~h/size, 1e-2 and more). It does not cover violent breaks of very
+ * soft solids: a beam of E = 2e4 Pa tearing under its own weight changes volume by up to 2 %
+ * per step as freed pieces spring back (measured); --volume-tol raises it for such logs.
+ */
+#define CS_VERIFY_VOLUME_TOL 1e-3 /* default of --volume-tol */
 
 static volatile sig_atomic_t stop_flag;
 
@@ -53,6 +75,7 @@ typedef struct replay_opts {
     double speed, start;
     int loop, paused, verify, quiet;
     int64_t frame; /* -1: last */
+    double volume_tol; /* relative, >= 0 */
 } replay_opts;
 
 static void usage(FILE *f)
@@ -61,7 +84,7 @@ static void usage(FILE *f)
             "usage: cubesim-replay LOG [--speed X] [--loop] [--start S] [--channels REGEX]\n"
             "                          [--lcm URL] [--paused] [--quiet]\n"
             "       cubesim-replay LOG --export FILE [--frame N]\n"
-            "       cubesim-replay LOG --verify\n"
+            "       cubesim-replay LOG --verify [--volume-tol R]\n"
             "keys while playing (stdin a terminal or pipe): p pause/resume, s step, q quit\n");
 }
 
@@ -107,7 +130,8 @@ static int rebuild_event(rebuild *rb, cs_log *log, int64_t i, char *err, size_t 
 {
     const char *ch = log->channels[log->ev[i].channel];
     int is_snap = !strcmp(ch, CS_CH_SNAPSHOT), is_delta = !strcmp(ch, CS_CH_DELTA);
-    if (!is_snap && !is_delta)
+    int is_topo = !strcmp(ch, CS_CH_TOPOLOGY);
+    if (!is_snap && !is_delta && !is_topo)
         return 0;
     const uint8_t *data;
     if (cs_log_read(log, i, &data, err, errlen))
@@ -133,6 +157,30 @@ static int rebuild_event(rebuild *rb, cs_log *log, int64_t i, char *err, size_t 
             changed = r == CS_SS_APPLIED;
         }
         cubesim_snapshot_t_decode_cleanup(&s);
+    } else if (is_topo) {
+        cubesim_topology_t m;
+        if (cubesim_topology_t_decode(data, 0, log->ev[i].datalen, &m) < 0) {
+            note_bad(rb, i, "CUBESIM_TOPOLOGY message of another type (fingerprint mismatch)");
+            return 0;
+        }
+        note_frame(rb, &m.header);
+        cs_ss_topo t = {ss_header(&m.header), m.change_id, m.chunk, m.n_chunks, m.object_id,
+                        m.parent_id, m.name, m.model, m.from_version, m.to_version,
+                        m.n_vertices_total, m.n_triangles_total, m.total_vremove, m.total_vnew,
+                        m.total_tremove, m.total_tset, m.total_tnew, m.vremove_offset,
+                        m.n_vremove, m.vremove, m.vnew_offset, m.n_vnew_coords, m.vnew_xyz,
+                        m.tremove_offset, m.n_tremove, m.tremove, m.tset_offset, m.n_tset,
+                        m.tset_index, m.n_tset_indices, m.tset_tri, m.tnew_offset,
+                        m.n_tnew_indices, m.tnew};
+        if (rb->frame_limit < 0 || m.header.frame <= rb->frame_limit) {
+            int r = cs_surface_state_apply_topology(&rb->st, &t, msg, sizeof msg);
+            if (r == CS_SS_REJECTED || r == CS_SS_NOMEM)
+                note_bad(rb, i, msg);
+            changed = r == CS_SS_APPLIED;
+        } else {
+            cs_surface_state_note_topology_seq(&rb->st, &t.header);
+        }
+        cubesim_topology_t_decode_cleanup(&m);
     } else {
         cubesim_delta_t d;
         if (cubesim_delta_t_decode(data, 0, log->ev[i].datalen, &d) < 0) {
@@ -160,7 +208,7 @@ static int frame_ends_at(cs_log *log, int64_t i, int64_t frame, char *err, size_
 {
     for (int64_t j = i + 1; j < log->n; j++) {
         const char *ch = log->channels[log->ev[j].channel];
-        if (strcmp(ch, CS_CH_SNAPSHOT) && strcmp(ch, CS_CH_DELTA))
+        if (strcmp(ch, CS_CH_SNAPSHOT) && strcmp(ch, CS_CH_DELTA) && strcmp(ch, CS_CH_TOPOLOGY))
             continue;
         const uint8_t *data;
         if (cs_log_read(log, j, &data, err, errlen))
@@ -173,25 +221,146 @@ static int frame_ends_at(cs_log *log, int64_t i, int64_t frame, char *err, size_
     return 1;
 }
 
-static int verify_state(const cs_surface_state *st, int64_t *failures)
+/* What --verify remembers of the previous checked frame: per object its id, topology
+ * version and enclosed volume. */
+typedef struct verify_ctx {
+    int64_t session_id;
+    int32_t epoch;
+    int64_t topology_applied;  /* st.topology_applied at that frame */
+    int n, cap;
+    int32_t *id, *version;
+    double *volume;
+    int have;
+} verify_ctx;
+
+static void verify_ctx_free(verify_ctx *v)
 {
-    for (int k = 0; k < st->n_objects; k++) {
-        const cs_ss_object *o = &st->objects[k];
-        double *v = cs_ss_object_vertices_double(o);
-        if (!v) {
-            fprintf(stderr, "cubesim-replay: out of memory\n");
-            return -1;
-        }
-        char err[256] = "";
-        cs_watertight_report rep;
-        if (!cs_watertight_check(v, o->nv, o->tris, o->nt, &rep, err, sizeof err)) {
-            printf("frame %" PRId64 " object %" PRId32 " '%s': %s\n", st->frame, o->id, o->name,
-                   err);
-            ++*failures;
-        }
-        free(v);
+    free(v->id);
+    free(v->version);
+    free(v->volume);
+    memset(v, 0, sizeof *v);
+}
+
+/* The original object a piece descends from: its parent chain within the state. */
+static int32_t root_of(const cs_surface_state *st, const cs_ss_object *o)
+{
+    int32_t id = o->id;
+    for (int guard = 0; o && o->parent_id > 0 && guard <= st->n_objects; guard++) {
+        const cs_ss_object *p = cs_surface_state_find(st, o->parent_id);
+        if (!p)
+            return o->parent_id;
+        id = p->id;
+        o = p;
     }
-    return 0;
+    return id;
+}
+
+static int prev_index(const verify_ctx *v, int32_t id)
+{
+    for (int i = 0; i < v->n; i++)
+        if (v->id[i] == id)
+            return i;
+    return -1;
+}
+
+/*
+ * Check one frame: the objects descending from one original object (their parent chains; an
+ * object without a parent is its own original) go to cs_check_pieces together, each a piece
+ * that must be closed, oriented, non-degenerate and of positive volume; if a topology change
+ * was applied since the previous checked frame (same session and epoch) and changed one of
+ * them, their total volume must also equal the previous frame's total of the same objects
+ * within `tol` (--volume-tol). Prints one line if the frame fails. Returns 1 if it failed,
+ * 0 if not, -1 out of memory.
+ */
+static int verify_frame(const cs_surface_state *st, verify_ctx *v, double tol)
+{
+    int n = st->n_objects, nprob = 0;
+    char first[512] = "";
+    double *vol = calloc((size_t)n + 1, sizeof *vol);
+    int32_t *root = calloc((size_t)n + 1, sizeof *root);
+    uint8_t *done = calloc((size_t)n + 1, 1);
+    cs_piece_view *pv = calloc((size_t)n + 1, sizeof *pv);
+    double **verts = calloc((size_t)n + 1, sizeof *verts);
+    int rc = -1;
+    if (!vol || !root || !done || !pv || !verts)
+        goto out;
+    for (int k = 0; k < n; k++) {
+        const cs_ss_object *o = &st->objects[k];
+        if (!(verts[k] = cs_ss_object_vertices_double(o)))
+            goto out;
+        root[k] = root_of(st, o);
+        vol[k] = cs_mesh_volume(verts[k], o->tris, o->nt);
+    }
+    int fractured = v->have && v->session_id == st->session_id && v->epoch == st->epoch &&
+                    st->topology_applied > v->topology_applied;
+    for (int k = 0; k < n; k++) {
+        if (done[k])
+            continue;
+        double before = 0;
+        int np = 0, changed = 0, in_prev = 0;
+        for (int j = k; j < n; j++) {
+            if (root[j] != root[k])
+                continue;
+            const cs_ss_object *o = &st->objects[j];
+            done[j] = 1;
+            pv[np++] = (cs_piece_view){o->name, verts[j], o->nv, o->tris, o->nt};
+            int p = prev_index(v, o->id);
+            if (p < 0 || v->version[p] != o->topology_version)
+                changed = 1;
+            if (p >= 0) {
+                before += v->volume[p];
+                in_prev = 1;
+            }
+        }
+        double expected = fractured && changed && in_prev ? before : NAN;
+        char err[400] = "";
+        if (!cs_check_pieces(pv, np, expected, tol, NULL, err, sizeof err) &&
+            !nprob++) {
+            const cs_ss_object *r = cs_surface_state_find(st, root[k]);
+            snprintf(first, sizeof first, "object %" PRId32 " '%s'%s: %s", root[k],
+                     r ? r->name : "?", np > 1 ? " and its pieces" : "", err);
+        }
+    }
+    /* Remember this frame. */
+    if (n > v->cap) {
+        int32_t *a = realloc(v->id, (size_t)n * sizeof *a);
+        if (a)
+            v->id = a;
+        int32_t *b = realloc(v->version, (size_t)n * sizeof *b);
+        if (b)
+            v->version = b;
+        double *c = realloc(v->volume, (size_t)n * sizeof *c);
+        if (c)
+            v->volume = c;
+        if (!a || !b || !c)
+            goto out;
+        v->cap = n;
+    }
+    for (int k = 0; k < n; k++) {
+        v->id[k] = st->objects[k].id;
+        v->version[k] = st->objects[k].topology_version;
+        v->volume[k] = vol[k];
+    }
+    v->n = n;
+    v->have = 1;
+    v->session_id = st->session_id;
+    v->epoch = st->epoch;
+    v->topology_applied = st->topology_applied;
+    if (nprob)
+        printf("frame %" PRId64 ": %s%s\n", st->frame, first,
+               nprob > 1 ? " (and more problems in this frame)" : "");
+    rc = nprob ? 1 : 0;
+out:
+    if (rc < 0)
+        fprintf(stderr, "cubesim-replay: out of memory\n");
+    for (int k = 0; verts && k < n; k++)
+        free(verts[k]);
+    free(verts);
+    free(pv);
+    free(done);
+    free(root);
+    free(vol);
+    return rc;
 }
 
 static int run_rebuild(const replay_opts *o, cs_log *log)
@@ -202,6 +371,9 @@ static int run_rebuild(const replay_opts *o, cs_log *log)
     rb.frame_limit = o->verify ? -1 : o->frame;
     char err[512];
     int64_t frames_checked = 0, failures = 0, snapshots = 0;
+    verify_ctx vc;
+    memset(&vc, 0, sizeof vc);
+    int dirty = 0;
     int status = 0;
     for (int64_t i = 0; i < log->n; i++) {
         int r = rebuild_event(&rb, log, i, err, sizeof err);
@@ -212,13 +384,20 @@ static int run_rebuild(const replay_opts *o, cs_log *log)
         }
         if (r > 0 && !strcmp(log->channels[log->ev[i].channel], CS_CH_SNAPSHOT))
             snapshots++;
-        if (o->verify && rb.st.valid && r > 0 &&
+        /* A frame is checked once its last message went by, if any of its messages changed
+         * the surfaces (the last one may have been ignored). */
+        if (r > 0)
+            dirty = 1;
+        if (o->verify && rb.st.valid && dirty &&
             frame_ends_at(log, i, rb.st.frame, err, sizeof err)) {
+            dirty = 0;
             frames_checked++;
-            if (verify_state(&rb.st, &failures)) {
+            int vr = verify_frame(&rb.st, &vc, o->volume_tol);
+            if (vr < 0) {
                 status = 2;
                 goto out;
             }
+            failures += vr;
         }
     }
     if (rb.bad_messages)
@@ -237,11 +416,15 @@ static int run_rebuild(const replay_opts *o, cs_log *log)
         goto out;
     }
     if (rb.st.stale)
-        fprintf(stderr, "cubesim-replay: warning: %" PRId64 " delta messages lost since the last "
-                        "snapshot: surfaces may lag the daemon's\n", rb.st.deltas_lost);
+        fprintf(stderr, "cubesim-replay: warning: the surfaces went stale after the last snapshot "
+                        "(messages lost, or a delta or topology change for a topology not held; "
+                        "lost in the whole log: %" PRId64 " deltas, %" PRId64 " topology messages, "
+                        "%" PRId64 " incomplete topology changes): they may lag the daemon's\n",
+                rb.st.deltas_lost, rb.st.topology_lost, rb.st.topology_incomplete);
     if (o->verify) {
-        printf("verify: %" PRId64 " frames checked, %" PRId64 " failures\n", frames_checked,
-               failures);
+        printf("verify: %" PRId64 " frames checked, %" PRId64 " failed (%" PRId64
+               " topology changes applied; volume tolerance %g relative)\n", frames_checked,
+               failures, rb.st.topology_applied, o->volume_tol);
         status = failures ? 1 : 0;
         goto out;
     }
@@ -272,6 +455,7 @@ static int run_rebuild(const replay_opts *o, cs_log *log)
     }
     cs_surface_state_meshes_free(pieces, names, n);
 out:
+    verify_ctx_free(&vc);
     cs_surface_state_free(&rb.st);
     return status;
 }
@@ -475,7 +659,8 @@ int main(int argc, char **argv)
     replay_opts o = {0};
     o.speed = 1.0;
     o.frame = -1;
-    int have_frame = 0;
+    o.volume_tol = CS_VERIFY_VOLUME_TOL;
+    int have_frame = 0, have_tol = 0;
     for (int i = 1; i < argc; i++) {
         const char *a = argv[i];
         int has_val = i + 1 < argc;
@@ -501,6 +686,13 @@ int main(int argc, char **argv)
             }
             o.frame = f;
             have_frame = 1;
+        } else if (!strcmp(a, "--volume-tol") && has_val) {
+            if (cs_parse_double(argv[++i], &o.volume_tol) || o.volume_tol < 0) {
+                fprintf(stderr, "cubesim-replay: --volume-tol: '%s' is not a number >= 0\n",
+                        argv[i]);
+                return 2;
+            }
+            have_tol = 1;
         } else if (!strcmp(a, "--channels") && has_val) {
             o.regex = argv[++i];
         } else if (!strcmp(a, "--lcm") && has_val) {
@@ -531,6 +723,10 @@ int main(int argc, char **argv)
     }
     if (o.export_path && o.verify) {
         fprintf(stderr, "cubesim-replay: --export and --verify are separate modes\n");
+        return 2;
+    }
+    if (have_tol && !o.verify) {
+        fprintf(stderr, "cubesim-replay: --volume-tol goes with --verify\n");
         return 2;
     }
     if (have_frame && !o.export_path) {

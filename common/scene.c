@@ -407,7 +407,8 @@ static int parse_world(sc_ctx *c, const cJSON *root, cs_scene *s)
         get_number(c, root, "", "keyframe_s", &s->keyframe_s, POSITIVE, 0) ||
         get_number(c, root, "", "status_hz", &s->status_hz, POSITIVE, 0) ||
         get_number(c, root, "", "publish_epsilon", &s->publish_epsilon, NONNEG, 0) ||
-        get_number(c, root, "", "max_force", &w->max_force, POSITIVE, 0))
+        get_number(c, root, "", "max_force", &w->max_force, POSITIVE, 0) ||
+        get_int(c, root, "", "max_fractures", &w->max_fractures, 1, 1000000))
         return -1;
     double g = sqrt(w->gravity[0] * w->gravity[0] + w->gravity[1] * w->gravity[1] +
                     w->gravity[2] * w->gravity[2]);
@@ -764,8 +765,8 @@ static int parse_object(sc_ctx *c, const cJSON *o, int index, const char *base_d
                         cs_object_def *d, cs_scene_object_store *st)
 {
     static const char *const keys[] = {"name",  "model", "material", "cube_size", "fracture",
-                                       "box",   "mesh",  "cells",    "fixed",     "loads",
-                                       NULL};
+                                       "fracture_radius", "box", "mesh", "cells", "fixed",
+                                       "loads", NULL};
     char path[SC_PATH], p[SC_PATH], b[48];
     join_index(path, "objects", index);
     if (!cJSON_IsObject(o))
@@ -825,7 +826,9 @@ static int parse_object(sc_ctx *c, const cJSON *o, int index, const char *base_d
         }
     }
     if (get_number(c, o, path, "cube_size", &d->cube_size, POSITIVE, 0) ||
-        get_bool(c, o, path, "fracture", &d->fracture) || parse_fixed(c, o, path, d, st) ||
+        get_bool(c, o, path, "fracture", &d->fracture) ||
+        get_number(c, o, path, "fracture_radius", &d->fracture_radius, NONNEG, 0) ||
+        parse_fixed(c, o, path, d, st) ||
         parse_loads(c, o, path, d, st))
         return -1;
 
@@ -918,7 +921,7 @@ int cs_scene_parse(const char *json, const char *base_dir, cs_scene *out, char *
                                        "ground",     "solver",    "materials",
                                        "objects",    "keyframe_s", "status_hz",
                                        "publish_epsilon", "sleep", "max_force",
-                                       NULL};
+                                       "max_fractures", NULL};
     if (err && errlen)
         err[0] = '\0';
     if (!out)

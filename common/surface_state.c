@@ -5,9 +5,13 @@
  * Owns the assembled objects and one half-built snapshot. Snapshot chunks are checked in full
  * (counts, offsets, finiteness, triangle indices) before anything is copied; every vertex and
  * triangle slot of an object must be filled exactly once for the snapshot to complete, so
- * overlapping or missing chunks can never pass as a complete surface.
+ * overlapping or missing chunks can never pass as a complete surface. Topology changes are
+ * assembled the same way (every item of each of the five arrays filled exactly once), checked
+ * with cs_topo_check and applied with common/topo.c on copies, so a change is applied whole
+ * or not at all.
  */
 #include "surface_state.h"
+#include "topo.h"
 
 #include <inttypes.h>
 #include <math.h>
@@ -37,6 +41,24 @@ struct cs_ss_pending {
     double sim_time;
     int n_obj;
     cs_ss_pobj *obj;    /* capacity max(n_objects, 1) */
+};
+
+/* A topology change being assembled: its identity (from the first chunk), the five arrays
+ * at full size, and a fill flag per item. */
+struct cs_ss_tpending {
+    int64_t session_id;
+    int32_t epoch;
+    int32_t change_id, n_chunks, n_got;
+    uint8_t *got;            /* 1 per chunk */
+    int64_t frame;
+    double sim_time;
+    int32_t object_id, parent_id, from_version, to_version, nv_total, nt_total;
+    char *name, *model;
+    int32_t total[5];        /* vremove, vnew, tremove, tset, tnew (items) */
+    int32_t filled[5];
+    uint8_t *fill[5];        /* 1 per item */
+    int32_t *vremove, *tremove, *tset_index, *tset_tri, *tnew;
+    float *vnew;
 };
 
 static char *dup_str(const char *s)
@@ -80,6 +102,24 @@ static void pending_free(cs_ss_pending *p)
     free(p);
 }
 
+static void tpending_free(cs_ss_tpending *p)
+{
+    if (!p)
+        return;
+    free(p->got);
+    free(p->name);
+    free(p->model);
+    for (int k = 0; k < 5; k++)
+        free(p->fill[k]);
+    free(p->vremove);
+    free(p->tremove);
+    free(p->tset_index);
+    free(p->tset_tri);
+    free(p->tnew);
+    free(p->vnew);
+    free(p);
+}
+
 void cs_surface_state_init(cs_surface_state *st)
 {
     memset(st, 0, sizeof *st);
@@ -89,6 +129,7 @@ void cs_surface_state_free(cs_surface_state *st)
 {
     objects_free(st->objects, st->n_objects);
     pending_free(st->pending);
+    tpending_free(st->tpending);
     cs_surface_state_init(st);
 }
 
@@ -101,6 +142,8 @@ static void drop_pending(cs_surface_state *st)
 /* Forget the objects (a new session or epoch made them meaningless). */
 static void invalidate(cs_surface_state *st)
 {
+    tpending_free(st->tpending);
+    st->tpending = NULL;
     objects_free(st->objects, st->n_objects);
     st->objects = NULL;
     st->n_objects = 0;
@@ -290,6 +333,11 @@ static int complete(cs_surface_state *st)
     for (int i = 0; i < p->n_obj; i++) {
         objs[i] = p->obj[i].o;
         memset(&p->obj[i].o, 0, sizeof p->obj[i].o);
+        /* Snapshots do not carry parents: keep what topology changes of this epoch said
+         * (observe() already emptied the state if the session or epoch changed). */
+        for (int j = 0; j < st->n_objects; j++)
+            if (st->objects[j].id == objs[i].id)
+                objs[i].parent_id = st->objects[j].parent_id;
     }
     objects_free(st->objects, st->n_objects);
     st->objects = objs;
@@ -471,7 +519,9 @@ int cs_surface_state_apply_delta(cs_surface_state *st, const cs_ss_delta *d, cha
     }
     cs_ss_object *o = find_mut(st, d->object_id);
     if (!o) {
+        /* Perhaps a piece whose topology message was lost: ask for a snapshot. */
         snprintf(err, errlen, "delta for unknown object %" PRId32, d->object_id);
+        st->stale = 1;
         return CS_SS_REJECTED;
     }
     if (d->topology_version != o->topology_version) {
@@ -600,4 +650,363 @@ int cs_surface_state_to_meshes(const cs_surface_state *st, cs_mesh **pieces, cha
     *names = nm;
     *n = k;
     return 0;
+}
+
+/* ---------------------------------------------------------------- topology changes */
+
+void cs_surface_state_note_topology_seq(cs_surface_state *st, const cs_ss_header *h)
+{
+    if (!st->have_topo_seq || h->session_id != st->topo_session) {
+        st->have_topo_seq = 1;
+        st->topo_session = h->session_id;
+        st->last_topo_seq = h->seq;
+        return;
+    }
+    if (h->seq > st->last_topo_seq + 1) {
+        st->topology_lost += h->seq - st->last_topo_seq - 1;
+        st->stale = 1;
+    }
+    if (h->seq > st->last_topo_seq)
+        st->last_topo_seq = h->seq;
+}
+
+static void drop_tpending(cs_surface_state *st)
+{
+    tpending_free(st->tpending);
+    st->tpending = NULL;
+}
+
+/* A slice [off, off + n) of an array of `total` items, with its data present if n > 0. */
+static int slice_ok(int32_t off, int32_t n, int32_t total, const void *data)
+{
+    return n >= 0 && off >= 0 && (int64_t)off + n <= total && (n == 0 || data);
+}
+
+/* Every field of a topology chunk that can be checked on its own. */
+static int check_topo_chunk(const cs_ss_topo *t, char *err, size_t errlen)
+{
+    const int32_t tot[5] = {t->total_vremove, t->total_vnew, t->total_tremove, t->total_tset,
+                            t->total_tnew};
+    if (t->n_chunks < 1 || t->n_chunks > CS_SS_MAX_CHUNKS || t->chunk < 0 ||
+        t->chunk >= t->n_chunks) {
+        snprintf(err, errlen, "topology change %" PRId32 ": chunk %" PRId32 " of %" PRId32
+                 " out of range", t->change_id, t->chunk, t->n_chunks);
+        return -1;
+    }
+    if (t->object_id <= 0 || t->parent_id < 0 || t->from_version < 0 ||
+        t->to_version <= t->from_version) {
+        snprintf(err, errlen, "topology change %" PRId32 ": object %" PRId32 ", parent %" PRId32
+                 ", version %" PRId32 " -> %" PRId32 " impossible", t->change_id, t->object_id,
+                 t->parent_id, t->from_version, t->to_version);
+        return -1;
+    }
+    int bad = t->n_vertices_total < 0 || t->n_vertices_total > CS_SS_MAX_ELEMS / 3 ||
+              t->n_triangles_total < 0 || t->n_triangles_total > CS_SS_MAX_ELEMS / 3;
+    for (int k = 0; k < 5; k++)
+        bad |= tot[k] < 0 || tot[k] > CS_SS_MAX_ELEMS / 3;
+    if (bad) {
+        snprintf(err, errlen, "topology change %" PRId32 " of object %" PRId32
+                 ": a total is out of range", t->change_id, t->object_id);
+        return -1;
+    }
+    if (t->from_version == 0 && (t->total_vremove || t->total_tremove || t->total_tset)) {
+        snprintf(err, errlen, "topology change %" PRId32 ": new object %" PRId32
+                 " removes or rewires items", t->change_id, t->object_id);
+        return -1;
+    }
+    if (t->n_vnew_coords % 3 || t->n_tset_indices != 3 * (int64_t)t->n_tset ||
+        t->n_tnew_indices % 3 ||
+        !slice_ok(t->vremove_offset, t->n_vremove, tot[0], t->vremove) ||
+        !slice_ok(t->vnew_offset, t->n_vnew_coords / 3, tot[1], t->vnew_xyz) ||
+        !slice_ok(t->tremove_offset, t->n_tremove, tot[2], t->tremove) ||
+        !slice_ok(t->tset_offset, t->n_tset, tot[3], t->tset_index) ||
+        (t->n_tset && !t->tset_tri) ||
+        !slice_ok(t->tnew_offset, t->n_tnew_indices / 3, tot[4], t->tnew)) {
+        snprintf(err, errlen, "topology change %" PRId32 " of object %" PRId32 ": chunk %" PRId32
+                 " has a slice that does not fit the totals", t->change_id, t->object_id,
+                 t->chunk);
+        return -1;
+    }
+    char what[96];
+    snprintf(what, sizeof what, "topology change %" PRId32 " of object %" PRId32, t->change_id,
+             t->object_id);
+    return check_floats(t->vnew_xyz, t->n_vnew_coords, err, errlen, what);
+}
+
+static cs_ss_tpending *tpending_new(const cs_ss_topo *t)
+{
+    cs_ss_tpending *p = calloc(1, sizeof *p);
+    if (!p)
+        return NULL;
+    p->session_id = t->header.session_id;
+    p->epoch = t->header.epoch;
+    p->change_id = t->change_id;
+    p->n_chunks = t->n_chunks;
+    p->object_id = t->object_id;
+    p->parent_id = t->parent_id;
+    p->from_version = t->from_version;
+    p->to_version = t->to_version;
+    p->nv_total = t->n_vertices_total;
+    p->nt_total = t->n_triangles_total;
+    const int32_t tot[5] = {t->total_vremove, t->total_vnew, t->total_tremove, t->total_tset,
+                            t->total_tnew};
+    int ok = 1;
+    for (int k = 0; k < 5; k++) {
+        p->total[k] = tot[k];
+        p->fill[k] = calloc((size_t)tot[k] + 1, 1);
+        ok &= p->fill[k] != NULL;
+    }
+    p->got = calloc((size_t)t->n_chunks, 1);
+    p->name = dup_str(t->name);
+    p->model = dup_str(t->model);
+    p->vremove = malloc((size_t)tot[0] * sizeof(int32_t) + 1);
+    p->vnew = malloc(3 * (size_t)tot[1] * sizeof(float) + 1);
+    p->tremove = malloc((size_t)tot[2] * sizeof(int32_t) + 1);
+    p->tset_index = malloc((size_t)tot[3] * sizeof(int32_t) + 1);
+    p->tset_tri = malloc(3 * (size_t)tot[3] * sizeof(int32_t) + 1);
+    p->tnew = malloc(3 * (size_t)tot[4] * sizeof(int32_t) + 1);
+    if (!ok || !p->got || !p->name || !p->model || !p->vremove || !p->vnew || !p->tremove ||
+        !p->tset_index || !p->tset_tri || !p->tnew) {
+        tpending_free(p);
+        return NULL;
+    }
+    return p;
+}
+
+/* Does chunk t belong to the change p is assembling (same identity and totals)? */
+static int tpending_agrees(const cs_ss_tpending *p, const cs_ss_topo *t)
+{
+    return p->n_chunks == t->n_chunks && p->object_id == t->object_id &&
+           p->parent_id == t->parent_id && p->from_version == t->from_version &&
+           p->to_version == t->to_version && p->nv_total == t->n_vertices_total &&
+           p->nt_total == t->n_triangles_total && p->total[0] == t->total_vremove &&
+           p->total[1] == t->total_vnew && p->total[2] == t->total_tremove &&
+           p->total[3] == t->total_tset && p->total[4] == t->total_tnew &&
+           !strcmp(p->name, t->name ? t->name : "") && !strcmp(p->model, t->model ? t->model : "");
+}
+
+/* Mark items [off, off+n) of array k filled; -1 if one already was. */
+static int fill_items(cs_ss_tpending *p, int k, int32_t off, int32_t n)
+{
+    for (int32_t i = 0; i < n; i++)
+        if (p->fill[k][off + i])
+            return -1;
+    if (n)
+        memset(p->fill[k] + off, 1, (size_t)n);
+    p->filled[k] += n;
+    return 0;
+}
+
+static int store_chunk(cs_ss_tpending *p, const cs_ss_topo *t)
+{
+    if (fill_items(p, 0, t->vremove_offset, t->n_vremove) ||
+        fill_items(p, 1, t->vnew_offset, t->n_vnew_coords / 3) ||
+        fill_items(p, 2, t->tremove_offset, t->n_tremove) ||
+        fill_items(p, 3, t->tset_offset, t->n_tset) ||
+        fill_items(p, 4, t->tnew_offset, t->n_tnew_indices / 3))
+        return -1;
+    if (t->n_vremove)
+        memcpy(p->vremove + t->vremove_offset, t->vremove, (size_t)t->n_vremove * 4);
+    if (t->n_vnew_coords)
+        memcpy(p->vnew + 3 * (size_t)t->vnew_offset, t->vnew_xyz, (size_t)t->n_vnew_coords * 4);
+    if (t->n_tremove)
+        memcpy(p->tremove + t->tremove_offset, t->tremove, (size_t)t->n_tremove * 4);
+    if (t->n_tset) {
+        memcpy(p->tset_index + t->tset_offset, t->tset_index, (size_t)t->n_tset * 4);
+        memcpy(p->tset_tri + 3 * (size_t)t->tset_offset, t->tset_tri, (size_t)t->n_tset * 12);
+    }
+    if (t->n_tnew_indices)
+        memcpy(p->tnew + 3 * (size_t)t->tnew_offset, t->tnew, (size_t)t->n_tnew_indices * 4);
+    return 0;
+}
+
+/* Apply the complete change p. Returns a cs_ss_result; the state changes only on APPLIED. */
+static int apply_change(cs_surface_state *st, const cs_ss_tpending *p, char *err, size_t errlen)
+{
+    cs_ss_object *o = find_mut(st, p->object_id);
+    if (p->from_version == 0 ? o != NULL : o == NULL) {
+        if (o && o->topology_version >= p->to_version) {
+            snprintf(err, errlen, "topology change %" PRId32 ": object %" PRId32
+                     " is already held at version %" PRId32, p->change_id, p->object_id,
+                     o->topology_version);
+            return CS_SS_IGNORED;
+        }
+        snprintf(err, errlen, "topology change %" PRId32 ": object %" PRId32 " %s",
+                 p->change_id, p->object_id,
+                 o ? "is held already but the change creates it" : "is not held");
+        st->stale = 1;
+        return CS_SS_IGNORED;
+    }
+    if (o && o->topology_version != p->from_version) {
+        if (o->topology_version >= p->to_version) {
+            snprintf(err, errlen, "topology change %" PRId32 " of object %" PRId32
+                     " is older than the held version %" PRId32, p->change_id, p->object_id,
+                     o->topology_version);
+            return CS_SS_IGNORED;
+        }
+        snprintf(err, errlen, "topology change %" PRId32 " of object %" PRId32 " is from version %"
+                 PRId32 ", the state has %" PRId32 " (a change was missed)", p->change_id,
+                 p->object_id, p->from_version, o->topology_version);
+        st->stale = 1;
+        return CS_SS_IGNORED;
+    }
+    int nv = o ? o->nv : 0, nt = o ? o->nt : 0;
+    double *vnew = malloc(3 * (size_t)p->total[1] * sizeof *vnew + 1);
+    if (!vnew) {
+        snprintf(err, errlen, "out of memory applying topology change %" PRId32, p->change_id);
+        return CS_SS_NOMEM;
+    }
+    for (size_t i = 0; i < 3 * (size_t)p->total[1]; i++)
+        vnew[i] = p->vnew[i];
+    cs_topo_change c = {p->object_id, p->parent_id, p->name, p->model,
+                        (uint32_t)p->from_version, (uint32_t)p->to_version, p->nv_total,
+                        p->nt_total, p->total[0], p->vremove, p->total[1], vnew,
+                        p->total[2], p->tremove, p->total[3], p->tset_index, p->tset_tri,
+                        p->total[4], p->tnew};
+    char why[200];
+    if (cs_topo_check(&c, nv, nt, why, sizeof why)) {
+        free(vnew);
+        snprintf(err, errlen, "topology change %" PRId32 " of object %" PRId32 ": %s",
+                 p->change_id, p->object_id, why);
+        st->stale = 1;
+        return CS_SS_REJECTED;
+    }
+    free(vnew);
+    /* Work on copies so that a failed allocation changes nothing. */
+    size_t vcap = (size_t)(nv > p->nv_total ? nv : p->nv_total);
+    size_t tcap = (size_t)(nt > p->nt_total ? nt : p->nt_total);
+    float *xyz = malloc(3 * vcap * sizeof *xyz + 1);
+    int32_t *tris = malloc(3 * tcap * sizeof *tris + 1);
+    char *name = NULL, *model = NULL;
+    cs_ss_object *objs = NULL;
+    if (!o) {
+        name = dup_str(p->name);
+        model = dup_str(p->model);
+        objs = realloc(st->objects, (size_t)(st->n_objects + 1) * sizeof *objs);
+        if (objs)
+            st->objects = objs; /* same contents, one more slot: harmless if we stop here */
+    }
+    if (!xyz || !tris || (!o && (!name || !model || !objs))) {
+        free(xyz);
+        free(tris);
+        free(name);
+        free(model);
+        snprintf(err, errlen, "out of memory applying topology change %" PRId32, p->change_id);
+        return CS_SS_NOMEM;
+    }
+    if (nv)
+        memcpy(xyz, o->xyz, 3 * (size_t)nv * sizeof *xyz);
+    if (nt)
+        memcpy(tris, o->tris, 3 * (size_t)nt * sizeof *tris);
+    int nv1 = cs_topo_remove_vertices(&c, xyz, 3 * sizeof *xyz, nv);
+    if (p->total[1])
+        memcpy(xyz + 3 * (size_t)nv1, p->vnew, 3 * (size_t)p->total[1] * sizeof *xyz);
+    cs_topo_apply_triangles(&c, tris, nt);
+    if (!o) {
+        o = &st->objects[st->n_objects++];
+        memset(o, 0, sizeof *o);
+        o->id = p->object_id;
+        o->parent_id = p->parent_id;
+        o->name = name;
+        o->model = model;
+    }
+    free(o->xyz);
+    free(o->tris);
+    o->xyz = xyz;
+    o->tris = tris;
+    o->nv = p->nv_total;
+    o->nt = p->nt_total;
+    o->topology_version = p->to_version;
+    st->frame = p->frame;
+    st->sim_time = p->sim_time;
+    st->topology_applied++;
+    return CS_SS_APPLIED;
+}
+
+int cs_surface_state_apply_topology(cs_surface_state *st, const cs_ss_topo *t, char *err,
+                                    size_t errlen)
+{
+    cs_surface_state_note_topology_seq(st, &t->header);
+    if (check_topo_chunk(t, err, errlen)) {
+        cs_ss_tpending *p = st->tpending;
+        if (p && p->session_id == t->header.session_id && p->change_id == t->change_id)
+            drop_tpending(st);
+        st->stale = 1; /* whatever it was, a change may have been lost with it */
+        return CS_SS_REJECTED;
+    }
+    if (observe(st, &t->header)) {
+        snprintf(err, errlen, "topology change of epoch %" PRId32 " is older than epoch %" PRId32,
+                 t->header.epoch, st->epoch);
+        return CS_SS_IGNORED;
+    }
+    if (!st->valid) {
+        snprintf(err, errlen, "topology change for object %" PRId32 " before any snapshot",
+                 t->object_id);
+        return CS_SS_IGNORED;
+    }
+    if (t->header.frame < st->frame) {
+        snprintf(err, errlen, "topology change of frame %" PRId64 " is older than the state's "
+                 "frame %" PRId64, t->header.frame, st->frame);
+        return CS_SS_IGNORED;
+    }
+    cs_ss_tpending *p = st->tpending;
+    if (p && (p->session_id != t->header.session_id || p->epoch != t->header.epoch ||
+              p->change_id != t->change_id)) {
+        /* Chunks of one change are sent back to back: another change means a chunk of this
+         * one was lost. */
+        st->topology_incomplete++;
+        st->stale = 1;
+        drop_tpending(st);
+        p = NULL;
+    }
+    if (p && !tpending_agrees(p, t)) {
+        snprintf(err, errlen, "topology change %" PRId32 ": chunk %" PRId32
+                 " disagrees with an earlier chunk on the object, versions or totals",
+                 t->change_id, t->chunk);
+        drop_tpending(st);
+        st->stale = 1;
+        return CS_SS_REJECTED;
+    }
+    if (!p) {
+        p = st->tpending = tpending_new(t);
+        if (!p) {
+            snprintf(err, errlen, "out of memory for topology change %" PRId32, t->change_id);
+            st->stale = 1;
+            return CS_SS_NOMEM;
+        }
+    }
+    if (p->got[t->chunk]) {
+        snprintf(err, errlen, "topology change %" PRId32 ": duplicate chunk %" PRId32,
+                 t->change_id, t->chunk);
+        return CS_SS_IGNORED;
+    }
+    if (store_chunk(p, t)) {
+        snprintf(err, errlen, "topology change %" PRId32 ": chunk %" PRId32
+                 " overlaps an earlier chunk", t->change_id, t->chunk);
+        drop_tpending(st);
+        st->stale = 1;
+        return CS_SS_REJECTED;
+    }
+    p->got[t->chunk] = 1;
+    if (p->n_got++ == 0 || t->header.frame > p->frame) {
+        p->frame = t->header.frame;
+        p->sim_time = t->header.sim_time;
+    }
+    if (p->n_got < p->n_chunks)
+        return CS_SS_PENDING;
+    for (int k = 0; k < 5; k++) {
+        if (p->filled[k] != p->total[k]) {
+            snprintf(err, errlen, "topology change %" PRId32 ": its %" PRId32 " chunks carry %"
+                     PRId32 " of %" PRId32 " items of array %d", t->change_id, p->n_chunks,
+                     p->filled[k], p->total[k], k);
+            drop_tpending(st);
+            st->stale = 1;
+            return CS_SS_REJECTED;
+        }
+    }
+    int r = apply_change(st, p, err, errlen);
+    drop_tpending(st);
+    if (r == CS_SS_NOMEM)
+        st->stale = 1;
+    return r;
 }

@@ -1,9 +1,10 @@
 /*
  * surface_state.h — what a client holds of the daemon's world, rebuilt from the bus.
  *
- * Owns: per object its id, name, model, topology_version, float32 surface positions and
- * triangles (DESIGN.md "Bus"). Fed with decoded CUBESIM_SNAPSHOT chunks and CUBESIM_DELTA
- * messages; it makes no LCM calls itself, so tests drive it directly.
+ * Owns: per object its id, name, model, parent (for pieces), topology_version, float32 surface
+ * positions and triangles (DESIGN.md "Bus"). Fed with decoded CUBESIM_SNAPSHOT chunks,
+ * CUBESIM_TOPOLOGY chunks and CUBESIM_DELTA messages; it makes no LCM calls itself, so tests
+ * drive it directly.
  *
  * Invariants
  * - `objects` is the last complete snapshot with every accepted delta applied on top; every
@@ -12,9 +13,17 @@
  *   snapshot_id) arrived, in any order; a chunk of a newer snapshot drops a half-built one.
  * - A delta is applied only to the same session, epoch, object and topology_version, and only
  *   whole: a delta with any bad field changes nothing.
+ * - A topology change (lcmtypes/topology_t.lcm, common/topo.h) is applied only when all its
+ *   chunks arrived, only to the same session and epoch, only to an object whose
+ *   topology_version is its from_version (a new piece: to an id not yet held), only after
+ *   cs_topo_check passed, and only whole. It bumps the object's topology_version to
+ *   to_version; a new piece becomes a new object (appended, remembering its parent).
  * - A message of a new session or epoch invalidates the state (valid = 0, stale = 1) until the
- *   next complete snapshot of that session and epoch; a gap in header.seq on CUBESIM_DELTA
- *   marks it stale (the client should ask for a snapshot). A stale state is still applied to.
+ *   next complete snapshot of that session and epoch; a gap in header.seq on CUBESIM_DELTA or
+ *   CUBESIM_TOPOLOGY, a topology change left incomplete, rejected or whose from_version does
+ *   not follow the object's version marks it stale (the client should ask for a snapshot:
+ *   deltas for a topology it does not hold are ignored until then). A stale state is still
+ *   applied to.
  *
  * Every malformed input is rejected with CS_SS_REJECTED and a one-line message; nothing here
  * prints, aborts or trusts a count it did not check.
@@ -69,8 +78,33 @@ typedef struct cs_ss_delta {
     const float *xyz;
 } cs_ss_delta;
 
+/* One CUBESIM_TOPOLOGY message (a chunk of one topology change), borrowed views; the fields
+ * mean what lcmtypes/topology_t.lcm says. */
+typedef struct cs_ss_topo {
+    cs_ss_header header;
+    int32_t change_id, chunk, n_chunks;
+    int32_t object_id, parent_id;
+    const char *name, *model;
+    int32_t from_version, to_version, n_vertices_total, n_triangles_total;
+    int32_t total_vremove, total_vnew, total_tremove, total_tset, total_tnew;
+    int32_t vremove_offset, n_vremove;
+    const int32_t *vremove;
+    int32_t vnew_offset, n_vnew_coords;
+    const float *vnew_xyz;
+    int32_t tremove_offset, n_tremove;
+    const int32_t *tremove;
+    int32_t tset_offset, n_tset;
+    const int32_t *tset_index;
+    int32_t n_tset_indices;
+    const int32_t *tset_tri;
+    int32_t tnew_offset, n_tnew_indices;
+    const int32_t *tnew;
+} cs_ss_topo;
+
 typedef struct cs_ss_object {
     int32_t id;
+    int32_t parent_id;       /* a piece: the object it broke off (from CUBESIM_TOPOLOGY; kept
+                                across snapshots of the same epoch); else 0 */
     char *name;              /* owned */
     char *model;             /* owned */
     int32_t topology_version;
@@ -81,6 +115,7 @@ typedef struct cs_ss_object {
 } cs_ss_object;
 
 typedef struct cs_ss_pending cs_ss_pending; /* a snapshot being assembled (private) */
+typedef struct cs_ss_tpending cs_ss_tpending; /* a topology change being assembled (private) */
 
 typedef struct cs_surface_state {
     int valid;               /* a complete snapshot of the current session/epoch is held */
@@ -100,7 +135,16 @@ typedef struct cs_surface_state {
     int64_t last_delta_seq;
     int64_t deltas_lost;     /* messages missing from header.seq gaps, all sessions */
 
+    /* CUBESIM_TOPOLOGY sequence tracking and counts. */
+    int have_topo_seq;
+    int64_t topo_session;
+    int64_t last_topo_seq;
+    int64_t topology_lost;       /* messages missing from header.seq gaps, all sessions */
+    int64_t topology_incomplete; /* changes dropped because a chunk never came */
+    int64_t topology_applied;    /* changes applied, all sessions */
+
     cs_ss_pending *pending;  /* owned */
+    cs_ss_tpending *tpending; /* owned */
 } cs_surface_state;
 
 /* An empty state (valid = 0). Nothing is allocated until messages arrive. */
@@ -122,8 +166,9 @@ int cs_surface_state_apply_chunk(cs_surface_state *st, const cs_ss_chunk *c, cha
  * Apply one delta (absolute float32 positions). Tracks header.seq first: a gap marks the
  * state stale and adds to deltas_lost. Returns CS_SS_APPLIED, CS_SS_IGNORED (no valid state,
  * another session or epoch, a frame older than the state, or a topology_version other than
- * the object's — err then says which), or CS_SS_REJECTED (unknown object, counts that
- * disagree, index out of range, non-finite coordinate).
+ * the object's — err then says which, and the state is marked stale), or CS_SS_REJECTED
+ * (unknown object — also marked stale: it may be a piece whose topology change was lost —,
+ * counts that disagree, index out of range, non-finite coordinate).
  */
 int cs_surface_state_apply_delta(cs_surface_state *st, const cs_ss_delta *d, char *err,
                                  size_t errlen);
@@ -131,6 +176,22 @@ int cs_surface_state_apply_delta(cs_surface_state *st, const cs_ss_delta *d, cha
 /* Track header.seq of a CUBESIM_DELTA that the caller chooses not to apply (e.g. a replay
  * stopping at a frame) so that the gaps it would hide are not reported as loss. */
 void cs_surface_state_note_delta_seq(cs_surface_state *st, const cs_ss_header *h);
+
+/*
+ * Store one topology chunk and, when it completes its change, apply the change. Tracks
+ * header.seq of CUBESIM_TOPOLOGY first (a gap marks the state stale). Returns
+ * CS_SS_APPLIED (a change was applied: objects changed or one was added), CS_SS_PENDING (more
+ * chunks needed), CS_SS_IGNORED (no valid state, older epoch or frame, a change the object
+ * already has, a duplicate chunk, or — stale set — a from_version that does not follow the
+ * object's version or an object not held), CS_SS_REJECTED (malformed chunk, chunks that
+ * disagree, or a change cs_topo_check refuses; the partial change is dropped, stale set), or
+ * CS_SS_NOMEM. The state is unchanged unless CS_SS_APPLIED.
+ */
+int cs_surface_state_apply_topology(cs_surface_state *st, const cs_ss_topo *t, char *err,
+                                    size_t errlen);
+
+/* Track header.seq of a CUBESIM_TOPOLOGY message the caller chooses not to apply. */
+void cs_surface_state_note_topology_seq(cs_surface_state *st, const cs_ss_header *h);
 
 /* Object by id, or NULL. */
 const cs_ss_object *cs_surface_state_find(const cs_surface_state *st, int32_t id);

@@ -24,6 +24,7 @@
 #include "cubesim_force_t.h"
 #include "cubesim_snapshot_t.h"
 #include "cubesim_status_t.h"
+#include "cubesim_topology_t.h"
 
 typedef struct outmsg {
     const char *channel; /* one of the CS_CH_* literals */
@@ -35,7 +36,7 @@ typedef struct outmsg {
 typedef struct sent_object {
     cs_object_id id;
     uint32_t topology_version;
-    int nv;
+    int nv, nt;
     float *xyz; /* 3·nv: the floats last sent */
     bool settled; /* asleep, and its last motion already compared and sent */
 } sent_object;
@@ -51,7 +52,8 @@ struct cs_bus {
     int32_t epoch;
     int64_t frame;
     double sim_time;
-    int64_t seq_snapshot, seq_delta, seq_status, seq_ack;
+    int64_t seq_snapshot, seq_delta, seq_status, seq_ack, seq_topology;
+    int32_t change_id;            /* last topology change sent */
 
     /* decoded inputs: a ring */
     cs_input *in;
@@ -262,11 +264,80 @@ static cs_command command_from_name(const char *s)
     static const struct { const char *name; cs_command c; } t[] = {
         {"pause", CS_CMD_PAUSE}, {"resume", CS_CMD_RESUME}, {"step", CS_CMD_STEP},
         {"reset", CS_CMD_RESET}, {"snapshot", CS_CMD_SNAPSHOT}, {"load", CS_CMD_LOAD},
+        {"fracture", CS_CMD_FRACTURE},
     };
     for (size_t i = 0; s && i < sizeof t / sizeof t[0]; i++)
         if (strcmp(s, t[i].name) == 0)
             return t[i].c;
     return CS_CMD_UNKNOWN;
+}
+
+/*
+ * The argument of "fracture": "OBJECT X Y Z NX NY NZ [RADIUS]", separated by blanks. OBJECT is
+ * a name without blanks or "#ID". Fills object_id/object_name, point, normal, radius.
+ */
+static int parse_fracture(cs_input *x, char *why, size_t whylen)
+{
+    char *tok[9];
+    int n = 0;
+    char *save = NULL, *arg = dup_str(x->argument);
+    if (!arg) {
+        snprintf(why, whylen, "out of memory");
+        return -1;
+    }
+    for (char *t = strtok_r(arg, " \t", &save); t; t = strtok_r(NULL, " \t", &save)) {
+        if (n == 9)
+            break;
+        tok[n++] = t;
+    }
+    int rc = -1;
+    double num[7] = {0, 0, 0, 0, 0, 0, 0};
+    if (n < 7 || n > 8) {
+        snprintf(why, whylen, "argument must be 'OBJECT X Y Z NX NY NZ [RADIUS]', got %d word%s",
+                 n, n == 1 ? "" : "s");
+        goto out;
+    }
+    for (int i = 1; i < n; i++) {
+        char *end = NULL;
+        errno = 0;
+        num[i - 1] = strtod(tok[i], &end);
+        if (!end || *end || errno || !isfinite(num[i - 1])) {
+            snprintf(why, whylen, "'%.40s' is not a finite number", tok[i]);
+            goto out;
+        }
+    }
+    if (num[3] == 0 && num[4] == 0 && num[5] == 0) {
+        snprintf(why, whylen, "the normal is zero");
+        goto out;
+    }
+    if (num[6] < 0) {
+        snprintf(why, whylen, "radius %g m is negative", num[6]);
+        goto out;
+    }
+    if (tok[0][0] == '#') {
+        char *end = NULL;
+        errno = 0;
+        long id = strtol(tok[0] + 1, &end, 10);
+        if (!end || *end || errno || id < 1 || id > INT32_MAX) {
+            snprintf(why, whylen, "'%.40s' is not a valid #id", tok[0]);
+            goto out;
+        }
+        x->object_id = (int32_t)id;
+    } else {
+        free(x->object_name);
+        x->object_name = dup_str(tok[0]);
+        if (!x->object_name) {
+            snprintf(why, whylen, "out of memory");
+            goto out;
+        }
+    }
+    memcpy(x->point, num, sizeof x->point);
+    memcpy(x->normal, num + 3, sizeof x->normal);
+    x->radius = num[6];
+    rc = 0;
+out:
+    free(arg);
+    return rc;
 }
 
 static void on_command(const lcm_recv_buf_t *rbuf, const char *channel, void *user)
@@ -311,14 +382,18 @@ static void on_command(const lcm_recv_buf_t *rbuf, const char *channel, void *us
         snprintf(x->error, sizeof x->error, "daemon out of memory");
     } else if (x->command == CS_CMD_UNKNOWN) {
         refuse(b, x,
-               "unknown command '%s' (known: pause, resume, step, reset, snapshot, load)",
-               x->request);
+               "unknown command '%s' (known: pause, resume, step, reset, snapshot, load, "
+               "fracture)", x->request);
     } else if (x->command == CS_CMD_STEP && x->count < 1) {
         char num[32];
         snprintf(num, sizeof num, "%d", (int)x->count);
         refuse(b, x, "step: count %s is less than 1", num);
     } else if (x->command == CS_CMD_LOAD && !x->argument[0]) {
         refuse(b, x, "load: no scene path given (argument is empty)%s", "");
+    } else if (x->command == CS_CMD_FRACTURE) {
+        char why[200];
+        if (parse_fracture(x, why, sizeof why))
+            refuse(b, x, "fracture: %s", why);
     }
     cubesim_command_t_decode_cleanup(&m);
 }
@@ -710,6 +785,7 @@ int32_t cs_bus_queue_snapshot(cs_bus_t *b, const cs_world_t *w, bool coalesce)
         }
         so->xyz = xyz;
         so->nv = nv;
+        so->nt = nt;
         so->topology_version = info.topology_version;
         so->settled = info.sleeping; /* the snapshot carries its resting surface */
         for (int j = 0; j < 3 * nv; j++)
@@ -848,4 +924,213 @@ int cs_bus_queue_deltas(cs_bus_t *b, const cs_world_t *w, double eps)
     if (need_snapshot && cs_bus_queue_snapshot(b, w, true) < 0)
         return -1;
     return queued;
+}
+
+/* ---------------------------------------------------------------- topology */
+
+static int enc_topology(void *buf, int off, int max, const void *m)
+{
+    return cubesim_topology_t_encode(buf, off, max, m);
+}
+
+/* Bytes per item of the five arrays of a change, in their order on the wire (vremove, vnew,
+ * tremove, tset, tnew). */
+static const int topo_item_bytes[5] = {4, 12, 4, 16, 12};
+
+/*
+ * Split a change into chunks: its five arrays laid end to end, each chunk taking the next
+ * slice that fits `budget` bytes (>= 16, so every chunk makes progress). If `sl` is not NULL,
+ * chunk k's start and count in array a go to sl[k][a][0] and sl[k][a][1]. Returns the number
+ * of chunks (1 for an empty change).
+ */
+static int plan_topology(const int32_t total[5], int budget, int32_t (*sl)[5][2])
+{
+    int a = 0, n = 0;
+    int32_t pos = 0;
+    while (a < 5 && total[a] == 0)
+        a++;
+    do {
+        int left = budget;
+        int32_t start[5], cnt[5] = {0, 0, 0, 0, 0};
+        for (int k = 0; k < 5; k++)
+            start[k] = k < a ? total[k] : (k == a ? pos : 0);
+        while (a < 5) {
+            int32_t m = total[a] - pos, fit = left / topo_item_bytes[a];
+            if (m > fit)
+                m = fit;
+            cnt[a] += m;
+            pos += m;
+            left -= m * topo_item_bytes[a];
+            if (pos < total[a])
+                break; /* this chunk is full */
+            a++;
+            pos = 0;
+            while (a < 5 && total[a] == 0)
+                a++;
+        }
+        if (sl)
+            for (int k = 0; k < 5; k++) {
+                sl[n][k][0] = start[k];
+                sl[n][k][1] = cnt[k];
+            }
+        n++;
+    } while (a < 5);
+    return n;
+}
+
+/* p + off without forming an offset from NULL (empty arrays may be NULL). */
+static int32_t *at32(const int32_t *p, int64_t off)
+{
+    return p ? (int32_t *)p + off : NULL;
+}
+
+/* Encode one change as chunks and queue them. Returns the number queued, or -1 (out of
+ * memory; chunks already queued stay: receivers see an incomplete change and go stale). */
+static int send_change(cs_bus_t *b, const cs_world_t *w, const cs_topo_change *c)
+{
+    const char *name = c->name ? c->name : "", *model = c->model ? c->model : "";
+    cs_object_info info;
+    if (c->from_version == 0 && (!c->name || !c->model) &&
+        cs_object_get_info(w, (cs_object_id)c->object_id, &info) == CS_OK) {
+        if (!c->name && info.name)
+            name = info.name;
+        if (!c->model)
+            model = cs_model_name(info.model);
+    }
+    int32_t total[5] = {c->n_vremove, c->n_vnew, c->n_tremove, c->n_tset, c->n_tnew};
+    int budget = CS_BUS_CHUNK_BYTES - 300 - (int)strlen(name) - (int)strlen(model);
+    int nch = plan_topology(total, budget, NULL);
+    int32_t(*sl)[5][2] = malloc((size_t)nch * sizeof *sl);
+    float *xyz = malloc(3 * (size_t)c->n_vnew * sizeof *xyz + sizeof *xyz);
+    if (!sl || !xyz) {
+        free(sl);
+        free(xyz);
+        return -1;
+    }
+    plan_topology(total, budget, sl);
+    for (int64_t k = 0; k < 3 * (int64_t)c->n_vnew; k++)
+        xyz[k] = (float)c->vnew_xyz[k];
+
+    cubesim_topology_t m;
+    memset(&m, 0, sizeof m);
+    m.change_id = ++b->change_id;
+    m.n_chunks = nch;
+    m.object_id = c->object_id;
+    m.parent_id = c->parent_id;
+    m.name = (char *)(c->from_version == 0 ? name : "");
+    m.model = (char *)(c->from_version == 0 ? model : "");
+    m.from_version = (int32_t)c->from_version;
+    m.to_version = (int32_t)c->to_version;
+    m.n_vertices_total = c->n_vertices_total;
+    m.n_triangles_total = c->n_triangles_total;
+    m.total_vremove = total[0];
+    m.total_vnew = total[1];
+    m.total_tremove = total[2];
+    m.total_tset = total[3];
+    m.total_tnew = total[4];
+    int queued = 0;
+    for (int k = 0; k < nch; k++) {
+        m.header = header(b, &b->seq_topology);
+        m.chunk = k;
+        m.vremove_offset = sl[k][0][0];
+        m.n_vremove = sl[k][0][1];
+        m.vremove = at32(c->vremove, m.vremove_offset);
+        m.vnew_offset = sl[k][1][0];
+        m.n_vnew_coords = 3 * sl[k][1][1];
+        m.vnew_xyz = xyz + 3 * (int64_t)m.vnew_offset;
+        m.tremove_offset = sl[k][2][0];
+        m.n_tremove = sl[k][2][1];
+        m.tremove = at32(c->tremove, m.tremove_offset);
+        m.tset_offset = sl[k][3][0];
+        m.n_tset = sl[k][3][1];
+        m.tset_index = at32(c->tset_index, m.tset_offset);
+        m.n_tset_indices = 3 * m.n_tset;
+        m.tset_tri = at32(c->tset_tri, 3 * (int64_t)m.tset_offset);
+        m.tnew_offset = sl[k][4][0];
+        m.n_tnew_indices = 3 * sl[k][4][1];
+        m.tnew = at32(c->tnew, 3 * (int64_t)m.tnew_offset);
+        if (encode_push(b, CS_CH_TOPOLOGY, 0, cubesim_topology_t_encoded_size(&m), enc_topology,
+                        &m) < 0) {
+            queued = -1;
+            break;
+        }
+        queued++;
+    }
+    free(sl);
+    free(xyz);
+    return queued;
+}
+
+/* The last-sent copy follows the change exactly as a client's does (steps 1–2 of topo.h on
+ * the floats; the triangles themselves are not kept, only their count). */
+static int mirror_change(cs_bus_t *b, const cs_topo_change *c)
+{
+    sent_object *so = add_sent(b, (cs_object_id)c->object_id);
+    if (!so)
+        return -1;
+    int nv0 = c->from_version == 0 ? 0 : so->nv;
+    int cap = nv0 > c->n_vertices_total ? nv0 : c->n_vertices_total;
+    float *xyz = realloc(so->xyz, 3 * (size_t)cap * sizeof *xyz + sizeof *xyz);
+    if (!xyz)
+        return -1;
+    so->xyz = xyz;
+    int nv = cs_topo_remove_vertices(c, xyz, 3 * sizeof *xyz, nv0);
+    for (int64_t k = 0; k < 3 * (int64_t)c->n_vnew; k++)
+        xyz[3 * (int64_t)nv + k] = (float)c->vnew_xyz[k];
+    so->nv = c->n_vertices_total;
+    so->nt = c->n_triangles_total;
+    so->topology_version = c->to_version;
+    so->settled = false;
+    return 0;
+}
+
+int cs_bus_queue_topology(cs_bus_t *b, const cs_world_t *w, const cs_topo_change *changes,
+                          int n)
+{
+    int queued = 0;
+    bool need_snapshot = false, nomem = false;
+    for (int i = 0; i < n; i++) {
+        const cs_topo_change *c = &changes[i];
+        char why[256] = "";
+        sent_object *so = c->object_id > 0 ? find_sent(b, (cs_object_id)c->object_id) : NULL;
+        int nv0 = 0, nt0 = 0;
+        if (c->object_id <= 0)
+            snprintf(why, sizeof why, "invalid object id");
+        else if (c->from_version == 0 && so)
+            snprintf(why, sizeof why, "a new piece with the id of an object already sent");
+        else if (c->from_version != 0 && !so)
+            snprintf(why, sizeof why, "the object was never sent");
+        else if (so && so->topology_version != c->from_version)
+            snprintf(why, sizeof why, "the copy last sent has version %u",
+                     (unsigned)so->topology_version);
+        else if (c->name && strlen(c->name) > 1024)
+            snprintf(why, sizeof why, "the piece's name is longer than 1024 bytes");
+        else if (so) {
+            nv0 = so->nv;
+            nt0 = so->nt;
+        }
+        if (!why[0])
+            cs_topo_check(c, nv0, nt0, why, sizeof why);
+        if (!why[0]) {
+            int r = send_change(b, w, c);
+            if (r >= 0) {
+                queued += r;
+                r = mirror_change(b, c);
+            }
+            if (r >= 0)
+                continue;
+            nomem = true;
+            snprintf(why, sizeof why, "out of memory");
+        }
+        cs_dlog_warn(b->log, "topology",
+                     "topology change of object %d (version %u -> %u) not sent (%s): "
+                     "sending a snapshot instead", (int)c->object_id, (unsigned)c->from_version,
+                     (unsigned)c->to_version, why);
+        need_snapshot = true;
+        if (c->object_id > 0 && (so = find_sent(b, (cs_object_id)c->object_id)) != NULL)
+            so->nv = -1; /* never matches the world: deltas wait for the snapshot */
+    }
+    if (need_snapshot && cs_bus_queue_snapshot(b, w, false) < 0)
+        nomem = true;
+    return nomem ? -1 : queued;
 }

@@ -9,10 +9,15 @@
  * Invariants
  * - Handlers (run inside cs_bus_drain) only decode, validate what needs no world, and queue;
  *   they never touch the world. The daemon applies queued inputs between steps.
- * - Snapshot chunks and deltas leave in the order they were made, through one FIFO outbox,
+ * - Snapshot chunks, topology changes and deltas leave in the order they were made, through
+ *   one FIFO outbox,
  *   paced by a byte bucket (CS_BUS_RATE bytes/s, bursts up to CS_BUS_BURST), so a delta is
  *   never sent ahead of the snapshot it follows and back-to-back fragments do not overflow a
- *   receiver's socket buffer. Nothing in here sleeps.
+ *   receiver's socket buffer. Nothing in here sleeps. A delta is therefore never ahead of
+ *   the topology change it was made for.
+ * - The last-sent copy of each object follows every topology change it publishes (the same
+ *   common/topo.c steps a client runs), so deltas go on without a snapshot; a change the copy
+ *   cannot follow is not sent and a snapshot is queued instead.
  * - Every encoded message is below 64 KiB.
  * - A client's copy of a vertex differs from the daemon's double by at most
  *   max(publish_epsilon, sqrt(3)·2^-24·max|x_i|) (Euclidean): a vertex is resent as soon as it
@@ -30,6 +35,7 @@
 
 #define CS_CH_SNAPSHOT "CUBESIM_SNAPSHOT"
 #define CS_CH_DELTA "CUBESIM_DELTA"
+#define CS_CH_TOPOLOGY "CUBESIM_TOPOLOGY"
 #define CS_CH_STATUS "CUBESIM_STATUS"
 #define CS_CH_ACK "CUBESIM_ACK"
 #define CS_CH_FORCE "CUBESIM_FORCE"
@@ -51,6 +57,7 @@ typedef enum cs_command {
     CS_CMD_RESET,
     CS_CMD_SNAPSHOT,
     CS_CMD_LOAD,
+    CS_CMD_FRACTURE,
     CS_CMD_UNKNOWN
 } cs_command;
 
@@ -69,6 +76,10 @@ typedef struct cs_input {
     cs_command command;
     int32_t count;
     char *argument;
+    /* CS_CMD_FRACTURE, parsed from argument "OBJECT X Y Z NX NY NZ [RADIUS]" on decode: the
+     * object is object_id (> 0, from "#ID") or object_name, the point is `point` [m]. */
+    double normal[3];   /* splitting plane normal, finite and non-zero */
+    double radius;      /* [m], >= 0; 0: the object's fracture_radius */
 } cs_input;
 
 void cs_input_clear(cs_input *in);
@@ -121,6 +132,17 @@ int32_t cs_bus_last_snapshot_id(const cs_bus_t *b);
  * snapshot is queued instead.
  */
 int cs_bus_queue_deltas(cs_bus_t *b, const cs_world_t *w, double eps);
+
+/*
+ * Queue the topology changes of one step or forced fracture (cs_world_topology_changes), in
+ * order, each as one or more CUBESIM_TOPOLOGY chunks, and apply each to the last-sent copy
+ * (a new piece gets one). A change the copy cannot follow (unknown object, another version,
+ * cs_topo_check fails) is logged and not sent; a snapshot is queued after the others
+ * instead. Returns the number of messages queued, or -1 (out of memory: a snapshot was
+ * still attempted).
+ */
+int cs_bus_queue_topology(cs_bus_t *b, const cs_world_t *w, const cs_topo_change *changes,
+                          int n);
 
 /* Telemetry of one status message beyond what the world says. */
 typedef struct cs_bus_status_extra {

@@ -55,6 +55,7 @@ typedef struct cs_daemon {
     long long steps_done;   /* by this process, all epochs */
     int32_t epoch;
     bool diverged_logged;
+    bool fractured;         /* the world's topology changed since it was built from the scene */
 
     double next_step;       /* monotonic s (realtime) */
     double next_publish;    /* simulated s */
@@ -314,6 +315,54 @@ static void new_epoch(cs_daemon *d, double now)
     d->diverged_logged = false;
 }
 
+/* One info line per fracture event of the last step or forced fracture. */
+static void log_events(cs_daemon *d)
+{
+    int ne = 0;
+    const cs_event *ev = cs_world_events(d->world, &ne);
+    for (int i = 0; ev && i < ne; i++) {
+        const cs_event *e = &ev[i];
+        cs_object_info info, pinfo;
+        memset(&info, 0, sizeof info);
+        memset(&pinfo, 0, sizeof pinfo);
+        cs_object_get_info(d->world, e->object, &info);
+        if (e->kind == CS_EVENT_FRACTURE) {
+            cs_dlog_info(&d->log,
+                         "fracture: object %u '%s' at frame %lld, point (%.4g, %.4g, %.4g) m, "
+                         "normal (%.3g, %.3g, %.3g), stress %.4g Pa, %d faces cut, %d closing "
+                         "triangles%s", (unsigned)e->object, info.name ? info.name : "?",
+                         (long long)e->frame, e->point[0], e->point[1], e->point[2],
+                         e->normal[0], e->normal[1], e->normal[2], e->stress, e->faces_cut,
+                         e->closing_triangles, e->fallback_loops ? " (fan fallback used)" : "");
+        } else if (e->kind == CS_EVENT_NEW_PIECE) {
+            cs_object_get_info(d->world, e->parent, &pinfo);
+            cs_dlog_info(&d->log, "fracture: new piece %u '%s' broke off object %u '%s' at "
+                         "frame %lld (%d cells)", (unsigned)e->object,
+                         info.name ? info.name : "?", (unsigned)e->parent,
+                         pinfo.name ? pinfo.name : "?", (long long)e->frame, info.n_cells);
+        }
+    }
+    if (ne > 0)
+        d->fractured = true;
+}
+
+/*
+ * After a step or a forced fracture: log its fracture events and queue its topology changes
+ * (before any delta of this frame, so no delta is ever ahead of its topology).
+ */
+static void publish_topology(cs_daemon *d)
+{
+    log_events(d);
+    int n = 0;
+    const cs_topo_change *tc = cs_world_topology_changes(d->world, &n);
+    if (!tc || n <= 0)
+        return;
+    d->fractured = true;
+    sync_context(d);
+    if (cs_bus_queue_topology(d->bus, d->world, tc, n) < 0)
+        cs_dlog_warn(&d->log, "topology", "could not queue topology changes (out of memory)");
+}
+
 /* ---------------------------------------------------------------- inputs */
 
 static void apply_force(cs_daemon *d, const cs_input *in, char *msg, size_t msglen)
@@ -362,7 +411,21 @@ static void apply_command(cs_daemon *d, const cs_input *in, double now, char *ms
         cs_dlog_info(&d->log, "stepping %d steps", (int)in->count);
         break;
     case CS_CMD_RESET:
-        cs_world_reset(d->world);
+        if (d->fractured) {
+            /* Pieces cannot be put back together: rebuild the world from the scene as it was
+             * loaded (the same objects, ids and rest shapes a fresh start would have). */
+            cs_world_t *world = NULL;
+            char err[400] = "";
+            if (cs_scene_instantiate(&d->scene, &world, err, sizeof err) != 0) {
+                snprintf(msg, msglen, "reset: cannot rebuild the scene: %s", err);
+                break; /* the old world stays */
+            }
+            cs_world_destroy(d->world);
+            d->world = world;
+            d->fractured = false;
+        } else {
+            cs_world_reset(d->world);
+        }
         d->epoch++;
         d->step_budget = 0;
         new_epoch(d, now);
@@ -389,11 +452,39 @@ static void apply_command(cs_daemon *d, const cs_input *in, double now, char *ms
         cs_scene_free(&d->scene);
         d->scene = scene;
         d->world = world;
+        d->fractured = false;
         d->epoch++;
         d->step_budget = 0;
         new_epoch(d, now);
         cs_dlog_info(&d->log, "loaded scene %s: epoch %d, %d objects", in->argument,
                      (int)d->epoch, d->scene.n_objects);
+        break;
+    }
+    case CS_CMD_FRACTURE: {
+        cs_object_id id = in->object_id > 0 ? (cs_object_id)in->object_id
+                                            : cs_world_find_object(d->world, in->object_name);
+        cs_object_info info;
+        if (id == CS_NULL_OBJECT) {
+            snprintf(msg, msglen, "fracture: no object named '%s'", in->object_name);
+            break;
+        }
+        if (cs_object_get_info(d->world, id, &info) != CS_OK) {
+            snprintf(msg, msglen, "fracture: unknown object id %u", (unsigned)id);
+            break;
+        }
+        char err[300] = "";
+        int rc = cs_world_fracture(d->world, id, in->point, in->normal, in->radius, err,
+                                   sizeof err);
+        if (rc != CS_OK) {
+            snprintf(msg, msglen, "fracture: %s", err[0] ? err : cs_status_str(rc));
+            break;
+        }
+        int ne = 0;
+        cs_world_events(d->world, &ne);
+        cs_dlog_info(&d->log, "fracture of object %u '%s' forced at frame %lld: %d events",
+                     (unsigned)id, info.name ? info.name : "?",
+                     (long long)cs_world_frame(d->world), ne);
+        publish_topology(d);
         break;
     }
     case CS_CMD_UNKNOWN:
@@ -442,6 +533,7 @@ static void do_step(cs_daemon *d)
     d->period_step_ms += ms;
     d->period_steps++;
     d->steps_done++;
+    publish_topology(d);
     if (rc == CS_ERR_DIVERGED) {
         /* The engine undid the step; stepping again would only repeat it. */
         d->paused = true;

@@ -14,9 +14,14 @@
  * points along n_f. The caller makes t (for c1) and its reverse t' (for c2).
  *
  * Degenerate positions are resolved by symbolic perturbation: a vertex whose coordinate along
- * f's axis equals the plane's counts as lying on the c2 side (just outside c1), a vertex on one
- * of the lines through f's edges counts as just outside f's square along that line's normal,
- * the same way for every triangle, so that neighbouring triangles always agree.
+ * f's axis equals the plane's counts as lying on the c2 side (just outside c1); a point on one
+ * of the lattice lines through f's edges counts as lying just above that line (on the side of
+ * larger coordinate), so f's square is [lo, hi) in both axes — inside for a point on a lower
+ * edge line, outside on an upper one. The same holds for every triangle and every face of the
+ * lattice, so neighbouring triangles agree and the squares of neighbouring faces tile the
+ * plane without gaps (a rule that put edge lines outside every square would lose what lies
+ * on them). A corner of f is taken just below both of its lines: corner_inside should say
+ * whether that point is inside the surface.
  *
  * Pure geometry: no allocation survives a call, nothing is global. Owns nothing.
  */
@@ -40,7 +45,19 @@ typedef struct cs_close_face {
     /* 1 if the corner lies inside the surface (used only when no triangle crosses f: then f
      * is closed whole if its centre is inside, i.e. if all four corners are, else not at all) */
     int corner_inside[4];
+    /* How a node where a triangle t crosses an edge of f gets its vertex (0 by default):
+     * CS_CLOSE_BOUNDARY_PAPER: §3.2 as written: if t's other node is made by t's edge
+     *   (v1,v2), the third vertex v3; if that node is on f's boundary too, t's vertex
+     *   nearest to the node. The two faces sharing that edge of f pick different vertices,
+     *   so closings of adjacent exposed faces do not meet.
+     * CS_CLOSE_BOUNDARY_SHARED: the vertex the edge rule gives t's crossing edge whose
+     *   crossing point lies on the upper side of f's edge line (the side of larger
+     *   coordinate), decided by t and the line alone; both faces agree and the closings of
+     *   adjacent exposed faces meet along their common edge. */
+    int boundary_rule;
 } cs_close_face;
+
+enum { CS_CLOSE_BOUNDARY_PAPER = 0, CS_CLOSE_BOUNDARY_SHARED = 1 };
 
 /*
  * Compute the closing triangles of face f.

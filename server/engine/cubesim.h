@@ -249,23 +249,28 @@ typedef struct cs_event {
 const cs_event *cs_world_events(const cs_world_t *w, int *count);
 
 /*
- * Surface topology changes of the last step or forced fracture, in the order they must be
- * applied (topo.h): splits within objects, then new pieces (from_version 0). Positions in
- * vnew_xyz are current. Valid until the next mutating call.
+ * Surface topology changes of the last step or forced fracture, in the order they were made
+ * (topo.h): per event, the split of the object, each new piece (from_version 0), then the
+ * object losing the pieces' cells. Positions in vnew_xyz are current. Valid until the next
+ * mutating call.
  */
 const cs_topo_change *cs_world_topology_changes(const cs_world_t *w, int *count);
 
 /*
  * Force a fracture as if the cell nearest to `point` were overstressed in direction `normal`:
- * cells within `radius` [m] (0: the object's fracture_radius) are labelled by the plane through
- * that cell's centre and separated (seed 000 §2.3). Works whether or not the object has
- * fracture enabled. Returns CS_OK (also when no face was cut), or an error with err set.
+ * cells within `radius` [m] (0: the object's fracture_radius; never less than the face
+ * neighbours) are labelled by the plane through that cell's current centre, and the + and −
+ * cells are separated (seed 000 §2.3: every node between them duplicated). New pieces become
+ * objects. Works whether or not the object has fracture enabled. Returns CS_OK (also when no
+ * face was left to cut), or an error with err set; events and changes as after a step.
  */
 int cs_world_fracture(cs_world_t *w, cs_object_id id, const double point[3],
                       const double normal[3], double radius, char *err, size_t errlen);
 
-/* Separate exactly one face: the one between cell (i,j,k) and its neighbour at +1 along
- * `axis` (both must exist and still be joined there). Returns CS_OK or an error (err set). */
+/* Cut exactly one face: the one between cell (i,j,k) and its neighbour at +1 along `axis`
+ * (both must exist in this object and still be joined there). Nodes are duplicated only where
+ * the cut faces separate the cells around them, so the face opens (and its closing surface
+ * appears) once the cuts around it free all four of its nodes. Returns CS_OK or an error. */
 int cs_world_cut_face(cs_world_t *w, cs_object_id id, const int32_t ijk[3], int axis,
                       char *err, size_t errlen);
 

@@ -4,30 +4,33 @@
  *
  * One fracture event on an object, given a ± label per cell (cells of a neighbourhood on the
  * two sides of a splitting plane; unlabelled cells take no part):
- *   1. crack faces F: faces between a + and a − cell that are still joined;
- *   2. cube mesh (§2.3): every node on F is shared by cells that F separates; around such a
- *      node the cells are grouped by the faces that still join them (not in F, all four nodes
- *      shared), the group with a + cell keeps the node and every other group (the minus side)
- *      is relinked to a duplicate. Where the cells stay joined around a node (the rim of the
- *      crack) nothing is duplicated, so the crack ends there instead of tearing a hinge;
+ *   1. crack faces F: faces between a + and a − cell that are still joined; each is marked cut;
+ *   2. cube mesh (§2.3): a stress fracture (or cs_world_fracture) follows the paper: every node
+ *      of F is duplicated and the − cells there relinked to the duplicate, so the crack opens
+ *      at once (at its rim the − cells tear from their unlabelled neighbours). A single cut
+ *      face (cs_world_cut_face) duplicates a node only where the cut faces separate the cells
+ *      around it, so cutting one face does exactly that;
  *   3. surface (§3.1): each triangle belongs to the cell its centroid lies in; two triangles
- *      sharing an edge are separated when their cells lie on opposite sides, or stopped sharing
- *      nodes; around each vertex the triangles are grouped by the edges that still join them,
- *      and every group beyond the first gets its own copy of the vertex, skinned to a cell of
- *      its own side;
- *   4. closing surface (§3.2, closing.c): per face of F, the region of f inside the surface as
- *      triangles between surface vertices and corner vertices (a random offset per lattice
- *      point, that never crosses the surface), t for the + cell and its reverse t' for the −
- *      cell;
+ *      sharing an edge are separated when their cells shared a node before and share none now;
+ *      around each vertex the triangles are grouped by the edges that still join them, and
+ *      every group beyond the first gets its own copy of the vertex, skinned to a cell of its
+ *      own side;
+ *   4. closing surface (§3.2, closing.c): per face that this event opened fully (its four nodes
+ *      separated), the region of f inside the surface as triangles between surface vertices
+ *      and corner vertices (a random offset per lattice point that never crosses the surface;
+ *      a mesh vertex lying on the lattice point is used instead), t for c1 and its reverse t'
+ *      for c2;
  *   5. repair: the §3.2 rules for assigning surface vertices to nodes are heuristics and can
  *      leave the closing triangles not matching the fracture line exactly (seed 000 does not
- *      claim otherwise). Every closing patch that would make an edge used twice in one
- *      direction, or that is degenerate, is dropped; every boundary loop left is closed by a fan
- *      around a new vertex. The surface is then closed and consistently oriented by
- *      construction, whatever the geometry; the event reports how many loops needed the fan;
- *   6. pieces (§2.4): cells are grouped by shared nodes (which, after step 2, is face
- *      connectivity); the largest group stays the object, every other one becomes a new object
- *      with its own cube mesh, surface, state and id.
+ *      claim otherwise). A face's pair t, t' that would make an edge used twice in one
+ *      direction, or that is degenerate, is dropped; where boundary loops pass a vertex twice
+ *      the vertex is split so that every loop is simple; every loop left is closed by one
+ *      triangle or a fan around a new vertex placed by the loop alone (the two sides of a
+ *      crack close twin loops identically, so their volumes cancel). The surface is then
+ *      closed and consistently oriented by construction; the event reports the fans;
+ *   6. pieces (§2.4): cells are grouped by shared nodes (face connectivity after step 2); the
+ *      largest group stays the object, every other one becomes a new object with its own cube
+ *      mesh, surface, state (positions, velocities, inputs) and id.
  * Steps 3–5 make one topology change (vertices and triangles appended, triangles rewired);
  * step 6 makes one more for the object (swap-removals) and one per new piece (from version 0).
  * The engine applies each change to its own arrays exactly as topo.c applies it for a client.
@@ -571,6 +574,21 @@ static int32_t sv_append(surf_edit *e, const double p[3], int32_t cell)
     if (ivec_push(&e->vcell, cell))
         return -1;
     return e->nv0 + e->vcell.n - 1;
+}
+
+/* Append a copy of vertex v bound to `cell`. It starts where v is now (not where the new
+ * binding would put it), so the surface does not jump at the fracture and the two sides'
+ * closing triangles coincide at this instant too; the next skin moves it with its side. */
+static int32_t sv_append_copy(surf_edit *e, int32_t v, int32_t cell)
+{
+    double p[3], x[3];
+    memcpy(p, sv_rest(e, v), sizeof p);
+    memcpy(x, v < e->nv0 ? e->o->surf.pos + 3 * (size_t)v : e->pos.a + 3 * (size_t)(v - e->nv0),
+           sizeof x);
+    int32_t c = sv_append(e, p, cell);
+    if (c >= 0)
+        memcpy(e->pos.a + 3 * (size_t)(c - e->nv0), x, sizeof x);
+    return c;
 }
 
 static void surf_edit_free(surf_edit *e)
@@ -1234,7 +1252,7 @@ static int split_surface(cs_object *o, surf_edit *e, const int32_t *cn0, const i
                         memcpy(s->vert_uvw + 3 * (size_t)v, uvw, sizeof uvw);
                     }
                 } else {
-                    copy = sv_append(e, s->rest + 3 * (size_t)v, bind);
+                    copy = sv_append_copy(e, v, bind);
                     if (copy < 0)
                         goto out_p;
                     while (e->vcell.n > fam->of_new.n)
@@ -1284,6 +1302,10 @@ static void face_setup(const cs_object *o, const crack_face *f, cs_close_face *c
     memset(cf, 0, sizeof *cf);
     cf->axis = ax;
     cf->c1_below = f->c1_below;
+    /* the boundary-node rule that depends only on the triangle and f's edge line, so that the
+     * closings of two opened faces sharing an edge meet (§3.2's own rule picks the vertex by
+     * the other node in each face and leaves cracks across several faces open) */
+    cf->boundary_rule = CS_CLOSE_BOUNDARY_SHARED;
     cf->plane = cm->origin[ax] + cm->h * (ijk[ax] + (f->c1_below ? 1 : 0));
     for (int k = 0; k < 3; k++) {
         cf->lo[k] = cm->origin[k] + cm->h * ijk[k];
@@ -1527,7 +1549,7 @@ static int split_pinches(surf_edit *e, edge_map *em, ivec *tri, const ivec *cell
                     if (nr == 64)
                         continue;
                     roots[nr] = r;
-                    copies[nr] = sv_append(e, sv_rest(e, v), edit_tri_cell(e, cell, pt.a[i + a]));
+                    copies[nr] = sv_append_copy(e, v, edit_tri_cell(e, cell, pt.a[i + a]));
                     if (copies[nr++] < 0) {
                         free(parent);
                         goto done;

@@ -80,6 +80,12 @@ expect_refused daemon-step-zero 'count 0 is less than 1' command step --count 0
 expect_refused daemon-unknown-command "unknown command 'explode'" command explode
 expect_refused daemon-load-broken-scene 'load: .*broken.json' command load --arg "$CS_TMP/broken.json"
 expect_refused daemon-load-missing-scene 'load: .*nothere.json' command load --arg "$CS_TMP/nothere.json"
+expect_refused daemon-fracture-arg-count 'fracture: argument must be .OBJECT X Y Z NX NY NZ' command fracture --arg "block 1 2"
+expect_refused daemon-fracture-nan "fracture: 'nan' is not a finite number" command fracture --arg "block nan 0 0 1 0 0"
+expect_refused daemon-fracture-zero-normal 'fracture: the normal is zero' command fracture --arg "block 0 0 0 0 0 0"
+expect_refused daemon-fracture-negative-radius 'fracture: radius -1 m is negative' command fracture --arg "block 0 0 0 1 0 0 -1"
+expect_refused daemon-fracture-unknown-object "fracture: no object named 'nosuch'" command fracture --arg "nosuch 0 0 0 1 0 0"
+expect_refused daemon-fracture-unknown-id 'fracture: unknown object id 99' command fracture --arg "#99 0 0 0 1 0 0"
 
 # expect_warned NAME CHANNEL VERB: a foreign or truncated message gets a warning naming the
 # channel, no ack, and the daemon goes on with its state intact.

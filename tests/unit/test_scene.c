@@ -132,6 +132,7 @@ TEST(scene_every_field_round_trip)
         "{ \"dt\": 0.005, \"gravity\": [1.5, -2.5, -3.5], \"publish_hz\": 30,\n"
         "  \"keyframe_s\": 7.5, \"status_hz\": 2, \"publish_epsilon\": 1e-5,\n"
         "  \"max_force\": 250, \"sleep\": { \"speed\": 0.01, \"steps\": 12 },\n"
+        "  \"max_fractures\": 9,\n"
         "  \"ground\": { \"height\": -0.25, \"friction\": 0.8 },\n"
         "  \"solver\": { \"tolerance\": 1e-8, \"max_iterations\": 77, \"threads\": 2 },\n"
         "  \"materials\": { \"a\": { \"young\": 2e5, \"poisson\": 0.45, \"density\": 900,\n"
@@ -139,7 +140,7 @@ TEST(scene_every_field_round_trip)
         "                 \"b\": { \"young\": 5 } },\n"
         "  \"objects\": [\n"
         "    { \"name\": \"first\", \"model\": \"linear\", \"material\": \"a\", \"cube_size\": 0.5,\n"
-        "      \"fracture\": true,\n"
+        "      \"fracture\": true, \"fracture_radius\": 0.75,\n"
         "      \"cells\": { \"origin\": [1, 2, 3], \"ijk\": [[0,0,0], [1,0,0], [-4,7,2]] },\n"
         "      \"fixed\": [ { \"min\": [0,0,0], \"max\": [1,1,1] },\n"
         "                 { \"min\": [-2,-2,-2], \"max\": [-1,-1,-1] } ],\n"
@@ -164,6 +165,7 @@ TEST(scene_every_field_round_trip)
     ENSURE_NEAR(s.status_hz, 2, 0);
     ENSURE_NEAR(s.publish_epsilon, 1e-5, 0);
     ENSURE_NEAR(s.world.max_force, 250, 0);
+    ENSURE(s.world.max_fractures == 9);
     ENSURE_NEAR(s.world.sleep_speed, 0.01, 0);
     ENSURE(s.world.sleep_steps == 12);
     ENSURE(s.world.has_ground);
@@ -180,7 +182,7 @@ TEST(scene_every_field_round_trip)
     ENSURE(o->material.young == 2e5 && o->material.poisson == 0.45);
     ENSURE(o->material.density == 900 && o->material.strength == 3e4);
     ENSURE(o->material.damping[0] == 0.1 && o->material.damping[1] == 0.02);
-    ENSURE(o->cube_size == 0.5 && o->fracture);
+    ENSURE(o->cube_size == 0.5 && o->fracture && o->fracture_radius == 0.75);
     ENSURE(o->geometry == CS_GEOMETRY_CELLS && o->n_cells == 3);
     ENSURE(o->cells_origin[0] == 1 && o->cells_origin[1] == 2 && o->cells_origin[2] == 3);
     const int32_t want[9] = {0, 0, 0, 1, 0, 0, -4, 7, 2};
@@ -200,6 +202,7 @@ TEST(scene_every_field_round_trip)
     ENSURE(o->material.damping[0] == 0 && o->material.damping[1] == 0.5);
     ENSURE(o->material.strength == 9);
     ENSURE(!o->fracture && o->n_fixed == 0 && o->fixed == NULL && o->n_loads == 0);
+    ENSURE(o->fracture_radius == cs_object_def_default().fracture_radius);
     ENSURE(o->cells_origin[0] == -1 && o->cells_origin[1] == -2 && o->cells_origin[2] == -3);
     ENSURE(box_cells_complete(o->cells_ijk, o->n_cells, 2, 3, 1));
 
@@ -233,12 +236,14 @@ TEST(scene_defaults)
     ENSURE(s.world.threads == wd.threads);
     ENSURE(s.world.sleep_speed == wd.sleep_speed && s.world.sleep_steps == wd.sleep_steps);
     ENSURE(s.world.max_force == wd.max_force);
+    ENSURE(s.world.max_fractures == wd.max_fractures && wd.max_fractures == 4);
     ENSURE(s.publish_hz == 60 && s.keyframe_s == 2 && s.status_hz == 4);
     ENSURE(s.publish_epsilon == 1e-6);
     ENSURE(s.n_objects == 1);
     cs_object_def od = cs_object_def_default();
     const cs_object_def *o = &s.objects[0];
     ENSURE(o->model == od.model && o->cube_size == od.cube_size && o->fracture == od.fracture);
+    ENSURE(o->fracture_radius == 0 && od.fracture_radius == 0); /* 0: 1.5 cube sizes */
     ENSURE(!memcmp(&o->material, &od.material, sizeof od.material));
     ENSURE(o->n_cells == 1 && o->n_fixed == 0 && o->n_loads == 0);
     cs_scene_free(&s);
@@ -379,6 +384,16 @@ static const bad_case BAD[] = {
      "materials.soft.strength: must be > 0"},
     {OBJ("\"material\": {\"poisson\": 0.7}, " BOX), "objects[0].material.poisson: must be in"},
     {OBJ("\"cube_size\": 0, " BOX), "objects[0].cube_size: must be > 0, got 0"},
+    {OBJ("\"fracture_radius\": -0.1, " BOX), "objects[0].fracture_radius: must be >= 0, got -0.1"},
+    {OBJ("\"fracture_radius\": \"big\", " BOX),
+     "objects[0].fracture_radius: expected a number, got a string"},
+    {OBJ("\"fracture_radius\": 1e999, " BOX), "objects[0].fracture_radius: must be finite"},
+    {OBJ("\"fracture_radus\": 0.1, " BOX),
+     "objects[0].fracture_radus: unknown field (did you mean 'fracture_radius'?)"},
+    {"{\"max_fractures\": 0, \"objects\": []}", "max_fractures: must be in [1, 1000000], got 0"},
+    {"{\"max_fractures\": 2.5, \"objects\": []}", "max_fractures: expected an integer, got 2.5"},
+    {"{\"max_fractures\": true, \"objects\": []}", "max_fractures: expected an integer, got"},
+    {"{\"max_fractures\": 1e7, \"objects\": []}", "max_fractures: must be in [1, 1000000]"},
     {OBJ("\"cube_size\": -0.1, " BOX), "objects[0].cube_size: must be > 0"},
     {OBJ("\"box\": {\"min\": [0,0,0], \"size\": [0.1,0,0.1]}"),
      "objects[0].box.size[1]: must be > 0, got 0"},
