@@ -242,6 +242,9 @@ typedef struct cs_event {
     int closing_triangles;/* FRACTURE: triangles added to close the surfaces */
     int fallback_loops;   /* FRACTURE: boundary loops the §3.2 polygons left open, closed by
                              a fan around a new vertex instead (0 when §3.2 closed all) */
+    int rebuilt_pieces;   /* FRACTURE: pieces whose surface enclosed no positive volume after
+                             that (closing patches rejected around them) and were given the
+                             boundary of their cubes instead; 0 normally */
 } cs_event;
 
 /* Events of the last step or forced fracture, in order; *count set. Valid until the next

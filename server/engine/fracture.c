@@ -405,7 +405,8 @@ static uint8_t face_bit(int axis, int dir)
 
 /* Are a and b (face neighbours, b at +dir along axis) joined: not cut by an earlier fracture
  * and sharing all four nodes of their face? (A cut whose rim kept every node shared is an
- * inner slit: the nodes alone do not show it.) */
+ * inner slit: the nodes alone do not show it; at the rim of a stress crack the − cells tear
+ * from their unlabelled neighbours without that face being cut.) */
 static bool face_joined(const cs_object *o, int32_t a, int32_t b, int axis, int dir)
 {
     const cs_cubemesh *cm = &o->cm;
@@ -414,8 +415,7 @@ static bool face_joined(const cs_object *o, int32_t a, int32_t b, int axis, int 
     int ca[4];
     face_corners(axis, dir > 0 ? 1 : 0, ca);
     for (int i = 0; i < 4; i++) {
-        int x = CS_CORNER[ca[i]][0], y = CS_CORNER[ca[i]][1], z = CS_CORNER[ca[i]][2];
-        int off[3] = {x, y, z};
+        int off[3] = {CS_CORNER[ca[i]][0], CS_CORNER[ca[i]][1], CS_CORNER[ca[i]][2]};
         off[axis] = 1 - off[axis];
         if (cm->cell_nodes[8 * (size_t)a + ca[i]] !=
             cm->cell_nodes[8 * (size_t)b + corner_id(off[0], off[1], off[2])])
@@ -799,14 +799,16 @@ static bool seg_tri(const double p[3], const double q[3], const double *a, const
  * it does not cross the surface).
  */
 /* A vertex of the mesh's own triangles lying exactly on node's lattice point (meshes made of
- * cube faces have them), or -1: the closing surface must end on it, not beside it. */
-static int32_t surface_vertex_at(const surf_edit *e, int32_t node)
+ * cube faces have them), or -1: the closing surface must end on it, not beside it. Where the
+ * mesh was split there, the copy used by a triangle of a cell attached to `cell` (sharing a
+ * node with it) is preferred; cell < 0 takes any. */
+static int32_t surface_vertex_at(const surf_edit *e, int32_t node, int32_t cell)
 {
     const cs_object *o = e->o;
     const cs_cubemesh *cm = &o->cm;
     const cs_surface *s = &o->surf;
     const double *p = cm->node_rest + 3 * (size_t)node, tol = 1e-9 * cm->h;
-    int32_t li[3];
+    int32_t li[3], any = -1;
     for (int k = 0; k < 3; k++)
         li[k] = (int32_t)llround((p[k] - cm->origin[k]) / cm->h);
     for (int dz = -1; dz <= 0; dz++)
@@ -822,26 +824,30 @@ static int32_t surface_vertex_at(const surf_edit *e, int32_t node)
                     for (int j = 0; j < 3; j++) {
                         int32_t v = s->tris[3 * (size_t)t + j];
                         const double *q = sv_rest(e, v);
-                        if (fabs(q[0] - p[0]) <= tol && fabs(q[1] - p[1]) <= tol &&
-                            fabs(q[2] - p[2]) <= tol)
+                        if (fabs(q[0] - p[0]) > tol || fabs(q[1] - p[1]) > tol ||
+                            fabs(q[2] - p[2]) > tol)
+                            continue;
+                        if (cell < 0 || cells_share_node(cm, s->tri_cell[t], cell))
                             return v;
+                        if (any < 0)
+                            any = v;
                     }
                 }
             }
-    return -1;
+    return any;
 }
 
 static void corner_position(const cs_world_t *w, const surf_edit *e, int32_t node,
                             double out[3])
 {
     const cs_object *o = e->o;
-    if (o->corner_vertex[node] >= 0) {
-        memcpy(out, sv_rest(e, o->corner_vertex[node]), 3 * sizeof(double));
-        return;
-    }
-    int32_t sv = surface_vertex_at(e, node);
+    int32_t sv = surface_vertex_at(e, node, -1);
     if (sv >= 0) {
         memcpy(out, sv_rest(e, sv), 3 * sizeof(double));
+        return;
+    }
+    if (o->corner_vertex[node] >= 0) {
+        memcpy(out, sv_rest(e, o->corner_vertex[node]), 3 * sizeof(double));
         return;
     }
     const cs_cubemesh *cm = &o->cm;
@@ -898,16 +904,18 @@ static int32_t corner_vertex(cs_world_t *w, surf_edit *e, const families *fam, i
                              int32_t cell)
 {
     cs_object *o = e->o;
-    if (o->corner_vertex[node] >= 0)
+    /* a mesh vertex on the lattice point is looked up each time (never cached: the surface
+     * split moves its copies between sides) */
+    int32_t sv = surface_vertex_at(e, node, cell);
+    if (sv < 0 && o->corner_vertex[node] >= 0)
         return o->corner_vertex[node];
-    int32_t sv = surface_vertex_at(e, node);
     if (sv >= 0) {
         int32_t orig = sv;
         for (int32_t f = family_of(fam, e->nv0, sv); f >= 0;) {
             orig = fam->mcopy.a[fam->fstart.a[f]]; /* a family's first member is the original */
             break;
         }
-        return o->corner_vertex[node] = copy_for_cell(o, fam, e->nv0, orig, cell);
+        return copy_for_cell(o, fam, e->nv0, orig, cell);
     }
     double q[3];
     corner_position(w, e, node, q);
@@ -1093,6 +1101,19 @@ static int refresh_node_state(cs_world_t *w, cs_object *o, int n_old, const ivec
     return 0;
 }
 
+/* The cell of c's corner at the lattice point of node position p, or -1. */
+static int corner_at(const cs_cubemesh *cm, int32_t c, const double p[3])
+{
+    int off[3];
+    for (int k = 0; k < 3; k++) {
+        long l = lround((p[k] - cm->origin[k]) / cm->h) - cm->cell_ijk[3 * (size_t)c + k];
+        if (l < 0 || l > 1)
+            return -1;
+        off[k] = (int)l;
+    }
+    return corner_id(off[0], off[1], off[2]);
+}
+
 /* ---------------------------------------------------------------- step 3: surface (§3.1) */
 
 /* Are triangles t and u (sharing an edge) separated by this event? Their cells shared a node
@@ -1129,7 +1150,7 @@ static double dist2_cell(const cs_cubemesh *cm, int32_t c, const double p[3])
  * rewired triangles.
  */
 static int split_surface(cs_object *o, surf_edit *e, const int32_t *cn0, const int32_t *tris0,
-                         const uint8_t *affected_cell, families *fam)
+                         const uint8_t *affected_cell, const int32_t *corner_of, families *fam)
 {
     cs_surface *s = &o->surf;
     const int nv = e->nv0, nt = e->nt0;
@@ -1188,6 +1209,30 @@ static int split_surface(cs_object *o, surf_edit *e, const int32_t *cn0, const i
                     if (adjacent && !tri_cut(o, cn0, s->tri_cell[T[a]], s->tri_cell[T[b]]))
                         uf_union(parent, a, b);
                 }
+            /* A corner vertex (§3.2) made for a node, used only by closing triangles, belongs
+             * to that node: it splits exactly as the node did, each copy going with the cells
+             * that reference one copy of the node. */
+            int32_t cnode = corner_of[v], tn_buf[64], *tn = NULL;
+            for (int a = 0; cnode >= 0 && a < m; a++)
+                if (o->tri_kind[T[a]] == 0)
+                    cnode = -1;
+            if (cnode >= 0) {
+                tn = m <= 64 ? tn_buf : malloc((size_t)m * sizeof *tn);
+                if (!tn)
+                    goto out_p;
+                const double *p = o->cm.node_rest + 3 * (size_t)cnode;
+                for (int a = 0; a < m; a++) {
+                    const int32_t ct = s->tri_cell[T[a]];
+                    const int k = corner_at(&o->cm, ct, p);
+                    tn[a] = k >= 0 ? o->cm.cell_nodes[8 * (size_t)ct + k] : cnode;
+                    parent[a] = a;
+                    for (int b = 0; b < a; b++)
+                        if (tn[b] == tn[a]) {
+                            parent[a] = b;
+                            break;
+                        }
+                }
+            }
             /* groups in order of their root; the group whose cells hold the vertex's binding
              * keeps the vertex */
             int n_groups = 0, keep = -1;
@@ -1201,6 +1246,11 @@ static int split_surface(cs_object *o, surf_edit *e, const int32_t *cn0, const i
                     roots[n_groups++] = r;
             }
             const int32_t vc = s->vert_cell[v];
+            for (int g = 0; cnode >= 0 && g < n_groups && keep < 0; g++)
+                if (tn[roots[g]] == cnode)
+                    keep = g;
+            if (cnode >= 0 && keep < 0)
+                keep = 0;
             for (int g = 0; g < n_groups && keep < 0; g++)
                 for (int a = 0; a < m; a++)
                     if (uf_find(parent, a) == roots[g] && s->tri_cell[T[a]] == vc) {
@@ -1220,6 +1270,8 @@ static int split_surface(cs_object *o, surf_edit *e, const int32_t *cn0, const i
             if (ivec_push(&fam->fstart, fam->mcopy.n))
                 goto out_p;
             fam->of_old.a[v] = famid;
+            if (cnode >= 0)
+                o->corner_vertex[cnode] = -1; /* set again below for the node copy keeping v */
             for (int gi = 0; gi < n_groups; gi++) {
                 /* keep first so that the family's first member is v */
                 const int g = gi == 0 ? keep : (gi <= keep ? gi - 1 : gi);
@@ -1235,8 +1287,10 @@ static int split_surface(cs_object *o, surf_edit *e, const int32_t *cn0, const i
                     int32_t c = s->tri_cell[T[a]];
                     if (ivec_push(&fam->mcells, c))
                         goto out_p;
-                    if (c == vc || cells_share_node(&o->cm, c, vc))
+                    if (cnode < 0 && (c == vc || cells_share_node(&o->cm, c, vc)))
                         own = true;
+                    if (cnode >= 0 && c == vc)
+                        own = true; /* a corner vertex stays bound to a cell of its node */
                     double d = dist2_cell(&o->cm, c, s->rest + 3 * (size_t)v);
                     if (d < bd) {
                         bd = d;
@@ -1271,13 +1325,19 @@ static int split_surface(cs_object *o, surf_edit *e, const int32_t *cn0, const i
                 }
                 if (ivec_push(&fam->mcopy, copy))
                     goto out_p;
+                if (cnode >= 0)
+                    o->corner_vertex[tn[roots[g]]] = copy;
             }
             if (parent != pbuf)
                 free(parent);
+            if (tn != tn_buf)
+                free(tn);
             continue;
         out_p:
             if (parent != pbuf)
                 free(parent);
+            if (tn != tn_buf)
+                free(tn);
             goto out;
         }
     }
@@ -1328,6 +1388,26 @@ static void face_setup(const cs_object *o, const crack_face *f, cs_close_face *c
     }
 }
 
+/* Does triangle q lie in one of the planes through f's four edges (perpendicular to f)? Such
+ * a triangle (the side of a box-shaped surface) touches f only along f's boundary and never
+ * bounds the region of f inside the surface; left in, its crossings lie exactly on f's edge
+ * lines, where a neighbouring closing triangle of an earlier fracture may stand in for its
+ * other side. */
+static bool on_side_plane(const cs_close_face *cf, const double *rest, const int32_t *q)
+{
+    for (int a = 0; a < 3; a++) {
+        if (a == cf->axis)
+            continue;
+        for (int side = 0; side < 2; side++) {
+            const double x = side ? cf->hi[a] : cf->lo[a];
+            if (rest[3 * (size_t)q[0] + a] == x && rest[3 * (size_t)q[1] + a] == x &&
+                rest[3 * (size_t)q[2] + a] == x)
+                return true;
+        }
+    }
+    return false;
+}
+
 /* A patch: the closing triangles of one crack face for one side. */
 typedef struct patch_list {
     ivec tri;    /* 3 per triangle */
@@ -1361,11 +1441,25 @@ static int close_faces(cs_world_t *w, cs_object *o, surf_edit *e, const int32_t 
             cf.corner_vertex[k] = e->nv0 + k;
             corner_position(w, e, n1[k], xr + 3 * ((size_t)e->nv0 + k));
         }
+        /* §3.2 tests the triangles meeting c1; those meeting c2 are added so that both
+         * triangles of every edge crossing f are seen even when rounding puts one of them
+         * just outside c1 (triangles not crossing f are ignored) */
+        int attempt = 0;
+    retry:
+        /* First the mesh's own triangles; if they leave an edge crossing f with one side only
+         * (its other triangle is a closing triangle of an earlier fracture), all triangles. */
         cand.n = 0;
-        for (int k = s->cell_tri_start[f->c1]; k < s->cell_tri_start[f->c1 + 1]; k++) {
-            int32_t t = s->cell_tri_list[k];
-            if (t < e->nt0 && o->tri_kind[t] == 0 && ivec_push(&cand, t))
-                goto out;
+        for (int sd = 0; sd < 2; sd++) {
+            const int32_t c = sd ? f->c2 : f->c1;
+            for (int k = s->cell_tri_start[c]; k < s->cell_tri_start[c + 1]; k++) {
+                int32_t t = s->cell_tri_list[k];
+                bool dup = false;
+                for (int j = 0; sd && j < cand.n && !dup; j++)
+                    dup = cand.a[j] == t;
+                if (t < e->nt0 && (attempt || o->tri_kind[t] == 0) && !dup &&
+                    !on_side_plane(&cf, s->rest, tris0 + 3 * (size_t)t) && ivec_push(&cand, t))
+                    goto out;
+            }
         }
         if (cand.n > cap_side) {
             cap_side = cand.n;
@@ -1391,6 +1485,23 @@ static int close_faces(cs_world_t *w, cs_object *o, surf_edit *e, const int32_t 
         char why[160];
         int nt = cs_close_face_triangles(&cf, xr, tris0, cand.a, cand.n, side, out, cap,
                                          why, sizeof why);
+        if (nt < 0 && attempt++ == 0)
+            goto retry;
+        /* The whole face (two triangles over its corners, in the positive sense): where t and
+         * t' share corners (nodes still joined), the diagonal must not join two shared ones, or
+         * t and t' would both use it in each direction. */
+        if (nt == 2) {
+            bool corners = true;
+            for (int k = 0; k < 6; k++)
+                corners &= out[k] >= e->nv0 && out[k] < e->nv0 + 4;
+            if (corners) {
+                const int d = n1[0] == n2[0] && n1[2] == n2[2] ? 1 : 0;
+                const int32_t b = e->nv0;
+                const int32_t q[6] = {b + d, b + d + 1, b + (d + 2) % 4,
+                                      b + d, b + (d + 2) % 4, b + (d + 3) % 4};
+                memcpy(out, q, sizeof q);
+            }
+        }
         if (nt < 0)
             continue; /* the repair closes what is left open */
         for (int sd = 0; sd < 2; sd++) {
@@ -1792,8 +1903,9 @@ static int repair_and_commit(cs_world_t *w, cs_object *o, surf_edit *e, const pa
             const int32_t *q = pl->tri.a + 3 * (size_t)t;
             for (int k = 0; k < 3; k++) {
                 int32_t a = q[k], b = q[(k + 1) % 3];
-                if (edge_get(&em, a, b) > 1 || edge_get(&em, a, b) + edge_get(&em, b, a) > 2)
+                if (edge_get(&em, a, b) > 1 || edge_get(&em, a, b) + edge_get(&em, b, a) > 2) {
                     ok = false;
+                }
             }
         }
         if (!ok) {
@@ -2165,9 +2277,87 @@ out:
     return rc;
 }
 
+/* Rest volume enclosed by o's surface. */
+static double rest_volume(const cs_object *o)
+{
+    double v = 0;
+    const cs_surface *s = &o->surf;
+    for (int t = 0; t < s->n_triangles; t++) {
+        const double *a = s->rest + 3 * (size_t)s->tris[3 * t],
+                     *b = s->rest + 3 * (size_t)s->tris[3 * t + 1],
+                     *c = s->rest + 3 * (size_t)s->tris[3 * t + 2];
+        v += (a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) +
+              a[2] * (b[0] * c[1] - b[1] * c[0])) / 6.0;
+    }
+    return v;
+}
+
+/*
+ * The last resort for a piece whose surface encloses no positive volume (or none at all): the
+ * boundary of its cubes, bound to them. Recorded as one change (everything removed, the new
+ * surface appended) when `record`. Returns 1 if it replaced the surface, 0 if not needed, -1.
+ */
+static int ensure_positive_volume(cs_world_t *w, cs_object *o, bool record)
+{
+    const double h = o->cm.h;
+    if (o->surf.n_triangles > 0 && rest_volume(o) > 1e-9 * h * h * h)
+        return 0;
+    double *v = NULL;
+    int32_t *t = NULL;
+    int nv = 0, nt = 0, rc = -1;
+    char err[128];
+    cs_surface ns;
+    if (cs_surface_of_cells(&o->cm, 1, &v, &nv, &t, &nt, err, sizeof err) != 0)
+        return -1;
+    if (cs_surface_bind(&ns, &o->cm, v, nv, t, nt, err, sizeof err) != 0) {
+        free(v);
+        free(t);
+        return -1;
+    }
+    free(v);
+    free(t);
+    cs_surface_skin(&ns, &o->cm, o->x);
+    uint8_t *kind = malloc((size_t)(nt ? nt : 1));
+    int32_t *vrem = malloc((size_t)(o->surf.n_vertices + 1) * sizeof *vrem);
+    int32_t *trem = malloc((size_t)(o->surf.n_triangles + 1) * sizeof *trem);
+    if (!kind || !vrem || !trem)
+        goto out;
+    memset(kind, 1, (size_t)nt);
+    for (int i = 0; i < o->surf.n_vertices; i++)
+        vrem[i] = o->surf.n_vertices - 1 - i;
+    for (int i = 0; i < o->surf.n_triangles; i++)
+        trem[i] = o->surf.n_triangles - 1 - i;
+    if (record) {
+        cs_topo_change c = {.object_id = (int32_t)o->id, .from_version = o->topology_version,
+                            .to_version = o->topology_version + 1, .n_vertices_total = nv,
+                            .n_triangles_total = nt, .n_vremove = o->surf.n_vertices,
+                            .vremove = vrem, .n_vnew = nv, .vnew_xyz = ns.pos,
+                            .n_tremove = o->surf.n_triangles, .tremove = trem, .n_tnew = nt,
+                            .tnew = ns.tris};
+        if (push_change(w, &c))
+            goto out;
+        o->topology_version++;
+    }
+    cs_surface_free(&o->surf);
+    o->surf = ns;
+    memset(&ns, 0, sizeof ns);
+    free(o->tri_kind);
+    o->tri_kind = kind;
+    kind = NULL;
+    for (int i = 0; o->corner_vertex && i < o->n; i++)
+        o->corner_vertex[i] = -1;
+    rc = 1;
+out:
+    cs_surface_free(&ns);
+    free(kind);
+    free(vrem);
+    free(trem);
+    return rc;
+}
+
 /* Split o into face-connected pieces (cells sharing nodes): the largest stays o, every other
  * becomes a new object announced by an event and a from-version-0 change. */
-static int split_pieces(cs_world_t *w, cs_object *o)
+static int split_pieces(cs_world_t *w, cs_object *o, int *n_rebuilt)
 {
     const cs_cubemesh *cm = &o->cm;
     const int nc = cm->n_cells;
@@ -2224,9 +2414,11 @@ static int split_pieces(cs_world_t *w, cs_object *o)
             cs_object_free_internal(p);
             goto out;
         }
-        int fans = 0;
-        if (close_open_loops(w, p, false, &fans) != 0)
+        int fans = 0, rebuilt;
+        if (close_open_loops(w, p, false, &fans) != 0 ||
+            (rebuilt = ensure_positive_volume(w, p, false)) < 0)
             goto out;
+        *n_rebuilt += rebuilt;
         p->topology_version = 1;
         cs_topo_change ch = {.object_id = (int32_t)p->id, .parent_id = (int32_t)o->id,
                              .name = p->name, .model = cs_model_name(p->model),
@@ -2247,6 +2439,11 @@ static int split_pieces(cs_world_t *w, cs_object *o)
             list[n++] = c;
     }
     rc = keep_cells(w, o, list, n, cmap);
+    if (rc == 0) {
+        int rebuilt = ensure_positive_volume(w, o, true);
+        rc = rebuilt < 0 ? -1 : 0;
+        *n_rebuilt += rebuilt > 0;
+    }
 out:
     free(parent);
     free(comp);
@@ -2287,15 +2484,17 @@ static int opened_faces(cs_object *o, const int8_t *label, const uint8_t *affect
             int32_t d = cs_cubemesh_find(cm, nb[0], nb[1], nb[2]);
             if (d < 0 || face_open(o, c, axis, 1))
                 continue;
-            int cs[4];
+            int cs[4], n_shared = 0;
             face_corners(axis, 1, cs);
-            bool shared = false;
-            for (int k = 0; k < 4 && !shared; k++) {
+            for (int k = 0; k < 4; k++) {
                 int32_t nc_ = cm->cell_nodes[8 * (size_t)c + cs[k]];
                 for (int j = 0; j < 8; j++)
-                    shared |= cm->cell_nodes[8 * (size_t)d + j] == nc_;
+                    if (cm->cell_nodes[8 * (size_t)d + j] == nc_) {
+                        n_shared++;
+                        break;
+                    }
             }
-            if (shared)
+            if (n_shared > 0)
                 continue;
             o->cell_open[c] |= face_bit(axis, 1);
             o->cell_open[d] |= face_bit(axis, -1);
@@ -2307,19 +2506,6 @@ static int opened_faces(cs_object *o, const int8_t *label, const uint8_t *affect
         }
     }
     return 0;
-}
-
-/* The cell of c's corner at the lattice point of node position p, or -1. */
-static int corner_at(const cs_cubemesh *cm, int32_t c, const double p[3])
-{
-    int off[3];
-    for (int k = 0; k < 3; k++) {
-        long l = lround((p[k] - cm->origin[k]) / cm->h) - cm->cell_ijk[3 * (size_t)c + k];
-        if (l < 0 || l > 1)
-            return -1;
-        off[k] = (int)l;
-    }
-    return corner_id(off[0], off[1], off[2]);
 }
 
 /*
@@ -2335,7 +2521,7 @@ static int fracture_event(cs_world_t *w, cs_object *o, const int8_t *label, bool
     ivec Fv = {0}, touched = {0}, newsrc = {0}, Ov = {0};
     crack_face *O = NULL;
     pairkey *fset = NULL;
-    int32_t *cn0 = NULL, *tris0 = NULL;
+    int32_t *cn0 = NULL, *tris0 = NULL, *corner_of = NULL;
     uint8_t *affected = NULL;
     surf_edit e = {0};
     families fam = {0};
@@ -2398,6 +2584,14 @@ static int fracture_event(cs_world_t *w, cs_object *o, const int8_t *label, bool
         for (int i = 0; i < o->n; i++)
             o->corner_vertex[i] = -1;
     }
+    corner_of = malloc((size_t)(o->surf.n_vertices ? o->surf.n_vertices : 1) * sizeof *corner_of);
+    if (!corner_of)
+        goto out_f;
+    for (int i = 0; i < o->surf.n_vertices; i++)
+        corner_of[i] = -1;
+    for (int i = 0; i < o->n; i++)
+        if (o->corner_vertex[i] >= 0 && o->corner_vertex[i] < o->surf.n_vertices)
+            corner_of[o->corner_vertex[i]] = i;
     /* 2. nodes */
     if (split_nodes(o, F, nF, fset, label, paper, &touched, &newsrc) < 0 ||
         refresh_node_state(w, o, n_old, &newsrc) != 0)
@@ -2419,32 +2613,8 @@ static int fracture_event(cs_world_t *w, cs_object *o, const int8_t *label, bool
     e.nv0 = o->surf.n_vertices;
     e.nt0 = o->surf.n_triangles;
     e.rewired = calloc((size_t)(e.nt0 ? e.nt0 : 1), 1);
-    if (!e.rewired || split_surface(o, &e, cn0, tris0, affected, &fam) != 0)
+    if (!e.rewired || split_surface(o, &e, cn0, tris0, affected, corner_of, &fam) != 0)
         goto out_f;
-    /* corner vertices of split nodes: each node copy takes the vertex copy on its side */
-    for (int i = 0; i < touched.n; i++) {
-        int32_t nd = touched.a[i];
-        int32_t cv = nd < n_old ? o->corner_vertex[nd] : -1;
-        if (cv < 0)
-            continue;
-        int32_t f = family_of(&fam, e.nv0, cv);
-        if (f < 0)
-            continue;
-        int m0 = fam.fstart.a[f], m1 = f + 1 < fam.fstart.n ? fam.fstart.a[f + 1] : fam.mcopy.n;
-        const double *p = cm->node_rest + 3 * (size_t)nd;
-        for (int m = m0; m < m1; m++) {
-            int c0 = fam.mcstart.a[m], c1 = m + 1 < fam.mcstart.n ? fam.mcstart.a[m + 1]
-                                                                  : fam.mcells.n;
-            for (int k = c0; k < c1; k++) {
-                int corner = corner_at(cm, fam.mcells.a[k], p);
-                if (corner >= 0) {
-                    o->corner_vertex[cm->cell_nodes[8 * (size_t)fam.mcells.a[k] + corner]] =
-                        fam.mcopy.a[m];
-                    break;
-                }
-            }
-        }
-    }
     /* 4. closing surfaces, 5. repair */
     if (close_faces(w, o, &e, tris0, O, nO, label, &fam, &pl) != 0)
         goto out_f;
@@ -2467,7 +2637,13 @@ static int fracture_event(cs_world_t *w, cs_object *o, const int8_t *label, bool
     o->still_steps = 0;
     o->elastic_energy_valid = false;
     /* 6. pieces */
-    rc = split_pieces(w, o) == 0 ? CS_OK : CS_ERR_NOMEM;
+    int rebuilt = 0;
+    rc = split_pieces(w, o, &rebuilt) == 0 ? CS_OK : CS_ERR_NOMEM;
+    for (int i = w->n_events - 1; i >= 0; i--)
+        if (w->events[i].kind == CS_EVENT_FRACTURE && w->events[i].object == o->id) {
+            w->events[i].rebuilt_pieces = rebuilt;
+            break;
+        }
 out_f:
     free(F);
 out:
@@ -2478,6 +2654,7 @@ out:
     free(fset);
     free(cn0);
     free(tris0);
+    free(corner_of);
     free(affected);
     surf_edit_free(&e);
     families_free(&fam);
