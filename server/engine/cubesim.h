@@ -245,6 +245,8 @@ typedef struct cs_event {
     int rebuilt_pieces;   /* FRACTURE: pieces whose surface enclosed no positive volume after
                              that (closing patches rejected around them) and were given the
                              boundary of their cubes instead; 0 normally */
+    int dropped_pieces;   /* FRACTURE: pieces of cubes holding no surface triangle (voxels
+                             that only grazed the surface: no material) that were discarded */
 } cs_event;
 
 /* Events of the last step or forced fracture, in order; *count set. Valid until the next

@@ -2355,13 +2355,13 @@ out:
     return rc;
 }
 
-/* Split o into face-connected pieces (cells sharing nodes): the largest stays o, every other
- * becomes a new object announced by an event and a from-version-0 change. */
-static int split_pieces(cs_world_t *w, cs_object *o, int *n_rebuilt)
+/* Split o into face-connected pieces: the largest stays o, every other becomes a new object
+ * announced by an event and a from-version-0 change. */
+static int split_pieces(cs_world_t *w, cs_object *o, int *n_rebuilt, int *n_dropped)
 {
     const cs_cubemesh *cm = &o->cm;
     const int nc = cm->n_cells;
-    int32_t *parent = malloc((size_t)o->n * sizeof *parent);
+    int32_t *parent = malloc((size_t)nc * sizeof *parent);
     int32_t *comp = malloc((size_t)nc * sizeof *comp);
     int32_t *count = calloc((size_t)nc, sizeof *count);
     int32_t *cmap = malloc((size_t)nc * sizeof *cmap);
@@ -2369,20 +2369,30 @@ static int split_pieces(cs_world_t *w, cs_object *o, int *n_rebuilt)
     int rc = -1;
     if (!parent || !comp || !count || !cmap || !list)
         goto out;
-    for (int i = 0; i < o->n; i++)
-        parent[i] = i;
+    /* face-connected: face neighbours still sharing a node of their face (cells that touch
+     * only along an edge or at a corner become pieces of their own; each keeps a copy of the
+     * nodes they shared) */
     for (int c = 0; c < nc; c++)
-        for (int k = 1; k < 8; k++)
-            uf_union(parent, cm->cell_nodes[8 * (size_t)c], cm->cell_nodes[8 * (size_t)c + k]);
+        parent[c] = c;
+    for (int c = 0; c < nc; c++) {
+        const int32_t *q = cm->cell_ijk + 3 * (size_t)c;
+        for (int axis = 0; axis < 3; axis++) {
+            int32_t nb[3] = {q[0], q[1], q[2]};
+            nb[axis]++;
+            int32_t d = cs_cubemesh_find(cm, nb[0], nb[1], nb[2]);
+            if (d >= 0 && cells_share_node(cm, c, d))
+                uf_union(parent, c, d);
+        }
+    }
     /* components numbered by their first cell */
     int ncomp = 0;
-    int32_t *root_comp = malloc((size_t)o->n * sizeof *root_comp);
+    int32_t *root_comp = malloc((size_t)nc * sizeof *root_comp);
     if (!root_comp)
         goto out;
-    for (int i = 0; i < o->n; i++)
+    for (int i = 0; i < nc; i++)
         root_comp[i] = -1;
     for (int c = 0; c < nc; c++) {
-        int r = uf_find(parent, cm->cell_nodes[8 * (size_t)c]);
+        int r = uf_find(parent, c);
         if (root_comp[r] < 0)
             root_comp[r] = ncomp++;
         comp[c] = root_comp[r];
@@ -2409,6 +2419,14 @@ static int split_pieces(cs_world_t *w, cs_object *o, int *n_rebuilt)
         cs_object *p = make_piece(w, o, list, n, cmap);
         if (!p)
             goto out;
+        if (p->surf.n_triangles == 0) {
+            /* cubes that hold no part of the surface: voxels that only grazed it (seed 000
+             * §2.1 keeps every cube the surface touches). No material, nothing to show: they
+             * are dropped rather than made into an invisible object. */
+            cs_object_free_internal(p);
+            (*n_dropped)++;
+            continue;
+        }
         p->name = piece_name(w, o->name);
         if (!p->name || cs_world_append_object(w, p) != 0) {
             cs_object_free_internal(p);
@@ -2637,11 +2655,12 @@ static int fracture_event(cs_world_t *w, cs_object *o, const int8_t *label, bool
     o->still_steps = 0;
     o->elastic_energy_valid = false;
     /* 6. pieces */
-    int rebuilt = 0;
-    rc = split_pieces(w, o, &rebuilt) == 0 ? CS_OK : CS_ERR_NOMEM;
+    int rebuilt = 0, dropped = 0;
+    rc = split_pieces(w, o, &rebuilt, &dropped) == 0 ? CS_OK : CS_ERR_NOMEM;
     for (int i = w->n_events - 1; i >= 0; i--)
         if (w->events[i].kind == CS_EVENT_FRACTURE && w->events[i].object == o->id) {
             w->events[i].rebuilt_pieces = rebuilt;
+            w->events[i].dropped_pieces = dropped;
             break;
         }
 out_f:
