@@ -2355,6 +2355,16 @@ out:
     return rc;
 }
 
+/* Does the centre of cell c lie inside o's closed rest surface (winding number > ½)? */
+static bool cell_inside(const cs_object *o, int32_t c)
+{
+    surf_edit e = {.o = (cs_object *)o, .nv0 = o->surf.n_vertices, .nt0 = o->surf.n_triangles};
+    double p[3];
+    for (int k = 0; k < 3; k++)
+        p[k] = o->cm.origin[k] + o->cm.h * (o->cm.cell_ijk[3 * (size_t)c + k] + 0.5);
+    return inside_surface(&e, p);
+}
+
 /* Split o into face-connected pieces: the largest stays o, every other becomes a new object
  * announced by an event and a from-version-0 change. */
 static int split_pieces(cs_world_t *w, cs_object *o, int *n_rebuilt, int *n_dropped)
@@ -2419,10 +2429,11 @@ static int split_pieces(cs_world_t *w, cs_object *o, int *n_rebuilt, int *n_drop
         cs_object *p = make_piece(w, o, list, n, cmap);
         if (!p)
             goto out;
-        if (p->surf.n_triangles == 0) {
-            /* cubes that hold no part of the surface: voxels that only grazed it (seed 000
-             * §2.1 keeps every cube the surface touches). No material, nothing to show: they
-             * are dropped rather than made into an invisible object. */
+        if (p->surf.n_triangles == 0 && !cell_inside(o, list[0])) {
+            /* cubes outside the surface holding none of it: voxels that only grazed it
+             * (seed 000 §2.1 keeps every cube the surface touches). No material, nothing to
+             * show: dropped rather than made into an invisible object. (Cubes inside with no
+             * surface left get the boundary of their cubes below.) */
             cs_object_free_internal(p);
             (*n_dropped)++;
             continue;
