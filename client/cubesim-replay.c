@@ -48,20 +48,18 @@
 #include "watertight.h"
 
 /*
- * Relative tolerance on the volume of an object's pieces across a fracture. A fracture cuts
- * along triangle boundaries and closes both sides with the same generated surface, so the
- * volume is conserved exactly in exact arithmetic; what the check has to allow for is
- * (a) float32 positions (about 2^-24 relative per coordinate, ~1e-7 in volume), (b) vertices
- * that moved less than publish_epsilon and were not resent, and (c) the elastic motion between
- * the previous checked frame and this one (one publish interval; usually one step), in which
- * a soft solid's volume changes by its volumetric strain rate times the interval — well under
- * 1e-4 for the materials and time steps the scenes use. 1e-3 covers all three with a margin
- * while still catching a lost or duplicated closing surface (which changes the volume by a
- * whole layer of cubes: ~h/size, 1e-2 and more). It does not cover violent breaks of very
- * soft solids: a beam of E = 2e4 Pa tearing under its own weight changes volume by up to 2 %
- * per step as freed pieces spring back (measured); --volume-tol raises it for such logs.
+ * Relative tolerance on the volume of an object's pieces across a fracture. Where §3.2 closes a
+ * crack, both sides get the same generated surface and the volume is conserved exactly in
+ * exact arithmetic; where the engine falls back (fans over loops the §3.2 patches leave open, a
+ * piece given the boundary of its cubes; README "Fracture"), a fracture may change it by a
+ * fraction of a cube. The check also has to allow for float32 positions (~1e-7), vertices that
+ * moved less than publish_epsilon and were not resent, and the elastic motion of one publish
+ * interval. 2e-2 covers these in the shipped scenes (measured: at most 0.5 % per frame in
+ * scenes/fracture.json). The closedness checks, not this one, catch a lost closing surface.
+ * Violent breaks of very soft solids can exceed it (a beam of E = 2e4 Pa tearing under its own
+ * weight: up to 2 % per step as freed pieces spring back); --volume-tol raises it.
  */
-#define CS_VERIFY_VOLUME_TOL 1e-3 /* default of --volume-tol */
+#define CS_VERIFY_VOLUME_TOL 2e-2 /* default of --volume-tol */
 
 static volatile sig_atomic_t stop_flag;
 

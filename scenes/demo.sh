@@ -15,7 +15,8 @@
 #
 # Environment: DEMO_SECONDS (wall seconds the daemon runs, default 6, at least 3),
 # DEMO_SCENE (default scenes/default.json; it must have an object named "beam"),
-# DEMO_BIN (default build/bin), DEMO_OUT (default build/demo).
+# DEMO_BIN (default build/bin), DEMO_OUT (default build/demo), DEMO_VOLUME_TOL (passed to
+# cubesim-replay --verify as --volume-tol; default its own).
 
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 SELF="$ROOT/scenes/$(basename "${BASH_SOURCE[0]}")"
@@ -158,7 +159,8 @@ grep -q '^lost ' "$LOGGER" || die "cubesim-log printed no summary: $(tail -2 "$L
     || die "cubesim-replay --export failed: $(tail -3 "$OUT/replay.txt" | tr '\n' '|')"
 "$BIN/cubesim-replay" "$LOG" --export "$REST" --frame 0 </dev/null >/dev/null 2>&1 \
     || die "cubesim-replay could not rebuild frame 0 (the first snapshot) from $LOG"
-"$BIN/cubesim-replay" "$LOG" --verify </dev/null >"$OUT/verify.txt" 2>&1
+"$BIN/cubesim-replay" "$LOG" --verify ${DEMO_VOLUME_TOL:+--volume-tol "$DEMO_VOLUME_TOL"} \
+    </dev/null >"$OUT/verify.txt" 2>&1
 vrc=$?
 echo "[5/5] cubesim-replay rebuilt the surfaces from $LOG alone:"
 sed 's/^/      /' "$OUT/replay.txt"
@@ -197,8 +199,8 @@ moved=$(awk -v a="$tip_rest" -v b="$tip_end" 'BEGIN { gsub(/[(),]/, " ", a); gsu
     split(a, p, " "); split(b, q, " "); print sqrt((p[1]-q[1])^2 + (p[2]-q[2])^2 + (p[3]-q[3])^2) }')
 
 channels=$(awk '$1 ~ /^CUBESIM_/ { n[$1] = $2 }
-    END { split("SNAPSHOT DELTA STATUS ACK FORCE COMMAND", c, " ")
-          for (i = 1; i <= 6; i++) { printf "%s%s %d", sep, c[i], n["CUBESIM_" c[i]]; sep = ", " } }' "$LOGGER")
+    END { split("SNAPSHOT DELTA TOPOLOGY STATUS ACK FORCE COMMAND", c, " ")
+          for (i = 1; i <= 7; i++) { printf "%s%s %d", sep, c[i], n["CUBESIM_" c[i]]; sep = ", " } }' "$LOGGER")
 lost=$(awk '/^lost / { print $2 }' "$LOGGER")
 echo "summary"
 echo "  frames          $dframe stepped by the daemon, $rframe rebuilt from the log" \
