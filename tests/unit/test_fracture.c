@@ -337,6 +337,17 @@ TEST(fracture_exhaustive_box_cuts_down_to_single_cubes)
     exhaustive_cuts(w, cells, 18, 0);
     cs_world_destroy(w);
     free(cells);
+    /* a 3×3×3 block: its centre cube has no mesh surface at all, only closing patches */
+    w = box_world(3, 3, 3, 0.05, &id, &cells);
+    ENSURE(w);
+    exhaustive_cuts(w, cells, 27, 0);
+    cs_world_destroy(w);
+    free(cells);
+    w = box_world(3, 3, 3, 0.05, &id, &cells);
+    ENSURE(w);
+    exhaustive_cuts(w, cells, 27, 12345u); /* the same faces in a shuffled order */
+    cs_world_destroy(w);
+    free(cells);
 }
 
 /* A ν = 0 bar of nx cubes held at x = 0 and pulled by F at x = L: uniform uniaxial stress. */
