@@ -330,10 +330,12 @@ static void log_events(cs_daemon *d)
             cs_dlog_info(&d->log,
                          "fracture: object %u '%s' at frame %lld, point (%.4g, %.4g, %.4g) m, "
                          "normal (%.3g, %.3g, %.3g), stress %.4g Pa, %d faces cut, %d closing "
-                         "triangles%s", (unsigned)e->object, info.name ? info.name : "?",
-                         (long long)e->frame, e->point[0], e->point[1], e->point[2],
-                         e->normal[0], e->normal[1], e->normal[2], e->stress, e->faces_cut,
-                         e->closing_triangles, e->fallback_loops ? " (fan fallback used)" : "");
+                         "triangles, %d loops closed by fans, %d pieces rebuilt from cubes, "
+                         "%d grazing cubes dropped", (unsigned)e->object,
+                         info.name ? info.name : "?", (long long)e->frame, e->point[0],
+                         e->point[1], e->point[2], e->normal[0], e->normal[1], e->normal[2],
+                         e->stress, e->faces_cut, e->closing_triangles, e->fallback_loops,
+                         e->rebuilt_pieces, e->dropped_pieces);
         } else if (e->kind == CS_EVENT_NEW_PIECE) {
             cs_object_get_info(d->world, e->parent, &pinfo);
             cs_dlog_info(&d->log, "fracture: new piece %u '%s' broke off object %u '%s' at "
