@@ -633,68 +633,10 @@ static bool inside_surface(const surf_edit *e, const double p[3])
     return total / (4 * M_PI) > 0.5;
 }
 
-/* ---------------------------------------------------------------- cell lists (Table 1) */
-
-/* Rebuild the per-cell triangle lists of s (the triangles intersecting each cell). */
+/* Rebuild the per-cell triangle lists (seed 000 Table 1) after the surface changed. */
 static int rebuild_cell_lists(cs_surface *s, const cs_cubemesh *cm)
 {
-    const double h = cm->h, tol = 1e-9 * h, half[3] = {0.5 * h + tol, 0.5 * h + tol,
-                                                       0.5 * h + tol};
-    int32_t *start = calloc((size_t)cm->n_cells + 1, sizeof *start);
-    ivec pc = {0}, pt = {0};
-    if (!start)
-        return -1;
-    for (int t = 0; t < s->n_triangles; t++) {
-        const int32_t *tri = s->tris + 3 * (size_t)t;
-        const double *a = s->rest + 3 * (size_t)tri[0], *b = s->rest + 3 * (size_t)tri[1],
-                     *c = s->rest + 3 * (size_t)tri[2];
-        int r0[3], r1[3];
-        for (int k = 0; k < 3; k++) {
-            double lo = fmin(a[k], fmin(b[k], c[k])), hi = fmax(a[k], fmax(b[k], c[k]));
-            r0[k] = (int)floor((lo - cm->origin[k]) / h - 1e-6);
-            r1[k] = (int)floor((hi - cm->origin[k]) / h + 1e-6);
-        }
-        for (int k = r0[2]; k <= r1[2]; k++)
-            for (int j = r0[1]; j <= r1[1]; j++)
-                for (int i = r0[0]; i <= r1[0]; i++) {
-                    int32_t cell = cs_cubemesh_find(cm, i, j, k);
-                    if (cell < 0)
-                        continue;
-                    double cc[3] = {cm->origin[0] + (i + 0.5) * h, cm->origin[1] + (j + 0.5) * h,
-                                    cm->origin[2] + (k + 0.5) * h};
-                    if (cell != s->tri_cell[t] && !cs_tri_box_overlap(cc, half, a, b, c))
-                        continue;
-                    if (ivec_push(&pc, cell) || ivec_push(&pt, t))
-                        goto oom;
-                }
-    }
-    int32_t *list = malloc((size_t)(pc.n ? pc.n : 1) * sizeof *list);
-    int32_t *fill = malloc((size_t)(cm->n_cells ? cm->n_cells : 1) * sizeof *fill);
-    if (!list || !fill) {
-        free(list);
-        free(fill);
-        goto oom;
-    }
-    for (int p = 0; p < pc.n; p++)
-        start[pc.a[p] + 1]++;
-    for (int c = 0; c < cm->n_cells; c++)
-        start[c + 1] += start[c];
-    memcpy(fill, start, (size_t)cm->n_cells * sizeof *fill);
-    for (int p = 0; p < pc.n; p++)
-        list[fill[pc.a[p]]++] = pt.a[p];
-    free(fill);
-    free(pc.a);
-    free(pt.a);
-    free(s->cell_tri_start);
-    free(s->cell_tri_list);
-    s->cell_tri_start = start;
-    s->cell_tri_list = list;
-    return 0;
-oom:
-    free(start);
-    free(pc.a);
-    free(pt.a);
-    return -1;
+    return cs_surface_build_cell_lists(s, cm, 1e-9 * cm->h);
 }
 
 /* ---------------------------------------------------------------- vertex families */

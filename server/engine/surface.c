@@ -79,8 +79,6 @@ int cs_surface_bind(cs_surface *s, const cs_cubemesh *cm, const double *verts, i
                     const int32_t *tris, int nt, char *err, size_t errlen)
 {
     memset(s, 0, sizeof *s);
-    pair *pairs = NULL;
-    int n_pairs = 0, cap_pairs = 0;
     s->n_vertices = nv;
     s->n_triangles = nt;
     size_t nv3 = (size_t)(nv ? nv : 1) * 3, nt3 = (size_t)(nt ? nt : 1) * 3;
@@ -111,9 +109,6 @@ int cs_surface_bind(cs_surface *s, const cs_cubemesh *cm, const double *verts, i
             goto fail;
         }
     }
-    const double h = cm->h;
-    const double grown = 0.5 * h + tol;
-    const double half[3] = {grown, grown, grown};
     for (int t = 0; t < nt; t++) {
         const int32_t *tri = tris + 3 * t;
         if (tri[0] < 0 || tri[0] >= nv || tri[1] < 0 || tri[1] >= nv || tri[2] < 0 ||
@@ -130,11 +125,37 @@ int cs_surface_bind(cs_surface *s, const cs_cubemesh *cm, const double *verts, i
             snprintf(err, errlen, "surface: centroid of triangle %d lies in no cube", t);
             goto fail;
         }
+    }
+    free(s->cell_tri_start);
+    s->cell_tri_start = NULL;
+    if (cs_surface_build_cell_lists(s, cm, tol) != 0)
+        goto oom;
+    return 0;
+oom:
+    snprintf(err, errlen, "surface: out of memory");
+fail:
+    cs_surface_free(s);
+    return -1;
+}
+
+int cs_surface_build_cell_lists(cs_surface *s, const cs_cubemesh *cm, double tol)
+{
+    const double h = cm->h, tol_h = tol / h, grown = 0.5 * h + tol;
+    const double half[3] = {grown, grown, grown};
+    pair *pairs = NULL;
+    int n_pairs = 0, cap_pairs = 0;
+    int32_t *start = calloc((size_t)cm->n_cells + 1, sizeof *start), *list = NULL;
+    if (!start)
+        return -1;
+    for (int t = 0; t < s->n_triangles; t++) {
+        const int32_t *tri = s->tris + 3 * (size_t)t;
+        const double *a = s->rest + 3 * (size_t)tri[0], *b = s->rest + 3 * (size_t)tri[1],
+                     *c = s->rest + 3 * (size_t)tri[2];
         int r0[3], r1[3];
         for (int k = 0; k < 3; k++) {
             double lo = fmin(a[k], fmin(b[k], c[k])), hi = fmax(a[k], fmax(b[k], c[k]));
-            r0[k] = (int)floor((lo - cm->origin[k]) / h - 2 * tol_h);
-            r1[k] = (int)floor((hi - cm->origin[k]) / h + 2 * tol_h);
+            r0[k] = (int)floor((lo - cm->origin[k]) / h - 2 * tol_h - 1e-9);
+            r1[k] = (int)floor((hi - cm->origin[k]) / h + 2 * tol_h + 1e-9);
         }
         for (int k = r0[2]; k <= r1[2]; k++)
             for (int j = r0[1]; j <= r1[1]; j++)
@@ -144,7 +165,8 @@ int cs_surface_bind(cs_surface *s, const cs_cubemesh *cm, const double *verts, i
                         continue;
                     double cc[3] = {cm->origin[0] + (i + 0.5) * h, cm->origin[1] + (j + 0.5) * h,
                                     cm->origin[2] + (k + 0.5) * h};
-                    if (!cs_tri_box_overlap(cc, half, a, b, c))
+                    /* the centroid's cell always lists its triangle */
+                    if (cell != s->tri_cell[t] && !cs_tri_box_overlap(cc, half, a, b, c))
                         continue;
                     if (n_pairs == cap_pairs) {
                         int nc = cap_pairs ? 2 * cap_pairs : 1024;
@@ -158,29 +180,30 @@ int cs_surface_bind(cs_surface *s, const cs_cubemesh *cm, const double *verts, i
                 }
     }
     /* CSR by counting sort on the cell; triangles stay in increasing order within a cell */
-    s->cell_tri_list = malloc((size_t)(n_pairs ? n_pairs : 1) * sizeof *s->cell_tri_list);
-    if (!s->cell_tri_list)
-        goto oom;
-    for (int p = 0; p < n_pairs; p++)
-        s->cell_tri_start[pairs[p].cell + 1]++;
-    for (int c = 0; c < cm->n_cells; c++)
-        s->cell_tri_start[c + 1] += s->cell_tri_start[c];
-    {
-        int32_t *fill = malloc((size_t)(cm->n_cells ? cm->n_cells : 1) * sizeof *fill);
-        if (!fill)
-            goto oom;
-        memcpy(fill, s->cell_tri_start, (size_t)cm->n_cells * sizeof *fill);
-        for (int p = 0; p < n_pairs; p++)
-            s->cell_tri_list[fill[pairs[p].cell]++] = pairs[p].tri;
+    list = malloc((size_t)(n_pairs ? n_pairs : 1) * sizeof *list);
+    int32_t *fill = malloc((size_t)(cm->n_cells ? cm->n_cells : 1) * sizeof *fill);
+    if (!list || !fill) {
         free(fill);
+        goto oom;
     }
+    for (int p = 0; p < n_pairs; p++)
+        start[pairs[p].cell + 1]++;
+    for (int c = 0; c < cm->n_cells; c++)
+        start[c + 1] += start[c];
+    memcpy(fill, start, (size_t)cm->n_cells * sizeof *fill);
+    for (int p = 0; p < n_pairs; p++)
+        list[fill[pairs[p].cell]++] = pairs[p].tri;
+    free(fill);
     free(pairs);
+    free(s->cell_tri_start);
+    free(s->cell_tri_list);
+    s->cell_tri_start = start;
+    s->cell_tri_list = list;
     return 0;
 oom:
-    snprintf(err, errlen, "surface: out of memory");
-fail:
     free(pairs);
-    cs_surface_free(s);
+    free(start);
+    free(list);
     return -1;
 }
 

@@ -39,6 +39,14 @@ int cs_surface_bind(cs_surface *s, const cs_cubemesh *cm, const double *verts, i
                     const int32_t *tris, int nt, char *err, size_t errlen);
 void cs_surface_free(cs_surface *s);
 
+/*
+ * (Re)build the per-cell triangle lists (seed 000 Table 1) from s->rest, s->tris and
+ * s->tri_cell: every cell whose cube, grown by tol [m], a triangle meets lists it, and the
+ * cell of its centroid always does. Replaces the old lists. Returns 0, or -1 (out of memory,
+ * lists unchanged).
+ */
+int cs_surface_build_cell_lists(cs_surface *s, const cs_cubemesh *cm, double tol);
+
 /* Recompute s->pos from node positions (3 per node) by trilinear interpolation. */
 void cs_surface_skin(cs_surface *s, const cs_cubemesh *cm, const double *node_pos);
 
