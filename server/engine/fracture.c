@@ -38,7 +38,6 @@
  * All surface geometry decisions use rest positions, as §3.2 prescribes.
  */
 #include <math.h>
-#include <stdarg.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -50,15 +49,18 @@
 
 /* ---------------------------------------------------------------- small helpers */
 
-static int fail(char *err, size_t errlen, int code, const char *fmt, ...)
+/* Grow *a (elements of `elem` bytes, capacity *cap) so that one more fits after n. */
+static int vec_room(void *a, int *cap, int n, size_t elem)
 {
-    if (err && errlen) {
-        va_list ap;
-        va_start(ap, fmt);
-        vsnprintf(err, errlen, fmt, ap);
-        va_end(ap);
-    }
-    return code;
+    if (n < *cap)
+        return 0;
+    int c = *cap ? 2 * *cap : 64;
+    void *g = realloc(*(void **)a, (size_t)c * elem);
+    if (!g)
+        return -1;
+    *(void **)a = g;
+    *cap = c;
+    return 0;
 }
 
 typedef struct ivec {
@@ -66,16 +68,15 @@ typedef struct ivec {
     int n, cap;
 } ivec;
 
+typedef struct dvec {
+    double *a;
+    int n, cap;
+} dvec;
+
 static int ivec_push(ivec *v, int32_t x)
 {
-    if (v->n == v->cap) {
-        int cap = v->cap ? 2 * v->cap : 64;
-        int32_t *g = realloc(v->a, (size_t)cap * sizeof *g);
-        if (!g)
-            return -1;
-        v->a = g;
-        v->cap = cap;
-    }
+    if (vec_room(&v->a, &v->cap, v->n, sizeof *v->a))
+        return -1;
     v->a[v->n++] = x;
     return 0;
 }
@@ -85,21 +86,10 @@ static int ivec_push3(ivec *v, int32_t a, int32_t b, int32_t c)
     return ivec_push(v, a) || ivec_push(v, b) || ivec_push(v, c) ? -1 : 0;
 }
 
-typedef struct dvec {
-    double *a;
-    int n, cap;
-} dvec;
-
 static int dvec_push(dvec *v, double x)
 {
-    if (v->n == v->cap) {
-        int cap = v->cap ? 2 * v->cap : 64;
-        double *g = realloc(v->a, (size_t)cap * sizeof *g);
-        if (!g)
-            return -1;
-        v->a = g;
-        v->cap = cap;
-    }
+    if (vec_room(&v->a, &v->cap, v->n, sizeof *v->a))
+        return -1;
     v->a[v->n++] = x;
     return 0;
 }
@@ -852,11 +842,9 @@ static int32_t corner_vertex(cs_world_t *w, surf_edit *e, const families *fam, i
     if (sv < 0 && o->corner_vertex[node] >= 0)
         return o->corner_vertex[node];
     if (sv >= 0) {
-        int32_t orig = sv;
-        for (int32_t f = family_of(fam, e->nv0, sv); f >= 0;) {
-            orig = fam->mcopy.a[fam->fstart.a[f]]; /* a family's first member is the original */
-            break;
-        }
+        /* a family's first member is the original vertex */
+        const int32_t f = family_of(fam, e->nv0, sv);
+        const int32_t orig = f >= 0 ? fam->mcopy.a[fam->fstart.a[f]] : sv;
         return copy_for_cell(o, fam, e->nv0, orig, cell);
     }
     double q[3];
@@ -909,7 +897,7 @@ static int split_nodes(cs_object *o, const crack_face *F, int nF, const pairkey 
         }
         if (m == 0)
             continue;
-        for (int a = 0; a < m; a++)
+        for (int a = 0; a < m && !paper; a++)
             for (int b = a + 1; b < m; b++) {
                 int dir;
                 int axis = face_axis(cm, cells[a], cells[b], &dir);
@@ -2681,25 +2669,33 @@ int cs_fracture_after_step(cs_world_t *w, cs_object *o)
     const int nc = o->cm.n_cells;
     if (nc < 2 || !(o->mat.strength < 1e299))
         return CS_OK;
-    double *sig = malloc((size_t)nc * sizeof *sig), *dir = malloc((size_t)nc * 3 * sizeof *dir);
-    uint8_t *done = calloc((size_t)nc, 1);
+    /* The common step breaks nothing: one stress pass, no allocation. After a fracture the
+     * stresses are the same (duplicated nodes keep their positions), so the next most
+     * stressed cube is found by the same pass, skipping the cubes already labelled. */
+    uint8_t *done = NULL;
     int rc = CS_OK;
-    if (!sig || !dir || !done) {
-        rc = CS_ERR_NOMEM;
-        goto out;
-    }
-    for (int c = 0; c < nc; c++)
-        sig[c] = cell_max_stress(o, c, dir + 3 * (size_t)c);
     const int n_objects = w->n_objects;
     for (int k = 0; k < w->def.max_fractures; k++) {
         int best = -1;
-        for (int c = 0; c < nc; c++)
-            if (!done[c] && sig[c] > o->mat.strength && (best < 0 || sig[c] > sig[best]))
+        double best_sig = 0, best_dir[3] = {0, 0, 0};
+        for (int c = 0; c < nc; c++) {
+            if (done && done[c])
+                continue;
+            double d[3];
+            const double sig = cell_max_stress(o, c, d);
+            if (sig > o->mat.strength && (best < 0 || sig > best_sig)) {
                 best = c;
+                best_sig = sig;
+                memcpy(best_dir, d, sizeof d);
+            }
+        }
         if (best < 0)
             break;
-        int8_t *label = plane_labels(o, best, dir + 3 * (size_t)best,
-                                     effective_radius(o, 0));
+        if (!done && !(done = calloc((size_t)nc, 1))) {
+            rc = CS_ERR_NOMEM;
+            break;
+        }
+        int8_t *label = plane_labels(o, best, best_dir, effective_radius(o, 0));
         if (!label) {
             rc = CS_ERR_NOMEM;
             break;
@@ -2708,14 +2704,11 @@ int cs_fracture_after_step(cs_world_t *w, cs_object *o)
             if (label[c])
                 done[c] = 1;
         int cut = 0;
-        rc = fracture_event(w, o, label, true, best, dir + 3 * (size_t)best, sig[best], &cut);
+        rc = fracture_event(w, o, label, true, best, best_dir, best_sig, &cut);
         free(label);
         if (rc != CS_OK || w->n_objects != n_objects)
             break; /* pieces renumbered o's cells: the rest waits for the next step */
     }
-out:
-    free(sig);
-    free(dir);
     free(done);
     return rc;
 }
@@ -2724,20 +2717,20 @@ int cs_world_fracture(cs_world_t *w, cs_object_id id, const double point[3],
                       const double normal[3], double radius, char *err, size_t errlen)
 {
     if (!w || !point || !normal)
-        return fail(err, errlen, CS_ERR_INVALID, "NULL argument");
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "NULL argument");
     cs_object *o = cs_world_find_internal(w, id);
     if (!o)
-        return fail(err, errlen, CS_ERR_UNKNOWN_OBJECT, "no object with id %u", (unsigned)id);
+        return cs_engine_fail(err, errlen, CS_ERR_UNKNOWN_OBJECT, "no object with id %u", (unsigned)id);
     double nn = 0;
     for (int a = 0; a < 3; a++) {
         if (!isfinite(point[a]) || !isfinite(normal[a]))
-            return fail(err, errlen, CS_ERR_INVALID, "fracture point and normal must be finite");
+            return cs_engine_fail(err, errlen, CS_ERR_INVALID, "fracture point and normal must be finite");
         nn += normal[a] * normal[a];
     }
     if (!(nn > 1e-24))
-        return fail(err, errlen, CS_ERR_INVALID, "fracture normal must not be zero");
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "fracture normal must not be zero");
     if (!(radius >= 0 && isfinite(radius)))
-        return fail(err, errlen, CS_ERR_INVALID, "fracture radius must be >= 0 m, got %g",
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "fracture radius must be >= 0 m, got %g",
                     radius);
     cs_fracture_clear_step(w);
     const double n[3] = {normal[0] / sqrt(nn), normal[1] / sqrt(nn), normal[2] / sqrt(nn)};
@@ -2755,12 +2748,12 @@ int cs_world_fracture(cs_world_t *w, cs_object_id id, const double point[3],
     }
     int8_t *label = plane_labels(o, best, n, effective_radius(o, radius));
     if (!label)
-        return fail(err, errlen, CS_ERR_NOMEM, "out of memory");
+        return cs_engine_fail(err, errlen, CS_ERR_NOMEM, "out of memory");
     int cut = 0;
     int rc = fracture_event(w, o, label, true, best, n, 0.0, &cut);
     free(label);
     if (rc != CS_OK)
-        return fail(err, errlen, rc, "fracture of '%s' failed: %s", o->name, cs_status_str(rc));
+        return cs_engine_fail(err, errlen, rc, "fracture of '%s' failed: %s", o->name, cs_status_str(rc));
     return CS_OK;
 }
 
@@ -2768,27 +2761,27 @@ int cs_world_cut_face(cs_world_t *w, cs_object_id id, const int32_t ijk[3], int 
                       char *err, size_t errlen)
 {
     if (!w || !ijk)
-        return fail(err, errlen, CS_ERR_INVALID, "NULL argument");
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "NULL argument");
     cs_object *o = cs_world_find_internal(w, id);
     if (!o)
-        return fail(err, errlen, CS_ERR_UNKNOWN_OBJECT, "no object with id %u", (unsigned)id);
+        return cs_engine_fail(err, errlen, CS_ERR_UNKNOWN_OBJECT, "no object with id %u", (unsigned)id);
     if (axis < 0 || axis > 2)
-        return fail(err, errlen, CS_ERR_INVALID, "axis must be 0, 1 or 2, got %d", axis);
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "axis must be 0, 1 or 2, got %d", axis);
     int32_t a = cs_cubemesh_find(&o->cm, ijk[0], ijk[1], ijk[2]);
     int32_t nb[3] = {ijk[0], ijk[1], ijk[2]};
     nb[axis]++;
     int32_t b = cs_cubemesh_find(&o->cm, nb[0], nb[1], nb[2]);
     if (a < 0 || b < 0)
-        return fail(err, errlen, CS_ERR_INVALID,
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID,
                     "object '%s' has no cells (%d,%d,%d) and its +%c neighbour", o->name,
                     ijk[0], ijk[1], ijk[2], "xyz"[axis]);
     if (!face_joined(o, a, b, axis, 1))
-        return fail(err, errlen, CS_ERR_INVALID, "the face after cell (%d,%d,%d) along %c is "
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "the face after cell (%d,%d,%d) along %c is "
                     "already cut", ijk[0], ijk[1], ijk[2], "xyz"[axis]);
     cs_fracture_clear_step(w);
     int8_t *label = calloc((size_t)o->cm.n_cells, 1);
     if (!label)
-        return fail(err, errlen, CS_ERR_NOMEM, "out of memory");
+        return cs_engine_fail(err, errlen, CS_ERR_NOMEM, "out of memory");
     label[a] = 1;
     label[b] = -1;
     double n[3] = {0, 0, 0};
@@ -2797,6 +2790,6 @@ int cs_world_cut_face(cs_world_t *w, cs_object_id id, const int32_t ijk[3], int 
     int rc = fracture_event(w, o, label, false, a, n, 0.0, &cut);
     free(label);
     if (rc != CS_OK)
-        return fail(err, errlen, rc, "cut of '%s' failed: %s", o->name, cs_status_str(rc));
+        return cs_engine_fail(err, errlen, rc, "cut of '%s' failed: %s", o->name, cs_status_str(rc));
     return CS_OK;
 }

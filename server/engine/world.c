@@ -25,7 +25,7 @@
 
 /* ---------------------------------------------------------------- small helpers */
 
-static int fail(char *err, size_t errlen, int code, const char *fmt, ...)
+int cs_engine_fail(char *err, size_t errlen, int code, const char *fmt, ...)
 {
     if (err && errlen) {
         va_list ap;
@@ -114,31 +114,31 @@ int cs_world_create(const cs_world_def *def, cs_world_t **out, char *err, size_t
 {
     *out = NULL;
     if (!def)
-        return fail(err, errlen, CS_ERR_INVALID, "world definition is NULL");
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "world definition is NULL");
     if (!(def->dt > 0 && def->dt <= 1.0))
-        return fail(err, errlen, CS_ERR_INVALID, "dt must be in (0, 1] s, got %g", def->dt);
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "dt must be in (0, 1] s, got %g", def->dt);
     if (!finite3(def->gravity) || norm3(def->gravity) > 1e4)
-        return fail(err, errlen, CS_ERR_INVALID, "gravity must be finite and below 1e4 m/s^2");
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "gravity must be finite and below 1e4 m/s^2");
     if (!isfinite(def->ground_height))
-        return fail(err, errlen, CS_ERR_INVALID, "ground height must be finite");
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "ground height must be finite");
     if (!(def->ground_friction >= 0 && def->ground_friction <= 100))
-        return fail(err, errlen, CS_ERR_INVALID, "ground friction must be in [0, 100]");
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "ground friction must be in [0, 100]");
     if (!(def->cg_tolerance > 0 && def->cg_tolerance < 1))
-        return fail(err, errlen, CS_ERR_INVALID, "solver tolerance must be in (0, 1), got %g",
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "solver tolerance must be in (0, 1), got %g",
                     def->cg_tolerance);
     if (def->cg_max_iterations < 1 || def->cg_max_iterations > 1000000)
-        return fail(err, errlen, CS_ERR_INVALID, "solver max_iterations must be in [1, 1e6]");
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "solver max_iterations must be in [1, 1e6]");
     if (def->threads < 0 || def->threads > 256)
-        return fail(err, errlen, CS_ERR_INVALID, "threads must be in [0, 256]");
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "threads must be in [0, 256]");
     if (!(def->sleep_speed >= 0 && isfinite(def->sleep_speed)) || def->sleep_steps < 0)
-        return fail(err, errlen, CS_ERR_INVALID, "sleep speed and steps must be >= 0");
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "sleep speed and steps must be >= 0");
     if (!(def->max_force > 0 && isfinite(def->max_force)))
-        return fail(err, errlen, CS_ERR_INVALID, "max_force must be positive and finite");
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "max_force must be positive and finite");
     if (def->max_fractures < 1 || def->max_fractures > 1000000)
-        return fail(err, errlen, CS_ERR_INVALID, "max_fractures must be in [1, 1e6]");
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "max_fractures must be in [1, 1e6]");
     cs_world_t *w = calloc(1, sizeof *w);
     if (!w)
-        return fail(err, errlen, CS_ERR_NOMEM, "out of memory creating a world");
+        return cs_engine_fail(err, errlen, CS_ERR_NOMEM, "out of memory creating a world");
     w->def = *def;
     w->threads = def->threads > 0 ? def->threads : omp_get_num_procs();
     if (w->threads < 1)
@@ -201,19 +201,19 @@ cs_object *cs_world_find_internal(const cs_world_t *w, cs_object_id id)
 static int check_material(const cs_material *m, char *err, size_t errlen)
 {
     if (!(m->young > 0 && isfinite(m->young)))
-        return fail(err, errlen, CS_ERR_INVALID, "material young must be > 0 Pa, got %g",
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "material young must be > 0 Pa, got %g",
                     m->young);
     if (!(m->poisson >= 0 && m->poisson < 0.5))
-        return fail(err, errlen, CS_ERR_INVALID, "material poisson must be in [0, 0.5), got %g",
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "material poisson must be in [0, 0.5), got %g",
                     m->poisson);
     if (!(m->density > 0 && isfinite(m->density)))
-        return fail(err, errlen, CS_ERR_INVALID, "material density must be > 0, got %g",
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "material density must be > 0, got %g",
                     m->density);
     if (!(m->damping[0] >= 0 && isfinite(m->damping[0]) && m->damping[1] >= 0 &&
           isfinite(m->damping[1])))
-        return fail(err, errlen, CS_ERR_INVALID, "material damping must be finite and >= 0");
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "material damping must be finite and >= 0");
     if (!(m->strength > 0))
-        return fail(err, errlen, CS_ERR_INVALID, "material strength must be > 0");
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "material strength must be > 0");
     return CS_OK;
 }
 
@@ -236,7 +236,7 @@ static int apply_loads(cs_object *o, const cs_object_def *def, char *err, size_t
     for (int l = 0; l < def->n_loads; l++) {
         const cs_load *ld = &def->loads[l];
         if (!finite3(ld->force) || !finite3(ld->box.min) || !finite3(ld->box.max))
-            return fail(err, errlen, CS_ERR_INVALID, "loads[%d]: values must be finite", l);
+            return cs_engine_fail(err, errlen, CS_ERR_INVALID, "loads[%d]: values must be finite", l);
         int count = 0;
         for (int pass = 0; pass < 2; pass++) {
             for (int c = 0; c < cm->n_cells; c++) {
@@ -265,7 +265,7 @@ static int apply_loads(cs_object *o, const cs_object_def *def, char *err, size_t
                 }
             }
             if (pass == 0 && count == 0)
-                return fail(err, errlen, CS_ERR_INVALID,
+                return cs_engine_fail(err, errlen, CS_ERR_INVALID,
                             "loads[%d]: no exposed cube face centre lies in its box", l);
         }
     }
@@ -277,9 +277,9 @@ static int build_geometry(cs_object *o, const cs_object_def *def, char *err, siz
     const double h = def->cube_size;
     if (def->geometry == CS_GEOMETRY_CELLS) {
         if (!def->cells_ijk || def->n_cells <= 0)
-            return fail(err, errlen, CS_ERR_INVALID, "cells: no cells given");
+            return cs_engine_fail(err, errlen, CS_ERR_INVALID, "cells: no cells given");
         if (!finite3(def->cells_origin))
-            return fail(err, errlen, CS_ERR_INVALID, "cells: origin must be finite");
+            return cs_engine_fail(err, errlen, CS_ERR_INVALID, "cells: origin must be finite");
         if (cs_cubemesh_build(&o->cm, h, def->cells_origin, def->cells_ijk, def->n_cells, err,
                               errlen) != 0)
             return CS_ERR_INVALID;
@@ -294,16 +294,16 @@ static int build_geometry(cs_object *o, const cs_object_def *def, char *err, siz
         return rc == 0 ? CS_OK : CS_ERR_GEOMETRY;
     }
     if (def->geometry != CS_GEOMETRY_MESH)
-        return fail(err, errlen, CS_ERR_INVALID, "unknown geometry kind %d", (int)def->geometry);
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "unknown geometry kind %d", (int)def->geometry);
     if (!def->mesh_vertices || !def->mesh_triangles || def->n_mesh_vertices < 4 ||
         def->n_mesh_triangles < 4)
-        return fail(err, errlen, CS_ERR_GEOMETRY, "mesh: fewer than 4 vertices or triangles");
+        return cs_engine_fail(err, errlen, CS_ERR_GEOMETRY, "mesh: fewer than 4 vertices or triangles");
     for (int i = 0; i < 3 * def->n_mesh_vertices; i++)
         if (!isfinite(def->mesh_vertices[i]))
-            return fail(err, errlen, CS_ERR_GEOMETRY, "mesh: vertex %d is not finite", i / 3);
+            return cs_engine_fail(err, errlen, CS_ERR_GEOMETRY, "mesh: vertex %d is not finite", i / 3);
     for (int i = 0; i < 3 * def->n_mesh_triangles; i++)
         if (def->mesh_triangles[i] < 0 || def->mesh_triangles[i] >= def->n_mesh_vertices)
-            return fail(err, errlen, CS_ERR_GEOMETRY, "mesh: triangle %d has a bad index", i / 3);
+            return cs_engine_fail(err, errlen, CS_ERR_GEOMETRY, "mesh: triangle %d has a bad index", i / 3);
     /* Seed 000 §3.3 on a private copy: no surface edge longer than h. */
     int nv = def->n_mesh_vertices, nt = def->n_mesh_triangles;
     double *v = malloc((size_t)nv * 3 * sizeof *v);
@@ -312,7 +312,7 @@ static int build_geometry(cs_object *o, const cs_object_def *def, char *err, siz
     int n_cells = 0, rc = CS_ERR_GEOMETRY;
     double origin[3];
     if (!v || !t) {
-        rc = fail(err, errlen, CS_ERR_NOMEM, "out of memory copying the mesh");
+        rc = cs_engine_fail(err, errlen, CS_ERR_NOMEM, "out of memory copying the mesh");
         goto out;
     }
     memcpy(v, def->mesh_vertices, (size_t)nv * 3 * sizeof *v);
@@ -359,31 +359,31 @@ int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *i
     if (id)
         *id = CS_NULL_OBJECT;
     if (!w || !def)
-        return fail(err, errlen, CS_ERR_INVALID, "world or object definition is NULL");
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "world or object definition is NULL");
     if (!def->name || !def->name[0] || strlen(def->name) > CS_MAX_NAME)
-        return fail(err, errlen, CS_ERR_INVALID, "object name must have 1 to %d characters",
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "object name must have 1 to %d characters",
                     CS_MAX_NAME);
     if (cs_world_find_object(w, def->name) != CS_NULL_OBJECT)
-        return fail(err, errlen, CS_ERR_INVALID, "object name '%s' is already used", def->name);
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "object name '%s' is already used", def->name);
     if (def->model != CS_MODEL_LINEAR && def->model != CS_MODEL_COROTATIONAL)
-        return fail(err, errlen, CS_ERR_INVALID, "model '%s' is not implemented yet",
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "model '%s' is not implemented yet",
                     cs_model_name(def->model));
     if (!(def->cube_size > 0 && isfinite(def->cube_size)))
-        return fail(err, errlen, CS_ERR_INVALID, "cube_size must be > 0 m, got %g",
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "cube_size must be > 0 m, got %g",
                     def->cube_size);
     int rc = check_material(&def->material, err, errlen);
     if (rc)
         return rc;
     if (!(def->fracture_radius >= 0 && isfinite(def->fracture_radius)))
-        return fail(err, errlen, CS_ERR_INVALID, "fracture_radius must be >= 0 m, got %g",
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "fracture_radius must be >= 0 m, got %g",
                     def->fracture_radius);
     for (int i = 0; i < def->n_fixed; i++)
         if (!finite3(def->fixed[i].min) || !finite3(def->fixed[i].max))
-            return fail(err, errlen, CS_ERR_INVALID, "fixed[%d]: values must be finite", i);
+            return cs_engine_fail(err, errlen, CS_ERR_INVALID, "fixed[%d]: values must be finite", i);
 
     cs_object *o = calloc(1, sizeof *o);
     if (!o)
-        return fail(err, errlen, CS_ERR_NOMEM, "out of memory");
+        return cs_engine_fail(err, errlen, CS_ERR_NOMEM, "out of memory");
     o->name = strdup(def->name);
     o->model = def->model;
     o->mat = def->material;
@@ -391,7 +391,7 @@ int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *i
     o->topology_version = 1; /* 0 means "no such object yet" in a topology change */
     o->fracture_radius = def->fracture_radius > 0 ? def->fracture_radius : 1.5 * def->cube_size;
     if (!o->name) {
-        rc = fail(err, errlen, CS_ERR_NOMEM, "out of memory");
+        rc = cs_engine_fail(err, errlen, CS_ERR_NOMEM, "out of memory");
         goto fail;
     }
     rc = build_geometry(o, def, err, errlen);
@@ -401,13 +401,13 @@ int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *i
     if (cs_object_alloc_state(o) != 0 ||
         cs_fem_init(&o->fem, &o->cm, def->material.young, def->material.poisson,
                     def->model == CS_MODEL_COROTATIONAL, w->threads) != 0) {
-        rc = fail(err, errlen, CS_ERR_NOMEM, "out of memory for %d nodes", o->n);
+        rc = cs_engine_fail(err, errlen, CS_ERR_NOMEM, "out of memory for %d nodes", o->n);
         goto fail;
     }
     memcpy(o->x, o->cm.node_rest, (size_t)o->n * 3 * sizeof(double));
     o->tri_kind = calloc((size_t)(o->surf.n_triangles ? o->surf.n_triangles : 1), 1);
     if (!o->tri_kind) {
-        rc = fail(err, errlen, CS_ERR_NOMEM, "out of memory");
+        rc = cs_engine_fail(err, errlen, CS_ERR_NOMEM, "out of memory");
         goto fail;
     }
     /* Lumped mass: ρh³, an eighth to each corner; gravity on every cube's mass. */
@@ -432,7 +432,7 @@ int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *i
             }
     cs_surface_skin(&o->surf, &o->cm, o->x);
     if (cs_world_append_object(w, o) != 0) {
-        rc = fail(err, errlen, CS_ERR_NOMEM, "out of memory");
+        rc = cs_engine_fail(err, errlen, CS_ERR_NOMEM, "out of memory");
         goto fail;
     }
     if (id)
@@ -517,14 +517,14 @@ static int add_input(cs_world_t *w, cs_object_id id, cs_input *in, const double 
 {
     cs_object *o = cs_world_find_internal(w, id);
     if (!o)
-        return fail(err, errlen, CS_ERR_UNKNOWN_OBJECT, "no object with id %u", (unsigned)id);
+        return cs_engine_fail(err, errlen, CS_ERR_UNKNOWN_OBJECT, "no object with id %u", (unsigned)id);
     if (!finite3(point))
-        return fail(err, errlen, CS_ERR_INVALID, "point is not finite");
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "point is not finite");
     if (!(seconds >= 0 && seconds <= 1e6))
-        return fail(err, errlen, CS_ERR_INVALID, "duration must be in [0, 1e6] s, got %g",
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "duration must be in [0, 1e6] s, got %g",
                     seconds);
     if (o->n_inputs == CS_MAX_INPUTS)
-        return fail(err, errlen, CS_ERR_INVALID, "object '%s' already has %d active inputs",
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "object '%s' already has %d active inputs",
                     o->name, CS_MAX_INPUTS);
     nearest_material_point(o, point, &in->cell, in->w);
     double steps = ceil(seconds / w->def.dt - 1e-9);
@@ -539,11 +539,11 @@ int cs_world_apply_force(cs_world_t *w, cs_object_id id, const double point[3],
                          const double force[3], double seconds, char *err, size_t errlen)
 {
     if (!w || !point || !force)
-        return fail(err, errlen, CS_ERR_INVALID, "NULL argument");
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "NULL argument");
     if (!finite3(force))
-        return fail(err, errlen, CS_ERR_INVALID, "force is not finite");
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "force is not finite");
     if (norm3(force) > w->def.max_force)
-        return fail(err, errlen, CS_ERR_INVALID, "force of %g N exceeds max_force %g N",
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "force of %g N exceeds max_force %g N",
                     norm3(force), w->def.max_force);
     cs_input in = {.kind = CS_INPUT_FORCE, .force = {force[0], force[1], force[2]}};
     return add_input(w, id, &in, point, seconds, err, errlen);
@@ -553,11 +553,11 @@ int cs_world_drag(cs_world_t *w, cs_object_id id, const double grab[3], const do
                   double stiffness, double seconds, char *err, size_t errlen)
 {
     if (!w || !grab || !target)
-        return fail(err, errlen, CS_ERR_INVALID, "NULL argument");
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "NULL argument");
     if (!finite3(target))
-        return fail(err, errlen, CS_ERR_INVALID, "drag target is not finite");
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "drag target is not finite");
     if (!(stiffness > 0 && isfinite(stiffness)))
-        return fail(err, errlen, CS_ERR_INVALID, "drag stiffness must be > 0 N/m, got %g",
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "drag stiffness must be > 0 N/m, got %g",
                     stiffness);
     /* The largest force the spring could exert over the object's extent must stay sane. */
     cs_object *o = cs_world_find_internal(w, id);
@@ -565,7 +565,7 @@ int cs_world_drag(cs_world_t *w, cs_object_id id, const double grab[3], const do
         double d = norm3((double[3]){target[0] - grab[0], target[1] - grab[1],
                                      target[2] - grab[2]});
         if (stiffness * d > w->def.max_force)
-            return fail(err, errlen, CS_ERR_INVALID,
+            return cs_engine_fail(err, errlen, CS_ERR_INVALID,
                         "drag force of %g N (stiffness x distance) exceeds max_force %g N",
                         stiffness * d, w->def.max_force);
     }

@@ -93,6 +93,9 @@ struct cs_world {
 };
 
 /* Defined in world.c, used by fracture.c. */
+/* Write the message to err (if any) and return code: the engine's runtime-error idiom. */
+int cs_engine_fail(char *err, size_t errlen, int code, const char *fmt, ...)
+    __attribute__((format(printf, 4, 5)));
 cs_object *cs_world_find_internal(const cs_world_t *w, cs_object_id id);
 int cs_world_append_object(cs_world_t *w, cs_object *o);
 void cs_object_free_internal(cs_object *o);
