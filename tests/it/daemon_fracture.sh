@@ -41,22 +41,6 @@ cat > beam.json <<'JSON'
       "fixed": [ { "min": [-0.001, -1, -1], "max": [0.001, 1, 1] } ] } ] }
 JSON
 
-obj_faces() {
-    awk '/^v /{n++; x[n]=$2; y[n]=$3; z[n]=$4}
-         /^f /{s=""; for(i=2;i<=NF;i++){split($i,p,"/"); k=p[1]+0; if(k<0)k=n+1+k;
-               s=s" "x[k]" "y[k]" "z[k]} print substr(s,2)}' "$1"
-}
-obj_close() { # A B EPS: same faces in the same order, coordinates within EPS + 2^-24|x|
-    local fa fb
-    fa=$(obj_faces "$1" | wc -l); fb=$(obj_faces "$2" | wc -l)
-    if [ "$fa" -ne "$fb" ] || [ "$fa" -eq 0 ]; then echo "faces $fa vs $fb"; return 1; fi
-    paste -d' ' <(obj_faces "$1") <(obj_faces "$2") | awk -v eps="$3" '
-        { if (NF != 18) { bad++; next }
-          for (i = 1; i <= 9; i++) { a = $i; b = $(i + 9); d = a - b; if (d < 0) d = -d;
-            m = a < 0 ? -a : a; tol = eps + m * (2 ^ -24) + m * 1e-8 + 1e-12;
-            if (d - tol > worst) worst = d - tol; if (d > maxd) maxd = d } }
-        END { printf "max |diff| %.3g", maxd; if (bad || worst > 0) { printf ", over bound by %.3g", worst; exit 1 } }'
-}
 
 "$B/cubesim-log" a.lcm --lcm "$U" >log_a.txt 2>&1 & pa=$!
 sleep 0.4
