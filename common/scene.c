@@ -764,9 +764,9 @@ static int parse_object(sc_ctx *c, const cJSON *o, int index, const char *base_d
                         const sc_named_material *mats, int n_mats, const cs_scene *s,
                         cs_object_def *d, cs_scene_object_store *st)
 {
-    static const char *const keys[] = {"name",  "model", "material", "cube_size", "fracture",
-                                       "fracture_radius", "box", "mesh", "cells", "fixed",
-                                       "loads", NULL};
+    static const char *const keys[] = {"name",  "model", "integrator", "material", "cube_size",
+                                       "fracture", "fracture_radius", "box", "mesh", "cells",
+                                       "fixed", "loads", NULL};
     char path[SC_PATH], p[SC_PATH], b[48];
     join_index(path, "objects", index);
     if (!cJSON_IsObject(o))
@@ -804,6 +804,18 @@ static int parse_object(sc_ctx *c, const cJSON *o, int index, const char *base_d
             return fail(c, p, "expected a string, got %s", type_name(it));
         if (cs_model_from_name(it->valuestring, &d->model) != 0)
             return fail(c, p, "unknown model '%s' (linear, corotational, mss, localframe, rigid)",
+                        show(it->valuestring, b));
+    }
+
+    it = cJSON_GetObjectItemCaseSensitive(o, "integrator");
+    if (it) {
+        join_key(p, path, "integrator");
+        if (!cJSON_IsString(it))
+            return fail(c, p, "expected a string, got %s", type_name(it));
+        if (cs_integrator_from_name(it->valuestring, &d->integrator) != 0)
+            return fail(c, p,
+                        "unknown integrator '%s' (default, implicit_euler, symplectic_euler, "
+                        "verlet, central_difference)",
                         show(it->valuestring, b));
     }
 

@@ -60,6 +60,19 @@ typedef enum cs_model {
 int cs_model_from_name(const char *name, cs_model *out);
 const char *cs_model_name(cs_model m);
 
+typedef enum cs_integrator {
+    CS_INTEGRATOR_DEFAULT = 0,           /* the model's own: implicit Euler for FEM and mss,
+                                            central differences for localframe */
+    CS_INTEGRATOR_IMPLICIT_EULER = 1,    /* seed 000: (M + dt C + dt² K) v1 = M v + dt f, CG */
+    CS_INTEGRATOR_SYMPLECTIC_EULER = 2,  /* explicit (seed 004) — not yet built */
+    CS_INTEGRATOR_VERLET = 3,            /* explicit velocity Verlet (seed 004) — not yet built */
+    CS_INTEGRATOR_CENTRAL_DIFFERENCE = 4 /* seed 001 Eq. (20), solved by CG — not yet built */
+} cs_integrator;
+
+/* "default", "implicit_euler", "symplectic_euler", "verlet", "central_difference". */
+int cs_integrator_from_name(const char *name, cs_integrator *out);
+const char *cs_integrator_name(cs_integrator i);
+
 typedef struct cs_material {
     double young;         /* Young's modulus E [Pa], > 0; default 1000 */
     double poisson;       /* Poisson ratio ν, in [0, 0.5); default 0.3 */
@@ -88,6 +101,7 @@ typedef enum cs_geometry_kind {
 typedef struct cs_object_def {
     const char *name;        /* copied; must be non-empty and unique in the world */
     cs_model model;          /* default CS_MODEL_COROTATIONAL */
+    cs_integrator integrator;/* default CS_INTEGRATOR_DEFAULT (the model's own) */
     cs_material material;    /* default cs_material_default() */
     double cube_size;        /* h [m], > 0; default 0.1 */
     bool fracture;           /* default false */
@@ -181,6 +195,7 @@ const cs_world_def *cs_world_get_def(const cs_world_t *w);
 typedef struct cs_object_info {
     const char *name;
     cs_model model;
+    cs_integrator integrator; /* never DEFAULT: the one in use */
     cs_material material;
     double cube_size;
     double origin[3];         /* world position of lattice index (0,0,0) */

@@ -20,6 +20,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "elastic.h"
 #include "voxelize.h"
 #include "world_internal.h"
 
@@ -77,6 +78,33 @@ int cs_model_from_name(const char *name, cs_model *out)
             return 0;
         }
     return -1;
+}
+
+static const char *const INTEGRATOR_NAMES[] = {"default", "implicit_euler", "symplectic_euler",
+                                               "verlet", "central_difference"};
+
+int cs_integrator_from_name(const char *name, cs_integrator *out)
+{
+    for (int i = 0; name && i < (int)(sizeof INTEGRATOR_NAMES / sizeof *INTEGRATOR_NAMES); i++)
+        if (strcmp(name, INTEGRATOR_NAMES[i]) == 0) {
+            *out = (cs_integrator)i;
+            return 0;
+        }
+    return -1;
+}
+
+const char *cs_integrator_name(cs_integrator i)
+{
+    if ((int)i < 0 || (int)i >= (int)(sizeof INTEGRATOR_NAMES / sizeof *INTEGRATOR_NAMES))
+        return "unknown";
+    return INTEGRATOR_NAMES[i];
+}
+
+/* The integrator an object uses when its definition asks for the default. */
+static cs_integrator default_integrator(cs_model m)
+{
+    return m == CS_MODEL_LOCALFRAME ? CS_INTEGRATOR_CENTRAL_DIFFERENCE
+                                    : CS_INTEGRATOR_IMPLICIT_EULER;
 }
 
 const char *cs_model_name(cs_model m)
@@ -159,7 +187,7 @@ void cs_object_free_internal(cs_object *o)
     free(o->cell_open);
     cs_cubemesh_free(&o->cm);
     cs_surface_free(&o->surf);
-    cs_fem_free(&o->fem);
+    cs_elastic_free(o);
     free(o->x);
     free(o->v);
     free(o->m);
@@ -368,6 +396,11 @@ int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *i
     if (def->model != CS_MODEL_LINEAR && def->model != CS_MODEL_COROTATIONAL)
         return cs_engine_fail(err, errlen, CS_ERR_INVALID, "model '%s' is not implemented yet",
                     cs_model_name(def->model));
+    const cs_integrator integ = def->integrator == CS_INTEGRATOR_DEFAULT
+                                    ? default_integrator(def->model) : def->integrator;
+    if (integ != CS_INTEGRATOR_IMPLICIT_EULER)
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID,
+                              "integrator '%s' is not implemented yet", cs_integrator_name(integ));
     if (!(def->cube_size > 0 && isfinite(def->cube_size)))
         return cs_engine_fail(err, errlen, CS_ERR_INVALID, "cube_size must be > 0 m, got %g",
                     def->cube_size);
@@ -386,6 +419,7 @@ int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *i
         return cs_engine_fail(err, errlen, CS_ERR_NOMEM, "out of memory");
     o->name = strdup(def->name);
     o->model = def->model;
+    o->integrator = integ;
     o->mat = def->material;
     o->fracture = def->fracture;
     o->topology_version = 1; /* 0 means "no such object yet" in a topology change */
@@ -399,8 +433,7 @@ int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *i
         goto fail;
     o->n = o->cm.n_nodes;
     if (cs_object_alloc_state(o) != 0 ||
-        cs_fem_init(&o->fem, &o->cm, def->material.young, def->material.poisson,
-                    def->model == CS_MODEL_COROTATIONAL, w->threads) != 0) {
+        cs_elastic_init(o, w->threads) != 0) {
         rc = cs_engine_fail(err, errlen, CS_ERR_NOMEM, "out of memory for %d nodes", o->n);
         goto fail;
     }
@@ -611,9 +644,9 @@ static void expire_inputs(cs_object *o)
 static void step_operator(void *ctx, const double *p, double *y)
 {
     cs_object *o = ctx;
-    cs_fem_apply_K(&o->fem, p, y);
+    cs_elastic_apply_K(o, p, y);
     const double mc = o->mcoef, kc = o->kcoef;
-#pragma omp parallel for num_threads(o->fem.threads) schedule(static)
+#pragma omp parallel for num_threads(cs_elastic_threads(o)) schedule(static)
     for (int i = 0; i < o->n; i++)
         for (int a = 0; a < 3; a++)
             y[3 * i + a] = kc * y[3 * i + a] + mc * o->m[i] * p[3 * i + a];
@@ -638,13 +671,13 @@ static void step_operator(void *ctx, const double *p, double *y)
 static void tangent_operator(void *ctx, const double *p, double *y)
 {
     cs_object *o = ctx;
-    cs_fem_apply_tangent(&o->fem, p, y);
+    cs_elastic_apply_tangent(o, p, y);
 }
 
 /* Block-Jacobi preconditioner of the current operator, inverted. */
 static void build_preconditioner(cs_object *o)
 {
-    cs_fem_diag_blocks(&o->fem, o->blocks);
+    cs_elastic_diag_blocks(o, o->blocks);
     for (int i = 0; i < o->n; i++) {
         double *B = o->blocks + 9 * i;
         for (int k = 0; k < 9; k++)
@@ -744,17 +777,18 @@ static bool all_finite(const double *a, size_t n)
     return true;
 }
 
-static int step_object(cs_world_t *w, cs_object *o, cs_step_stats *st)
+/* Implicit Euler (seed 000 §2.2): one linear solve per step for the new velocities. */
+static int step_implicit_euler(cs_world_t *w, cs_object *o, cs_step_stats *st)
 {
     const double dt = w->def.dt;
     const size_t n3 = (size_t)o->n * 3;
     double t0 = now_ms();
     gather_forces(o);
     double t1 = now_ms();
-    cs_fem_update_rotations(&o->fem, o->x);
+    cs_elastic_update(o, o->x);
     double t2 = now_ms();
     /* b = M v + dt (f + f_el(x)); the solve is for v1 (implicit Euler, Rayleigh damping). */
-    cs_fem_elastic_force(&o->fem, o->x, o->b, NULL);
+    cs_elastic_force(o, o->x, o->b, NULL);
     for (int i = 0; i < o->n; i++)
         for (int a = 0; a < 3; a++) {
             size_t d = 3 * (size_t)i + a;
@@ -769,7 +803,7 @@ static int step_object(cs_world_t *w, cs_object *o, cs_step_stats *st)
     int contacts = constrain_ground(w, o);
     double t3 = now_ms();
     cs_cg_result r = cs_pcg(&o->cg, step_operator, o, o->blocks, o->smask, o->b, o->v1,
-                            w->def.cg_tolerance, w->def.cg_max_iterations, o->fem.threads);
+                            w->def.cg_tolerance, w->def.cg_max_iterations, cs_elastic_threads(o));
     double t4 = now_ms();
     if (!all_finite(o->v1, n3))
         return CS_ERR_DIVERGED;
@@ -812,6 +846,16 @@ static int step_object(cs_world_t *w, cs_object *o, cs_step_stats *st)
         st->converged = false;
     st->objects_stepped++;
     return CS_OK;
+}
+
+static int step_object(cs_world_t *w, cs_object *o, cs_step_stats *st)
+{
+    switch (o->integrator) {
+    case CS_INTEGRATOR_IMPLICIT_EULER:
+        return step_implicit_euler(w, o, st);
+    default: /* refused when the object was added */
+        return CS_ERR_INVALID;
+    }
 }
 
 static bool needs_step(const cs_object *o)
@@ -872,8 +916,8 @@ static double masked_norm(cs_object *o, const double *r)
 static double static_residual(cs_object *o, double load, double *res, double *pot)
 {
     double e = 0, work = 0;
-    cs_fem_update_rotations(&o->fem, o->x);
-    cs_fem_elastic_force(&o->fem, o->x, res, pot ? &e : NULL);
+    cs_elastic_update(o, o->x);
+    cs_elastic_force(o, o->x, res, pot ? &e : NULL);
     for (int d = 0; d < 3 * o->n; d++) {
         res[d] = o->mask[d] ? 0.0 : res[d] + load * o->f[d];
         work += load * o->f[d] * (o->x[d] - o->cm.node_rest[d]);
@@ -930,16 +974,16 @@ static int solve_static_object(cs_world_t *w, cs_object *o, cs_step_stats *st)
              * meets a direction of negative curvature (compression, near buckling), the
              * warped stiffness alone, which always is. */
             cs_cg_result r = {0, 1, 0};
-            bool geometric = o->fem.corotational && cs_fem_prepare_tangent(&o->fem, o->x) == 0;
+            bool geometric = cs_elastic_prepare_tangent(o, o->x) == 0;
             if (geometric) {
                 r = cs_pcg(&o->cg, tangent_operator, o, o->blocks, o->mask, res, dx, ctol,
-                           w->def.cg_max_iterations * 4, o->fem.threads);
+                           w->def.cg_max_iterations * 4, cs_elastic_threads(o));
                 st->cg_iterations += r.iterations;
             }
             if (!geometric || !r.converged) {
                 memset(dx, 0, (size_t)n3 * sizeof(double));
                 r = cs_pcg(&o->cg, step_operator, o, o->blocks, o->mask, res, dx, ctol,
-                           w->def.cg_max_iterations * 4, o->fem.threads);
+                           w->def.cg_max_iterations * 4, cs_elastic_threads(o));
                 st->cg_iterations += r.iterations;
             }
             if (!all_finite(dx, (size_t)n3))
@@ -979,7 +1023,7 @@ static int solve_static_object(cs_world_t *w, cs_object *o, cs_step_stats *st)
             dl = fmin(1.0, dl * 2);
         } else {
             memcpy(o->x, x_save, (size_t)n3 * sizeof(double));
-            cs_fem_update_rotations(&o->fem, o->x);
+            cs_elastic_update(o, o->x);
             dl *= 0.5;
             if (dl < 1e-4) {
                 rc = CS_ERR_NOT_CONVERGED;
@@ -993,7 +1037,7 @@ static int solve_static_object(cs_world_t *w, cs_object *o, cs_step_stats *st)
         st->converged = false;
     st->objects_stepped++;
     free(x_save);
-    cs_fem_release_tangent(&o->fem);
+    cs_elastic_release_tangent(o);
     cs_surface_skin(&o->surf, &o->cm, o->x);
     o->elastic_energy_valid = false;
     return rc;
@@ -1038,7 +1082,7 @@ void cs_world_reset(cs_world_t *w)
         o->still_steps = 0;
         memset(o->contact, 0, (size_t)o->n);
         o->elastic_energy_valid = false;
-        cs_fem_reset_rotations(&o->fem);
+        cs_elastic_reset(o);
         cs_surface_skin(&o->surf, &o->cm, o->x);
     }
     w->time = 0;
@@ -1072,7 +1116,7 @@ int cs_object_get_info(const cs_world_t *w, cs_object_id id, cs_object_info *inf
     if (!o || !info)
         return CS_ERR_UNKNOWN_OBJECT;
     *info = (cs_object_info){
-        .name = o->name, .model = o->model, .material = o->mat, .cube_size = o->cm.h,
+        .name = o->name, .model = o->model, .integrator = o->integrator, .material = o->mat, .cube_size = o->cm.h,
         .origin = {o->cm.origin[0], o->cm.origin[1], o->cm.origin[2]},
         .n_cells = o->cm.n_cells, .n_nodes = o->n, .n_fixed_nodes = o->n_fixed_nodes,
         .n_surface_vertices = o->surf.n_vertices, .n_surface_triangles = o->surf.n_triangles,
@@ -1163,7 +1207,7 @@ int cs_object_energy(const cs_world_t *w, cs_object_id id, cs_energy *e)
     }
     cs_object *mo = (cs_object *)o; /* the cache is not part of the observable state */
     if (!mo->elastic_energy_valid) {
-        mo->elastic_energy = cs_fem_energy(&o->fem, o->x);
+        mo->elastic_energy = cs_elastic_energy(mo, o->x);
         mo->elastic_energy_valid = true;
     }
     const double ee = o->elastic_energy;

@@ -34,6 +34,7 @@ typedef struct cs_object {
     cs_object_id id;
     char *name;
     cs_model model;
+    cs_integrator integrator; /* resolved: never CS_INTEGRATOR_DEFAULT */
     cs_material mat;
     bool fracture;
     double fracture_radius;  /* [m], > 0 */
