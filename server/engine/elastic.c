@@ -6,8 +6,10 @@
 int cs_elastic_init(cs_object *o, int threads)
 {
     /* Every model keeps the FEM record: fracture uses its adjacency and rotations. */
-    return cs_fem_init(&o->fem, &o->cm, o->mat.young, o->mat.poisson,
-                       o->model != CS_MODEL_LINEAR, threads);
+    int rc = cs_fem_init(&o->fem, &o->cm, o->mat.young, o->mat.poisson,
+                         o->model != CS_MODEL_LINEAR, threads);
+    o->fem.kf = o->fld.young; /* the stiffness field (world_internal.h); NULL: uniform */
+    return rc;
 }
 
 void cs_elastic_free(cs_object *o)
@@ -17,6 +19,7 @@ void cs_elastic_free(cs_object *o)
 
 int cs_elastic_relink(cs_object *o)
 {
+    o->fem.kf = o->fld.young;
     return cs_fem_relink(&o->fem, &o->cm);
 }
 

@@ -199,6 +199,8 @@ void cs_object_free_internal(cs_object *o)
     free(o->mask);
     free(o->smask);
     free(o->contact);
+    free(o->pin);
+    cs_fields_free(&o->fld);
     cs_cg_work_free(&o->cg);
     free(o);
 }
@@ -361,6 +363,225 @@ out:
     return rc;
 }
 
+/* ---------------------------------------------------------------- material fields */
+
+/* Local coordinate in [0, 1] of Gauss point g along axis a of its cell. */
+static double gauss_t(int g, int a)
+{
+    return 0.5 + (CS_CORNER[g][a] - 0.5) / sqrt(3.0);
+}
+
+/* Trilinear weight of corner k at Gauss point g: N_k(ξ_g). */
+static double gauss_weight(int g, int k)
+{
+    double w = 1;
+    for (int a = 0; a < 3; a++)
+        w *= CS_CORNER[k][a] ? gauss_t(g, a) : 1 - gauss_t(g, a);
+    return w;
+}
+
+/* Position of Gauss point g of cell c interpolated from node positions x. */
+static void gauss_point(const cs_object *o, const double *x, int c, int g, double p[3])
+{
+    const int32_t *nd = o->cm.cell_nodes + 8 * (size_t)c;
+    p[0] = p[1] = p[2] = 0;
+    for (int k = 0; k < 8; k++) {
+        const double wk = gauss_weight(g, k);
+        for (int a = 0; a < 3; a++)
+            p[a] += wk * x[3 * (size_t)nd[k] + a];
+    }
+}
+
+void cs_fields_free(cs_fields *f)
+{
+    free(f->young);
+    free(f->density);
+    free(f->damping);
+    free(f->kd);
+    free(f->md);
+    free(f->tmp);
+    memset(f, 0, sizeof *f);
+}
+
+int cs_fields_alloc(cs_object *o)
+{
+    const size_t n = 8 * (size_t)(o->cm.n_cells ? o->cm.n_cells : 1);
+    cs_fields_free(&o->fld);
+    o->fld.young = malloc(n * sizeof(double));
+    o->fld.density = malloc(n * sizeof(double));
+    o->fld.damping = malloc(n * sizeof(double));
+    o->fld.kd = malloc(n * sizeof(double));
+    if (!o->fld.young || !o->fld.density || !o->fld.damping || !o->fld.kd)
+        return -1;
+    for (size_t i = 0; i < n; i++)
+        o->fld.young[i] = o->fld.density[i] = o->fld.damping[i] = o->fld.kd[i] = 1.0;
+    return 0;
+}
+
+static bool cell_uniform(const double *f)
+{
+    for (int g = 1; g < 8; g++)
+        if (f[g] != f[0])
+            return false;
+    return true;
+}
+
+int cs_object_lump_mass(cs_object *o)
+{
+    const cs_cubemesh *cm = &o->cm;
+    const double h = cm->h, rho = o->mat.density;
+    cs_fields *fl = &o->fld;
+    fl->has_damping = false;
+    for (size_t i = 0; i < 8 * (size_t)cm->n_cells; i++) {
+        fl->kd[i] = fl->young[i] * fl->damping[i];
+        if (fl->damping[i] != 1.0)
+            fl->has_damping = true;
+    }
+    double *md = NULL;
+    if (fl->has_damping) {
+        md = realloc(fl->md, (size_t)(o->n ? o->n : 1) * sizeof *md);
+        if (md)
+            fl->md = md;
+        double *tmp = realloc(fl->tmp, (size_t)(o->n ? o->n : 1) * 9 * sizeof *tmp);
+        if (tmp)
+            fl->tmp = tmp;
+        if (!md || !tmp)
+            return -1;
+        memset(md, 0, (size_t)o->n * sizeof *md);
+    }
+    memset(o->m, 0, (size_t)o->n * sizeof *o->m);
+    for (int c = 0; c < cm->n_cells; c++) {
+        const double *dn = fl->density + 8 * (size_t)c, *dm = fl->damping + 8 * (size_t)c;
+        const int32_t *nd = cm->cell_nodes + 8 * (size_t)c;
+        if (cell_uniform(dn)) { /* exactly the plain lumping ρh³/8 when the factor is 1 */
+            const double mc = rho * dn[0] * h * h * h;
+            for (int k = 0; k < 8; k++)
+                o->m[nd[k]] += mc / 8.0;
+        } else {
+            for (int k = 0; k < 8; k++) {
+                double s = 0;
+                for (int g = 0; g < 8; g++)
+                    s += dn[g] * gauss_weight(g, k);
+                o->m[nd[k]] += rho * h * h * h / 8.0 * s;
+            }
+        }
+        if (md)
+            for (int k = 0; k < 8; k++) {
+                double s = 0;
+                for (int g = 0; g < 8; g++)
+                    s += dn[g] * dm[g] * gauss_weight(g, k);
+                md[nd[k]] += rho * h * h * h / 8.0 * s;
+            }
+    }
+    o->mass = 0;
+    for (int i = 0; i < o->n; i++)
+        o->mass += o->m[i];
+    return 0;
+}
+
+static int check_factors(const cs_field_factors *f, const char *what, char *err, size_t errlen)
+{
+    if (!f || (f->which & ~(CS_FIELD_YOUNG | CS_FIELD_DENSITY | CS_FIELD_DAMPING)) ||
+        !(f->which & (CS_FIELD_YOUNG | CS_FIELD_DENSITY | CS_FIELD_DAMPING)))
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID,
+                              "%s: give at least one of the young, density, damping factors",
+                              what);
+    if ((f->which & CS_FIELD_YOUNG) && !(f->young >= 1e-6 && f->young <= 1e6))
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID,
+                              "%s: young factor must be in [1e-6, 1e6], got %g", what, f->young);
+    if ((f->which & CS_FIELD_DENSITY) && !(f->density >= 1e-6 && f->density <= 1e6))
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID,
+                              "%s: density factor must be in [1e-6, 1e6], got %g", what,
+                              f->density);
+    if ((f->which & CS_FIELD_DAMPING) && !(f->damping >= 0 && f->damping <= 1e6))
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID,
+                              "%s: damping factor must be in [0, 1e6], got %g", what,
+                              f->damping);
+    return CS_OK;
+}
+
+static int check_region(const cs_field_region *r, int i, char *err, size_t errlen)
+{
+    char what[48];
+    snprintf(what, sizeof what, "fields[%d]", i);
+    switch (r->shape) {
+    case CS_FIELD_SPHERE:
+    case CS_FIELD_RADIAL:
+        if (!finite3(r->centre) || !(r->radius > 0 && isfinite(r->radius)))
+            return cs_engine_fail(err, errlen, CS_ERR_INVALID,
+                                  "%s: centre must be finite and radius > 0, got %g", what,
+                                  r->radius);
+        break;
+    case CS_FIELD_BOX:
+        if (!finite3(r->box.min) || !finite3(r->box.max))
+            return cs_engine_fail(err, errlen, CS_ERR_INVALID, "%s: box must be finite", what);
+        break;
+    case CS_FIELD_GRADIENT: {
+        const double d[3] = {r->to[0] - r->from[0], r->to[1] - r->from[1], r->to[2] - r->from[2]};
+        if (!finite3(r->from) || !finite3(r->to) || !(norm3(d) > 0))
+            return cs_engine_fail(err, errlen, CS_ERR_INVALID,
+                                  "%s: gradient from and to must be finite and distinct", what);
+        break;
+    }
+    default:
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "%s: unknown shape %d", what,
+                              (int)r->shape);
+    }
+    return check_factors(&r->factors, what, err, errlen);
+}
+
+/* The weight in [0, 1] with which region r's factors apply at p (1 − s + s·f). */
+static double region_weight(const cs_field_region *r, const double p[3])
+{
+    switch (r->shape) {
+    case CS_FIELD_SPHERE: {
+        const double d[3] = {p[0] - r->centre[0], p[1] - r->centre[1], p[2] - r->centre[2]};
+        return norm3(d) <= r->radius ? 1.0 : 0.0;
+    }
+    case CS_FIELD_BOX:
+        return in_box(&r->box, p) ? 1.0 : 0.0;
+    case CS_FIELD_GRADIENT: {
+        double d[3], l2 = 0, t = 0;
+        for (int a = 0; a < 3; a++) {
+            d[a] = r->to[a] - r->from[a];
+            l2 += d[a] * d[a];
+            t += (p[a] - r->from[a]) * d[a];
+        }
+        t /= l2;
+        return t < 0 ? 0.0 : t > 1 ? 1.0 : t;
+    }
+    case CS_FIELD_RADIAL: {
+        const double d[3] = {p[0] - r->centre[0], p[1] - r->centre[1], p[2] - r->centre[2]};
+        const double q = norm3(d) / r->radius;
+        return q >= 1 ? 0.0 : (1 - q * q) * (1 - q * q);
+    }
+    }
+    return 0.0;
+}
+
+/* Multiply the fields by every region, evaluated at each Gauss point's rest position. */
+static void apply_regions(cs_object *o, const cs_field_region *r, int n)
+{
+    for (int c = 0; c < o->cm.n_cells; c++)
+        for (int g = 0; g < 8; g++) {
+            double p[3];
+            gauss_point(o, o->cm.node_rest, c, g, p);
+            const size_t i = 8 * (size_t)c + g;
+            for (int j = 0; j < n; j++) {
+                const double s = region_weight(&r[j], p);
+                if (s == 0)
+                    continue;
+                const cs_field_factors *f = &r[j].factors;
+                if (f->which & CS_FIELD_YOUNG)
+                    o->fld.young[i] *= 1 - s + s * f->young;
+                if (f->which & CS_FIELD_DENSITY)
+                    o->fld.density[i] *= 1 - s + s * f->density;
+                if (f->which & CS_FIELD_DAMPING)
+                    o->fld.damping[i] *= 1 - s + s * f->damping;
+            }
+        }
+}
+
 int cs_object_alloc_state(cs_object *o)
 {
     size_t n3 = (size_t)o->n * 3;
@@ -375,8 +596,9 @@ int cs_object_alloc_state(cs_object *o)
     o->mask = calloc(n3, 1);
     o->smask = calloc(n3, 1);
     o->contact = calloc((size_t)o->n, 1);
+    o->pin = calloc((size_t)(o->n ? o->n : 1), 1);
     if (!o->x || !o->v || !o->m || !o->f_const || !o->f || !o->b || !o->v1 || !o->blocks ||
-        !o->mask || !o->smask || !o->contact || cs_cg_work_init(&o->cg, (int)n3) != 0)
+        !o->mask || !o->smask || !o->contact || !o->pin || cs_cg_work_init(&o->cg, (int)n3) != 0)
         return -1;
     return 0;
 }
@@ -413,6 +635,18 @@ int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *i
     for (int i = 0; i < def->n_fixed; i++)
         if (!finite3(def->fixed[i].min) || !finite3(def->fixed[i].max))
             return cs_engine_fail(err, errlen, CS_ERR_INVALID, "fixed[%d]: values must be finite", i);
+    if (def->n_fields < 0 || (def->n_fields > 0 && !def->fields))
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "fields: bad count or NULL array");
+    for (int i = 0; i < def->n_fields; i++)
+        if ((rc = check_region(&def->fields[i], i, err, errlen)) != CS_OK)
+            return rc;
+    if (def->constraints != CS_CONSTRAINT_REMOVE && def->constraints != CS_CONSTRAINT_PENALTY)
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "constraints: unknown mode %d",
+                              (int)def->constraints);
+    if (!(def->penalty_stiffness >= 0 && def->penalty_stiffness <= 1e15))
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID,
+                              "penalty_stiffness must be in [0, 1e15] N/m, got %g",
+                              def->penalty_stiffness);
 
     cs_object *o = calloc(1, sizeof *o);
     if (!o)
@@ -422,6 +656,9 @@ int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *i
     o->integrator = integ;
     o->mat = def->material;
     o->fracture = def->fracture;
+    o->penalty = def->constraints != CS_CONSTRAINT_PENALTY ? 0.0
+                 : def->penalty_stiffness > 0 ? def->penalty_stiffness
+                 : 1e4 * def->material.young * def->cube_size;
     o->topology_version = 1; /* 0 means "no such object yet" in a topology change */
     o->fracture_radius = def->fracture_radius > 0 ? def->fracture_radius : 1.5 * def->cube_size;
     if (!o->name) {
@@ -443,23 +680,31 @@ int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *i
         rc = cs_engine_fail(err, errlen, CS_ERR_NOMEM, "out of memory");
         goto fail;
     }
-    /* Lumped mass: ρh³, an eighth to each corner; gravity on every cube's mass. */
-    const double h = def->cube_size, mc = def->material.density * h * h * h;
-    for (int c = 0; c < o->cm.n_cells; c++)
-        for (int k = 0; k < 8; k++)
-            o->m[o->cm.cell_nodes[8 * c + k]] += mc / 8.0;
-    for (int i = 0; i < o->n; i++) {
-        o->mass += o->m[i];
+    /* Material fields (all 1, then the design regions), then the lumped mass that follows
+     * the density field (ρh³/8 to each corner when uniform); gravity on every node's mass. */
+    if (cs_fields_alloc(o) != 0) {
+        rc = cs_engine_fail(err, errlen, CS_ERR_NOMEM, "out of memory for the material fields");
+        goto fail;
+    }
+    apply_regions(o, def->fields, def->n_fields);
+    o->fem.kf = o->fld.young;
+    if (cs_object_lump_mass(o) != 0) {
+        rc = cs_engine_fail(err, errlen, CS_ERR_NOMEM, "out of memory");
+        goto fail;
+    }
+    for (int i = 0; i < o->n; i++)
         for (int a = 0; a < 3; a++)
             o->f_const[3 * i + a] = o->m[i] * w->def.gravity[a];
-    }
     rc = apply_loads(o, def, err, errlen);
     if (rc)
         goto fail;
     for (int i = 0; i < o->n; i++)
         for (int b = 0; b < def->n_fixed; b++)
             if (in_box(&def->fixed[b], o->cm.node_rest + 3 * i)) {
-                o->mask[3 * i] = o->mask[3 * i + 1] = o->mask[3 * i + 2] = 1;
+                if (def->constraints == CS_CONSTRAINT_PENALTY)
+                    o->pin[i] = 1;
+                else
+                    o->mask[3 * i] = o->mask[3 * i + 1] = o->mask[3 * i + 2] = 1;
                 o->n_fixed_nodes++;
                 break;
             }
@@ -607,21 +852,300 @@ int cs_world_drag(cs_world_t *w, cs_object_id id, const double grab[3], const do
     return add_input(w, id, &in, grab, seconds, err, errlen);
 }
 
-/* f = f_const + point forces + drag forces at the current positions. */
-static void gather_forces(cs_object *o)
+int cs_world_drag_curve(cs_world_t *w, cs_object_id id, const double *points, int n,
+                        double stiffness, double seconds, char *err, size_t errlen)
+{
+    if (!w || !points)
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "NULL argument");
+    if (n < 2 || n > CS_MAX_CURVE_POINTS)
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID,
+                              "curve must have 2 to %d points, got %d", CS_MAX_CURVE_POINTS, n);
+    for (int i = 0; i < n; i++)
+        if (!finite3(points + 3 * i))
+            return cs_engine_fail(err, errlen, CS_ERR_INVALID, "curve point %d is not finite", i);
+    if (!(stiffness > 0 && isfinite(stiffness)))
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID,
+                              "drag stiffness must be > 0 N/m, got %g", stiffness);
+    if (!(seconds > 0 && seconds <= 1e6))
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID,
+                              "curve duration must be in (0, 1e6] s, got %g", seconds);
+    cs_object *o = cs_world_find_internal(w, id);
+    if (!o)
+        return cs_engine_fail(err, errlen, CS_ERR_UNKNOWN_OBJECT, "no object with id %u",
+                              (unsigned)id);
+    double len[CS_MAX_CURVE_POINTS], total = 0, dmax = 0;
+    len[0] = 0;
+    for (int i = 1; i < n; i++) {
+        const double *a = points + 3 * (i - 1), *b = points + 3 * i;
+        total += norm3((double[3]){b[0] - a[0], b[1] - a[1], b[2] - a[2]});
+        len[i] = total;
+    }
+    if (!(total > 0))
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "curve has zero length");
+    cs_input in = {.kind = CS_INPUT_CURVE, .stiffness = stiffness};
+    nearest_material_point(o, points, &in.cell, in.w);
+    const int32_t *nd = o->cm.cell_nodes + 8 * in.cell;
+    double grab[3] = {0, 0, 0};
+    for (int k = 0; k < 8; k++)
+        for (int a = 0; a < 3; a++)
+            grab[a] += in.w[k] * o->x[3 * nd[k] + a];
+    for (int i = 0; i < n; i++) {
+        const double *q = points + 3 * i;
+        dmax = fmax(dmax, norm3((double[3]){q[0] - grab[0], q[1] - grab[1], q[2] - grab[2]}));
+    }
+    if (stiffness * dmax > w->def.max_force)
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID,
+                              "curve drag force of %g N (stiffness x distance) exceeds max_force "
+                              "%g N", stiffness * dmax, w->def.max_force);
+    /* Step j (1..S) has the target at arc length total·j/S: segment i covers the steps
+     * (S·len[i]/total, S·len[i+1]/total], rounded; segments that get no step are skipped. */
+    double sd = ceil(seconds / w->def.dt - 1e-9);
+    const int S = sd < 1 ? 1 : sd > 1e9 ? 1000000000 : (int)sd;
+    int segs = 0;
+    for (int i = 0; i + 1 < n; i++)
+        if (llround(S * len[i + 1] / total) > llround(S * len[i] / total))
+            segs++;
+    if (o->n_inputs + segs > CS_MAX_INPUTS)
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID,
+                              "object '%s' has room for %d more inputs, the curve needs %d",
+                              o->name, CS_MAX_INPUTS - o->n_inputs, segs);
+    for (int i = 0; i + 1 < n; i++) {
+        const int s0 = (int)llround(S * len[i] / total), s1 = (int)llround(S * len[i + 1] / total);
+        if (s1 <= s0)
+            continue;
+        in.delay = s0;
+        in.steps_total = in.steps_left = s1 - s0;
+        memcpy(in.target, points + 3 * i, sizeof in.target);
+        memcpy(in.target1, points + 3 * (i + 1), sizeof in.target1);
+        o->inputs[o->n_inputs++] = in;
+    }
+    o->sleeping = false;
+    o->still_steps = 0;
+    return CS_OK;
+}
+
+/* Area-weighted outward normal sum of the current surface and its area. */
+static double surface_area(const cs_object *o)
+{
+    double area = 0;
+    for (int t = 0; t < o->surf.n_triangles; t++) {
+        const int32_t *q = o->surf.tris + 3 * (size_t)t;
+        const double *a = o->surf.pos + 3 * (size_t)q[0], *b = o->surf.pos + 3 * (size_t)q[1],
+                     *c = o->surf.pos + 3 * (size_t)q[2];
+        const double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]};
+        const double v[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+        const double n[3] = {u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2],
+                             u[0] * v[1] - u[1] * v[0]};
+        area += 0.5 * norm3(n);
+    }
+    return area;
+}
+
+int cs_world_pressure(cs_world_t *w, cs_object_id id, double pressure, double seconds,
+                      char *err, size_t errlen)
+{
+    if (!w)
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "NULL argument");
+    if (!isfinite(pressure))
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "pressure is not finite");
+    if (!(seconds >= 0 && seconds <= 1e6))
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID,
+                              "duration must be in [0, 1e6] s, got %g", seconds);
+    cs_object *o = cs_world_find_internal(w, id);
+    if (!o)
+        return cs_engine_fail(err, errlen, CS_ERR_UNKNOWN_OBJECT, "no object with id %u",
+                              (unsigned)id);
+    const double area = surface_area(o);
+    if (fabs(pressure) * area > w->def.max_force)
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID,
+                              "pressure force of %g N (|pressure| x area %g m^2) exceeds "
+                              "max_force %g N", fabs(pressure) * area, area, w->def.max_force);
+    if (o->n_inputs == CS_MAX_INPUTS)
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID,
+                              "object '%s' already has %d active inputs", o->name, CS_MAX_INPUTS);
+    double steps = ceil(seconds / w->def.dt - 1e-9);
+    cs_input in = {.kind = CS_INPUT_PRESSURE, .cell = -1, .pressure = pressure,
+                   .steps_left = steps < 1 ? 1 : (int)steps};
+    o->inputs[o->n_inputs++] = in;
+    o->sleeping = false;
+    o->still_steps = 0;
+    return CS_OK;
+}
+
+int cs_world_paint(cs_world_t *w, cs_object_id id, const double centre[3], double radius,
+                   const cs_field_factors *f, int *touched, char *err, size_t errlen)
+{
+    if (touched)
+        *touched = 0;
+    if (!w || !centre || !f)
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "NULL argument");
+    if (!finite3(centre))
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "paint centre is not finite");
+    if (!(radius > 0 && isfinite(radius)))
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID,
+                              "paint radius must be > 0 m and finite, got %g", radius);
+    int rc = check_factors(f, "paint", err, errlen);
+    if (rc != CS_OK)
+        return rc;
+    cs_object *o = cs_world_find_internal(w, id);
+    if (!o)
+        return cs_engine_fail(err, errlen, CS_ERR_UNKNOWN_OBJECT, "no object with id %u",
+                              (unsigned)id);
+    /* The scene loads in f_const, without the old masses' gravity. */
+    const double *g = w->def.gravity;
+    double *load = malloc((size_t)(o->n ? o->n : 1) * 3 * sizeof *load);
+    if (!load)
+        return cs_engine_fail(err, errlen, CS_ERR_NOMEM, "out of memory");
+    for (int i = 0; i < o->n; i++)
+        for (int a = 0; a < 3; a++)
+            load[3 * i + a] = o->f_const[3 * i + a] - o->m[i] * g[a];
+    int count = 0;
+    for (int c = 0; c < o->cm.n_cells; c++)
+        for (int k = 0; k < 8; k++) {
+            double p[3];
+            gauss_point(o, o->x, c, k, p);
+            if (norm3((double[3]){p[0] - centre[0], p[1] - centre[1], p[2] - centre[2]}) > radius)
+                continue;
+            const size_t i = 8 * (size_t)c + k;
+            if (f->which & CS_FIELD_YOUNG)
+                o->fld.young[i] = f->young;
+            if (f->which & CS_FIELD_DENSITY)
+                o->fld.density[i] = f->density;
+            if (f->which & CS_FIELD_DAMPING)
+                o->fld.damping[i] = f->damping;
+            count++;
+        }
+    if (cs_object_lump_mass(o) != 0) {
+        free(load);
+        return cs_engine_fail(err, errlen, CS_ERR_NOMEM, "out of memory");
+    }
+    for (int i = 0; i < o->n; i++)
+        for (int a = 0; a < 3; a++)
+            o->f_const[3 * i + a] = o->m[i] * g[a] + load[3 * i + a];
+    free(load);
+    o->elastic_energy_valid = false;
+    if (count > 0) {
+        o->sleeping = false;
+        o->still_steps = 0;
+    }
+    if (touched)
+        *touched = count;
+    return CS_OK;
+}
+
+int cs_object_fields(const cs_world_t *w, cs_object_id id, const double **young,
+                     const double **density, const double **damping, int *n)
+{
+    const cs_object *o = cs_world_find_internal(w, id);
+    if (!o)
+        return CS_ERR_UNKNOWN_OBJECT;
+    if (young)
+        *young = o->fld.young;
+    if (density)
+        *density = o->fld.density;
+    if (damping)
+        *damping = o->fld.damping;
+    if (n)
+        *n = o->cm.n_cells;
+    return CS_OK;
+}
+
+/* The target of a spring input at its current step. */
+static void spring_target(const cs_input *in, double t[3])
+{
+    if (in->kind != CS_INPUT_CURVE) {
+        memcpy(t, in->target, 3 * sizeof *t);
+        return;
+    }
+    const double s = (double)(in->steps_total - in->steps_left + 1) / in->steps_total;
+    for (int a = 0; a < 3; a++)
+        t[a] = in->target[a] + s * (in->target1[a] - in->target[a]);
+}
+
+/* Pressure: p·(area-weighted outward normal) of each triangle, a third to each vertex, and
+ * from the vertex to its cell's corners by its skinning weights. */
+static void add_pressure(cs_object *o, double pressure, double *f)
+{
+    const cs_surface *sf = &o->surf;
+    for (int t = 0; t < sf->n_triangles; t++) {
+        const int32_t *q = sf->tris + 3 * (size_t)t;
+        const double *a = sf->pos + 3 * (size_t)q[0], *b = sf->pos + 3 * (size_t)q[1],
+                     *c = sf->pos + 3 * (size_t)q[2];
+        const double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]};
+        const double v[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+        /* ½ u × v is the area vector; a third of p times it to each vertex */
+        const double F[3] = {pressure / 6.0 * (u[1] * v[2] - u[2] * v[1]),
+                             pressure / 6.0 * (u[2] * v[0] - u[0] * v[2]),
+                             pressure / 6.0 * (u[0] * v[1] - u[1] * v[0])};
+        for (int j = 0; j < 3; j++) {
+            const int32_t vx = q[j], cell = sf->vert_cell[vx];
+            const double *uvw = sf->vert_uvw + 3 * (size_t)vx;
+            const int32_t *nd = o->cm.cell_nodes + 8 * (size_t)cell;
+            for (int k = 0; k < 8; k++) {
+                const double wk = (CS_CORNER[k][0] ? uvw[0] : 1 - uvw[0]) *
+                                  (CS_CORNER[k][1] ? uvw[1] : 1 - uvw[1]) *
+                                  (CS_CORNER[k][2] ? uvw[2] : 1 - uvw[2]);
+                for (int e = 0; e < 3; e++)
+                    f[3 * (size_t)nd[k] + e] += wk * F[e];
+            }
+        }
+    }
+}
+
+/* f += k_p (X − x) at every penalty-held node (seed 001 §4.2); returns ½ k_p Σ |x − X|². */
+static double add_penalty_force(const cs_object *o, const double *x, double *f)
+{
+    double e = 0;
+    if (o->penalty <= 0)
+        return 0;
+    for (int i = 0; i < o->n; i++) {
+        if (!o->pin[i])
+            continue;
+        for (int a = 0; a < 3; a++) {
+            const double d = x[3 * i + a] - o->cm.node_rest[3 * i + a];
+            f[3 * i + a] -= o->penalty * d;
+            e += 0.5 * o->penalty * d * d;
+        }
+    }
+    return e;
+}
+
+/* y += coef · k_p p at every penalty-held node. */
+static void add_penalty_operator(const cs_object *o, double coef, const double *p, double *y)
+{
+    if (o->penalty <= 0 || coef == 0)
+        return;
+    for (int i = 0; i < o->n; i++)
+        if (o->pin[i])
+            for (int a = 0; a < 3; a++)
+                y[3 * i + a] += coef * o->penalty * p[3 * i + a];
+}
+
+/* f = f_const + point forces + drag and curve springs + pressure at the current positions
+ * (+ the penalty springs of held nodes if `penalty`). */
+static void gather_forces_ex(cs_object *o, bool penalty)
 {
     memcpy(o->f, o->f_const, (size_t)o->n * 3 * sizeof(double));
+    if (penalty)
+        add_penalty_force(o, o->x, o->f);
     for (int i = 0; i < o->n_inputs; i++) {
         const cs_input *in = &o->inputs[i];
+        if (in->delay > 0)
+            continue;
+        if (in->kind == CS_INPUT_PRESSURE) {
+            add_pressure(o, in->pressure, o->f);
+            continue;
+        }
         const int32_t *nd = o->cm.cell_nodes + 8 * in->cell;
         double F[3] = {in->force[0], in->force[1], in->force[2]};
-        if (in->kind == CS_INPUT_DRAG) {
-            double p[3] = {0, 0, 0};
+        if (cs_input_is_spring(in)) {
+            double p[3] = {0, 0, 0}, t[3];
+            spring_target(in, t);
             for (int k = 0; k < 8; k++)
                 for (int a = 0; a < 3; a++)
                     p[a] += in->w[k] * o->x[3 * nd[k] + a];
             for (int a = 0; a < 3; a++)
-                F[a] = in->stiffness * (in->target[a] - p[a]);
+                F[a] = in->stiffness * (t[a] - p[a]);
         }
         for (int k = 0; k < 8; k++)
             for (int a = 0; a < 3; a++)
@@ -629,12 +1153,19 @@ static void gather_forces(cs_object *o)
     }
 }
 
+static void gather_forces(cs_object *o)
+{
+    gather_forces_ex(o, true);
+}
+
 static void expire_inputs(cs_object *o)
 {
     int j = 0;
-    for (int i = 0; i < o->n_inputs; i++)
-        if (--o->inputs[i].steps_left > 0)
-            o->inputs[j++] = o->inputs[i];
+    for (int i = 0; i < o->n_inputs; i++) {
+        cs_input *in = &o->inputs[i];
+        if (in->delay > 0 ? (in->delay--, true) : --in->steps_left > 0)
+            o->inputs[j++] = *in;
+    }
     o->n_inputs = j;
 }
 
@@ -650,11 +1181,24 @@ static void step_operator(void *ctx, const double *p, double *y)
     for (int i = 0; i < o->n; i++)
         for (int a = 0; a < 3; a++)
             y[3 * i + a] = kc * y[3 * i + a] + mc * o->m[i] * p[3 * i + a];
+    if (o->fld.has_damping && (o->cmcoef != 0 || o->ckcoef != 0)) {
+        /* the damping field: + dt·α M_d p + dt·β K_d p */
+        double *t = o->fld.tmp;
+        if (o->ckcoef != 0) {
+            cs_fem_apply_Kw(&o->fem, o->fld.kd, p, t);
+            for (int d = 0; d < 3 * o->n; d++)
+                y[d] += o->ckcoef * t[d];
+        }
+        for (int i = 0; i < o->n; i++)
+            for (int a = 0; a < 3; a++)
+                y[3 * i + a] += o->cmcoef * o->fld.md[i] * p[3 * i + a];
+    }
+    add_penalty_operator(o, o->pcoef, p, y);
     if (o->dcoef == 0)
         return;
     for (int i = 0; i < o->n_inputs; i++) {
         const cs_input *in = &o->inputs[i];
-        if (in->kind != CS_INPUT_DRAG)
+        if (!cs_input_is_spring(in) || in->delay > 0)
             continue;
         const int32_t *nd = o->cm.cell_nodes + 8 * in->cell;
         double s[3] = {0, 0, 0};
@@ -672,6 +1216,7 @@ static void tangent_operator(void *ctx, const double *p, double *y)
 {
     cs_object *o = ctx;
     cs_elastic_apply_tangent(o, p, y);
+    add_penalty_operator(o, o->pcoef, p, y);
 }
 
 /* Block-Jacobi preconditioner of the current operator, inverted. */
@@ -683,11 +1228,19 @@ static void build_preconditioner(cs_object *o)
         for (int k = 0; k < 9; k++)
             B[k] *= o->kcoef;
         for (int a = 0; a < 3; a++)
-            B[4 * a] += o->mcoef * o->m[i];
+            B[4 * a] += o->mcoef * o->m[i] +
+                        (o->fld.has_damping ? o->cmcoef * o->fld.md[i] : 0.0) +
+                        (o->pin[i] ? o->pcoef * o->penalty : 0.0);
+    }
+    if (o->fld.has_damping && o->ckcoef != 0) {
+        /* + dt·β diag(K_d) */
+        cs_fem_diag_blocks_w(&o->fem, o->fld.kd, o->fld.tmp);
+        for (size_t d = 0; d < 9 * (size_t)o->n; d++)
+            o->blocks[d] += o->ckcoef * o->fld.tmp[d];
     }
     for (int i = 0; o->dcoef != 0 && i < o->n_inputs; i++) {
         const cs_input *in = &o->inputs[i];
-        if (in->kind != CS_INPUT_DRAG)
+        if (!cs_input_is_spring(in) || in->delay > 0)
             continue;
         for (int k = 0; k < 8; k++)
             for (int a = 0; a < 3; a++)
@@ -777,6 +1330,24 @@ static bool all_finite(const double *a, size_t n)
     return true;
 }
 
+/* The implicit Euler operator (M + dt C + dt² K [+ dt² springs]) with Rayleigh damping
+ * C = α M + β K, or α M_d + β K_d where a damping field is painted. */
+static void set_implicit_coefs(cs_object *o, double dt)
+{
+    if (o->fld.has_damping) {
+        o->mcoef = 1;
+        o->kcoef = dt * dt;
+        o->cmcoef = dt * o->mat.damping[0];
+        o->ckcoef = dt * o->mat.damping[1];
+    } else {
+        o->mcoef = 1 + dt * o->mat.damping[0];
+        o->kcoef = dt * o->mat.damping[1] + dt * dt;
+        o->cmcoef = o->ckcoef = 0;
+    }
+    o->dcoef = dt * dt;
+    o->pcoef = dt * dt;
+}
+
 /* Implicit Euler (seed 000 §2.2): one linear solve per step for the new velocities. */
 static int step_implicit_euler(cs_world_t *w, cs_object *o, cs_step_stats *st)
 {
@@ -794,9 +1365,7 @@ static int step_implicit_euler(cs_world_t *w, cs_object *o, cs_step_stats *st)
             size_t d = 3 * (size_t)i + a;
             o->b[d] = o->m[i] * o->v[d] + dt * (o->f[d] + o->b[d]);
         }
-    o->mcoef = 1 + dt * o->mat.damping[0];
-    o->kcoef = dt * o->mat.damping[1] + dt * dt;
-    o->dcoef = dt * dt;
+    set_implicit_coefs(o, dt);
     build_preconditioner(o);
     for (size_t d = 0; d < n3; d++)
         o->v1[d] = o->mask[d] ? 0.0 : o->v[d];
@@ -918,12 +1487,13 @@ static double static_residual(cs_object *o, double load, double *res, double *po
     double e = 0, work = 0;
     cs_elastic_update(o, o->x);
     cs_elastic_force(o, o->x, res, pot ? &e : NULL);
+    const double ep = add_penalty_force(o, o->x, res); /* the supports, not scaled by load */
     for (int d = 0; d < 3 * o->n; d++) {
         res[d] = o->mask[d] ? 0.0 : res[d] + load * o->f[d];
         work += load * o->f[d] * (o->x[d] - o->cm.node_rest[d]);
     }
     if (pot)
-        *pot = e - work;
+        *pot = e + ep - work;
     return masked_norm(o, res);
 }
 
@@ -935,7 +1505,7 @@ static double static_residual(cs_object *o, double load, double *res, double *po
 static int solve_static_object(cs_world_t *w, cs_object *o, cs_step_stats *st)
 {
     const int n3 = 3 * o->n;
-    gather_forces(o);
+    gather_forces_ex(o, false); /* the penalty springs are in static_residual */
     const double fnorm = masked_norm(o, o->f);
     memset(o->v, 0, (size_t)n3 * sizeof(double));
     if (fnorm == 0)
@@ -951,6 +1521,8 @@ static int solve_static_object(cs_world_t *w, cs_object *o, cs_step_stats *st)
     o->mcoef = 0;
     o->kcoef = 1;
     o->dcoef = 0;
+    o->cmcoef = o->ckcoef = 0;
+    o->pcoef = 1;
     double load = 0, dl = 1;
     int rc = CS_OK;
     while (load < 1) {
