@@ -12,6 +12,7 @@
 
 #include "check.h"
 #include "cubesim.h"
+#include "scene.h"
 
 typedef struct bar {
     cs_world_t *w;
@@ -625,4 +626,76 @@ TEST(sculpt_refuses_bad_input_with_clear_messages)
     cs_world_destroy(b.w);
     free(b.ijk);
 #undef REFUSED
+}
+
+/* The scene's design fields and constraint mode reach the engine; bad ones are named. */
+TEST(sculpt_scene_fields_and_constraints)
+{
+    const char *json =
+        "{\"gravity\": [0, 0, 0], \"objects\": [{\"name\": \"b\", \"cube_size\": 0.1,"
+        " \"material\": {\"young\": 1e5, \"poisson\": 0.0},"
+        " \"box\": {\"min\": [0, 0, 0], \"size\": [0.4, 0.1, 0.1]},"
+        " \"constraints\": \"penalty\", \"penalty_stiffness\": 1e7,"
+        " \"fixed\": [{\"min\": [-0.01, -1, -1], \"max\": [0.01, 1, 1]}],"
+        " \"fields\": [{\"shape\": \"box\", \"min\": [0, -1, -1], \"max\": [0.2, 1, 1],"
+        "               \"young\": 2, \"density\": 3},"
+        "              {\"shape\": \"sphere\", \"centre\": [0.35, 0.05, 0.05], \"radius\": 0.01,"
+        "               \"damping\": 0},"
+        "              {\"shape\": \"gradient\", \"from\": [0, 0, 0], \"to\": [0.4, 0, 0],"
+        "               \"young\": 1},"
+        "              {\"shape\": \"radial\", \"centre\": [9, 9, 9], \"radius\": 1,"
+        "               \"young\": 5}]}]}";
+    cs_scene s;
+    char err[256];
+    ENSURE_MSG(cs_scene_parse(json, NULL, &s, err, sizeof err) == 0, "%s", err);
+    ENSURE(s.n_objects == 1 && s.objects[0].n_fields == 4);
+    ENSURE(s.objects[0].constraints == CS_CONSTRAINT_PENALTY);
+    ENSURE(s.objects[0].penalty_stiffness == 1e7);
+    cs_world_t *w = NULL;
+    ENSURE_MSG(cs_scene_instantiate(&s, &w, err, sizeof err) == 0, "%s", err);
+    cs_object_id id = cs_world_find_object(w, "b");
+    const double *yf, *df;
+    int nc;
+    cs_object_fields(w, id, &yf, &df, NULL, &nc);
+    ENSURE(nc == 4);
+    const int32_t *ijk;
+    cs_object_cells(w, id, &ijk, NULL, NULL);
+    for (int c = 0; c < nc; c++)
+        for (int g = 0; g < 8; g++) {
+            ENSURE_NEAR(yf[8 * c + g], ijk[3 * c] < 2 ? 2.0 : 1.0, 0);
+            ENSURE_NEAR(df[8 * c + g], ijk[3 * c] < 2 ? 3.0 : 1.0, 0);
+        }
+    cs_object_info info;
+    cs_object_get_info(w, id, &info);
+    ENSURE_NEAR(info.mass, 1000 * (2 * 3 + 2) * 1e-3, 1e-9);
+    ENSURE(info.n_fixed_nodes == 4);
+    cs_world_destroy(w);
+    cs_scene_free(&s);
+
+    static const struct {
+        const char *field, *word;
+    } bad[] = {
+        {"\"fields\": [{\"shape\": \"cone\", \"young\": 2}]", "unknown shape"},
+        {"\"fields\": [{\"shape\": \"sphere\", \"centre\": [0,0,0], \"radius\": 0, \"young\": 2}]",
+         "radius"},
+        {"\"fields\": [{\"shape\": \"sphere\", \"centre\": [0,0,0], \"radius\": 1}]",
+         "at least one factor"},
+        {"\"fields\": [{\"shape\": \"box\", \"min\": [0,0,0], \"max\": [1,1,1], \"young\": -1}]",
+         "young"},
+        {"\"fields\": [{\"shape\": \"box\", \"centre\": [0,0,0], \"min\": [0,0,0], \"max\": [1,1,1],"
+         " \"young\": 2}]", "does not apply"},
+        {"\"constraints\": \"glue\"", "unknown mode"},
+        {"\"penalty_stiffness\": 5", "only applies"},
+    };
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        char text[1024];
+        snprintf(text, sizeof text,
+                 "{\"objects\": [{\"name\": \"b\", \"box\": {\"min\": [0,0,0], \"size\": [0.1,0.1,0.1]},"
+                 " %s}]}", bad[i].field);
+        err[0] = 0;
+        ENSURE_MSG(cs_scene_parse(text, NULL, &s, err, sizeof err) != 0, "accepted %s",
+                   bad[i].field);
+        ENSURE_MSG(strstr(err, bad[i].word) && strstr(err, "objects[0]"),
+                   "message '%s' lacks '%s'", err, bad[i].word);
+    }
 }
