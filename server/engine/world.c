@@ -481,21 +481,23 @@ int cs_object_lump_mass(cs_object *o)
 
 static int check_factors(const cs_field_factors *f, const char *what, char *err, size_t errlen)
 {
+    /* what: the prefix of the message ("fields[2]"), or "" */
+    const char *sep = what[0] ? ": " : "";
     if (!f || (f->which & ~(CS_FIELD_YOUNG | CS_FIELD_DENSITY | CS_FIELD_DAMPING)) ||
         !(f->which & (CS_FIELD_YOUNG | CS_FIELD_DENSITY | CS_FIELD_DAMPING)))
         return cs_engine_fail(err, errlen, CS_ERR_INVALID,
-                              "%s: give at least one of the young, density, damping factors",
-                              what);
+                              "%s%sgive at least one of the young, density, damping factors",
+                              what, sep);
     if ((f->which & CS_FIELD_YOUNG) && !(f->young >= 1e-6 && f->young <= 1e6))
         return cs_engine_fail(err, errlen, CS_ERR_INVALID,
-                              "%s: young factor must be in [1e-6, 1e6], got %g", what, f->young);
+                              "%s%syoung factor must be in [1e-6, 1e6], got %g", what, sep, f->young);
     if ((f->which & CS_FIELD_DENSITY) && !(f->density >= 1e-6 && f->density <= 1e6))
         return cs_engine_fail(err, errlen, CS_ERR_INVALID,
-                              "%s: density factor must be in [1e-6, 1e6], got %g", what,
+                              "%s%sdensity factor must be in [1e-6, 1e6], got %g", what, sep,
                               f->density);
     if ((f->which & CS_FIELD_DAMPING) && !(f->damping >= 0 && f->damping <= 1e6))
         return cs_engine_fail(err, errlen, CS_ERR_INVALID,
-                              "%s: damping factor must be in [0, 1e6], got %g", what,
+                              "%s%sdamping factor must be in [0, 1e6], got %g", what, sep,
                               f->damping);
     return CS_OK;
 }
@@ -984,7 +986,7 @@ int cs_world_paint(cs_world_t *w, cs_object_id id, const double centre[3], doubl
     if (!(radius > 0 && isfinite(radius)))
         return cs_engine_fail(err, errlen, CS_ERR_INVALID,
                               "paint radius must be > 0 m and finite, got %g", radius);
-    int rc = check_factors(f, "paint", err, errlen);
+    int rc = check_factors(f, "", err, errlen);
     if (rc != CS_OK)
         return rc;
     cs_object *o = cs_world_find_internal(w, id);
