@@ -8,7 +8,8 @@ int cs_elastic_init(cs_object *o, int threads)
     /* Every model keeps the FEM record: fracture uses its adjacency and rotations. */
     int rc = cs_fem_init(&o->fem, &o->cm, o->mat.young, o->mat.poisson,
                          o->model != CS_MODEL_LINEAR, threads);
-    o->fem.kf = o->fld.young; /* the stiffness field (world_internal.h); NULL: uniform */
+    /* the stiffness field (world_internal.h); NULL while uniform 1 */
+    o->fem.kf = o->fld.has_young ? o->fld.young : NULL;
     return rc;
 }
 
@@ -19,7 +20,7 @@ void cs_elastic_free(cs_object *o)
 
 int cs_elastic_relink(cs_object *o)
 {
-    o->fem.kf = o->fld.young;
+    o->fem.kf = o->fld.has_young ? o->fld.young : NULL;
     return cs_fem_relink(&o->fem, &o->cm);
 }
 

@@ -431,12 +431,15 @@ int cs_object_lump_mass(cs_object *o)
     const cs_cubemesh *cm = &o->cm;
     const double h = cm->h, rho = o->mat.density;
     cs_fields *fl = &o->fld;
-    fl->has_damping = false;
+    fl->has_damping = fl->has_young = false;
     for (size_t i = 0; i < 8 * (size_t)cm->n_cells; i++) {
         fl->kd[i] = fl->young[i] * fl->damping[i];
         if (fl->damping[i] != 1.0)
             fl->has_damping = true;
+        if (fl->young[i] != 1.0)
+            fl->has_young = true;
     }
+    o->fem.kf = fl->has_young ? fl->young : NULL;
     double *md = NULL;
     if (fl->has_damping) {
         md = realloc(fl->md, (size_t)(o->n ? o->n : 1) * sizeof *md);
@@ -689,7 +692,6 @@ int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *i
         goto fail;
     }
     apply_regions(o, def->fields, def->n_fields);
-    o->fem.kf = o->fld.young;
     if (cs_object_lump_mass(o) != 0) {
         rc = cs_engine_fail(err, errlen, CS_ERR_NOMEM, "out of memory");
         goto fail;

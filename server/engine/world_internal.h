@@ -79,6 +79,7 @@ typedef struct cs_fields {
     double *md;       /* per node: the lumped α-damping mass (valid when has_damping) */
     double *tmp;      /* 9 per node: scratch of the damping products (when has_damping) */
     bool has_damping; /* some damping factor differs from 1 */
+    bool has_young;   /* some young factor differs from 1 (else the models may ignore it) */
 } cs_fields;
 
 typedef struct cs_object {
@@ -165,7 +166,8 @@ int cs_object_alloc_state(cs_object *o);
 int cs_fields_alloc(cs_object *o);
 void cs_fields_free(cs_fields *f);
 /* Lumped masses o->m and o->mass from the density field, and M_d, K_d (fld.md reallocated
- * to o->n nodes) from the damping field. f_const is left alone. Returns -1 on out of
+ * to o->n nodes) from the damping field; has_young, has_damping and the FEM's o->fem.kf
+ * (NULL while every young factor is 1) follow the fields. f_const is left alone. Returns -1 on out of
  * memory. */
 int cs_object_lump_mass(cs_object *o);
 
