@@ -56,6 +56,7 @@ typedef struct cs_daemon {
     int32_t epoch;
     bool diverged_logged;
     bool fractured;         /* the world's topology changed since it was built from the scene */
+    bool painted;           /* material fields were painted since it was built from the scene */
 
     double next_step;       /* monotonic s (realtime) */
     double next_publish;    /* simulated s */
@@ -417,9 +418,13 @@ static void apply_sculpt(cs_daemon *d, const cs_input *in, char *msg, size_t msg
     else if (in->kind == CS_INPUT_CURVE)
         rc = cs_world_drag_curve(d->world, id, in->points, in->n_points, in->stiffness,
                                  in->duration, err, sizeof err);
-    if (rc != CS_OK)
+    if (rc != CS_OK) {
         snprintf(msg, msglen, "%s: %s", in->request, err[0] ? err : cs_status_str(rc));
-    else if (in->kind == CS_INPUT_PAINT)
+        return;
+    }
+    if (in->kind == CS_INPUT_PAINT && touched > 0)
+        d->painted = true;
+    if (in->kind == CS_INPUT_PAINT)
         cs_dlog_info(&d->log, "paint of object %u '%s': %d Gauss points", (unsigned)id,
                      info.name, touched);
 }
@@ -445,9 +450,10 @@ static void apply_command(cs_daemon *d, const cs_input *in, double now, char *ms
         cs_dlog_info(&d->log, "stepping %d steps", (int)in->count);
         break;
     case CS_CMD_RESET:
-        if (d->fractured) {
-            /* Pieces cannot be put back together: rebuild the world from the scene as it was
-             * loaded (the same objects, ids and rest shapes a fresh start would have). */
+        if (d->fractured || d->painted) {
+            /* Pieces cannot be put back together, and painting changed the material: rebuild
+             * the world from the scene as it was loaded (the same objects, ids, rest shapes
+             * and design fields a fresh start would have). */
             cs_world_t *world = NULL;
             char err[400] = "";
             if (cs_scene_instantiate(&d->scene, &world, err, sizeof err) != 0) {
@@ -457,6 +463,7 @@ static void apply_command(cs_daemon *d, const cs_input *in, double now, char *ms
             cs_world_destroy(d->world);
             d->world = world;
             d->fractured = false;
+            d->painted = false;
         } else {
             cs_world_reset(d->world);
         }
@@ -487,6 +494,7 @@ static void apply_command(cs_daemon *d, const cs_input *in, double now, char *ms
         d->scene = scene;
         d->world = world;
         d->fractured = false;
+        d->painted = false;
         d->epoch++;
         d->step_budget = 0;
         new_epoch(d, now);

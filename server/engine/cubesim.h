@@ -259,7 +259,8 @@ int cs_world_step(cs_world_t *w);
  * Newton iterations with the corotated tangent). Velocities are zeroed.
  */
 int cs_world_solve_static(cs_world_t *w);
-/* Every object back to its rest shape, at rest; time and inputs cleared. */
+/* Every object back to its rest shape, at rest; time and inputs cleared. Painted material
+ * fields are kept (they are the material, not the state). */
 void cs_world_reset(cs_world_t *w);
 
 double cs_world_time(const cs_world_t *w);
