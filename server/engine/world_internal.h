@@ -113,6 +113,9 @@ typedef struct cs_object {
      * each towards its rest position (pin[node] = 1, mask 0). */
     double penalty;
     uint8_t *pin;          /* per node: held by a penalty spring */
+    /* An integrator honours them through world.c: gather_forces adds k_p (X − x) at pinned
+     * nodes, and an implicit operator adds pcoef·k_p on their diagonal (step_operator and
+     * build_preconditioner do). An explicit integrator must keep dt below 2·sqrt(m/k_p). */
     cs_fields fld;
     double mass;
     cs_cg_work cg;
