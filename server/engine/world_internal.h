@@ -157,7 +157,7 @@ struct cs_world {
     cs_topo_list topo;
 };
 
-/* Defined in world.c, used by fracture.c. */
+/* Defined in world.c and fields.c, used by fracture.c and each other. */
 /* Write the message to err (if any) and return code: the engine's runtime-error idiom. */
 int cs_engine_fail(char *err, size_t errlen, int code, const char *fmt, ...)
     __attribute__((format(printf, 4, 5)));
@@ -168,6 +168,10 @@ int cs_object_alloc_state(cs_object *o);
 /* Allocate o->fld for o->cm.n_cells cells, every factor 1. Returns -1 on out of memory. */
 int cs_fields_alloc(cs_object *o);
 void cs_fields_free(cs_fields *f);
+/* Check design region i (message names "fields[i]"); CS_OK or CS_ERR_INVALID. */
+int cs_fields_check_region(const cs_field_region *r, int i, char *err, size_t errlen);
+/* Multiply the fields by every region, evaluated at each Gauss point's rest position. */
+void cs_fields_apply_regions(cs_object *o, const cs_field_region *r, int n);
 /* Lumped masses o->m and o->mass from the density field, and M_d, K_d (fld.md reallocated
  * to o->n nodes) from the damping field; has_young, has_damping and the FEM's o->fem.kf
  * (NULL while every young factor is 1) follow the fields. f_const is left alone. Returns -1 on out of
