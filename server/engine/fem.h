@@ -14,7 +14,8 @@
  * Material fields (world_internal.h, seed 001 §3.3): with kf set (8 factors per cell, one per
  * Gauss point), cell c's stiffness is K_e = Σ_g kf[8c+g]·K_g, K_g the shared unit matrix of
  * Gauss point g (Σ_g K_g = K). A cell whose 8 factors are equal costs one product with K (scaled);
- * a graded cell costs 8 products with the K_g. No matrix is stored per element.
+ * a graded cell's product is taken point by point, Σ_g kf_g·B_gᵀ C B_g u (strain, stress,
+ * nodal forces: about twice a product with K). No matrix is stored per element.
  *
  * Owns: R, q, fe, adj_start, adj, Kg. Borrows: cell_nodes (from the object's cube mesh) and kf
  * (the object's young field).
@@ -37,6 +38,8 @@ typedef struct cs_fem {
     int threads;        /* worker threads for this object's products (1 when small) */
     double K[24 * 24];
     double *Kg;         /* 8 × 576: the unit matrix of each Gauss point (Σ_g = K) */
+    double gq[8][8][3]; /* ∂N_k/∂x at Gauss point g: graded products as Σ_g B_gᵀ C B_g */
+    double lambda, mu, detj;
     const double *kf;   /* 8 per cell: stiffness factor per Gauss point; NULL = all 1. Borrowed */
     double *R;          /* 9 per cell, row-major; identity for the linear model */
     double *q;          /* 4 per cell (w,x,y,z): warm start of the rotation extraction */

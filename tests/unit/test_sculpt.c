@@ -11,7 +11,9 @@
 #include <string.h>
 
 #include "check.h"
+#include "cubemesh.h"
 #include "cubesim.h"
+#include "fem.h"
 #include "scene.h"
 
 typedef struct bar {
@@ -771,4 +773,66 @@ TEST(sculpt_penalty_supports_survive_fracture)
     ENSURE(held < 1e-4);
     ENSURE(fall > 0.05);
     free_bar(&b);
+}
+
+/* A graded cube's product (point by point, B_gᵀ C B_g) is the matrix Σ_g f_g K_g built from
+ * the per-Gauss-point matrices, column by column, and its diagonal blocks are that matrix's. */
+TEST(sculpt_graded_element_equals_weighted_gauss_matrices)
+{
+    const double E = 3e4, nu = 0.3, h = 0.2;
+    cs_cubemesh cm;
+    memset(&cm, 0, sizeof cm);
+    char err[128];
+    ENSURE(cs_cubemesh_build(&cm, h, (double[3]){0, 0, 0}, (int32_t[3]){0, 0, 0}, 1, err,
+                             sizeof err) == 0);
+    cs_fem fem;
+    ENSURE(cs_fem_init(&fem, &cm, E, nu, true, 1) == 0);
+    const double f[8] = {1.0, 2.5, 0.3, 4.0, 1.7, 0.9, 3.3, 0.01};
+    fem.kf = f;
+    double want[576] = {0}, Kg[576];
+    for (int g = 0; g < 8; g++) {
+        cs_cube_stiffness_gauss(E, nu, h, g, Kg);
+        for (int i = 0; i < 576; i++)
+            want[i] += f[g] * Kg[i];
+    }
+    double scale = 0;
+    for (int i = 0; i < 576; i++)
+        scale = fmax(scale, fabs(want[i]));
+    /* columns through the product (rotations are the identity) */
+    double p[24], y[24], worst = 0;
+    for (int j = 0; j < 24; j++) {
+        memset(p, 0, sizeof p);
+        p[j] = 1;
+        cs_fem_apply_K(&fem, p, y);
+        for (int i = 0; i < 24; i++) {
+            const int node_i = i / 3, node_j = j / 3;
+            /* the mesh numbers nodes its own way: map through the cell's corner list */
+            int ci = -1, cj = -1;
+            for (int k = 0; k < 8; k++) {
+                if (cm.cell_nodes[k] == node_i)
+                    ci = k;
+                if (cm.cell_nodes[k] == node_j)
+                    cj = k;
+            }
+            worst = fmax(worst, fabs(y[i] - want[(3 * ci + i % 3) * 24 + 3 * cj + j % 3]));
+        }
+    }
+    ENSURE_MSG(worst <= 1e-12 * scale, "product differs from sum f_g K_g by %g (scale %g)",
+               worst, scale);
+    double blocks[72];
+    cs_fem_diag_blocks(&fem, blocks);
+    worst = 0;
+    for (int n = 0; n < 8; n++) {
+        int c = -1;
+        for (int k = 0; k < 8; k++)
+            if (cm.cell_nodes[k] == n)
+                c = k;
+        for (int a = 0; a < 3; a++)
+            for (int b = 0; b < 3; b++)
+                worst = fmax(worst, fabs(blocks[9 * n + 3 * a + b] -
+                                         want[(3 * c + a) * 24 + 3 * c + b]));
+    }
+    ENSURE_MSG(worst <= 1e-12 * scale, "diagonal blocks differ by %g", worst);
+    cs_fem_free(&fem);
+    cs_cubemesh_free(&cm);
 }
