@@ -240,7 +240,7 @@ int cs_world_pressure(cs_world_t *w, cs_object_id id, double pressure, double se
 /*
  * Paint the material fields: every Gauss point whose current position lies within `radius`
  * (> 0) [m] of `centre` gets the factors in f (those in f->which; set, not multiplied).
- * Masses and the gravity load follow the density at once. Returns CS_OK with *touched (if
+ * Masses and the gravity load follow the density at once (velocities are kept). Returns CS_OK with *touched (if
  * non-NULL) the number of Gauss points painted (0 is not an error), or an error naming the
  * bad argument.
  */
