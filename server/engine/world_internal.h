@@ -48,6 +48,7 @@ typedef struct cs_object {
     cs_cubemesh cm;
     cs_surface surf;
     cs_fem fem;
+    struct cs_lf *lf;      /* localframe model data (localframe.h); NULL for other models */
     int n;                 /* nodes */
     double *x, *v, *m;     /* 3, 3, 1 per node */
     double *f_const;       /* gravity + scene loads, 3 per node */
