@@ -1,0 +1,325 @@
+/*
+ * test_localframe.c — the local-frame B-spline model (seed 001 §3.2–3.4) and the
+ * central-difference integrator (Eq. 20) against known answers: B-spline partition of unity
+ * and identity reproduction, element null spaces, rigid motions of any size giving no force,
+ * forces as the energy's gradient, cell classification and its survival of fracture, exact
+ * tricubic skinning, a ν = 0 cantilever against Euler–Bernoulli/Timoshenko and its error
+ * under refinement, energy of an undamped oscillation, and refusals.
+ */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "check.h"
+#include "cubemesh.h"
+#include "cubesim.h"
+#include "localframe.h"
+#include "surface.h"
+#include "world_internal.h"
+
+static int32_t *box_ijk(int nx, int ny, int nz)
+{
+    int32_t *ijk = malloc(sizeof(int32_t) * 3 * (size_t)(nx * ny * nz));
+    int c = 0;
+    for (int k = 0; k < nz; k++)
+        for (int j = 0; j < ny; j++)
+            for (int i = 0; i < nx; i++) {
+                ijk[3 * c] = i;
+                ijk[3 * c + 1] = j;
+                ijk[3 * c + 2] = k;
+                c++;
+            }
+    return ijk;
+}
+
+static int box_mesh(cs_cubemesh *cm, int nx, int ny, int nz, double h)
+{
+    int32_t *ijk = box_ijk(nx, ny, nz);
+    char err[128];
+    const double origin[3] = {0.1, -0.2, 0.3};
+    int rc = cs_cubemesh_build(cm, h, origin, ijk, nx * ny * nz, err, sizeof err);
+    free(ijk);
+    return rc;
+}
+
+/* Rotation matrix of angle th about unit axis u (Rodrigues). */
+static void rotation(const double u0[3], double th, double Q[9])
+{
+    double n = sqrt(u0[0] * u0[0] + u0[1] * u0[1] + u0[2] * u0[2]);
+    double u[3] = {u0[0] / n, u0[1] / n, u0[2] / n}, c = cos(th), s = sin(th);
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++)
+            Q[3 * i + j] = (i == j ? c : 0) + (1 - c) * u[i] * u[j];
+    Q[1] -= s * u[2];
+    Q[2] += s * u[1];
+    Q[3] += s * u[2];
+    Q[5] -= s * u[0];
+    Q[6] -= s * u[1];
+    Q[7] += s * u[0];
+}
+
+/* ---------------------------------------------------------------- basis and elements */
+
+TEST(lf_bspline_partition_of_unity_and_identity)
+{
+    for (int s = 0; s <= 20; s++) {
+        const double t = s / 20.0;
+        double b[4], db[4];
+        cs_bspline_basis(t, b, db);
+        double sum = 0, dsum = 0, lin = 0, dlin = 0;
+        for (int k = 0; k < 4; k++) {
+            ENSURE(b[k] >= 0);
+            sum += b[k];
+            dsum += db[k];
+            lin += b[k] * (k - 1);  /* control points at the integers i−1..i+2 */
+            dlin += db[k] * (k - 1);
+        }
+        ENSURE_NEAR(sum, 1.0, 1e-15);
+        ENSURE_NEAR(dsum, 0.0, 1e-15);
+        ENSURE_NEAR(lin, t, 1e-15);
+        ENSURE_NEAR(dlin, 1.0, 1e-15);
+    }
+    /* C² across the knot: the basis of span i at t = 1 equals that of span i+1 at t = 0
+     * shifted by one control point. */
+    double b1[4], b0[4], d1[4], d0[4];
+    cs_bspline_basis(1.0, b1, d1);
+    cs_bspline_basis(0.0, b0, d0);
+    for (int k = 1; k < 4; k++) {
+        ENSURE_NEAR(b1[k], b0[k - 1], 1e-15);
+        ENSURE_NEAR(d1[k], d0[k - 1], 1e-15);
+    }
+}
+
+/* The classification: in a 5×5×5 box the 3×3×3 interior cells are B-spline elements. */
+TEST(lf_classify_box_interior_cells)
+{
+    cs_cubemesh cm;
+    ENSURE(box_mesh(&cm, 5, 5, 5, 0.1) == 0);
+    ENSURE(cs_lf_classify(&cm) == 27);
+    for (int c = 0; c < cm.n_cells; c++) {
+        const int32_t *q = cm.cell_ijk + 3 * c;
+        const bool interior = q[0] > 0 && q[0] < 4 && q[1] > 0 && q[1] < 4 && q[2] > 0 && q[2] < 4;
+        ENSURE((cm.spline_nodes[64 * c] >= 0) == interior);
+        if (!interior)
+            continue;
+        /* the 64 control points sit on the lattice i−1..i+2: the tricubic map at rest is the
+         * identity (B-splines reproduce linear functions) */
+        for (int a = 0; a < 64; a++) {
+            const double *X = cm.node_rest + 3 * cm.spline_nodes[64 * c + a];
+            const int off[3] = {a % 4 - 1, (a / 4) % 4 - 1, a / 16 - 1};
+            for (int i = 0; i < 3; i++)
+                ENSURE_NEAR(X[i], cm.origin[i] + cm.h * (q[i] + off[i]), 1e-12);
+        }
+        const double uvw[3] = {0.137, 0.5, 0.911};
+        double bx[4], by[4], bz[4], p[3] = {0, 0, 0};
+        cs_bspline_basis(uvw[0], bx, NULL);
+        cs_bspline_basis(uvw[1], by, NULL);
+        cs_bspline_basis(uvw[2], bz, NULL);
+        for (int a = 0; a < 64; a++)
+            for (int i = 0; i < 3; i++)
+                p[i] += bx[a % 4] * by[(a / 4) % 4] * bz[a / 16] *
+                        cm.node_rest[3 * cm.spline_nodes[64 * c + a] + i];
+        for (int i = 0; i < 3; i++)
+            ENSURE_NEAR(p[i], cm.origin[i] + cm.h * (q[i] + uvw[i]), 1e-12);
+    }
+    cs_cubemesh_free(&cm);
+}
+
+/* Element matrices: symmetric, total mass ρh³, and rigid motions in the null space. */
+TEST(lf_element_matrices_symmetric_mass_and_null_space)
+{
+    cs_cubemesh cm;
+    ENSURE(box_mesh(&cm, 3, 3, 3, 0.05) == 0);
+    cs_lf lf;
+    const double E = 1e5, nu = 0.3, rho = 800, h = 0.05;
+    ENSURE(cs_lf_init(&lf, &cm, E, nu, rho, 1) == 0);
+    ENSURE(lf.n_spline == 1);
+    double kmax = 0, msum = 0, mlsum = 0;
+    for (int i = 0; i < 192 * 192; i++)
+        kmax = fmax(kmax, fabs(lf.Ks[i]));
+    for (int i = 0; i < 192; i++)
+        for (int j = 0; j < 192; j++)
+            ENSURE_NEAR(lf.Ks[i * 192 + j], lf.Ks[j * 192 + i], 1e-12 * kmax);
+    for (int i = 0; i < 64 * 64; i++)
+        msum += lf.Ms[i];
+    for (int i = 0; i < 64; i++)
+        mlsum += lf.Ml[i];
+    ENSURE_NEAR(msum, rho * h * h * h, 1e-12 * rho * h * h * h);
+    ENSURE_NEAR(mlsum, rho * h * h * h, 1e-12 * rho * h * h * h);
+    /* translations and infinitesimal rotations about the cell centre */
+    for (int mode = 0; mode < 6; mode++) {
+        double u[192];
+        for (int a = 0; a < 64; a++) {
+            const double X[3] = {(a % 4 - 1.5) * h, ((a / 4) % 4 - 1.5) * h, (a / 16 - 1.5) * h};
+            for (int i = 0; i < 3; i++)
+                u[3 * a + i] = mode < 3 ? (i == mode) : 0.0;
+            if (mode >= 3) {
+                const int ax = mode - 3, i1 = (ax + 1) % 3, i2 = (ax + 2) % 3;
+                u[3 * a + i1] = -X[i2];
+                u[3 * a + i2] = X[i1];
+            }
+        }
+        for (int i = 0; i < 192; i++) {
+            double s = 0;
+            for (int j = 0; j < 192; j++)
+                s += lf.Ks[i * 192 + j] * u[j];
+            ENSURE_NEAR(s, 0.0, 1e-10 * kmax * h);
+        }
+    }
+    cs_lf_free(&lf);
+    cs_cubemesh_free(&cm);
+}
+
+/* ---------------------------------------------------------------- local frames */
+
+/* Rigid motions of any size (translation, rotations up to 179°) give no force and no energy,
+ * in B-spline and linear elements alike: the local frames rotate with the body. */
+TEST(lf_rigid_motions_give_no_force)
+{
+    cs_cubemesh cm;
+    const double h = 0.1, E = 1e4;
+    ENSURE(box_mesh(&cm, 5, 4, 4, h) == 0);
+    cs_lf lf;
+    ENSURE(cs_lf_init(&lf, &cm, E, 0.3, 1000, 1) == 0);
+    ENSURE(lf.n_spline == 3 * 2 * 2);
+    const int n = cm.n_nodes;
+    double *x = malloc(sizeof(double) * 3 * n), *f = malloc(sizeof(double) * 3 * n);
+    const double axes[4][3] = {{0, 0, 1}, {1, 0, 0}, {1, 2, -0.5}, {-0.3, 0.7, 0.2}};
+    const double angles[5] = {0.0, 0.3, 1.5707963, 2.5, 3.12};
+    /* force scale: what a 1 % strain would give at a node, E·h²·0.01 */
+    const double fscale = E * h * h * 0.01;
+    for (int ax = 0; ax < 4; ax++)
+        for (int an = 0; an < 5; an++) {
+            double Q[9];
+            rotation(axes[ax], angles[an], Q);
+            const double t[3] = {3.0, -1.0, 0.5};
+            for (int i = 0; i < n; i++) {
+                const double *X = cm.node_rest + 3 * i;
+                for (int r = 0; r < 3; r++)
+                    x[3 * i + r] = Q[3 * r] * X[0] + Q[3 * r + 1] * X[1] + Q[3 * r + 2] * X[2] + t[r];
+            }
+            cs_lf_reset(&lf);
+            cs_lf_update(&lf, x);
+            double e;
+            cs_lf_force(&lf, x, f, &e);
+            double fbig = 0;
+            for (int d = 0; d < 3 * n; d++)
+                fbig = fmax(fbig, fabs(f[d]));
+            ENSURE_MSG(fbig < 1e-9 * fscale, "axis %d angle %g: |f| %g", ax, angles[an], fbig);
+            ENSURE(e < 1e-20 * E * h * h * h);
+            ENSURE(cs_lf_energy(&lf, x) < 1e-20 * E * h * h * h);
+        }
+    /* and a real deformation is resisted: a 1 % stretch along x gives forces of that scale */
+    for (int i = 0; i < n; i++) {
+        memcpy(x + 3 * i, cm.node_rest + 3 * i, 3 * sizeof(double));
+        x[3 * i] *= 1.01;
+    }
+    cs_lf_update(&lf, x);
+    cs_lf_force(&lf, x, f, NULL);
+    double fbig = 0;
+    for (int d = 0; d < 3 * n; d++)
+        fbig = fmax(fbig, fabs(f[d]));
+    ENSURE(fbig > 0.05 * fscale && fbig < 10 * fscale);
+    free(x);
+    free(f);
+    cs_lf_free(&lf);
+    cs_cubemesh_free(&cm);
+}
+
+/* The elastic force is the negative gradient of the energy: a central finite difference of
+ * cs_lf_energy along a random direction matches −f·dir, at a rotated, deformed state. */
+TEST(lf_force_is_energy_gradient)
+{
+    cs_cubemesh cm;
+    const double h = 0.1;
+    ENSURE(box_mesh(&cm, 4, 4, 4, h) == 0);
+    cs_lf lf;
+    ENSURE(cs_lf_init(&lf, &cm, 1e4, 0.25, 1000, 1) == 0);
+    const int n = cm.n_nodes;
+    double *x = malloc(sizeof(double) * 3 * n), *f = malloc(sizeof(double) * 3 * n),
+           *dir = malloc(sizeof(double) * 3 * n), *xp = malloc(sizeof(double) * 3 * n);
+    double Q[9];
+    rotation((double[3]){0.2, 1, 0.4}, 0.9, Q);
+    unsigned s = 12345;
+    for (int i = 0; i < n; i++) {
+        double X[3];
+        for (int r = 0; r < 3; r++) {
+            s = s * 1103515245u + 12345u;
+            X[r] = cm.node_rest[3 * i + r] + 0.003 * ((s >> 8) % 1000 / 500.0 - 1.0);
+            s = s * 1103515245u + 12345u;
+            dir[3 * i + r] = (s >> 8) % 1000 / 500.0 - 1.0;
+        }
+        for (int r = 0; r < 3; r++)
+            x[3 * i + r] = Q[3 * r] * X[0] + Q[3 * r + 1] * X[1] + Q[3 * r + 2] * X[2];
+    }
+    cs_lf_update(&lf, x);
+    cs_lf_force(&lf, x, f, NULL);
+    double fd = 0, an = 0;
+    const double eps = 1e-6;
+    for (int d = 0; d < 3 * n; d++)
+        xp[d] = x[d] + eps * dir[d];
+    double ep = cs_lf_energy(&lf, xp);
+    for (int d = 0; d < 3 * n; d++)
+        xp[d] = x[d] - eps * dir[d];
+    double em = cs_lf_energy(&lf, xp);
+    fd = (ep - em) / (2 * eps);
+    for (int d = 0; d < 3 * n; d++)
+        an -= f[d] * dir[d];
+    /* the local-frame force omits the frame's own derivative (as corotational FEM does), an
+     * error of the order of the strain (0.3 %) relative to the force */
+    ENSURE_MSG(fabs(fd - an) < 0.02 * fabs(an), "dE %g vs -f.dir %g", fd, an);
+    free(x);
+    free(f);
+    free(dir);
+    free(xp);
+    cs_lf_free(&lf);
+    cs_cubemesh_free(&cm);
+}
+
+/* The stability bound is the exact largest element eigenvalue: for one free linear cell (the
+ * whole object is one element) it matches a full eigen-decomposition. */
+TEST(lf_stability_bound_matches_element_eigenvalue)
+{
+    const double E = 2e4, nu = 0.3, rho = 500, h = 0.07;
+    double w2;
+    ENSURE(cs_lf_omega2_bound(CS_MODEL_LINEAR, E, nu, rho, h, &w2) == 0);
+    /* the same element through the FEM code: K of fem.c and the lumped mass ρh³/8 */
+    double K[576];
+    cs_cube_stiffness(E, nu, h, K);
+    const double m = rho * h * h * h / 8;
+    /* Jacobi eigenvalues of K/m */
+    double A[576];
+    for (int i = 0; i < 576; i++)
+        A[i] = K[i] / m;
+    const int nn = 24;
+    for (int sweep = 0; sweep < 60; sweep++)
+        for (int p = 0; p < nn; p++)
+            for (int q = p + 1; q < nn; q++) {
+                double apq = A[p * nn + q];
+                if (fabs(apq) < 1e-300)
+                    continue;
+                double th = (A[q * nn + q] - A[p * nn + p]) / (2 * apq);
+                double t = (th >= 0 ? 1 : -1) / (fabs(th) + sqrt(th * th + 1));
+                double c = 1 / sqrt(t * t + 1), sn = t * c;
+                for (int k = 0; k < nn; k++) {
+                    double akp = A[k * nn + p], akq = A[k * nn + q];
+                    A[k * nn + p] = c * akp - sn * akq;
+                    A[k * nn + q] = sn * akp + c * akq;
+                }
+                for (int k = 0; k < nn; k++) {
+                    double apk = A[p * nn + k], aqk = A[q * nn + k];
+                    A[p * nn + k] = c * apk - sn * aqk;
+                    A[q * nn + k] = sn * apk + c * aqk;
+                }
+            }
+    double lmax = 0;
+    for (int i = 0; i < nn; i++)
+        lmax = fmax(lmax, A[i * nn + i]);
+    ENSURE(w2 >= lmax);
+    ENSURE_NEAR(w2, lmax, 2e-3 * lmax);
+    /* localframe's consistent-mass bound is finite and of the expected E/(ρh²) scale */
+    double w2lf;
+    ENSURE(cs_lf_omega2_bound(CS_MODEL_LOCALFRAME, E, nu, rho, h, &w2lf) == 0);
+    ENSURE(w2lf > 1.0 * E / (rho * h * h) && w2lf < 1e3 * E / (rho * h * h));
+}
