@@ -79,13 +79,21 @@ void cs_lf_diag_blocks(const cs_lf *lf, double *blocks);
 void cs_lf_apply_M(cs_lf *lf, const double *p, double *y, double coef);
 
 /*
- * An upper bound of ω²max = λmax(M⁻¹K) of any object of this model, material and cube size:
- * the largest element eigenvalue over the element types the model uses (the element
- * eigenvalue bound: λmax of the assembly never exceeds the largest element λmax). FEM models
- * use the linear hexahedron with the engine's lumped mass; localframe its two element types
- * with consistent mass. Returns 0, or -1 on out of memory.
+ * ω²max = λmax(M⁻¹K) of objects of this model, material and cube size, for the stability
+ * limit dt < 2/ωmax of central differences. FEM models (lumped mass): the largest element
+ * eigenvalue of the linear hexahedron, a rigorous bound (λmax of an assembly never exceeds
+ * its elements'). localframe (consistent mass): the larger of that bound for its linear
+ * hexahedra and 1.1 × the B-spline lattice maximum (cs_lf_lattice_max); an estimate, checked
+ * against assembled objects in the tests. Returns 0, or -1 on out of memory.
  */
 int cs_lf_omega2_bound(cs_model model, double young, double poisson, double density, double h,
                        double *omega2);
+
+/*
+ * λmax of the infinite uniform lattice of one element type (nb = 2 or 4 nodes per axis, K
+ * 3n×3n and M n×n in lexicographic order): plane waves e^{iθ·X/h} turn K and M into a 3×3
+ * Hermitian K̂(θ) and a scalar M̂(θ); θ is scanned over a grid of [0, π]³. -1 on out of memory.
+ */
+double cs_lf_lattice_max(const double *K, const double *M, int nb);
 
 #endif

@@ -887,10 +887,14 @@ static int step_implicit_euler(cs_world_t *w, cs_object *o, cs_step_stats *st)
 static void cd_operator(void *ctx, const double *p, double *y)
 {
     cs_object *o = ctx;
-    cs_elastic_apply_K(o, p, y);
     const double kc = o->kcoef;
-    for (size_t d = 0; d < 3 * (size_t)o->n; d++)
-        y[d] *= kc;
+    if (kc != 0) {
+        cs_elastic_apply_K(o, p, y);
+        for (size_t d = 0; d < 3 * (size_t)o->n; d++)
+            y[d] *= kc;
+    } else {
+        memset(y, 0, 3 * (size_t)o->n * sizeof(double)); /* no stiffness damping: M alone */
+    }
     cs_elastic_apply_M(o, p, y, o->mcoef);
     if (o->dcoef == 0)
         return;
