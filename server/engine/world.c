@@ -916,7 +916,10 @@ static void cd_operator(void *ctx, const double *p, double *y)
 static void cd_preconditioner(cs_object *o)
 {
     const double *md = cs_elastic_mass_diag(o);
-    cs_elastic_diag_blocks(o, o->blocks);
+    if (o->kcoef != 0)
+        cs_elastic_diag_blocks(o, o->blocks);
+    else
+        memset(o->blocks, 0, 9 * (size_t)o->n * sizeof(double));
     for (int i = 0; i < o->n; i++) {
         double *B = o->blocks + 9 * i;
         for (int k = 0; k < 9; k++)

@@ -15,6 +15,7 @@
 #include "check.h"
 #include "cubemesh.h"
 #include "cubesim.h"
+#include "elastic.h"
 #include "localframe.h"
 #include "surface.h"
 #include "world_internal.h"
@@ -398,8 +399,10 @@ TEST(lf_cantilever_tip_load_matches_euler_bernoulli)
     mat.poisson = 0.0;
     lbeam b;
     char err[256];
-    ENSURE_MSG(make_lbeam(&b, static_world(), CS_MODEL_LOCALFRAME, CS_INTEGRATOR_DEFAULT, mat, nx,
-                          nz, H / nz, (double[3]){0, 0, -P}, err, sizeof err) == CS_OK, "%s", err);
+    /* statics: the integrator does not matter (central differences would need dt < 3e-4 s) */
+    ENSURE_MSG(make_lbeam(&b, static_world(), CS_MODEL_LOCALFRAME, CS_INTEGRATOR_IMPLICIT_EULER,
+                          mat, nx, nz, H / nz, (double[3]){0, 0, -P}, err, sizeof err) == CS_OK,
+               "%s", err);
     ENSURE(cs_world_solve_static(b.w) == CS_OK);
     const double d = tip_deflection(&b, L);
     const double I = H * H * H * H / 12.0, A = H * H, G = E / 2.0;
@@ -476,4 +479,379 @@ TEST(lf_cantilever_refinement_error_falls_as_h_squared)
     const double order = log(errs[0] / errs[2]) / log(2.0);
     printf("    observed order %.2f\n", order);
     ENSURE_MSG(order > 1.8, "order %g", order);
+}
+
+/* ---------------------------------------------------------------- central differences */
+
+static cs_object *internal(const lbeam *b)
+{
+    return cs_world_find_internal(b->w, b->id);
+}
+
+/* ½ v̄ᵀ M v̄ + U(x) with the model's own mass (consistent for localframe). */
+static double kinetic_m(cs_object *o, const double *v)
+{
+    const size_t n3 = 3 * (size_t)o->n;
+    double *mv = calloc(n3, sizeof *mv), e = 0;
+    cs_elastic_apply_M(o, v, mv, 1.0);
+    for (size_t d = 0; d < n3; d++)
+        e += 0.5 * v[d] * mv[d];
+    free(mv);
+    return e;
+}
+
+static void m_operator(void *ctx, const double *p, double *y)
+{
+    cs_object *o = ctx;
+    memset(y, 0, 3 * (size_t)o->n * sizeof(double));
+    cs_elastic_apply_M(o, p, y, 1.0);
+}
+
+/* The ω²max of the assembled object (rest frames) by power iteration on M⁻¹K, inner CG for
+ * M; returns the largest Rayleigh quotient met, a lower bound of ω²max. */
+static double assembled_omega2(cs_object *o, int iters)
+{
+    const int n3 = 3 * o->n;
+    double *v = malloc(sizeof(double) * n3), *w = malloc(sizeof(double) * n3),
+           *z = calloc(n3, sizeof(double)), *mv = malloc(sizeof(double) * n3);
+    double *blk = calloc(9 * (size_t)o->n, sizeof(double));
+    uint8_t *mask = calloc(n3, 1);
+    const double *md = cs_elastic_mass_diag(o);
+    for (int i = 0; i < o->n; i++)
+        for (int a = 0; a < 3; a++)
+            blk[9 * i + 4 * a] = 1.0 / md[i];
+    cs_cg_work cg;
+    cs_cg_work_init(&cg, n3);
+    for (int d = 0; d < n3; d++)
+        v[d] = sin(1.3 * d) + ((d / 3) % 2 ? 1 : -1);
+    cs_elastic_reset(o);
+    double lam = 0;
+    for (int it = 0; it < iters; it++) {
+        double nv = 0, num = 0, den = 0;
+        for (int d = 0; d < n3; d++)
+            nv += v[d] * v[d];
+        nv = sqrt(nv);
+        for (int d = 0; d < n3; d++)
+            v[d] /= nv;
+        cs_elastic_apply_K(o, v, w);
+        m_operator(o, v, mv);
+        for (int d = 0; d < n3; d++) {
+            num += v[d] * w[d];
+            den += v[d] * mv[d];
+        }
+        lam = fmax(lam, num / den);
+        cs_pcg(&cg, m_operator, o, blk, mask, w, z, 1e-9, 2000, 1);
+        memcpy(v, z, sizeof(double) * n3);
+    }
+    cs_cg_work_free(&cg);
+    free(v);
+    free(w);
+    free(z);
+    free(mv);
+    free(blk);
+    free(mask);
+    return lam;
+}
+
+/* The stability limit against the assembled objects' largest frequency: never below it,
+ * and not far above (a limit much too strict would refuse usable time steps). */
+TEST(lf_stability_estimate_bounds_assembled_objects)
+{
+    const int shapes[2][3] = {{5, 5, 5}, {10, 3, 3}};
+    const double nus[2] = {0.3, 0.45};
+    for (int s = 0; s < 2; s++)
+        for (int k = 0; k < 2; k++) {
+            cs_world_def wd = static_world();
+            wd.dt = 1e-4;
+            cs_world_t *w;
+            ENSURE(cs_world_create(&wd, &w, NULL, 0) == CS_OK);
+            int32_t *ijk = box_ijk(shapes[s][0], shapes[s][1], shapes[s][2]);
+            cs_object_def d = cs_object_def_default();
+            d.name = "box";
+            d.model = CS_MODEL_LOCALFRAME;
+            d.material.young = 1.0;
+            d.material.density = 1.0;
+            d.material.poisson = nus[k];
+            d.cube_size = 1.0;
+            d.cells_ijk = ijk;
+            d.n_cells = shapes[s][0] * shapes[s][1] * shapes[s][2];
+            cs_object_id id;
+            char err[256];
+            ENSURE_MSG(cs_world_add_object(w, &d, &id, err, sizeof err) == CS_OK, "%s", err);
+            double bound;
+            ENSURE(cs_lf_omega2_bound(CS_MODEL_LOCALFRAME, 1, nus[k], 1, 1, &bound) == 0);
+            const double got = assembled_omega2(cs_world_find_internal(w, id), 60);
+            printf("    %dx%dx%d nu %.2f: assembled omega^2 >= %.4g, estimate %.4g (ratio %.2f)\n",
+                   shapes[s][0], shapes[s][1], shapes[s][2], nus[k], got, bound, bound / got);
+            ENSURE(got <= bound);
+            ENSURE(bound < 1.6 * got);
+            free(ijk);
+            cs_world_destroy(w);
+        }
+}
+
+/* A free-vibrating cantilever, undamped: central differences keep the energy
+ * ½ v̄ᵀMv̄ + U (v̄ the mean of the half-step velocities around x) bounded with no drift. */
+TEST(lf_central_difference_energy_bounded_no_drift)
+{
+    cs_material mat = cs_material_default();
+    mat.young = 1e4;
+    mat.poisson = 0.3;
+    mat.density = 1000;
+    double w2;
+    ENSURE(cs_lf_omega2_bound(CS_MODEL_LOCALFRAME, mat.young, mat.poisson, mat.density, 0.1,
+                              &w2) == 0);
+    cs_world_def wd = static_world();
+    /* the modified energy of central differences oscillates by O((ω·dt)²) in each mode: at
+     * half the limit the pluck's high modes keep the spread within a few per cent */
+    wd.dt = 0.5 * 2 / sqrt(w2);
+    wd.cg_tolerance = 1e-10;
+    wd.sleep_steps = 0;
+    lbeam b;
+    char err[256];
+    ENSURE_MSG(make_lbeam(&b, wd, CS_MODEL_LOCALFRAME, CS_INTEGRATOR_DEFAULT, mat, 6, 3, 0.1,
+                          NULL, err, sizeof err) == CS_OK, "%s", err);
+    cs_object_info info;
+    cs_object_get_info(b.w, b.id, &info);
+    ENSURE(info.integrator == CS_INTEGRATOR_CENTRAL_DIFFERENCE);
+    cs_object *o = internal(&b);
+    ENSURE(o->lf && o->lf->n_spline == 4);
+    /* pluck the tip for 0.1 s */
+    ENSURE(cs_world_apply_force(b.w, b.id, (double[3]){0.6, 0.15, 0.3}, (double[3]){0, 0, -2.0},
+                                0.1, err, sizeof err) == CS_OK);
+    const int n3 = 3 * o->n;
+    double *vprev = malloc(sizeof(double) * n3), *vbar = malloc(sizeof(double) * n3);
+    const int steps = (int)(3.0 / wd.dt); /* 3 s of simulated time */
+    double emin = INFINITY, emax = 0, first = 0, last = 0;
+    int nfirst = 0, nlast = 0, iters = 0, counted = 0;
+    for (int s = 0; s < steps; s++) {
+        memcpy(vprev, o->v, sizeof(double) * n3);
+        const double u = cs_elastic_energy(o, o->x);
+        ENSURE(cs_world_step(b.w) == CS_OK);
+        iters += cs_world_last_stats(b.w)->cg_iterations;
+        counted++;
+        if (o->n_inputs > 0 || s < (int)(0.1 / wd.dt) + 2)
+            continue;
+        for (int d = 0; d < n3; d++)
+            vbar[d] = 0.5 * (vprev[d] + o->v[d]);
+        const double e = kinetic_m(o, vbar) + u;
+        emin = fmin(emin, e);
+        emax = fmax(emax, e);
+        if (s < steps / 3) {
+            first += e;
+            nfirst++;
+        } else if (s > 2 * steps / 3) {
+            last += e;
+            nlast++;
+        }
+    }
+    first /= nfirst;
+    last /= nlast;
+    printf("    dt %.4g s, %d steps, energy %.6g..%.6g J (spread %.3f%%), drift %.4f%%, %.1f CG "
+           "iterations per step\n",
+           wd.dt, steps, emin, emax, 100 * (emax - emin) / emax, 100 * (last - first) / first,
+           (double)iters / counted);
+    ENSURE(emax > 0);
+    ENSURE_MSG((emax - emin) < 0.03 * emax, "spread %g", (emax - emin) / emax);
+    ENSURE_MSG(fabs(last - first) < 0.002 * first, "drift %g", (last - first) / first);
+    free(vprev);
+    free(vbar);
+    cs_world_destroy(b.w);
+}
+
+/* Just below the limit the scheme stays bounded for every model; just above it the object is
+ * refused with a one-line message naming the limit. */
+TEST(lf_central_difference_limit_enforced)
+{
+    const cs_model models[3] = {CS_MODEL_LOCALFRAME, CS_MODEL_COROTATIONAL, CS_MODEL_LINEAR};
+    for (int m = 0; m < 3; m++) {
+        cs_material mat = cs_material_default();
+        mat.young = 1e4;
+        double w2;
+        ENSURE(cs_lf_omega2_bound(models[m], mat.young, mat.poisson, mat.density, 0.1, &w2) == 0);
+        const double limit = 2 / sqrt(w2);
+        cs_world_def wd = static_world();
+        wd.cg_tolerance = 1e-8;
+        wd.sleep_steps = 0;
+        wd.dt = 1.05 * limit;
+        lbeam b;
+        char err[256] = "";
+        ENSURE(make_lbeam(&b, wd, models[m], CS_INTEGRATOR_CENTRAL_DIFFERENCE, mat, 4, 3, 0.1, NULL,
+                          err, sizeof err) == CS_ERR_INVALID);
+        ENSURE_MSG(strstr(err, "stability limit") && !strchr(err, '\n'), "%s", err);
+        cs_world_destroy(b.w);
+        /* the implicit integrator takes the same dt */
+        ENSURE(make_lbeam(&b, wd, models[m], CS_INTEGRATOR_IMPLICIT_EULER, mat, 4, 3, 0.1, NULL, err,
+                          sizeof err) == CS_OK);
+        cs_world_destroy(b.w);
+        wd.dt = 0.95 * limit;
+        ENSURE_MSG(make_lbeam(&b, wd, models[m], CS_INTEGRATOR_CENTRAL_DIFFERENCE, mat, 4, 3, 0.1,
+                              NULL, err, sizeof err) == CS_OK, "%s", err);
+        /* a one-step kick at a corner excites the highest modes */
+        ENSURE(cs_world_apply_force(b.w, b.id, (double[3]){0.4, 0.3, 0.3}, (double[3]){3, -2, 5}, 0,
+                                    err, sizeof err) == CS_OK);
+        ENSURE(cs_world_step(b.w) == CS_OK);
+        cs_energy e0;
+        cs_object_energy(b.w, b.id, &e0);
+        double emax = 0;
+        for (int s = 0; s < 1500; s++) {
+            ENSURE(cs_world_step(b.w) == CS_OK);
+            cs_energy e;
+            cs_object_energy(b.w, b.id, &e);
+            emax = fmax(emax, e.kinetic + e.elastic);
+        }
+        ENSURE_MSG(emax < 3 * (e0.kinetic + e0.elastic), "%s: energy grew from %g to %g",
+                   cs_model_name(models[m]), e0.kinetic + e0.elastic, emax);
+        cs_world_destroy(b.w);
+    }
+}
+
+TEST(lf_bad_parameters_refused)
+{
+    cs_material mat = cs_material_default();
+    const double bad[3][2] = {{1000, 0.5}, {0, 0.3}, {-5, 0.3}};
+    for (int k = 0; k < 3; k++) {
+        mat.young = bad[k][0];
+        mat.poisson = bad[k][1];
+        lbeam b;
+        char err[256] = "";
+        ENSURE(make_lbeam(&b, static_world(), CS_MODEL_LOCALFRAME, CS_INTEGRATOR_DEFAULT, mat, 3, 3,
+                          0.1, NULL, err, sizeof err) == CS_ERR_INVALID);
+        ENSURE_MSG(strstr(err, k == 0 ? "poisson" : "young"), "%s", err);
+        cs_world_destroy(b.w);
+    }
+}
+
+/* Fracture: the localframe data follow node duplication (cells next to a cut become linear)
+ * and the pieces step on; pieces at rest feel no force. */
+TEST(lf_fracture_then_step)
+{
+    cs_world_def wd = static_world();
+    wd.dt = 1.0 / 60;
+    wd.cg_tolerance = 1e-8;
+    cs_material mat = cs_material_default(); /* E = 1000 Pa: 1/60 s is below the limit */
+    cs_world_t *w;
+    ENSURE(cs_world_create(&wd, &w, NULL, 0) == CS_OK);
+    int32_t *ijk = box_ijk(8, 4, 4);
+    cs_object_def d = cs_object_def_default();
+    d.name = "box";
+    d.model = CS_MODEL_LOCALFRAME;
+    d.material = mat;
+    d.cube_size = 0.1;
+    d.cells_ijk = ijk;
+    d.n_cells = 8 * 4 * 4;
+    d.fracture = true;
+    cs_object_id id;
+    char err[256];
+    ENSURE_MSG(cs_world_add_object(w, &d, &id, err, sizeof err) == CS_OK, "%s", err);
+    ENSURE(cs_world_find_internal(w, id)->lf->n_spline == 6 * 2 * 2);
+    ENSURE_MSG(cs_world_fracture(w, id, (double[3]){0.4, 0.2, 0.2}, (double[3]){1, 0, 0}, 1.0, err,
+                                 sizeof err) == CS_OK, "%s", err);
+    cs_object_id ids[8];
+    const int n = cs_world_object_ids(w, ids, 8);
+    ENSURE(n == 2);
+    int spline = 0;
+    for (int i = 0; i < n; i++) {
+        cs_object *o = cs_world_find_internal(w, ids[i]);
+        ENSURE(o->lf && o->lf->n_cells == o->cm.n_cells && o->lf->n_nodes == o->n);
+        spline += o->lf->n_spline;
+    }
+    /* two 4×4×4 halves: 2×2×2 interior cells each, the layers at the cut now boundary cells */
+    ENSURE_MSG(spline == 2 * 2 * 2 * 2, "%d B-spline cells after the cut", spline);
+    for (int s = 0; s < 20; s++)
+        ENSURE(cs_world_step(w) == CS_OK);
+    for (int i = 0; i < n; i++) {
+        const double *rest, *pos;
+        int nn;
+        cs_object_nodes(w, ids[i], &rest, &pos, NULL, &nn);
+        for (int k = 0; k < 3 * nn; k++)
+            ENSURE_NEAR(pos[k], rest[k], 1e-9);
+    }
+    /* kick one piece: it moves and stays finite */
+    ENSURE(cs_world_apply_force(w, ids[1], (double[3]){0.8, 0.2, 0.4}, (double[3]){0, 0, 0.05}, 0.1,
+                                err, sizeof err) == CS_OK);
+    for (int s = 0; s < 30; s++)
+        ENSURE(cs_world_step(w) == CS_OK);
+    cs_energy e;
+    ENSURE(cs_object_energy(w, ids[1], &e) == CS_OK);
+    ENSURE(e.kinetic > 0 && isfinite(e.kinetic) && isfinite(e.elastic));
+    free(ijk);
+    cs_world_destroy(w);
+}
+
+/* Skinning follows the tricubic map in B-spline cells: rest positions map to themselves
+ * exactly, affine node motions are reproduced, and a general motion gives Σ B̃_a x_a. */
+TEST(lf_skin_tricubic_exact_at_rest_and_affine)
+{
+    cs_cubemesh cm;
+    ENSURE(box_mesh(&cm, 5, 5, 5, 0.1) == 0);
+    ENSURE(cs_lf_classify(&cm) == 27);
+    /* a closed tetrahedron inside the centre cell (2,2,2) and a triangle in a boundary cell */
+    const double c0[3] = {cm.origin[0] + 0.2, cm.origin[1] + 0.2, cm.origin[2] + 0.2};
+    double v[7][3] = {{0.013, 0.021, 0.017}, {0.087, 0.019, 0.031}, {0.041, 0.093, 0.022},
+                      {0.047, 0.038, 0.081}, {-0.18, -0.17, -0.16}, {-0.12, -0.17, -0.16},
+                      {-0.15, -0.12, -0.16}};
+    for (int i = 0; i < 7; i++)
+        for (int k = 0; k < 3; k++)
+            v[i][k] += c0[k];
+    const int32_t t[5][3] = {{0, 2, 1}, {0, 1, 3}, {1, 2, 3}, {0, 3, 2}, {4, 5, 6}};
+    cs_surface s;
+    char err[256];
+    ENSURE_MSG(cs_surface_bind(&s, &cm, &v[0][0], 7, &t[0][0], 5, err, sizeof err) == 0, "%s", err);
+    const int n = cm.n_nodes;
+    double *x = malloc(sizeof(double) * 3 * n);
+    memcpy(x, cm.node_rest, sizeof(double) * 3 * n);
+    cs_surface_skin(&s, &cm, x);
+    for (int i = 0; i < 3 * 4; i++) /* the tetrahedron, in a B-spline cell: bit-exact */
+        ENSURE(s.pos[i] == s.rest[i]);
+    for (int i = 3 * 4; i < 3 * 7; i++) /* the trilinear cell: up to rounding */
+        ENSURE_NEAR(s.pos[i], s.rest[i], 1e-15);
+    /* affine: x = A X + b */
+    const double A[9] = {1.1, 0.2, -0.05, 0.03, 0.9, 0.1, -0.1, 0.07, 1.2}, bb[3] = {0.3, -0.2, 1};
+    for (int i = 0; i < n; i++) {
+        const double *X = cm.node_rest + 3 * i;
+        for (int r = 0; r < 3; r++)
+            x[3 * i + r] = A[3 * r] * X[0] + A[3 * r + 1] * X[1] + A[3 * r + 2] * X[2] + bb[r];
+    }
+    cs_surface_skin(&s, &cm, x);
+    for (int i = 0; i < 7; i++)
+        for (int r = 0; r < 3; r++)
+            ENSURE_NEAR(s.pos[3 * i + r],
+                        A[3 * r] * v[i][0] + A[3 * r + 1] * v[i][1] + A[3 * r + 2] * v[i][2] + bb[r],
+                        1e-12);
+    /* a general motion: the tetrahedron follows Σ B̃_a x_a of its cell, not the trilinear map */
+    for (int i = 0; i < n; i++) {
+        const double *X = cm.node_rest + 3 * i;
+        x[3 * i] = X[0] + 0.3 * sin(7 * X[1]) * X[2];
+        x[3 * i + 1] = X[1] + 0.2 * X[0] * X[0];
+        x[3 * i + 2] = X[2] + 0.1 * cos(5 * X[0] + 3 * X[1]);
+    }
+    cs_surface_skin(&s, &cm, x);
+    const int32_t cell = s.vert_cell[0];
+    ENSURE(cm.spline_nodes[64 * cell] >= 0);
+    double bx[4], by[4], bz[4], p[3] = {0, 0, 0}, ptri[3] = {0, 0, 0};
+    const double *uvw = s.vert_uvw;
+    cs_bspline_basis(uvw[0], bx, NULL);
+    cs_bspline_basis(uvw[1], by, NULL);
+    cs_bspline_basis(uvw[2], bz, NULL);
+    for (int a = 0; a < 64; a++)
+        for (int r = 0; r < 3; r++)
+            p[r] += bx[a % 4] * by[(a / 4) % 4] * bz[a / 16] * x[3 * cm.spline_nodes[64 * cell + a] + r];
+    for (int k = 0; k < 8; k++) {
+        const double wk = (CS_CORNER[k][0] ? uvw[0] : 1 - uvw[0]) *
+                          (CS_CORNER[k][1] ? uvw[1] : 1 - uvw[1]) * (CS_CORNER[k][2] ? uvw[2] : 1 - uvw[2]);
+        for (int r = 0; r < 3; r++)
+            ptri[r] += wk * x[3 * cm.cell_nodes[8 * cell + k] + r];
+    }
+    double dtri = 0;
+    for (int r = 0; r < 3; r++) {
+        ENSURE_NEAR(s.pos[r], p[r], 1e-12);
+        dtri += fabs(ptri[r] - p[r]);
+    }
+    ENSURE(dtri > 1e-6); /* the two maps really differ here */
+    /* the boundary-cell triangle stays trilinear */
+    ENSURE(cm.spline_nodes[64 * s.vert_cell[4]] < 0);
+    free(x);
+    cs_surface_free(&s);
+    cs_cubemesh_free(&cm);
 }
