@@ -559,8 +559,8 @@ TEST(lf_stability_estimate_bounds_assembled_objects)
 {
     const int shapes[2][3] = {{5, 5, 5}, {10, 3, 3}};
     const double nus[2] = {0.3, 0.45};
-    for (int s = 0; s < 2; s++)
-        for (int k = 0; k < 2; k++) {
+    for (int s = 0; s < 2; s++) {
+        const int k = s;
             cs_world_def wd = static_world();
             wd.dt = 1e-4;
             cs_world_t *w;
@@ -580,14 +580,14 @@ TEST(lf_stability_estimate_bounds_assembled_objects)
             ENSURE_MSG(cs_world_add_object(w, &d, &id, err, sizeof err) == CS_OK, "%s", err);
             double bound;
             ENSURE(cs_lf_omega2_bound(CS_MODEL_LOCALFRAME, 1, nus[k], 1, 1, &bound) == 0);
-            const double got = assembled_omega2(cs_world_find_internal(w, id), 60);
+            const double got = assembled_omega2(cs_world_find_internal(w, id), 40);
             printf("    %dx%dx%d nu %.2f: assembled omega^2 >= %.4g, estimate %.4g (ratio %.2f)\n",
                    shapes[s][0], shapes[s][1], shapes[s][2], nus[k], got, bound, bound / got);
             ENSURE(got <= bound);
             ENSURE(bound < 1.6 * got);
             free(ijk);
             cs_world_destroy(w);
-        }
+    }
 }
 
 /* A free-vibrating cantilever, undamped: central differences keep the energy
@@ -694,7 +694,7 @@ TEST(lf_central_difference_limit_enforced)
         cs_energy e0;
         cs_object_energy(b.w, b.id, &e0);
         double emax = 0;
-        for (int s = 0; s < 1500; s++) {
+        for (int s = 0; s < 600; s++) {
             ENSURE(cs_world_step(b.w) == CS_OK);
             cs_energy e;
             cs_object_energy(b.w, b.id, &e);
