@@ -398,7 +398,7 @@ static int check_central_difference(const cs_world_t *w, const cs_object_def *de
     const double limit = 2.0 / sqrt(omega2);
     if (w->def.dt > limit)
         return cs_engine_fail(err, errlen, CS_ERR_INVALID,
-                              "dt %g s is above the central_difference stability limit %.3g s "
+                              "dt %.4g s is above the central_difference stability limit %.4g s "
                               "for '%s' (E %g Pa, density %g, cube_size %g m): lower dt or use "
                               "implicit_euler",
                               w->def.dt, limit, def->name, m->young, m->density, def->cube_size);
