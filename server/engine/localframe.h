@@ -41,6 +41,7 @@ typedef struct cs_lf {
     double h;
     double Kl[24 * 24], Ml[8 * 8]; /* linear hexahedron, corner order of cubemesh.h */
     double *Ks, *Ms;       /* tricubic: 192×192 and 64×64, node a = ix + 4·iy + 16·iz */
+    double m1[16], m1scale; /* Ms = m1scale · m1⊗m1⊗m1 (1D Gram matrix of one span) */
     int32_t *off;          /* n_cells + 1: each cell's first slot in en */
     int32_t *en;           /* element nodes: 8 (corner order) or 64 (lattice order) per cell */
     double *R;             /* 9 per cell: the local frame's rotation, row-major */

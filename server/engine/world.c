@@ -971,14 +971,19 @@ static int step_central_difference(cs_world_t *w, cs_object *o, cs_step_stats *s
     o->dcoef = 0;
     cd_operator(o, o->v, o->b);
     cs_elastic_force(o, o->x, o->v1, NULL);
-    for (size_t d = 0; d < n3; d++)
-        o->b[d] += 2.0 * dt * (o->f[d] + o->v1[d]);
+    /* Warm start: the step with the row-sum lumped mass, v + dt·(f + f_el)/m_row. It is the
+     * exact answer for a lumped mass without damping and drags; with the consistent B-spline
+     * mass CG only corrects the difference, which cuts its iterations several-fold. */
+    const double *mr = mrow ? mrow : o->m;
+    for (size_t d = 0; d < n3; d++) {
+        const double F = o->f[d] + o->v1[d];
+        o->b[d] += 2.0 * dt * F;
+        o->v1[d] = o->mask[d] ? 0.0 : o->v[d] + dt * F / mr[d / 3];
+    }
     o->mcoef = 2.0 + dt * al;
     o->kcoef = dt * be;
     o->dcoef = 2.0 * dt * dt;
     cd_preconditioner(o);
-    for (size_t d = 0; d < n3; d++)
-        o->v1[d] = o->mask[d] ? 0.0 : o->v[d];
     int contacts = constrain_ground(w, o);
     double t3 = now_ms();
     cs_cg_result r = cs_pcg(&o->cg, cd_operator, o, o->blocks, o->smask, o->b, o->v1,

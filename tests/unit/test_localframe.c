@@ -148,6 +148,13 @@ TEST(lf_element_matrices_symmetric_mass_and_null_space)
     for (int i = 0; i < 64; i++)
         mlsum += lf.Ml[i];
     ENSURE_NEAR(msum, rho * h * h * h, 1e-12 * rho * h * h * h);
+    /* the tensor-product form the mass product uses */
+    for (int a = 0; a < 64; a++)
+        for (int b = 0; b < 64; b++) {
+            const double k = lf.m1scale * lf.m1[4 * (a % 4) + b % 4] *
+                             lf.m1[4 * ((a / 4) % 4) + (b / 4) % 4] * lf.m1[4 * (a / 16) + b / 16];
+            ENSURE_NEAR(lf.Ms[64 * a + b], k, 1e-12 * rho * h * h * h);
+        }
     ENSURE_NEAR(mlsum, rho * h * h * h, 1e-12 * rho * h * h * h);
     /* translations and infinitesimal rotations about the cell centre */
     for (int mode = 0; mode < 6; mode++) {
