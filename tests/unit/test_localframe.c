@@ -882,7 +882,7 @@ TEST(lf_results_independent_of_thread_count)
         ENSURE(cs_world_find_internal(b.w, b.id)->lf->threads == t + 1);
         ENSURE(cs_world_apply_force(b.w, b.id, (double[3]){0.8, 0.3, 0.6}, (double[3]){0, 1, -2},
                                     0.05, err, sizeof err) == CS_OK);
-        for (int s = 0; s < 8; s++)
+        for (int s = 0; s < 3; s++)
             ENSURE(cs_world_step(b.w) == CS_OK);
         hash[t] = cs_object_state_hash(b.w, b.id);
         cs_world_destroy(b.w);
