@@ -889,3 +889,64 @@ TEST(lf_results_independent_of_thread_count)
     }
     ENSURE(hash[0] == hash[1]);
 }
+
+/* Central differences with everything the step honours: a damped localframe block dropped on
+ * the ground settles on it, stops (Rayleigh damping), falls asleep; a drag wakes it and pulls
+ * it up towards the target. */
+TEST(lf_central_difference_ground_damping_sleep_drag)
+{
+    cs_world_def wd = cs_world_def_default();
+    wd.has_ground = true;
+    wd.threads = 1;
+    wd.dt = 0.003; /* the limit is 0.0037 s for E = 1e5 Pa, ρ = 1000, h = 0.1 m */
+    cs_world_t *w;
+    ENSURE(cs_world_create(&wd, &w, NULL, 0) == CS_OK);
+    int32_t *ijk = box_ijk(3, 3, 3);
+    cs_object_def d = cs_object_def_default();
+    d.name = "block";
+    d.model = CS_MODEL_LOCALFRAME;
+    d.material.young = 1e5;
+    d.material.damping[0] = 6.0;
+    d.cube_size = 0.1;
+    d.cells_origin[2] = 0.05;
+    d.cells_ijk = ijk;
+    d.n_cells = 27;
+    cs_object_id id;
+    char err[256];
+    ENSURE_MSG(cs_world_add_object(w, &d, &id, err, sizeof err) == CS_OK, "%s", err);
+    cs_object_info info;
+    cs_object_get_info(w, id, &info);
+    ENSURE(info.integrator == CS_INTEGRATOR_CENTRAL_DIFFERENCE);
+    int s = 0;
+    for (; s < 2000 && !info.sleeping; s++) {
+        ENSURE(cs_world_step(w) == CS_OK);
+        cs_object_get_info(w, id, &info);
+    }
+    ENSURE_MSG(info.sleeping, "not asleep after %d steps", s);
+    const double *rest, *pos;
+    int n;
+    cs_object_nodes(w, id, &rest, &pos, NULL, &n);
+    double zmin = INFINITY, zmean = 0;
+    for (int i = 0; i < n; i++) {
+        zmin = fmin(zmin, pos[3 * i + 2]);
+        zmean += pos[3 * i + 2] / n;
+    }
+    printf("    asleep after %d steps, lowest node z = %.2e m, mean z %.4f m\n", s, zmin, zmean);
+    ENSURE(zmin >= -1e-12 && zmin < 1e-3); /* resting on the ground */
+    /* a column under its own weight: u(z) = −ρg(Hz − z²/2)/E, whose mean is −ρgH²/3E */
+    const double sag = 1000 * 9.81 * 0.09 / (3 * 1e5);
+    ENSURE_MSG(fabs((0.15 - zmean) - sag) < 0.15 * sag, "mean sag %g vs %g", 0.15 - zmean, sag);
+    /* a drag wakes it and lifts it */
+    ENSURE(cs_world_drag(w, id, (double[3]){0.15, 0.15, 0.3}, (double[3]){0.15, 0.15, 0.6}, 2000.0,
+                         0.5, err, sizeof err) == CS_OK);
+    for (int k = 0; k < 100; k++)
+        ENSURE(cs_world_step(w) == CS_OK);
+    cs_object_get_info(w, id, &info);
+    ENSURE(!info.sleeping);
+    double zmean2 = 0;
+    for (int i = 0; i < n; i++)
+        zmean2 += pos[3 * i + 2] / n;
+    ENSURE_MSG(zmean2 > zmean + 0.01, "mean z %g -> %g", zmean, zmean2);
+    free(ijk);
+    cs_world_destroy(w);
+}
