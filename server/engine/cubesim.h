@@ -52,7 +52,7 @@ typedef enum cs_model {
     CS_MODEL_LINEAR = 0,       /* small-strain hexahedral FEM (seed 000 App. A) */
     CS_MODEL_COROTATIONAL = 1, /* the same with per-element rotation (seed 000 §2.2) */
     CS_MODEL_MSS = 2,          /* hexahedral mass-spring element (seed 004) — not yet built */
-    CS_MODEL_LOCALFRAME = 3,   /* local-frame B-spline model (seed 001) — not yet built */
+    CS_MODEL_LOCALFRAME = 3,   /* local-frame B-spline model (seed 001 §3.2–3.4) */
     CS_MODEL_RIGID = 4         /* rigid cube sets (seed 000 §2.4) — not yet built */
 } cs_model;
 
@@ -66,7 +66,8 @@ typedef enum cs_integrator {
     CS_INTEGRATOR_IMPLICIT_EULER = 1,    /* seed 000: (M + dt C + dt² K) v1 = M v + dt f, CG */
     CS_INTEGRATOR_SYMPLECTIC_EULER = 2,  /* explicit (seed 004) — not yet built */
     CS_INTEGRATOR_VERLET = 3,            /* explicit velocity Verlet (seed 004) — not yet built */
-    CS_INTEGRATOR_CENTRAL_DIFFERENCE = 4 /* seed 001 Eq. (20), solved by CG — not yet built */
+    CS_INTEGRATOR_CENTRAL_DIFFERENCE = 4 /* seed 001 Eq. (20), solved by CG; conditionally
+                                            stable: dt above the limit is refused */
 } cs_integrator;
 
 /* "default", "implicit_euler", "symplectic_euler", "verlet", "central_difference". */
@@ -251,7 +252,8 @@ int cs_world_paint(cs_world_t *w, cs_object_id id, const double centre[3], doubl
 int cs_object_fields(const cs_world_t *w, cs_object_id id, const double **young,
                      const double **density, const double **damping, int *n);
 
-/* Advance one dt: inputs, rotations, implicit Euler solve, ground, skinning, sleep. */
+/* Advance one dt: inputs, each object's integrator (implicit Euler or central differences),
+ * ground, skinning, sleep. */
 int cs_world_step(cs_world_t *w);
 /*
  * Static equilibrium under gravity, loads and held forces, from the current state. For

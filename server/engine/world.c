@@ -21,6 +21,7 @@
 #include <time.h>
 
 #include "elastic.h"
+#include "localframe.h"
 #include "voxelize.h"
 #include "world_internal.h"
 
@@ -384,6 +385,29 @@ int cs_object_alloc_state(cs_object *o)
     return 0;
 }
 
+/*
+ * Central differences (seed 001 Eq. 20) are conditionally stable: with Rayleigh damping
+ * centred as in Eq. (19), a mode of frequency ω is stable iff ω·dt < 2, whatever the
+ * damping. ω is bounded by the largest element eigenvalue (cs_lf_omega2_bound).
+ */
+static int check_central_difference(const cs_world_t *w, const cs_object_def *def, char *err,
+                                    size_t errlen)
+{
+    const cs_material *m = &def->material;
+    double omega2;
+    if (cs_lf_omega2_bound(def->model, m->young, m->poisson, m->density, def->cube_size,
+                           &omega2) != 0)
+        return cs_engine_fail(err, errlen, CS_ERR_NOMEM, "out of memory");
+    const double limit = 2.0 / sqrt(omega2);
+    if (w->def.dt > limit)
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID,
+                              "dt %.4g s is above the central_difference stability limit %.4g s "
+                              "for '%s' (E %g Pa, density %g, cube_size %g m): lower dt or use "
+                              "implicit_euler",
+                              w->def.dt, limit, def->name, m->young, m->density, def->cube_size);
+    return CS_OK;
+}
+
 int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *id, char *err,
                         size_t errlen)
 {
@@ -396,12 +420,13 @@ int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *i
                     CS_MAX_NAME);
     if (cs_world_find_object(w, def->name) != CS_NULL_OBJECT)
         return cs_engine_fail(err, errlen, CS_ERR_INVALID, "object name '%s' is already used", def->name);
-    if (def->model != CS_MODEL_LINEAR && def->model != CS_MODEL_COROTATIONAL)
+    if (def->model != CS_MODEL_LINEAR && def->model != CS_MODEL_COROTATIONAL &&
+        def->model != CS_MODEL_LOCALFRAME)
         return cs_engine_fail(err, errlen, CS_ERR_INVALID, "model '%s' is not implemented yet",
                     cs_model_name(def->model));
     const cs_integrator integ = def->integrator == CS_INTEGRATOR_DEFAULT
                                     ? default_integrator(def->model) : def->integrator;
-    if (integ != CS_INTEGRATOR_IMPLICIT_EULER)
+    if (integ != CS_INTEGRATOR_IMPLICIT_EULER && integ != CS_INTEGRATOR_CENTRAL_DIFFERENCE)
         return cs_engine_fail(err, errlen, CS_ERR_INVALID,
                               "integrator '%s' is not implemented yet", cs_integrator_name(integ));
     if (!(def->cube_size > 0 && isfinite(def->cube_size)))
@@ -410,6 +435,11 @@ int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *i
     int rc = check_material(&def->material, err, errlen);
     if (rc)
         return rc;
+    if (integ == CS_INTEGRATOR_CENTRAL_DIFFERENCE) {
+        rc = check_central_difference(w, def, err, errlen);
+        if (rc)
+            return rc;
+    }
     if (!(def->fracture_radius >= 0 && isfinite(def->fracture_radius)))
         return cs_engine_fail(err, errlen, CS_ERR_INVALID, "fracture_radius must be >= 0 m, got %g",
                     def->fracture_radius);
@@ -1119,11 +1149,185 @@ static int step_implicit_euler(cs_world_t *w, cs_object *o, cs_step_stats *st)
     return CS_OK;
 }
 
+/* ---------------------------------------------------------------- central differences */
+
+/*
+ * y = mcoef·M p + kcoef·K_R p + dcoef·Σ drags k w (w·p), M the model's mass (consistent for
+ * localframe, lumped otherwise): the operator of the central-difference step.
+ */
+static void cd_operator(void *ctx, const double *p, double *y)
+{
+    cs_object *o = ctx;
+    const double kc = o->kcoef;
+    if (kc != 0) {
+        cs_elastic_apply_K(o, p, y);
+        for (size_t d = 0; d < 3 * (size_t)o->n; d++)
+            y[d] *= kc;
+    } else {
+        memset(y, 0, 3 * (size_t)o->n * sizeof(double)); /* no stiffness damping: M alone */
+    }
+    cs_elastic_apply_M(o, p, y, o->mcoef);
+    if (o->dcoef == 0)
+        return;
+    for (int i = 0; i < o->n_inputs; i++) {
+        const cs_input *in = &o->inputs[i];
+        if (in->kind != CS_INPUT_DRAG)
+            continue;
+        const int32_t *nd = o->cm.cell_nodes + 8 * in->cell;
+        double s[3] = {0, 0, 0};
+        for (int k = 0; k < 8; k++)
+            for (int a = 0; a < 3; a++)
+                s[a] += in->w[k] * p[3 * nd[k] + a];
+        for (int k = 0; k < 8; k++)
+            for (int a = 0; a < 3; a++)
+                y[3 * nd[k] + a] += o->dcoef * in->stiffness * in->w[k] * s[a];
+    }
+}
+
+static void cd_preconditioner(cs_object *o)
+{
+    const double *md = cs_elastic_mass_diag(o);
+    if (o->kcoef != 0)
+        cs_elastic_diag_blocks(o, o->blocks);
+    else
+        memset(o->blocks, 0, 9 * (size_t)o->n * sizeof(double));
+    for (int i = 0; i < o->n; i++) {
+        double *B = o->blocks + 9 * i;
+        for (int k = 0; k < 9; k++)
+            B[k] *= o->kcoef;
+        for (int a = 0; a < 3; a++)
+            B[4 * a] += o->mcoef * md[i];
+    }
+    for (int i = 0; o->dcoef != 0 && i < o->n_inputs; i++) {
+        const cs_input *in = &o->inputs[i];
+        if (in->kind != CS_INPUT_DRAG)
+            continue;
+        for (int k = 0; k < 8; k++)
+            for (int a = 0; a < 3; a++)
+                o->blocks[9 * o->cm.cell_nodes[8 * in->cell + k] + 4 * a] +=
+                    o->dcoef * in->stiffness * in->w[k] * in->w[k];
+    }
+    cs_invert_blocks(o->blocks, o->n);
+}
+
+/*
+ * Central differences, seed 001 Eq. (20): (2M + dt D) p⁺ = 2dt²(f − K_R p) + 4M p −
+ * (2M − dt D) p⁻, D = αM + βK_R (Rayleigh; the mass part is §3.2.1's ∫γΓᵀΓ with γ = αρ),
+ * "K_R p" the model's elastic force at p (local frames: it is −R K d̂). Written for the
+ * increment p⁺ − p = dt·v1 (o->v holds (p − p⁻)/dt, so no extra state survives fracture
+ * or reset):
+ *   ((2 + dtα) M + dtβ K_R + 2dt²·drags) v1 = 2dt (f + f_el(p)) + ((2 − dtα) M − dtβ K_R) v,
+ * solved by PCG warm-started from v. Drag springs are taken at p⁺ (implicitly) so that a
+ * stiff drag cannot break the stability limit checked at add time (ω·dt < 2). Ground
+ * contact holds a touching node's normal velocity in the solve, as in implicit Euler.
+ */
+static int step_central_difference(cs_world_t *w, cs_object *o, cs_step_stats *st)
+{
+    const double dt = w->def.dt, al = o->mat.damping[0], be = o->mat.damping[1];
+    const size_t n3 = (size_t)o->n * 3;
+    double t0 = now_ms();
+    gather_forces(o);
+    /* Gravity with the model's consistent nodal masses where they differ from o->m. */
+    const double *mrow = cs_elastic_mass_rows(o);
+    if (mrow)
+        for (int i = 0; i < o->n; i++)
+            for (int a = 0; a < 3; a++)
+                o->f[3 * i + a] += (mrow[i] - o->m[i]) * w->def.gravity[a];
+    double t1 = now_ms();
+    cs_elastic_update(o, o->x);
+    double t2 = now_ms();
+    /* b = ((2 − dtα) M − dtβ K_R) v + 2dt (f + f_el) */
+    o->mcoef = 2.0 - dt * al;
+    o->kcoef = -dt * be;
+    o->dcoef = 0;
+    cd_operator(o, o->v, o->b);
+    cs_elastic_force(o, o->x, o->v1, NULL);
+    /* Warm start: the step with the row-sum lumped mass, v + dt·(f + f_el)/m_row. It is the
+     * exact answer for a lumped mass without damping and drags; with the consistent B-spline
+     * mass CG only corrects the difference, which cuts its iterations several-fold. */
+    const double *mr = mrow ? mrow : o->m;
+    for (size_t d = 0; d < n3; d++) {
+        const double F = o->f[d] + o->v1[d];
+        o->b[d] += 2.0 * dt * F;
+        o->v1[d] = o->mask[d] ? 0.0 : o->v[d] + dt * F / mr[d / 3];
+    }
+    o->mcoef = 2.0 + dt * al;
+    o->kcoef = dt * be;
+    o->dcoef = 2.0 * dt * dt;
+    cd_preconditioner(o);
+    int contacts = constrain_ground(w, o);
+    double t3 = now_ms();
+    cs_cg_result r = cs_pcg(&o->cg, cd_operator, o, o->blocks, o->smask, o->b, o->v1,
+                            w->def.cg_tolerance, w->def.cg_max_iterations, cs_elastic_threads(o));
+    double t4 = now_ms();
+    if (!all_finite(o->v1, n3))
+        return CS_ERR_DIVERGED;
+    if (w->def.has_ground && contacts > 0) {
+        /* The held rows' residual is the ground's reaction: 2dt·f_c = (A v1 − b). */
+        double *av = o->cg.q;
+        const double mu = w->def.ground_friction;
+        cd_operator(o, o->v1, av);
+        for (int i = 0; i < o->n; i++) {
+            if (o->contact[i] != 1)
+                continue;
+            const double fn = (av[3 * i + 2] - o->b[3 * i + 2]) / (2.0 * dt);
+            if (fn < 0) {
+                o->contact[i] = 2;
+                continue;
+            }
+            double *v = o->v1 + 3 * i;
+            const double vt = sqrt(v[0] * v[0] + v[1] * v[1]);
+            const double dv = mu * fn * dt / o->m[i];
+            const double sc = vt > dv ? (vt - dv) / vt : 0.0;
+            v[0] *= sc;
+            v[1] *= sc;
+        }
+    }
+    memcpy(o->v, o->v1, n3 * sizeof(double));
+    for (size_t d = 0; d < n3; d++)
+        o->x[d] += dt * o->v[d];
+    ground_project(w, o);
+    o->elastic_energy_valid = false;
+    double vmax2 = 0;
+    for (size_t d = 0; d < n3; d += 3) {
+        double s = o->v[d] * o->v[d] + o->v[d + 1] * o->v[d + 1] + o->v[d + 2] * o->v[d + 2];
+        if (s > vmax2)
+            vmax2 = s;
+    }
+    expire_inputs(o);
+    double t5 = now_ms();
+    cs_surface_skin(&o->surf, &o->cm, o->x);
+    double t6 = now_ms();
+    if (w->def.sleep_steps > 0 && o->n_inputs == 0 && sqrt(vmax2) < w->def.sleep_speed) {
+        if (++o->still_steps >= w->def.sleep_steps) {
+            o->sleeping = true;
+            memset(o->v, 0, n3 * sizeof(double));
+        }
+    } else {
+        o->still_steps = 0;
+    }
+    st->ms_inputs += t1 - t0;
+    st->ms_rotations += t2 - t1;
+    st->ms_rhs += t3 - t2;
+    st->ms_solve += t4 - t3;
+    st->ms_post += t5 - t4;
+    st->ms_skin += t6 - t5;
+    st->cg_iterations += r.iterations;
+    if (r.relres > st->cg_residual)
+        st->cg_residual = r.relres;
+    if (!r.converged)
+        st->converged = false;
+    st->objects_stepped++;
+    return CS_OK;
+}
+
 static int step_object(cs_world_t *w, cs_object *o, cs_step_stats *st)
 {
     switch (o->integrator) {
     case CS_INTEGRATOR_IMPLICIT_EULER:
         return step_implicit_euler(w, o, st);
+    case CS_INTEGRATOR_CENTRAL_DIFFERENCE:
+        return step_central_difference(w, o, st);
     default: /* refused when the object was added */
         return CS_ERR_INVALID;
     }

@@ -2,7 +2,7 @@
  * world_internal.h — the engine's private object and world records, shared by world.c (the
  * step, inputs, reading) and fracture.c (seed 000 §2.3, §3.1–3.2). Not part of the API.
  *
- * Owns (through cs_object): the cube mesh, the bound surface, the FEM data and every
+ * Owns (through cs_object): the cube mesh, the bound surface, the FEM (and localframe) data and every
  * per-node array; (through cs_world) every object, and the events and topology changes of
  * the last mutating call.
  */
@@ -100,6 +100,7 @@ typedef struct cs_object {
     cs_cubemesh cm;
     cs_surface surf;
     cs_fem fem;
+    struct cs_lf *lf;      /* localframe model data (localframe.h); NULL for other models */
     int n;                 /* nodes */
     double *x, *v, *m;     /* 3, 3, 1 per node */
     double *f_const;       /* gravity + scene loads, 3 per node */
