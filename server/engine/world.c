@@ -5,6 +5,9 @@
  *   inputs → rotations (corotational only) → right-hand side → block-Jacobi PCG on
  *   (1+dt·α)M + (dt·β+dt²)K_R [+ dt²·drag springs] for the new velocities (implicit Euler,
  *   warm-started from the old ones) → positions → ground → skin the surface → sleep test.
+ * Explicit objects (symplectic Euler, velocity Verlet): inputs → forces → kick/drift → ground
+ * projection with Coulomb friction → skin → sleep test; cs_world_add_object refuses a dt above
+ * their stability limit (elastic.h: cs_elastic_critical_dt).
  * A step that produces non-finite values is undone and reported (CS_ERR_DIVERGED).
  *
  * Owns: every object and everything an object holds. Objects are kept in creation order in
