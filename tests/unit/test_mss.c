@@ -555,7 +555,7 @@ static double total_energy(const box *b)
  * for 18 — that a bar one cube thick leaves nearly free, so a point pluck there excites slow,
  * large, weakly nonlinear motions; see mss_cube_has_three_zero_energy_modes.)
  */
-TEST(mss_integrators_energy_behaviour)
+SLOW_TEST(mss_integrators_energy_behaviour)
 {
     const cs_model models[2] = {CS_MODEL_LINEAR, CS_MODEL_MSS};
     const cs_integrator integs[3] = {CS_INTEGRATOR_SYMPLECTIC_EULER, CS_INTEGRATOR_VERLET,
@@ -626,7 +626,7 @@ TEST(mss_integrators_energy_behaviour)
 /* An explicit integrator with dt above the limit is refused with a message naming it; just
  * below the limit, a block started from random nodal noise (every mode, the fastest
  * included) stays bounded over many steps. */
-TEST(mss_explicit_step_limit_is_enforced_and_safe)
+SLOW_TEST(mss_explicit_step_limit_is_enforced_and_safe)
 {
     const cs_model models[3] = {CS_MODEL_MSS, CS_MODEL_LINEAR, CS_MODEL_COROTATIONAL};
     cs_material mat = cs_material_default();
