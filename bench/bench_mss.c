@@ -54,7 +54,10 @@ static int solve(cs_model model, double rho, const double g[3], const int32_t *i
     char err[512];
     cs_world_def wd = cs_world_def_default();
     memcpy(wd.gravity, g, sizeof wd.gravity);
-    wd.cg_tolerance = 1e-9;
+    /* Equilibrium to 1e-7 of the loads: far below the errors measured, and above the floor
+     * that round-off in the internal forces of a fine, lightly loaded beam sets (a tighter
+     * tolerance stalls there and load stepping retries for ever). */
+    wd.cg_tolerance = 1e-7;
     wd.cg_max_iterations = 200000;
     wd.threads = 2;
     cs_world_t *w;

@@ -820,3 +820,31 @@ TEST(mss_scene_selects_model_and_integrator)
         ENSURE(cs_world_step(w) == CS_OK);
     cs_world_destroy(w);
 }
+
+/* Above CS_FEM_PARALLEL_CELLS an object's products run on the world's threads: an mss block
+ * steps to bit-identical states on 1 and 2 threads (implicit and Verlet). */
+SLOW_TEST(mss_results_independent_of_thread_count)
+{
+    uint64_t hash[2][2];
+    for (int integ = 0; integ < 2; integ++)
+        for (int t = 0; t < 2; t++) {
+            cs_material mat = cs_material_default();
+            mat.young = 1e5;
+            cs_world_def wd = quiet_world(-9.81);
+            wd.threads = t + 1;
+            wd.cg_tolerance = 1e-6;
+            if (integ)
+                wd.dt = 0.5 * cs_elastic_critical_dt(CS_MODEL_MSS, &mat, 0.02);
+            box b;
+            char err[512];
+            ENSURE_MSG(make_box(&b, wd, CS_MODEL_MSS,
+                                integ ? CS_INTEGRATOR_VERLET : CS_INTEGRATOR_IMPLICIT_EULER, mat,
+                                13, 13, 13, 0.02, true, err, sizeof err) == 0, "%s", err);
+            for (int s = 0; s < 3; s++)
+                ENSURE(cs_world_step(b.w) == CS_OK);
+            hash[integ][t] = cs_object_state_hash(b.w, b.id);
+            free_box(&b);
+        }
+    ENSURE(hash[0][0] == hash[0][1]);
+    ENSURE(hash[1][0] == hash[1][1]);
+}
