@@ -906,33 +906,46 @@ static void explicit_drift(cs_object *o, double dt)
             o->x[d] += dt * o->v[d];
 }
 
+/* Coulomb friction for a contact node whose downward velocity dvn the ground just removed:
+ * up to μ·dvn off the tangential velocity. */
+static void ground_friction(const cs_world_t *w, cs_object *o, int i, double dvn)
+{
+    double *v = o->v + 3 * i;
+    const double vt = sqrt(v[0] * v[0] + v[1] * v[1]), mu = w->def.ground_friction;
+    const double sc = vt > mu * dvn ? (vt - mu * dvn) / vt : 0.0;
+    if (!o->mask[3 * i])
+        v[0] *= sc;
+    if (!o->mask[3 * i + 1])
+        v[1] *= sc;
+}
+
 /*
- * Ground for explicit steps: a node below the plane is put back on it and loses its downward
- * velocity; the normal velocity removed, Δv_n, is the impulse the ground gave per unit mass,
- * and Coulomb friction takes up to μ·Δv_n off the tangential velocity (a node resting on the
- * ground loses g·dt each step, so it feels μ m g of friction).
+ * Ground for explicit steps, in two passes. After the drift (positions): a node below the
+ * plane is put back on it and marked in contact. After the last kick (velocities): a contact
+ * node moving down is stopped. Each pass removes a downward velocity Δv_n, the impulse per unit
+ * mass the ground gave, and Coulomb friction takes up to μ·Δv_n off the tangential velocity (a
+ * resting node loses g·dt per step, so it feels μmg). Verlet's second force evaluation sees the
+ * projected positions, so a block at rest on the ground has zero velocity, not −g·dt/2.
  */
-static void ground_explicit(const cs_world_t *w, cs_object *o)
+static void ground_explicit(const cs_world_t *w, cs_object *o, bool positions)
 {
     if (!w->def.has_ground)
         return;
-    const double g = w->def.ground_height, mu = w->def.ground_friction;
+    const double g = w->def.ground_height;
     for (int i = 0; i < o->n; i++) {
         double *x = o->x + 3 * i, *v = o->v + 3 * i;
-        if (x[2] >= g || o->mask[3 * i + 2]) {
+        if (positions) {
             o->contact[i] = 0;
+            if (x[2] >= g || o->mask[3 * i + 2])
+                continue;
+            o->contact[i] = 1;
+            x[2] = g;
+        } else if (!o->contact[i]) {
             continue;
         }
-        o->contact[i] = 1;
-        x[2] = g;
         const double dvn = v[2] < 0 ? -v[2] : 0.0;
         v[2] += dvn;
-        const double vt = sqrt(v[0] * v[0] + v[1] * v[1]);
-        const double sc = vt > mu * dvn ? (vt - mu * dvn) / vt : 0.0;
-        if (!o->mask[3 * i])
-            v[0] *= sc;
-        if (!o->mask[3 * i + 1])
-            v[1] *= sc;
+        ground_friction(w, o, i, dvn);
     }
 }
 
@@ -956,13 +969,15 @@ static int step_explicit(cs_world_t *w, cs_object *o, cs_step_stats *st, bool ve
     if (verlet) {
         explicit_kick(o, ftot, 0.5 * dt);
         explicit_drift(o, dt);
+        ground_explicit(w, o, true);
         explicit_force(o, o->v, ftot);
         explicit_kick(o, ftot, 0.5 * dt);
     } else {
         explicit_kick(o, ftot, dt);
         explicit_drift(o, dt);
+        ground_explicit(w, o, true);
     }
-    ground_explicit(w, o);
+    ground_explicit(w, o, false);
     double t2 = now_ms();
     o->elastic_energy_valid = false;
     if (!all_finite(o->x, n3) || !all_finite(o->v, n3)) {

@@ -848,3 +848,48 @@ SLOW_TEST(mss_results_independent_of_thread_count)
     ENSURE(hash[0][0] == hash[0][1]);
     ENSURE(hash[1][0] == hash[1][1]);
 }
+
+/* Explicit ground contact: a block sliding on the ground at 1 m/s stops after v²/(2μg) (Coulomb
+ * friction from the normal impulses), stays on the plane, and then goes to sleep. */
+TEST(mss_explicit_block_slides_to_rest_by_coulomb_friction)
+{
+    for (int ii = 0; ii < 2; ii++) {
+        cs_material mat = cs_material_default();
+        mat.young = 1e5;
+        mat.damping[1] = 2e-3; /* stiffness damping: calms vibration, not rigid sliding */
+        cs_world_def wd = cs_world_def_default();
+        wd.has_ground = true;
+        wd.ground_friction = 0.5;
+        wd.sleep_steps = 30;
+        wd.dt = 0.5 * cs_elastic_critical_dt(CS_MODEL_MSS, &mat, 0.05);
+        box b;
+        char err[512];
+        ENSURE_MSG(make_box(&b, wd, CS_MODEL_MSS,
+                            ii ? CS_INTEGRATOR_VERLET : CS_INTEGRATOR_SYMPLECTIC_EULER, mat, 2, 2,
+                            2, 0.05, false, err, sizeof err) == 0, "%s", err);
+        cs_object *o = cs_world_find_internal(b.w, b.id);
+        for (int i = 0; i < o->n; i++)
+            o->v[3 * i] = 1.0;
+        const int steps = (int)(3.0 / wd.dt);
+        double zmin = 0;
+        for (int s = 0; s < steps && !o->sleeping; s++) {
+            ENSURE(cs_world_step(b.w) == CS_OK);
+            for (int i = 0; i < o->n; i++)
+                zmin = fmin(zmin, o->x[3 * i + 2]);
+        }
+        double dx = 0;
+        for (int i = 0; i < o->n; i++)
+            dx += (o->x[3 * i] - o->cm.node_rest[3 * i]) / o->n;
+        const double want = 1.0 / (2 * 0.5 * 9.81);
+        cs_object_info info;
+        cs_object_get_info(b.w, b.id, &info);
+        double vmax = 0;
+        for (int i = 0; i < 3 * o->n; i++)
+            vmax = fmax(vmax, fabs(o->v[i]));
+        printf("    %s: slid %.4f m (Coulomb %.4f), lowest node %.2g m, sleeping %d, |v| %.2g\n",
+               cs_integrator_name(o->integrator), dx, want, zmin, info.sleeping, vmax);
+        free_box(&b);
+        ENSURE_MSG(fabs(dx - want) < 0.1 * want, "slid %g m, want %g", dx, want);
+        ENSURE(zmin >= 0 && info.sleeping);
+    }
+}
