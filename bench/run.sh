@@ -68,8 +68,8 @@ fi
 # Seed 004 §4: the mss cantilever and L-shaped shear studies against a fine corotational FEM
 # reference. Writes bench/results/mss_cantilever.csv, mss_lshape.csv and mss.md (the README
 # tables). BENCH_MSS_REF / BENCH_MSS_LREF override the references (cubes across the cantilever's 100 mm,
-# default 24; per 2 m of the L, default 12).
+# default 24; per 2 m of the L, default 24).
 mref=${BENCH_MSS_REF:-24}
 echo "bench_mss: seed 004 studies, reference FEM at $mref cubes across"
-build/bin/bench_mss --ref "$mref" --lref "${BENCH_MSS_LREF:-12}" --csv-cantilever "$out/mss_cantilever.csv" \
+build/bin/bench_mss --ref "$mref" --lref "${BENCH_MSS_LREF:-24}" --csv-cantilever "$out/mss_cantilever.csv" \
   --csv-lshape "$out/mss_lshape.csv" | tee "$out/mss.md"
