@@ -273,8 +273,9 @@ int main(int argc, char **argv)
         failed |= r1 | r2;
         const double es = max_error(&S, &R), ef = max_error(&F, &R);
         const char *paper = m == 1 ? "≈ 45 %" : m == 4 ? "≈ 5 %" : "—";
-        printf("| %d×%d×%d | %.1f | %.4g | %.1f %% | %.4g | %.1f %% | %s |\n", 4 * m, m, m,
-               100.0 / m, 1e3 * S.tip, 100 * es, 1e3 * F.tip, 100 * ef, paper);
+        printf("| %d×%d×%d | %.1f | %.4g | %.1f %%%s | %.4g | %.1f %%%s | %s |\n", 4 * m, m, m,
+               100.0 / m, 1e3 * S.tip, 100 * es, r1 ? " (not converged)" : "", 1e3 * F.tip,
+               100 * ef, r2 ? " (not converged)" : "", paper);
         if (fc)
             fprintf(fc, "%dx%dx%d,%d,%.4f,%g,%.6g,%.5f,%.6g,%.5f,%.6g,%d,%.5f\n", 4 * m, m, m,
                     4 * m * m * m, 100.0 / m, rho, 1e3 * S.tip, es, 1e3 * F.tip, ef, 1e3 * R.tip,
@@ -316,8 +317,8 @@ int main(int argc, char **argv)
             return 1;
         failed |= r1 | r2;
         const double es = max_error(&S, &LR), ef = max_error(&F, &LR);
-        printf("| %d | %.0f | %.4g | %.1f %% | %.1f %% |\n", r, 2000.0 / r, 1e3 * S.umax, 100 * es,
-               100 * ef);
+        printf("| %d | %.0f | %.4g | %.1f %%%s | %.1f %%%s |\n", r, 2000.0 / r, 1e3 * S.umax,
+               100 * es, r1 ? " (not converged)" : "", 100 * ef, r2 ? " (not converged)" : "");
         if (fl)
             fprintf(fl, "%d,%.1f,%.6g,%.5f,%.6g,%.5f,%.6g,%d,%.5f\n", r, 2000.0 / r, 1e3 * S.umax,
                     es, 1e3 * F.umax, ef, 1e3 * LR.umax, lref, max_error(&LRh, &LR));
