@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# make bench: speed of the corotational implicit step against size, 1 and 2 threads, and the
-# cost of a fracture event against surface triangles (bench_fracture, at the end).
+# make bench: speed of the corotational implicit step against size, 1 and 2 threads, the
+# cost of a fracture event against surface triangles (bench_fracture), and seed 004's mss
+# studies (bench_mss, at the end).
 # Writes bench/results/blocks.csv, blocks.md (the README table) and blocks.svg (log-log plot).
 # BENCH_SIZES / BENCH_RUNS override the defaults (8,16,32,48 and 5 runs; medians are reported).
 set -euo pipefail
@@ -90,3 +91,11 @@ plot "< awk -F, 'NR>1 && \$1==\"localframe\"' $out/localframe.csv" using 7:(abs(
 GP
   echo "plot: $out/localframe.svg"
 fi
+# Seed 004 §4: the mss cantilever and L-shaped shear studies against a fine corotational FEM
+# reference. Writes bench/results/mss_cantilever.csv, mss_lshape.csv and mss.md (the README
+# tables). BENCH_MSS_REF / BENCH_MSS_LREF override the references (cubes across the cantilever's 100 mm,
+# default 24; per 2 m of the L, default 24).
+mref=${BENCH_MSS_REF:-24}
+echo "bench_mss: seed 004 studies, reference FEM at $mref cubes across"
+build/bin/bench_mss --ref "$mref" --lref "${BENCH_MSS_LREF:-24}" --csv-cantilever "$out/mss_cantilever.csv" \
+  --csv-lshape "$out/mss_lshape.csv" | tee "$out/mss.md"

@@ -51,7 +51,7 @@ typedef uint32_t cs_object_id; /* 0 is never a valid id */
 typedef enum cs_model {
     CS_MODEL_LINEAR = 0,       /* small-strain hexahedral FEM (seed 000 App. A) */
     CS_MODEL_COROTATIONAL = 1, /* the same with per-element rotation (seed 000 §2.2) */
-    CS_MODEL_MSS = 2,          /* hexahedral mass-spring element (seed 004) — not yet built */
+    CS_MODEL_MSS = 2,          /* cubic mass-spring element with correction forces (seed 004) */
     CS_MODEL_LOCALFRAME = 3,   /* local-frame B-spline model (seed 001 §3.2–3.4) */
     CS_MODEL_RIGID = 4         /* rigid cube sets (seed 000 §2.4) — not yet built */
 } cs_model;
@@ -64,8 +64,9 @@ typedef enum cs_integrator {
     CS_INTEGRATOR_DEFAULT = 0,           /* the model's own: implicit Euler for FEM and mss,
                                             central differences for localframe */
     CS_INTEGRATOR_IMPLICIT_EULER = 1,    /* seed 000: (M + dt C + dt² K) v1 = M v + dt f, CG */
-    CS_INTEGRATOR_SYMPLECTIC_EULER = 2,  /* explicit (seed 004) — not yet built */
-    CS_INTEGRATOR_VERLET = 3,            /* explicit velocity Verlet (seed 004) — not yet built */
+    CS_INTEGRATOR_SYMPLECTIC_EULER = 2,  /* explicit: v += dt M⁻¹f(x, v), x += dt v (seed 004) */
+    CS_INTEGRATOR_VERLET = 3,            /* explicit velocity Verlet (seed 004); both explicit
+                                            ones need dt below a limit checked at add time */
     CS_INTEGRATOR_CENTRAL_DIFFERENCE = 4 /* seed 001 Eq. (20), solved by CG; conditionally
                                             stable: dt above the limit is refused */
 } cs_integrator;
@@ -195,7 +196,9 @@ typedef struct cs_world cs_world_t;
 int cs_world_create(const cs_world_def *def, cs_world_t **out, char *err, size_t errlen);
 void cs_world_destroy(cs_world_t *w); /* NULL is fine */
 
-/* Voxelize and add an object; on error the world is unchanged. */
+/* Voxelize and add an object; on error the world is unchanged. Objects with an explicit
+ * integrator are refused (CS_ERR_INVALID, the limit in err) when the world's dt exceeds their
+ * stability limit 2/ω_max (smaller with damping; ω_max bounded per cube at rest). */
 int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *id,
                         char *err, size_t errlen);
 int cs_world_remove_object(cs_world_t *w, cs_object_id id);

@@ -1,9 +1,14 @@
 /*
  * elastic.c — dispatch from the integrators to the element model of each object.
+ *
+ * FEM (linear, corotational): fem.c. Mass-spring (mss, seed 004): mss.c, which borrows the
+ * FEM record's node → cell adjacency (every model keeps o->fem, see elastic.h).
  */
 #include "elastic.h"
 
+#include <math.h>
 #include <stdlib.h>
+#include <string.h>
 
 #include "localframe.h"
 
@@ -24,6 +29,9 @@ int cs_elastic_init(cs_object *o, int threads)
             return -1;
         }
     }
+    if (o->model == CS_MODEL_MSS &&
+        cs_mss_init(&o->mss, &o->cm, &o->fem, o->mat.young, o->mat.poisson) != 0)
+        return -1;
     return 0;
 }
 
@@ -35,6 +43,7 @@ void cs_elastic_free(cs_object *o)
         free(o->lf);
         o->lf = NULL;
     }
+    cs_mss_free(&o->mss);
 }
 
 int cs_elastic_relink(cs_object *o)
@@ -42,6 +51,8 @@ int cs_elastic_relink(cs_object *o)
     o->fem.kf = o->fld.has_young ? o->fld.young : NULL;
     if (cs_fem_relink(&o->fem, &o->cm) != 0)
         return -1;
+    if (o->model == CS_MODEL_MSS)
+        return cs_mss_relink(&o->mss, &o->cm, &o->fem);
     return o->lf ? cs_lf_relink(o->lf, &o->cm) : 0;
 }
 
@@ -50,12 +61,16 @@ void cs_elastic_reset(cs_object *o)
     cs_fem_reset_rotations(&o->fem);
     if (o->lf)
         cs_lf_reset(o->lf);
+    if (o->model == CS_MODEL_MSS)
+        cs_mss_update(&o->mss, o->cm.node_rest);
 }
 
 void cs_elastic_update(cs_object *o, const double *x)
 {
     if (o->lf)
         cs_lf_update(o->lf, x);
+    else if (o->model == CS_MODEL_MSS)
+        cs_mss_update(&o->mss, x);
     else
         cs_fem_update_rotations(&o->fem, x);
 }
@@ -64,19 +79,27 @@ void cs_elastic_force(cs_object *o, const double *x, double *f, double *energy)
 {
     if (o->lf)
         cs_lf_force(o->lf, x, f, energy);
+    else if (o->model == CS_MODEL_MSS)
+        cs_mss_force(&o->mss, x, f, energy);
     else
         cs_fem_elastic_force(&o->fem, x, f, energy);
 }
 
 double cs_elastic_energy(cs_object *o, const double *x)
 {
-    return o->lf ? cs_lf_energy(o->lf, x) : cs_fem_energy(&o->fem, x);
+    if (o->lf)
+        return cs_lf_energy(o->lf, x);
+    if (o->model == CS_MODEL_MSS)
+        return cs_mss_energy(&o->mss, x);
+    return cs_fem_energy(&o->fem, x);
 }
 
 void cs_elastic_apply_K(cs_object *o, const double *p, double *y)
 {
     if (o->lf)
         cs_lf_apply_K(o->lf, p, y);
+    else if (o->model == CS_MODEL_MSS)
+        cs_mss_apply_K(&o->mss, p, y);
     else
         cs_fem_apply_K(&o->fem, p, y);
 }
@@ -85,6 +108,8 @@ void cs_elastic_diag_blocks(cs_object *o, double *blocks)
 {
     if (o->lf)
         cs_lf_diag_blocks(o->lf, blocks);
+    else if (o->model == CS_MODEL_MSS)
+        cs_mss_diag_blocks(&o->mss, blocks);
     else
         cs_fem_diag_blocks(&o->fem, blocks);
 }
@@ -131,4 +156,67 @@ void cs_elastic_release_tangent(cs_object *o)
 int cs_elastic_threads(const cs_object *o)
 {
     return o->lf ? o->lf->threads : o->fem.threads;
+}
+
+/* Largest eigenvalue of a symmetric 24×24 matrix by cyclic Jacobi rotations. */
+static double sym_max_eigen(const double *K)
+{
+    double A[24 * 24];
+    memcpy(A, K, sizeof A);
+    for (int i = 0; i < 24; i++) /* symmetrize: the stored matrices are symmetric up to rounding */
+        for (int j = i + 1; j < 24; j++)
+            A[24 * i + j] = A[24 * j + i] = 0.5 * (A[24 * i + j] + A[24 * j + i]);
+    for (int sweep = 0; sweep < 60; sweep++) {
+        double off = 0, diag = 0;
+        for (int i = 0; i < 24; i++) {
+            diag += A[25 * i] * A[25 * i];
+            for (int j = i + 1; j < 24; j++)
+                off += A[24 * i + j] * A[24 * i + j];
+        }
+        if (off <= 1e-30 * diag)
+            break;
+        for (int p = 0; p < 24; p++)
+            for (int q = p + 1; q < 24; q++) {
+                const double apq = A[24 * p + q];
+                if (fabs(apq) < 1e-300)
+                    continue;
+                const double theta = (A[24 * q + q] - A[24 * p + p]) / (2 * apq);
+                const double t = (theta >= 0 ? 1.0 : -1.0) / (fabs(theta) + sqrt(theta * theta + 1));
+                const double c = 1 / sqrt(t * t + 1), s = t * c;
+                for (int k = 0; k < 24; k++) {
+                    const double akp = A[24 * k + p], akq = A[24 * k + q];
+                    A[24 * k + p] = c * akp - s * akq;
+                    A[24 * k + q] = s * akp + c * akq;
+                }
+                for (int k = 0; k < 24; k++) {
+                    const double apk = A[24 * p + k], aqk = A[24 * q + k];
+                    A[24 * p + k] = c * apk - s * aqk;
+                    A[24 * q + k] = s * apk + c * aqk;
+                }
+            }
+    }
+    double mx = 0;
+    for (int i = 0; i < 24; i++)
+        mx = fmax(mx, A[25 * i]);
+    return mx;
+}
+
+double cs_elastic_max_omega(cs_model model, const cs_material *mat, double h)
+{
+    double K[24 * 24];
+    if (model == CS_MODEL_MSS)
+        cs_mss_cube_stiffness(mat->young, mat->poisson, h, K);
+    else
+        cs_cube_stiffness(mat->young, mat->poisson, h, K);
+    const double m_corner = mat->density * h * h * h / 8.0;
+    return sqrt(sym_max_eigen(K) / m_corner);
+}
+
+double cs_elastic_critical_dt(cs_model model, const cs_material *mat, double h)
+{
+    const double w = cs_elastic_max_omega(model, mat, h);
+    /* Explicit step with Rayleigh damping C = αM + βK on the old velocity: the recurrence of
+     * a mode ω is stable iff ω²dt² + 2dt(α + βω²) ≤ 4 (Jury's test), largest at ω_max. */
+    const double g = mat->damping[0] + mat->damping[1] * w * w;
+    return (-g + sqrt(g * g + 4 * w * w)) / (w * w);
 }

@@ -45,6 +45,16 @@ int cs_elastic_prepare_tangent(cs_object *o, const double *x);
 void cs_elastic_apply_tangent(cs_object *o, const double *p, double *y);
 void cs_elastic_release_tangent(cs_object *o);
 
+/*
+ * Explicit integration (symplectic Euler, velocity Verlet): an upper bound of ω_max, the
+ * largest eigenfrequency of M⁻¹K, for a model at rest on cubes of edge h with the lumped mass
+ * ρh³/8 per corner — the largest eigenvalue of one cube's M_e⁻¹K_e, which bounds the assembled
+ * one (element eigenvalue theorem) for any mesh and after any fracture. The critical step is
+ * 2/ω_max, smaller with damping (see elastic.c).
+ */
+double cs_elastic_max_omega(cs_model model, const cs_material *mat, double h);
+double cs_elastic_critical_dt(cs_model model, const cs_material *mat, double h);
+
 /* Worker threads the model's products use for this object. */
 int cs_elastic_threads(const cs_object *o);
 

@@ -5,6 +5,9 @@
  *   inputs → rotations (corotational only) → right-hand side → block-Jacobi PCG on
  *   (1+dt·α)M + (dt·β+dt²)K_R [+ dt²·drag springs] for the new velocities (implicit Euler,
  *   warm-started from the old ones) → positions → ground → skin the surface → sleep test.
+ * Explicit objects (symplectic Euler, velocity Verlet): inputs → forces → kick/drift → ground
+ * projection with Coulomb friction → skin → sleep test; cs_world_add_object refuses a dt above
+ * their stability limit (elastic.h: cs_elastic_critical_dt).
  * A step that produces non-finite values is undone and reported (CS_ERR_DIVERGED).
  *
  * Owns: every object and everything an object holds. Objects are kept in creation order in
@@ -421,12 +424,15 @@ int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *i
     if (cs_world_find_object(w, def->name) != CS_NULL_OBJECT)
         return cs_engine_fail(err, errlen, CS_ERR_INVALID, "object name '%s' is already used", def->name);
     if (def->model != CS_MODEL_LINEAR && def->model != CS_MODEL_COROTATIONAL &&
-        def->model != CS_MODEL_LOCALFRAME)
+        def->model != CS_MODEL_LOCALFRAME && def->model != CS_MODEL_MSS)
         return cs_engine_fail(err, errlen, CS_ERR_INVALID, "model '%s' is not implemented yet",
                     cs_model_name(def->model));
     const cs_integrator integ = def->integrator == CS_INTEGRATOR_DEFAULT
                                     ? default_integrator(def->model) : def->integrator;
-    if (integ != CS_INTEGRATOR_IMPLICIT_EULER && integ != CS_INTEGRATOR_CENTRAL_DIFFERENCE)
+    const bool explicit_integ =
+        integ == CS_INTEGRATOR_SYMPLECTIC_EULER || integ == CS_INTEGRATOR_VERLET;
+    if (integ != CS_INTEGRATOR_IMPLICIT_EULER && integ != CS_INTEGRATOR_CENTRAL_DIFFERENCE &&
+        !explicit_integ)
         return cs_engine_fail(err, errlen, CS_ERR_INVALID,
                               "integrator '%s' is not implemented yet", cs_integrator_name(integ));
     if (!(def->cube_size > 0 && isfinite(def->cube_size)))
@@ -435,6 +441,18 @@ int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *i
     int rc = check_material(&def->material, err, errlen);
     if (rc)
         return rc;
+    if (explicit_integ) {
+        /* An explicit step above the stability limit blows up within a few steps: refuse it
+         * here, with the limit, rather than report divergence later. */
+        const double dtc = cs_elastic_critical_dt(def->model, &def->material, def->cube_size);
+        if (w->def.dt > dtc)
+            return cs_engine_fail(err, errlen, CS_ERR_INVALID,
+                        "integrator '%s' is unstable for object '%s': world dt %g s exceeds the "
+                        "explicit stability limit %g s (2/omega_max, damping included; "
+                        "omega_max %g rad/s); use dt <= %g s, larger cubes, or implicit_euler",
+                        cs_integrator_name(integ), def->name, w->def.dt, dtc,
+                        cs_elastic_max_omega(def->model, &def->material, def->cube_size), dtc);
+    }
     if (integ == CS_INTEGRATOR_CENTRAL_DIFFERENCE) {
         rc = check_central_difference(w, def, err, errlen);
         if (rc)
@@ -1321,6 +1339,149 @@ static int step_central_difference(cs_world_t *w, cs_object *o, cs_step_stats *s
     return CS_OK;
 }
 
+/* ---------------------------------------------------------------- explicit steps */
+
+/*
+ * ftot = inputs (gather_forces, at the current o->x) + elastic force at o->x − β K v; the
+ * mass-proportional damping α M v is applied with the acceleration.
+ */
+static void explicit_force(cs_object *o, const double *v, double *ftot)
+{
+    gather_forces(o);
+    cs_elastic_update(o, o->x);
+    cs_elastic_force(o, o->x, ftot, NULL);
+    const size_t n3 = (size_t)o->n * 3;
+    if (o->mat.damping[1] > 0) {
+        double *kv = o->cg.z; /* scratch: no solve in an explicit step */
+        cs_elastic_apply_K(o, v, kv);
+        for (size_t d = 0; d < n3; d++)
+            ftot[d] -= o->mat.damping[1] * kv[d];
+    }
+    for (size_t d = 0; d < n3; d++)
+        ftot[d] += o->f[d];
+}
+
+/* v += s·dt·(M⁻¹ftot − α v) on free dofs; held dofs keep zero velocity. */
+static void explicit_kick(cs_object *o, const double *ftot, double sdt)
+{
+    const double alpha = o->mat.damping[0];
+    for (int i = 0; i < o->n; i++)
+        for (int a = 0; a < 3; a++) {
+            const size_t d = 3 * (size_t)i + a;
+            o->v[d] = o->mask[d] ? 0.0 : o->v[d] + sdt * (ftot[d] / o->m[i] - alpha * o->v[d]);
+        }
+}
+
+static void explicit_drift(cs_object *o, double dt)
+{
+    for (size_t d = 0; d < (size_t)o->n * 3; d++)
+        if (!o->mask[d])
+            o->x[d] += dt * o->v[d];
+}
+
+/* Coulomb friction for a contact node whose downward velocity dvn the ground just removed:
+ * up to μ·dvn off the tangential velocity. */
+static void ground_friction(const cs_world_t *w, cs_object *o, int i, double dvn)
+{
+    double *v = o->v + 3 * i;
+    const double vt = sqrt(v[0] * v[0] + v[1] * v[1]), mu = w->def.ground_friction;
+    const double sc = vt > mu * dvn ? (vt - mu * dvn) / vt : 0.0;
+    if (!o->mask[3 * i])
+        v[0] *= sc;
+    if (!o->mask[3 * i + 1])
+        v[1] *= sc;
+}
+
+/*
+ * Ground for explicit steps, in two passes. After the drift (positions): a node below the
+ * plane is put back on it and marked in contact. After the last kick (velocities): a contact
+ * node moving down is stopped. Each pass removes a downward velocity Δv_n, the impulse per unit
+ * mass the ground gave, and Coulomb friction takes up to μ·Δv_n off the tangential velocity (a
+ * resting node loses g·dt per step, so it feels μmg). Verlet's second force evaluation sees the
+ * projected positions, so a block at rest on the ground has zero velocity, not −g·dt/2.
+ */
+static void ground_explicit(const cs_world_t *w, cs_object *o, bool positions)
+{
+    if (!w->def.has_ground)
+        return;
+    const double g = w->def.ground_height;
+    for (int i = 0; i < o->n; i++) {
+        double *x = o->x + 3 * i, *v = o->v + 3 * i;
+        if (positions) {
+            o->contact[i] = 0;
+            if (x[2] >= g || o->mask[3 * i + 2])
+                continue;
+            o->contact[i] = 1;
+            x[2] = g;
+        } else if (!o->contact[i]) {
+            continue;
+        }
+        const double dvn = v[2] < 0 ? -v[2] : 0.0;
+        v[2] += dvn;
+        ground_friction(w, o, i, dvn);
+    }
+}
+
+/*
+ * Symplectic Euler (v ← v + dt M⁻¹f(x, v); x ← x + dt v) or velocity Verlet (half kick with
+ * f(x_n), drift, half kick with f(x_{n+1}) — two force evaluations per step, so that inputs
+ * and fracture need no force carried between steps). Damping uses the velocity at the start
+ * of each kick. Stable for dt below cs_elastic_critical_dt (checked when the object is added).
+ * A step that produces non-finite values is undone.
+ */
+static int step_explicit(cs_world_t *w, cs_object *o, cs_step_stats *st, bool verlet)
+{
+    const double dt = w->def.dt;
+    const size_t n3 = (size_t)o->n * 3;
+    double *ftot = o->cg.r; /* scratch */
+    double t0 = now_ms();
+    memcpy(o->v1, o->x, n3 * sizeof(double)); /* kept to undo a diverged step */
+    memcpy(o->b, o->v, n3 * sizeof(double));
+    explicit_force(o, o->v, ftot);
+    double t1 = now_ms();
+    if (verlet) {
+        explicit_kick(o, ftot, 0.5 * dt);
+        explicit_drift(o, dt);
+        ground_explicit(w, o, true);
+        explicit_force(o, o->v, ftot);
+        explicit_kick(o, ftot, 0.5 * dt);
+    } else {
+        explicit_kick(o, ftot, dt);
+        explicit_drift(o, dt);
+        ground_explicit(w, o, true);
+    }
+    ground_explicit(w, o, false);
+    double t2 = now_ms();
+    o->elastic_energy_valid = false;
+    if (!all_finite(o->x, n3) || !all_finite(o->v, n3)) {
+        memcpy(o->x, o->v1, n3 * sizeof(double));
+        memcpy(o->v, o->b, n3 * sizeof(double));
+        return CS_ERR_DIVERGED;
+    }
+    double vmax2 = 0;
+    for (size_t d = 0; d < n3; d += 3) {
+        double s = o->v[d] * o->v[d] + o->v[d + 1] * o->v[d + 1] + o->v[d + 2] * o->v[d + 2];
+        if (s > vmax2)
+            vmax2 = s;
+    }
+    expire_inputs(o);
+    cs_surface_skin(&o->surf, &o->cm, o->x);
+    double t3 = now_ms();
+    if (w->def.sleep_steps > 0 && o->n_inputs == 0 && sqrt(vmax2) < w->def.sleep_speed) {
+        if (++o->still_steps >= w->def.sleep_steps) {
+            o->sleeping = true;
+            memset(o->v, 0, n3 * sizeof(double));
+        }
+    } else {
+        o->still_steps = 0;
+    }
+    st->ms_rhs += t1 - t0;
+    st->ms_solve += t2 - t1;
+    st->ms_skin += t3 - t2;
+    st->objects_stepped++;
+    return CS_OK;
+}
+
 static int step_object(cs_world_t *w, cs_object *o, cs_step_stats *st)
 {
     switch (o->integrator) {
@@ -1328,6 +1489,10 @@ static int step_object(cs_world_t *w, cs_object *o, cs_step_stats *st)
         return step_implicit_euler(w, o, st);
     case CS_INTEGRATOR_CENTRAL_DIFFERENCE:
         return step_central_difference(w, o, st);
+    case CS_INTEGRATOR_SYMPLECTIC_EULER:
+        return step_explicit(w, o, st, false);
+    case CS_INTEGRATOR_VERLET:
+        return step_explicit(w, o, st, true);
     default: /* refused when the object was added */
         return CS_ERR_INVALID;
     }

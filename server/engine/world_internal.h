@@ -12,6 +12,7 @@
 #include "cubesim.h"
 #include "cubemesh.h"
 #include "fem.h"
+#include "mss.h"
 #include "solver.h"
 #include "surface.h"
 
@@ -101,6 +102,7 @@ typedef struct cs_object {
     cs_surface surf;
     cs_fem fem;
     struct cs_lf *lf;      /* localframe model data (localframe.h); NULL for other models */
+    cs_mss mss;            /* CS_MODEL_MSS only (seed 004) */
     int n;                 /* nodes */
     double *x, *v, *m;     /* 3, 3, 1 per node */
     double *f_const;       /* gravity + scene loads, 3 per node */

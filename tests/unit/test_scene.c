@@ -649,7 +649,7 @@ TEST(scene_instantiate)
                info.n_fixed_nodes, info.cube_size);
 
     /* A model the engine does not build yet: refused, named, nothing leaked. */
-    s.objects[0].model = CS_MODEL_MSS;
+    s.objects[0].model = CS_MODEL_LOCALFRAME;
     rc = cs_scene_instantiate(&s, &w, err, sizeof err);
     cs_scene_free(&s);
     ENSURE(rc == -1 && w == NULL);

@@ -399,7 +399,7 @@ TEST(world_refuses_bad_definitions)
     d.cube_size = 0;
     ENSURE(cs_world_add_object(w, &d, NULL, err, sizeof err) == CS_ERR_INVALID);
     d.cube_size = 0.1;
-    d.model = CS_MODEL_MSS;
+    d.model = (cs_model)99;
     ENSURE(cs_world_add_object(w, &d, NULL, err, sizeof err) == CS_ERR_INVALID);
     d.model = CS_MODEL_LINEAR;
     cs_object_id id;

@@ -1,0 +1,92 @@
+/*
+ * mss.h — the cubic mass-spring element of seed 004 §3.2 (Baudet et al., WSCG 2009).
+ *
+ * Per cube of edge h (the per-cube formulation: springs of neighbouring cubes on a shared
+ * edge each contribute, so an interior edge carries four springs):
+ *   12 edge springs          k   = E·h(4ν+1) / (8(1+ν))       rest length h
+ *    4 inner-diagonal springs k_d = 3E·h / (8(1+ν))           rest length √3·h
+ *   correction forces         F⊥_i = −F_i(4ν−1)/16 for an elongation force F_i along axis i
+ *
+ * The correction forces, read from §3.2 and checked against the paper's own Lagrangians
+ * (2D: L = F η − 4F⊥(2δ) − …; the 3D analogue has 16 node–direction pairs moving by 2δ):
+ *   - the element's axes are e_i = d_i/|d_i| with d_i = ¼ Σ_a s_i(a) x_a (the mean edge along
+ *     i; s_i(a) = ±1 the side of corner a), so everything rotates with the element;
+ *   - F_i is the elongation force of the faces normal to i: "the component of the sum of all
+ *     applied forces to a face, in the direction of face normal vector". At equilibrium the
+ *     forces applied to a face from outside balance the element's spring AND correction forces
+ *     on it, so F = Fs − 4c(J − I)F with Fs_i = −½ Σ_a s_i(a) e_i·fs_a (spring forces only) and
+ *     c = (1−4ν)/8; solved in closed form, F = A⁻¹ Fs, A = (1−4c)I + 4cJ (J = all ones);
+ *   - each corner a gets 2F⊥ = c·F_i along ±e_j for both axes j ≠ i, outward for s_j(a) = +1:
+ *     f_a += c Σ_i F_i Σ_{j≠i} s_j(a) e_j.
+ * With this reading one cube under uniaxial stress has exactly Young's modulus E and Poisson
+ * ratio ν; its nodal forces for the homogeneous normal strains equal the continuum's (bulk and
+ * deviatoric parts both), and its energy for every homogeneous strain, shears included (the
+ * diagonals give G exactly, §3.2 Eq. 2) — tests/unit/test_mss.c. The correction forces sum to zero and
+ * have zero moment (Σ_a s_j(a) x_a ∥ e_j), vanish in any rigid placement, but are not the
+ * gradient of a potential beyond first order.
+ *
+ * Energy: the springs' ½k(L−L0)² plus ε^T (A⁻¹ − I) P ε, ε_i = |d_i| − h, P the springs'
+ * stiffness for axial stretches — the potential whose gradient is the linearized correction
+ * force. Exact for small strains; it is what status messages report.
+ *
+ * Stiffness for implicit steps (cs_mss_apply_K): at the state of the last cs_mss_update, the
+ * springs' Jacobian k[n nᵀ + max(0, 1 − L0/L)(I − n nᵀ)] (the transverse term clamped at zero
+ * so that compressed springs never make it indefinite) plus the correction's Jacobian with the
+ * axes frozen, symmetrized (it is symmetric at rest). Matrix-free: per cell 145 numbers.
+ *
+ * Products are race-free like fem.c's: an element pass writes 24 numbers per cell, a node
+ * pass gathers them through the node→(cell,corner) list.
+ *
+ * Owns: fe, st. Borrows: cell_nodes (the cube mesh), adj_start/adj (the object's cs_fem,
+ * which every model keeps; cs_mss_relink re-borrows them after cs_fem_relink).
+ */
+#ifndef CS_MSS_H
+#define CS_MSS_H
+
+#include <stdint.h>
+#include "cubemesh.h"
+#include "fem.h"
+
+#define CS_MSS_STATE 145 /* per cell: 16 springs × (n, g), 3 axes, K_s·S (3 × 24) */
+
+typedef struct cs_mss {
+    int n_cells, n_nodes;
+    const int32_t *cell_nodes; /* 8 per cell, borrowed */
+    const int32_t *adj_start, *adj; /* borrowed from the object's cs_fem */
+    int threads;
+    double h;
+    double k_edge, k_diag; /* [N/m] */
+    double c;              /* (1 − 4ν)/8: 2F⊥/F */
+    double Ainv[9];        /* A⁻¹ of the face-force balance */
+    double B[9];           /* (J − I)·A⁻¹: the correction's response to the face forces */
+    double Mc[9];          /* (A⁻¹ − I)·P: the correction's quadratic energy */
+    double *fe;            /* 24 per cell: scratch of the element pass */
+    double *st;            /* CS_MSS_STATE per cell: the state of the last update */
+} cs_mss;
+
+/* Spring constants of seed 004 §3.2 for a cube of edge h. */
+double cs_mss_edge_constant(double young, double poisson, double h);
+double cs_mss_diagonal_constant(double young, double poisson, double h);
+
+/* Needs fem (initialized for the same mesh) for its adjacency. Returns 0, -1 on OOM. */
+int cs_mss_init(cs_mss *m, const cs_cubemesh *cm, const cs_fem *fem, double young,
+                double poisson);
+void cs_mss_free(cs_mss *m);
+/* After fracture changed the cell → node links and cs_fem_relink ran. */
+int cs_mss_relink(cs_mss *m, const cs_cubemesh *cm, const cs_fem *fem);
+
+/* Spring directions, axes and K_s·S at positions x, for apply_K / diag_blocks. */
+void cs_mss_update(cs_mss *m, const double *x);
+/* f = spring + correction forces at x (3 per node, overwritten); energy as above if non-NULL. */
+void cs_mss_force(cs_mss *m, const double *x, double *f, double *energy);
+/* The energy alone (reads only). */
+double cs_mss_energy(const cs_mss *m, const double *x);
+/* y = K p with K the symmetric stiffness of the last update. */
+void cs_mss_apply_K(cs_mss *m, const double *p, double *y);
+/* The 3×3 diagonal blocks of that K (9 per node, overwritten). */
+void cs_mss_diag_blocks(cs_mss *m, double *blocks);
+
+/* The 24×24 stiffness of one cube at rest (what apply_K uses there); row-major. */
+void cs_mss_cube_stiffness(double young, double poisson, double h, double K[24 * 24]);
+
+#endif
