@@ -69,6 +69,8 @@ typedef struct cs_object {
     bool elastic_energy_valid;
     /* operator coefficients of the current solve */
     double mcoef, kcoef, dcoef;
+    /* CS_MODEL_RIGID: pose, velocities and mass properties (rigid.h); NULL otherwise */
+    struct cs_rigid *rb;
 } cs_object;
 
 /* The topology changes of one mutating call: their arrays live in one arena. */
@@ -91,6 +93,7 @@ struct cs_world {
     cs_event *events;
     int n_events, cap_events;
     cs_topo_list topo;
+    struct cs_rigid_world *rigid; /* rigid.c's per-step scratch; NULL until a rigid step */
 };
 
 /* Defined in world.c, used by fracture.c. */
