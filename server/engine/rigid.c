@@ -48,7 +48,7 @@
 
 #define PGS_ITERATIONS 60
 #define BAUMGARTE 0.2
-#define MAX_SUBSTEPS 16
+#define MAX_SUBSTEPS 8
 #define MAX_SPEED 1e3 /* m/s: beyond it a body's velocity is taken as diverged */
 
 typedef struct contact {
@@ -601,6 +601,7 @@ static int cube_pair(cs_rigid_world *rw, int ia, int32_t ca, int ib, int32_t cb,
     obox bbx = {.R = B->rb->R, .half = 0.5 * B->cm.h + 0.5 * margin};
     cell_centre_world(A, ca, ba.c);
     cell_centre_world(B, cb, bbx.c);
+    double n[3], depth;
     ccd_t ccd;
     CCD_INIT(&ccd);
     ccd.support1 = obox_support;
@@ -608,18 +609,62 @@ static int cube_pair(cs_rigid_world *rw, int ia, int32_t ca, int ib, int32_t cb,
     ccd.center1 = obox_center;
     ccd.center2 = obox_center;
     ccd.max_iterations = 100;
-    ccd.epa_tolerance = 1e-9 * (A->cm.h + B->cm.h);
-    ccd.mpr_tolerance = ccd.epa_tolerance;
-    ccd_real_t depth;
-    ccd_vec3_t dir, pos;
-    if (ccdGJKPenetration(&bbx, &ba, &ccd, &depth, &dir, &pos) != 0)
+    ccd.mpr_tolerance = 1e-9 * (A->cm.h + B->cm.h);
+    /* Pieces of one broken body keep its orientation: parallel cubes need no GJK/MPR */
+    double par = 0;
+    for (int k = 0; k < 9; k++)
+        par = fmax(par, fabs(A->rb->R[k] - B->rb->R[k]));
+    if (par >= 1e-9 && !ccdMPRIntersect(&bbx, &ba, &ccd))
         return 0;
-    double n[3] = {dir.v[0], dir.v[1], dir.v[2]};
-    const double nn = sqrt(dot3(n, n));
-    if (!(nn > 0.5) || !isfinite(depth))
-        return 0;
-    for (int a = 0; a < 3; a++)
-        n[a] /= nn;
+    /* The separating-axis test over the 15 axes of two boxes gives the exact minimum
+     * translation (libccd's EPA is that too in principle, but stalls on the touching,
+     * coplanar faces that resting cubes always have; MPR's direction is too rough). */
+    {
+        double d[3], axes[15][3];
+        int na = 0;
+        for (int a = 0; a < 3; a++)
+            d[a] = ba.c[a] - bbx.c[a];
+        for (int s2 = 0; s2 < 2; s2++)
+            for (int k = 0; k < 3; k++) {
+                const double *R = s2 ? A->rb->R : B->rb->R;
+                axes[na][0] = R[k];
+                axes[na][1] = R[3 + k];
+                axes[na][2] = R[6 + k];
+                na++;
+            }
+        if (par >= 1e-9)
+            for (int i = 0; i < 3; i++)
+                for (int j = 3; j < 6; j++) {
+                    double c[3];
+                    cross3(axes[i], axes[j], c);
+                    const double l = sqrt(dot3(c, c));
+                    if (l < 1e-6)
+                        continue;
+                    for (int a = 0; a < 3; a++)
+                        axes[na][a] = c[a] / l;
+                    na++;
+                }
+        depth = INFINITY;
+        int best = -1;
+        for (int k = 0; k < na; k++) {
+            double ra = 0, rb = 0;
+            for (int j = 0; j < 3; j++) {
+                ra += ba.half * fabs(dot3(axes[3 + j], axes[k]));
+                rb += bbx.half * fabs(dot3(axes[j], axes[k]));
+            }
+            const double ov = ra + rb - fabs(dot3(d, axes[k]));
+            if (ov < 0)
+                return 0;
+            /* face axes win ties against edge axes (1e-9 of h) */
+            if (ov < depth - (k >= 6 ? 1e-9 * (A->cm.h + B->cm.h) : 0)) {
+                depth = ov;
+                best = k;
+            }
+        }
+        const double sg = dot3(d, axes[best]) >= 0 ? 1 : -1;
+        for (int a = 0; a < 3; a++)
+            n[a] = sg * axes[best][a];
+    }
     /* Face contacts: the normal of the face (of either cube) it is within ~14° of, so that
      * every cube pair of one face-to-face contact pushes along the same direction; the penetration
      * direction varies with the overlap of each pair and makes stacks creep. */
@@ -686,6 +731,11 @@ static int cube_pair(cs_rigid_world *rw, int ia, int32_t ca, int ib, int32_t cb,
             made++;
         }
     if (made == 0) {
+        /* edge against edge: libccd's contact point */
+        ccd_real_t cdepth;
+        ccd_vec3_t dir, pos;
+        if (ccdMPRPenetration(&bbx, &ba, &ccd, &cdepth, &dir, &pos) != 0)
+            return 0;
         contact *c = new_contact(rw);
         if (!c)
             return -1;
