@@ -212,6 +212,8 @@ static int mass_properties(cs_object *o, cs_rigid *rb)
                 I[3 * i + j] += mc * ((i == j) * (h * h / 6.0 + dd) - d[i] * d[j]);
     }
     rb->mass = mc * cm->n_cells;
+    rb->n_cells = cm->n_cells;
+    rb->n_nodes = o->n;
     rb->inv_mass = 1.0 / rb->mass;
     memcpy(rb->com_rest, C, sizeof C);
     memcpy(rb->I_body, I, sizeof I);
@@ -323,6 +325,33 @@ int cs_rigid_refit(cs_object *o, const double q[4], const double c0[3], const do
     place_nodes(o);
     node_aabb(o, 0);
     return 0;
+}
+
+cs_rigid *cs_rigid_clone(const cs_rigid *rb)
+{
+    cs_rigid *c = malloc(sizeof *c);
+    if (c)
+        *c = *rb;
+    return c;
+}
+
+int cs_rigid_sync(cs_world_t *w)
+{
+    for (int i = 0; i < w->n_objects; i++) {
+        cs_object *o = w->objects[i];
+        const cs_rigid *rb = o->rb;
+        if (!rb || (rb->n_cells == o->cm.n_cells && rb->n_nodes == o->n))
+            continue;
+        double q[4], c0[3], C0[3], v0[3], w0[3];
+        memcpy(q, rb->q, sizeof q);
+        memcpy(c0, rb->c, sizeof c0);
+        memcpy(C0, rb->com_rest, sizeof C0);
+        memcpy(v0, rb->v, sizeof v0);
+        memcpy(w0, rb->w, sizeof w0);
+        if (cs_rigid_refit(o, q, c0, C0, v0, w0) != 0)
+            return CS_ERR_NOMEM;
+    }
+    return CS_OK;
 }
 
 void cs_rigid_free(cs_object *o)
@@ -1336,17 +1365,12 @@ static int impact_fracture(cs_world_t *w, cs_rigid_world *rw, int bi)
     memcpy(C0, rb->com_rest, sizeof C0);
     memcpy(v0, rb->v, sizeof v0);
     memcpy(w0, rb->w, sizeof w0);
-    const int n_before = w->n_objects;
     int rc = cs_fracture_after_step(w, o);
-    /* o's nodes may have been duplicated and its cells reduced (rb then freed with the old
-     * state): every part gets its mass properties and pose again */
-    if (cs_rigid_refit(o, q, c0, C0, v0, w0) != 0)
+    /* o's nodes may have been duplicated and its cells reduced; pieces carry a copy of its
+     * pose (make_piece): every part gets its mass properties and continues the motion. o is
+     * refitted even if nothing changed, to undo the static deformation. */
+    if (cs_rigid_refit(o, q, c0, C0, v0, w0) != 0 || cs_rigid_sync(w) != CS_OK)
         return CS_ERR_NOMEM;
-    for (int i = n_before; i < w->n_objects; i++) {
-        cs_object *p = w->objects[i];
-        if (p->model == CS_MODEL_RIGID && !p->rb && cs_rigid_refit(p, q, c0, C0, v0, w0) != 0)
-            return CS_ERR_NOMEM;
-    }
     return rc;
 }
 
@@ -1596,6 +1620,8 @@ int cs_rigid_step(cs_world_t *w, cs_step_stats *st)
             return CS_ERR_NOMEM;
     }
     cs_rigid_world *rw = w->rigid;
+    if (cs_rigid_sync(w) != CS_OK)
+        return CS_ERR_NOMEM;
     const double dt = w->def.dt, gn = sqrt(dot3(w->def.gravity, w->def.gravity));
     int n_sub = 1;
     for (int i = 0; i < w->n_objects; i++) {

@@ -32,6 +32,7 @@ typedef struct cs_rigid {
     double I_inv_world[9];         /* R I_body⁻¹ Rᵀ of the current pose */
     double aabb_min[3], aabb_max[3]; /* of the nodes, grown by the speculative margin */
     double impact_force;           /* Σ |contact impulse| / dt of the last step [N] */
+    int n_cells, n_nodes;          /* of the object these were computed for */
 } cs_rigid;
 
 /* Mass properties from o's cells (each a solid box of the material's density) and the pose
@@ -43,6 +44,12 @@ int cs_rigid_init(cs_object *o);
 int cs_rigid_refit(cs_object *o, const double q[4], const double c0[3], const double C0[3],
                    const double v0[3], const double w0[3]);
 void cs_rigid_free(cs_object *o);
+/* A copy (for a piece made by fracture: it starts from its parent's pose and motion until
+ * cs_rigid_sync fits it to its own cells). NULL if out of memory. */
+cs_rigid *cs_rigid_clone(const cs_rigid *rb);
+/* Refit every rigid object whose cells or nodes changed since its mass properties were
+ * computed (fracture), continuing the motion it had. Returns CS_OK or CS_ERR_NOMEM. */
+int cs_rigid_sync(cs_world_t *w);
 /* Back to the rest pose, at rest. */
 void cs_rigid_reset(cs_object *o);
 /* Kinetic energy ½ m v² + ½ ωᵀ I ω. */

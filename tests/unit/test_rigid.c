@@ -12,6 +12,7 @@
 
 #include "check.h"
 #include "cubesim.h"
+#include "scene.h"
 #include "watertight.h"
 
 /* A box of nx×ny×nz cubes of edge h with its lower corner at `at`. */
@@ -512,4 +513,95 @@ TEST(rigid_impact_breaks_into_closed_pieces)
     for (int i = 0; i < 60; i++)
         ENSURE(cs_world_step(w) == CS_OK);
     cs_world_destroy(w);
+}
+
+/* Σ m v and Σ (I ω + m c × v) (about the origin) over every object. */
+static void world_momentum(cs_world_t *w, double p[3], double L[3], double *mass)
+{
+    cs_object_id ids[256];
+    const int no = cs_world_object_ids(w, ids, 256);
+    p[0] = p[1] = p[2] = L[0] = L[1] = L[2] = *mass = 0;
+    for (int i = 0; i < no; i++) {
+        cs_rigid_state s;
+        if (cs_object_rigid_state(w, ids[i], &s) != CS_OK)
+            continue;
+        const double *c = s.position, *v = s.velocity;
+        const double cxv[3] = {c[1] * v[2] - c[2] * v[1], c[2] * v[0] - c[0] * v[2],
+                               c[0] * v[1] - c[1] * v[0]};
+        *mass += s.mass;
+        for (int a = 0; a < 3; a++) {
+            p[a] += s.mass * v[a];
+            L[a] += s.angular_momentum[a] + s.mass * cxv[a];
+        }
+    }
+}
+
+TEST(rigid_pieces_inherit_momentum)
+{
+    cs_world_t *w = world(false, false);
+    char err[256] = "";
+    cs_object_id id = add_box(w, "spinner", 6, 2, 2, 0.05, (double[3]){0, 0, 0},
+                              cs_material_default(), false, CS_MODEL_RIGID, NULL, err);
+    ENSURE_MSG(id != CS_NULL_OBJECT, "%s", err);
+    ENSURE(cs_world_apply_force(w, id, (double[3]){0.3, 0.1, 0.1}, (double[3]){0, 30, 5}, 0, err,
+                                sizeof err) == CS_OK);
+    ENSURE(cs_world_apply_force(w, id, (double[3]){0, 0, 0}, (double[3]){3, -10, 0}, 0, err,
+                                sizeof err) == CS_OK);
+    for (int i = 0; i < 10; i++)
+        ENSURE(cs_world_step(w) == CS_OK);
+    double p0[3], L0[3], m0, p1[3], L1[3], m1;
+    world_momentum(w, p0, L0, &m0);
+    cs_rigid_state s;
+    ENSURE(cs_object_rigid_state(w, id, &s) == CS_OK);
+    ENSURE(norm3(s.angular_velocity) > 0.5);
+    /* through the middle, across the whole bar */
+    ENSURE_MSG(cs_world_fracture(w, id, s.position, (double[3]){1, 0, 0}, 1.0, err, sizeof err) ==
+                   CS_OK, "%s", err);
+    const int no = cs_world_object_ids(w, NULL, 0);
+    ENSURE_MSG(no >= 2, "%d objects after the fracture", no);
+    world_momentum(w, p1, L1, &m1);
+    ENSURE_NEAR(m1, m0, 1e-12 * m0);
+    for (int a = 0; a < 3; a++) {
+        ENSURE_NEAR(p1[a], p0[a], 1e-12 * (norm3(p0) + 1));
+        ENSURE_NEAR(L1[a], L0[a], 1e-12 * (norm3(L0) + 1));
+    }
+    cs_object_id ids[16];
+    const int n = cs_world_object_ids(w, ids, 16);
+    for (int i = 0; i < n; i++)
+        ENSURE(node_pose_error(w, ids[i]) < 1e-12);
+    /* the pieces fly on, touching each other: contacts are equal and opposite impulses */
+    for (int i = 0; i < 120; i++)
+        ENSURE(cs_world_step(w) == CS_OK);
+    world_momentum(w, p1, L1, &m1);
+    printf("    %d pieces: momentum kept to %.1e, angular momentum to %.1e after 2 s\n", n,
+           fmax(fabs(p1[0] - p0[0]), fmax(fabs(p1[1] - p0[1]), fabs(p1[2] - p0[2]))),
+           fmax(fabs(L1[0] - L0[0]), fmax(fabs(L1[1] - L0[1]), fabs(L1[2] - L0[2]))));
+    for (int a = 0; a < 3; a++) {
+        ENSURE_NEAR(p1[a], p0[a], 1e-9 * (norm3(p0) + 1));
+        ENSURE_NEAR(L1[a], L0[a], 1e-9 * (norm3(L0) + 1));
+    }
+    cs_world_destroy(w);
+}
+
+TEST(rigid_scene_materials)
+{
+    const char *ok = "{\"materials\": {\"stone\": {\"restitution\": 0.7, \"friction\": 0.9}},"
+                     " \"objects\": [{\"name\": \"s\", \"model\": \"rigid\", \"material\": \"stone\","
+                     " \"box\": {\"min\": [0, 0, 0], \"size\": [0.2, 0.1, 0.1]}}]}";
+    cs_scene sc;
+    char err[256] = "";
+    ENSURE_MSG(cs_scene_parse(ok, ".", &sc, err, sizeof err) == 0, "%s", err);
+    ENSURE(sc.n_objects == 1 && sc.objects[0].model == CS_MODEL_RIGID);
+    ENSURE_NEAR(sc.objects[0].material.restitution, 0.7, 0);
+    ENSURE_NEAR(sc.objects[0].material.friction, 0.9, 0);
+    cs_world_t *w = NULL;
+    ENSURE_MSG(cs_scene_instantiate(&sc, &w, err, sizeof err) == 0, "%s", err);
+    cs_world_destroy(w);
+    cs_scene_free(&sc);
+    const char *bad = "{\"materials\": {\"stone\": {\"restitution\": 1.5}}, \"objects\": []}";
+    ENSURE(cs_scene_parse(bad, ".", &sc, err, sizeof err) != 0);
+    ENSURE_MSG(strstr(err, "restitution"), "%s", err);
+    const char *bad2 = "{\"materials\": {\"stone\": {\"friction\": -1}}, \"objects\": []}";
+    ENSURE(cs_scene_parse(bad2, ".", &sc, err, sizeof err) != 0);
+    ENSURE_MSG(strstr(err, "friction"), "%s", err);
 }
