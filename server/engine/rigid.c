@@ -320,6 +320,7 @@ int cs_rigid_refit(cs_object *o, const double q[4], const double c0[3], const do
         rb->w[a] = w0[a];
     }
     update_inertia(rb);
+    rb->has_loads = o->rb && o->rb->has_loads;
     free(o->rb);
     o->rb = rb;
     place_nodes(o);
@@ -464,8 +465,29 @@ static void apply_inputs(const cs_world_t *w, cs_object *o)
 {
     cs_rigid *rb = o->rb;
     const double dt = w->rigid->dt;
-    for (int a = 0; a < 3; a++)
-        rb->v[a] += dt * w->def.gravity[a];
+    if (!rb->has_loads) {
+        for (int a = 0; a < 3; a++)
+            rb->v[a] += dt * w->def.gravity[a];
+    } else {
+        /* gravity and the scene's constant loads, as the nodes carry them (f_const) */
+        double F[3] = {0, 0, 0}, tau[3] = {0, 0, 0};
+        for (int i = 0; i < o->n; i++) {
+            double r[3], t[3];
+            for (int a = 0; a < 3; a++)
+                r[a] = o->x[3 * (size_t)i + a] - rb->c[a];
+            cross3(r, o->f_const + 3 * (size_t)i, t);
+            for (int a = 0; a < 3; a++) {
+                F[a] += o->f_const[3 * (size_t)i + a];
+                tau[a] += t[a];
+            }
+        }
+        double dw[3];
+        mat_vec(rb->I_inv_world, tau, dw);
+        for (int a = 0; a < 3; a++) {
+            rb->v[a] += dt * F[a] * rb->inv_mass;
+            rb->w[a] += dt * dw[a];
+        }
+    }
     for (int i = 0; i < o->n_inputs; i++) {
         const cs_input *in = &o->inputs[i];
         const int32_t *nd = o->cm.cell_nodes + 8 * (size_t)in->cell;

@@ -33,6 +33,7 @@ typedef struct cs_rigid {
     double aabb_min[3], aabb_max[3]; /* of the nodes, grown by the speculative margin */
     double impact_force;           /* Σ |contact impulse| / dt of the last step [N] */
     int n_cells, n_nodes;          /* of the object these were computed for */
+    bool has_loads;                /* scene loads: forces from the nodes' f_const, else M g */
 } cs_rigid;
 
 /* Mass properties from o's cells (each a solid box of the material's density) and the pose

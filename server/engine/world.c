@@ -475,9 +475,12 @@ int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *i
                 break;
             }
     cs_surface_skin(&o->surf, &o->cm, o->x);
-    if (o->model == CS_MODEL_RIGID && cs_rigid_init(o) != 0) {
-        rc = cs_engine_fail(err, errlen, CS_ERR_NOMEM, "out of memory");
-        goto fail;
+    if (o->model == CS_MODEL_RIGID) {
+        if (cs_rigid_init(o) != 0) {
+            rc = cs_engine_fail(err, errlen, CS_ERR_NOMEM, "out of memory");
+            goto fail;
+        }
+        o->rb->has_loads = def->n_loads > 0;
     }
     if (cs_world_append_object(w, o) != 0) {
         rc = cs_engine_fail(err, errlen, CS_ERR_NOMEM, "out of memory");

@@ -605,3 +605,29 @@ TEST(rigid_scene_materials)
     ENSURE(cs_scene_parse(bad2, ".", &sc, err, sizeof err) != 0);
     ENSURE_MSG(strstr(err, "friction"), "%s", err);
 }
+
+TEST(rigid_scene_loads_push_and_turn)
+{
+    cs_world_t *w = world(false, false);
+    char err[256] = "";
+    /* a 4×1×1 bar with a constant load of 2 N (+y) on its x = 0.4 end face: a = F/m, and a
+     * torque 0.2 m · 2 N about z through the centre */
+    const int32_t ijk[12] = {0, 0, 0, 1, 0, 0, 2, 0, 0, 3, 0, 0};
+    cs_load load = {.box = {{0.39, -1, -1}, {0.41, 1, 1}}, .force = {0, 2, 0}};
+    cs_object_def d = cs_object_def_default();
+    d.name = "bar";
+    d.model = CS_MODEL_RIGID;
+    d.cells_ijk = ijk;
+    d.n_cells = 4;
+    d.loads = &load;
+    d.n_loads = 1;
+    cs_object_id id;
+    ENSURE_MSG(cs_world_add_object(w, &d, &id, err, sizeof err) == CS_OK, "%s", err);
+    ENSURE(cs_world_step(w) == CS_OK);
+    cs_rigid_state s;
+    cs_object_rigid_state(w, id, &s);
+    const double dt = cs_world_get_def(w)->dt, m = 4, Izz = m * (0.16 + 0.01) / 12;
+    ENSURE_NEAR(s.velocity[1], 2 / m * dt, 1e-12);
+    ENSURE_NEAR(s.angular_velocity[2], 0.2 * 2 / Izz * dt, 1e-9);
+    cs_world_destroy(w);
+}
