@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # make bench: speed of the corotational implicit step against size, 1 and 2 threads, and the
-# cost of a fracture event against surface triangles (bench_fracture, at the end).
+# cost of a fracture event against surface triangles (bench_fracture), and the rigid drop demo
+# (bench_rigid, at the end).
 # Writes bench/results/blocks.csv, blocks.md (the README table) and blocks.svg (log-log plot).
 # BENCH_SIZES / BENCH_RUNS override the defaults (8,16,32,48 and 5 runs; medians are reported).
 set -euo pipefail
@@ -63,3 +64,7 @@ GP
     echo "no fracture plot: no size fractured (is the engine's fracture built?)"
   fi
 fi
+
+# Rigid bodies: the drop demo headless (real-time factor, pieces checked closed).
+echo "bench_rigid: scenes/drop.json, 2 s"
+build/bin/bench_rigid scenes/drop.json 2 | tee "$out/rigid_drop.txt"
