@@ -124,7 +124,7 @@ test: deps
 
 valgrind: all
 	valgrind --error-exitcode=1 --leak-check=full --errors-for-leak-kinds=definite --show-possibly-lost=no \
-	  $(B)/bin/cs_unit_tests --quick
+	  --suppressions=tests/stress/lcm.supp $(B)/bin/cs_unit_tests --quick
 
 run: deps all
 	bash scenes/demo.sh

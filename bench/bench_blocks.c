@@ -7,7 +7,13 @@
  * thread count: the median over runs of steps per second, CG iterations per step and the
  * cost of each stage of a step. CSV to the file given with --csv; a Markdown table on stdout.
  *
+ * --field (seed 001 §3.3 material fields): "cubes" makes the half x < 0.5 three times stiffer
+ * (each cube's 8 Gauss-point factors equal: one product with K per cube), "gradient" a
+ * stiffness rising linearly to 5× along x (every cube graded: 8 products with the per-Gauss-
+ * point matrices); "none" (default) the plain material.
+ *
  * Usage: bench_blocks [--sizes 8,16,32,48] [--runs 5] [--threads 1,2] [--csv FILE]
+ *                     [--field none|cubes|gradient]
  */
 #include <math.h>
 #include <stdio.h>
@@ -22,7 +28,9 @@ typedef struct result {
     double steps_per_s, ms_step, iters, ms_rot, ms_rhs, ms_solve, ms_post, ms_skin;
 } result;
 
-static int run_once(int n, int threads, int steps, result *r)
+typedef enum { FIELD_NONE, FIELD_CUBES, FIELD_GRADIENT } field_kind;
+
+static int run_once(int n, int threads, int steps, field_kind field, result *r)
 {
     char err[256];
     cs_world_def wd = cs_world_def_default();
@@ -54,6 +62,19 @@ static int run_once(int n, int threads, int steps, result *r)
     cs_aabb fix = {{-1, -1, -1e-6}, {2, 2, 1e-6}};
     d.fixed = &fix;
     d.n_fixed = 1;
+    cs_field_region reg = {.factors = {.young = field == FIELD_CUBES ? 3.0 : 5.0,
+                                       .which = CS_FIELD_YOUNG}};
+    if (field == FIELD_CUBES) {
+        reg.shape = CS_FIELD_BOX;
+        reg.box = (cs_aabb){{-1, -1, -1}, {0.5, 2, 2}};
+    } else {
+        reg.shape = CS_FIELD_GRADIENT;
+        reg.to[0] = 1.0;
+    }
+    if (field != FIELD_NONE) {
+        d.fields = &reg;
+        d.n_fields = 1;
+    }
     cs_object_id id;
     if (cs_world_add_object(w, &d, &id, err, sizeof err) != CS_OK) {
         fprintf(stderr, "bench_blocks: %s\n", err);
@@ -92,6 +113,7 @@ int main(int argc, char **argv)
 {
     int sizes[16] = {8, 16, 32, 48}, ns = 4, threads[8] = {1, 2}, nt = 2, runs = 5;
     const char *csv = NULL;
+    field_kind field = FIELD_NONE;
     for (int i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--sizes") && i + 1 < argc)
             ns = parse_list(argv[++i], sizes, 16);
@@ -101,9 +123,15 @@ int main(int argc, char **argv)
             runs = atoi(argv[++i]);
         else if (!strcmp(argv[i], "--csv") && i + 1 < argc)
             csv = argv[++i];
+        else if (!strcmp(argv[i], "--field") && i + 1 < argc && !strcmp(argv[i + 1], "none"))
+            field = FIELD_NONE, i++;
+        else if (!strcmp(argv[i], "--field") && i + 1 < argc && !strcmp(argv[i + 1], "cubes"))
+            field = FIELD_CUBES, i++;
+        else if (!strcmp(argv[i], "--field") && i + 1 < argc && !strcmp(argv[i + 1], "gradient"))
+            field = FIELD_GRADIENT, i++;
         else {
             fprintf(stderr, "usage: bench_blocks [--sizes 8,16,32,48] [--runs 5] "
-                            "[--threads 1,2] [--csv FILE]\n");
+                            "[--threads 1,2] [--csv FILE] [--field none|cubes|gradient]\n");
             return 2;
         }
     }
@@ -129,7 +157,7 @@ int main(int argc, char **argv)
             result rs[100];
             double v[100];
             for (int r = 0; r < runs; r++)
-                if (run_once(n, threads[ti], steps, &rs[r]) != 0)
+                if (run_once(n, threads[ti], steps, field, &rs[r]) != 0)
                     return 1;
             result m;
             double *fields[] = {&m.steps_per_s, &m.ms_step, &m.iters, &m.ms_rot,

@@ -65,6 +65,33 @@ GP
   fi
 fi
 
+# localframe (seed 001) against corotational FEM: tip error of a ν = 0 cantilever in pure
+# bending (exact answer known), static solve time, and wall seconds per simulated second of
+# central differences (at 0.9 × each model's stability limit) and implicit Euler (1/60 s).
+# Writes bench/results/localframe.csv, localframe.md and localframe.svg.
+# BENCH_LF_SIZES overrides the cubes through the thickness (default 2,3,4,6).
+lfsizes=${BENCH_LF_SIZES:-2,3,4,6}
+echo "bench_localframe: nz $lfsizes, $runs runs of the static solve"
+build/bin/bench_localframe --sizes "$lfsizes" --runs "$runs" --csv "$out/localframe.csv" \
+  2> "$out/localframe.iterations.txt" | tee "$out/localframe.md"
+cat "$out/localframe.iterations.txt"
+if command -v gnuplot >/dev/null; then
+  gnuplot <<GP
+set terminal svg size 640,420
+set output "$out/localframe.svg"
+set datafile separator ","
+set logscale xy
+set xlabel "wall seconds per simulated second (central differences)"
+set ylabel "|tip error| under pure bending (%)"
+set title "localframe vs corotational FEM, cantilever nz = $lfsizes"
+set key right top
+plot "< awk -F, 'NR>1 && \$1==\"localframe\"' $out/localframe.csv" using 7:(abs(\$4)) with linespoints title "localframe (central differences)", \
+     "< awk -F, 'NR>1 && \$1==\"corotational\"' $out/localframe.csv" using 7:(abs(\$4)) with linespoints title "corotational (central differences)", \
+     "< awk -F, 'NR>1 && \$1==\"corotational\"' $out/localframe.csv" using 8:(abs(\$4)) with linespoints title "corotational (implicit Euler, 1/60 s)"
+GP
+  echo "plot: $out/localframe.svg"
+fi
+
 # Rigid bodies: the drop demo headless (real-time factor, pieces checked closed).
 echo "bench_rigid: scenes/drop.json, 2 s"
 build/bin/bench_rigid scenes/drop.json 2 | tee "$out/rigid_drop.txt"

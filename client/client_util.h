@@ -25,6 +25,9 @@
 #define CS_CH_ACK "CUBESIM_ACK"
 #define CS_CH_FORCE "CUBESIM_FORCE"
 #define CS_CH_COMMAND "CUBESIM_COMMAND"
+#define CS_CH_PAINT "CUBESIM_PAINT"
+#define CS_CH_PRESSURE "CUBESIM_PRESSURE"
+#define CS_CH_CURVE "CUBESIM_CURVE"
 
 /* Wall clock, microseconds since 1970; monotonic seconds. */
 int64_t cs_now_utime(void);

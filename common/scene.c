@@ -48,6 +48,7 @@ struct cs_scene_object_store {
     int32_t *ijk;
     cs_aabb *fixed;
     cs_load *loads;
+    cs_field_region *fields;
 };
 
 typedef struct {
@@ -760,6 +761,116 @@ static int parse_loads(sc_ctx *c, const cJSON *obj, const char *path, cs_object_
     return rc;
 }
 
+/* One entry of "fields": {"shape": "sphere"|"box"|"gradient"|"radial", its geometry,
+ * and at least one of "young", "density", "damping" (factors on the material)}. */
+static int parse_field_entry(sc_ctx *c, const cJSON *e, const char *path, void *item)
+{
+    static const char *const shapes[] = {"sphere", "box", "gradient", "radial"};
+    /* geometry keys each shape needs; every other geometry key is refused */
+    static const char *const need[4][2] = {
+        {"centre", "radius"}, {"min", "max"}, {"from", "to"}, {"centre", "radius"}};
+    static const char *const geo_keys[] = {"centre", "radius", "min", "max", "from", "to"};
+    cs_field_region *r = item;
+    char p[SC_PATH], b[48];
+    join_key(p, path, "shape");
+    const cJSON *sh = cJSON_GetObjectItemCaseSensitive(e, "shape");
+    if (!sh)
+        return fail(c, p, "missing required field (sphere, box, gradient or radial)");
+    if (!cJSON_IsString(sh))
+        return fail(c, p, "expected a string, got %s", type_name(sh));
+    int k = -1;
+    for (int i = 0; i < 4; i++)
+        if (!strcmp(sh->valuestring, shapes[i]))
+            k = i;
+    if (k < 0)
+        return fail(c, p, "unknown shape '%s' (sphere, box, gradient, radial)",
+                    show(sh->valuestring, b));
+    r->shape = (cs_field_shape)k;
+    for (int g = 0; g < 6; g++) {
+        const bool wanted = !strcmp(geo_keys[g], need[k][0]) || !strcmp(geo_keys[g], need[k][1]);
+        const bool given = cJSON_GetObjectItemCaseSensitive(e, geo_keys[g]) != NULL;
+        if (given && !wanted) {
+            join_key(p, path, geo_keys[g]);
+            return fail(c, p, "does not apply to shape '%s' (it takes %s and %s)", shapes[k],
+                        need[k][0], need[k][1]);
+        }
+    }
+    int rc = 0;
+    switch (r->shape) {
+    case CS_FIELD_SPHERE:
+    case CS_FIELD_RADIAL:
+        rc = get_vec(c, e, path, "centre", r->centre, 3, ANY, 1) ||
+             get_number(c, e, path, "radius", &r->radius, POSITIVE, 1);
+        break;
+    case CS_FIELD_BOX:
+        rc = parse_aabb(c, e, path, &r->box);
+        break;
+    case CS_FIELD_GRADIENT:
+        rc = get_vec(c, e, path, "from", r->from, 3, ANY, 1) ||
+             get_vec(c, e, path, "to", r->to, 3, ANY, 1);
+        if (!rc && r->from[0] == r->to[0] && r->from[1] == r->to[1] && r->from[2] == r->to[2])
+            return fail(c, path, "gradient 'from' and 'to' must differ");
+        break;
+    }
+    if (rc)
+        return -1;
+    static const sc_range FACTOR = {LO_GE, 1e-6, HI_LE, 1e6};
+    static const sc_range DAMPING_FACTOR = {LO_GE, 0, HI_LE, 1e6};
+    cs_field_factors *f = &r->factors;
+    static const char *const fk[] = {"young", "density", "damping"};
+    double *fv[] = {&f->young, &f->density, &f->damping};
+    for (int i = 0; i < 3; i++) {
+        if (!cJSON_GetObjectItemCaseSensitive(e, fk[i]))
+            continue;
+        if (get_number(c, e, path, fk[i], fv[i], i == 2 ? DAMPING_FACTOR : FACTOR, 1))
+            return -1;
+        f->which |= 1u << i;
+    }
+    if (!f->which)
+        return fail(c, path, "give at least one factor: young, density or damping");
+    return 0;
+}
+
+static int parse_fields(sc_ctx *c, const cJSON *obj, const char *path, cs_object_def *d,
+                        cs_scene_object_store *st)
+{
+    static const char *const keys[] = {"shape", "centre", "radius", "min", "max", "from",
+                                       "to", "young", "density", "damping", NULL};
+    void *items = NULL;
+    int rc = parse_entries(c, obj, path, "fields", keys, sizeof *st->fields, parse_field_entry,
+                           &items, &d->n_fields);
+    st->fields = items;
+    d->fields = st->fields;
+    return rc;
+}
+
+/* "constraints": "remove" (default) or "penalty"; "penalty_stiffness" [N/m] (penalty only). */
+static int parse_constraints(sc_ctx *c, const cJSON *o, const char *path, cs_object_def *d)
+{
+    char p[SC_PATH], b[48];
+    const cJSON *it = cJSON_GetObjectItemCaseSensitive(o, "constraints");
+    if (it) {
+        join_key(p, path, "constraints");
+        if (!cJSON_IsString(it))
+            return fail(c, p, "expected a string, got %s", type_name(it));
+        if (!strcmp(it->valuestring, "remove"))
+            d->constraints = CS_CONSTRAINT_REMOVE;
+        else if (!strcmp(it->valuestring, "penalty"))
+            d->constraints = CS_CONSTRAINT_PENALTY;
+        else
+            return fail(c, p, "unknown mode '%s' (remove, penalty)", show(it->valuestring, b));
+    }
+    if (cJSON_GetObjectItemCaseSensitive(o, "penalty_stiffness")) {
+        join_key(p, path, "penalty_stiffness");
+        if (d->constraints != CS_CONSTRAINT_PENALTY)
+            return fail(c, p, "only applies with \"constraints\": \"penalty\"");
+        static const sc_range PEN = {LO_GT, 0, HI_LE, 1e15};
+        if (get_number(c, o, path, "penalty_stiffness", &d->penalty_stiffness, PEN, 1))
+            return -1;
+    }
+    return 0;
+}
+
 /* ---------------------------------------------------------------- objects */
 
 static int parse_object(sc_ctx *c, const cJSON *o, int index, const char *base_dir,
@@ -768,7 +879,8 @@ static int parse_object(sc_ctx *c, const cJSON *o, int index, const char *base_d
 {
     static const char *const keys[] = {"name",  "model", "integrator", "material", "cube_size",
                                        "fracture", "fracture_radius", "box", "mesh", "cells",
-                                       "fixed", "loads", NULL};
+                                       "fixed", "loads", "fields", "constraints",
+                                       "penalty_stiffness", NULL};
     char path[SC_PATH], p[SC_PATH], b[48];
     join_index(path, "objects", index);
     if (!cJSON_IsObject(o))
@@ -843,7 +955,9 @@ static int parse_object(sc_ctx *c, const cJSON *o, int index, const char *base_d
         get_bool(c, o, path, "fracture", &d->fracture) ||
         get_number(c, o, path, "fracture_radius", &d->fracture_radius, NONNEG, 0) ||
         parse_fixed(c, o, path, d, st) ||
-        parse_loads(c, o, path, d, st))
+        parse_loads(c, o, path, d, st) ||
+        parse_fields(c, o, path, d, st) ||
+        parse_constraints(c, o, path, d))
         return -1;
 
     static const char *const geo[] = {"box", "mesh", "cells"};
@@ -895,6 +1009,7 @@ void cs_scene_free(cs_scene *s)
             free(st->ijk);
             free(st->fixed);
             free(st->loads);
+            free(st->fields);
         }
     }
     free(s->store);

@@ -20,6 +20,9 @@
 
 #include "cubesim_ack_t.h"
 #include "cubesim_command_t.h"
+#include "cubesim_curve_t.h"
+#include "cubesim_paint_t.h"
+#include "cubesim_pressure_t.h"
 #include "cubesim_delta_t.h"
 #include "cubesim_pose_t.h"
 #include "surface_state.h"
@@ -49,7 +52,7 @@ typedef struct sent_object {
 
 struct cs_bus {
     lcm_t *lcm;
-    lcm_subscription_t *sub_force, *sub_command;
+    lcm_subscription_t *sub_force, *sub_command, *sub_paint, *sub_pressure, *sub_curve;
     cs_dlog *log;
     double max_force;
 
@@ -87,6 +90,7 @@ void cs_input_clear(cs_input *in)
 {
     free(in->object_name);
     free(in->argument);
+    free(in->points);
     memset(in, 0, sizeof *in);
 }
 
@@ -189,7 +193,16 @@ static void validate_force(cs_bus_t *b, cs_input *x)
  * -1 for a string (int32 length including '\0', then the bytes, the last one '\0'), ending
  * with 0. The message must be exactly as long as its fields.
  */
+static bool well_formed_at(const void *data, uint32_t size, const int *layout, size_t *end);
+
 static bool well_formed(const void *data, uint32_t size, const int *layout)
+{
+    size_t end = 0;
+    return well_formed_at(data, size, layout, &end) && end == size;
+}
+
+/* The walk of well_formed, leaving the end of the fields in *end (the message may go on). */
+static bool well_formed_at(const void *data, uint32_t size, const int *layout, size_t *end)
 {
     const unsigned char *p = data;
     size_t pos = 0;
@@ -209,7 +222,8 @@ static bool well_formed(const void *data, uint32_t size, const int *layout)
             return false;
         pos += len;
     }
-    return pos == size;
+    *end = pos;
+    return true;
 }
 
 /* force_t: hash, client_id, command_id, object_id, object_name, kind, point, force, target,
@@ -263,6 +277,192 @@ static void on_force(const lcm_recv_buf_t *rbuf, const char *channel, void *user
     else
         validate_force(b, x);
     cubesim_force_t_decode_cleanup(&m);
+}
+
+/* paint_t: hash, client_id, command_id, object_id, object_name, centre, radius, which, young,
+ * density, damping. pressure_t: hash, ids, object, pressure, duration. curve_t: hash, ids,
+ * object, stiffness, duration, n_points, then 24 bytes per point. */
+static const int paint_layout[] = {8, 8, 8, 4, -1, 24, 8, 1, 8, 8, 8, 0};
+static const int pressure_layout[] = {8, 8, 8, 4, -1, 8, 8, 0};
+static const int curve_head_layout[] = {8, 8, 8, 4, -1, 8, 8, 4, 0};
+
+static bool curve_well_formed(const void *data, uint32_t size)
+{
+    size_t end = 0;
+    if (!well_formed_at(data, size, curve_head_layout, &end))
+        return false;
+    const unsigned char *p = (const unsigned char *)data + end - 4;
+    const int32_t n = (int32_t)(((uint32_t)p[0] << 24) | ((uint32_t)p[1] << 16) |
+                                ((uint32_t)p[2] << 8) | (uint32_t)p[3]);
+    return n >= 0 && n <= 1 << 16 && end + 24 * (size_t)n == size;
+}
+
+/* A slot for a decoded sculpting input of `request`, or NULL after acking "queue full". */
+static cs_input *sculpt_slot(cs_bus_t *b, cs_input_kind kind, const char *request,
+                             int64_t client_id, int64_t command_id)
+{
+    cs_input *x = push_input(b);
+    if (!x) {
+        cs_input tmp;
+        memset(&tmp, 0, sizeof tmp);
+        tmp.kind = kind;
+        tmp.client_id = client_id;
+        tmp.command_id = command_id;
+        snprintf(tmp.request, sizeof tmp.request, "%s", request);
+        cs_dlog_warn(b->log, "input queue full", "input queue full: refused a %s", request);
+        cs_bus_ack(b, &tmp, false, "daemon input queue full; input dropped");
+        return NULL;
+    }
+    x->kind = kind;
+    x->client_id = client_id;
+    x->command_id = command_id;
+    snprintf(x->request, sizeof x->request, "%s", request);
+    return x;
+}
+
+/* The object of a sculpting input; false (and refused) when none is given. */
+static bool sculpt_object(cs_bus_t *b, cs_input *x, int32_t object_id, const char *name)
+{
+    char msg[96];
+    x->object_id = object_id;
+    x->object_name = dup_str(name);
+    if (!x->object_name) {
+        snprintf(x->error, sizeof x->error, "daemon out of memory");
+        return false;
+    }
+    if (object_id < 0) {
+        snprintf(msg, sizeof msg, "%s: invalid object id %d", x->request, (int)object_id);
+        refuse(b, x, "%s", msg);
+        return false;
+    }
+    if (object_id == 0 && !x->object_name[0]) {
+        snprintf(msg, sizeof msg, "%s: no object given (object_id is 0 and object_name empty)",
+                 x->request);
+        refuse(b, x, "%s", msg);
+        return false;
+    }
+    return true;
+}
+
+static void undecodable(cs_bus_t *b, const char *channel, const char *type, uint32_t size)
+{
+    char key[64];
+    snprintf(key, sizeof key, "undecodable %s", channel);
+    cs_dlog_warn(b->log, key,
+                 "ignored a message on %s that is not a cubesim.%s (%u bytes: another type, "
+                 "truncated or malformed)",
+                 channel, type, (unsigned)size);
+}
+
+static void on_paint(const lcm_recv_buf_t *rbuf, const char *channel, void *user)
+{
+    cs_bus_t *b = user;
+    cubesim_paint_t m;
+    memset(&m, 0, sizeof m);
+    int rc = -1;
+    if (well_formed(rbuf->data, rbuf->data_size, paint_layout))
+        rc = cubesim_paint_t_decode(rbuf->data, 0, (int)rbuf->data_size, &m);
+    if (rc < 0) {
+        cubesim_paint_t_decode_cleanup(&m);
+        undecodable(b, channel, "paint_t", rbuf->data_size);
+        return;
+    }
+    cs_input *x = sculpt_slot(b, CS_INPUT_PAINT, "paint", m.client_id, m.command_id);
+    if (x && sculpt_object(b, x, m.object_id, m.object_name)) {
+        char num[96];
+        memcpy(x->point, m.centre, sizeof x->point);
+        x->radius = m.radius;
+        x->factors = (cs_field_factors){.young = m.young, .density = m.density,
+                                        .damping = m.damping, .which = (uint8_t)m.which};
+        if (!finite3(m.centre))
+            refuse(b, x, "paint: centre is not finite%s", "");
+        else if (!(m.radius > 0 && isfinite(m.radius))) {
+            snprintf(num, sizeof num, "%g", m.radius);
+            refuse(b, x, "paint: radius %s m is not positive and finite", num);
+        } else if (!(m.which & 7) || (m.which & ~7)) {
+            snprintf(num, sizeof num, "%d", (int)m.which);
+            refuse(b, x, "paint: which = %s; give bits 1 (young), 2 (density), 4 (damping)",
+                   num);
+        }
+        /* factor ranges: the engine's one-line message (cs_world_paint) */
+    }
+    cubesim_paint_t_decode_cleanup(&m);
+}
+
+static void on_pressure(const lcm_recv_buf_t *rbuf, const char *channel, void *user)
+{
+    cs_bus_t *b = user;
+    cubesim_pressure_t m;
+    memset(&m, 0, sizeof m);
+    int rc = -1;
+    if (well_formed(rbuf->data, rbuf->data_size, pressure_layout))
+        rc = cubesim_pressure_t_decode(rbuf->data, 0, (int)rbuf->data_size, &m);
+    if (rc < 0) {
+        cubesim_pressure_t_decode_cleanup(&m);
+        undecodable(b, channel, "pressure_t", rbuf->data_size);
+        return;
+    }
+    cs_input *x = sculpt_slot(b, CS_INPUT_PRESSURE, "pressure", m.client_id, m.command_id);
+    if (x && sculpt_object(b, x, m.object_id, m.object_name)) {
+        char num[64];
+        x->pressure = m.pressure;
+        x->duration = m.duration;
+        if (!isfinite(m.pressure))
+            refuse(b, x, "pressure: pressure is not finite%s", "");
+        else if (!(m.duration >= 0 && isfinite(m.duration))) {
+            snprintf(num, sizeof num, "%g", m.duration);
+            refuse(b, x, "pressure: duration %s s is negative or not finite", num);
+        }
+    }
+    cubesim_pressure_t_decode_cleanup(&m);
+}
+
+static void on_curve(const lcm_recv_buf_t *rbuf, const char *channel, void *user)
+{
+    cs_bus_t *b = user;
+    cubesim_curve_t m;
+    memset(&m, 0, sizeof m);
+    int rc = -1;
+    if (curve_well_formed(rbuf->data, rbuf->data_size))
+        rc = cubesim_curve_t_decode(rbuf->data, 0, (int)rbuf->data_size, &m);
+    if (rc < 0) {
+        cubesim_curve_t_decode_cleanup(&m);
+        undecodable(b, channel, "curve_t", rbuf->data_size);
+        return;
+    }
+    cs_input *x = sculpt_slot(b, CS_INPUT_CURVE, "curve", m.client_id, m.command_id);
+    if (x && sculpt_object(b, x, m.object_id, m.object_name)) {
+        char num[64];
+        x->stiffness = m.stiffness;
+        x->duration = m.duration;
+        bool finite = true;
+        if (m.n_points >= 2 && m.n_points <= CS_MAX_CURVE_POINTS) {
+            x->points = malloc(sizeof(double) * 3 * (size_t)m.n_points);
+            if (!x->points) {
+                snprintf(x->error, sizeof x->error, "daemon out of memory");
+                cubesim_curve_t_decode_cleanup(&m);
+                return;
+            }
+            x->n_points = m.n_points;
+            for (int i = 0; i < m.n_points; i++) {
+                memcpy(x->points + 3 * i, m.points[i], 3 * sizeof(double));
+                finite = finite && finite3(m.points[i]);
+            }
+        }
+        if (m.n_points < 2 || m.n_points > CS_MAX_CURVE_POINTS) {
+            snprintf(num, sizeof num, "%d", (int)m.n_points);
+            refuse(b, x, "curve: needs 2 to 64 points, got %s", num);
+        } else if (!finite)
+            refuse(b, x, "curve: a point is not finite%s", "");
+        else if (!(m.stiffness > 0 && isfinite(m.stiffness))) {
+            snprintf(num, sizeof num, "%g", m.stiffness);
+            refuse(b, x, "curve: stiffness %s N/m is not positive and finite", num);
+        } else if (!(m.duration > 0 && isfinite(m.duration))) {
+            snprintf(num, sizeof num, "%g", m.duration);
+            refuse(b, x, "curve: duration %s s is not positive and finite", num);
+        }
+    }
+    cubesim_curve_t_decode_cleanup(&m);
 }
 
 static cs_command command_from_name(const char *s)
@@ -440,13 +640,21 @@ int cs_bus_create(const char *url, cs_dlog *log, cs_bus_t **out, char *err, size
     }
     b->sub_force = lcm_subscribe(b->lcm, CS_CH_FORCE, on_force, b);
     b->sub_command = lcm_subscribe(b->lcm, CS_CH_COMMAND, on_command, b);
-    if (!b->sub_force || !b->sub_command) {
-        snprintf(err, errlen, "cannot subscribe to %s / %s", CS_CH_FORCE, CS_CH_COMMAND);
+    b->sub_paint = lcm_subscribe(b->lcm, CS_CH_PAINT, on_paint, b);
+    b->sub_pressure = lcm_subscribe(b->lcm, CS_CH_PRESSURE, on_pressure, b);
+    b->sub_curve = lcm_subscribe(b->lcm, CS_CH_CURVE, on_curve, b);
+    if (!b->sub_force || !b->sub_command || !b->sub_paint || !b->sub_pressure ||
+        !b->sub_curve) {
+        snprintf(err, errlen, "cannot subscribe to the input channels (%s, %s, %s, %s, %s)",
+                 CS_CH_FORCE, CS_CH_COMMAND, CS_CH_PAINT, CS_CH_PRESSURE, CS_CH_CURVE);
         cs_bus_destroy(b);
         return -1;
     }
     lcm_subscription_set_queue_capacity(b->sub_force, CS_BUS_QUEUE_CAPACITY);
     lcm_subscription_set_queue_capacity(b->sub_command, CS_BUS_QUEUE_CAPACITY);
+    lcm_subscription_set_queue_capacity(b->sub_paint, CS_BUS_QUEUE_CAPACITY);
+    lcm_subscription_set_queue_capacity(b->sub_pressure, CS_BUS_QUEUE_CAPACITY);
+    lcm_subscription_set_queue_capacity(b->sub_curve, CS_BUS_QUEUE_CAPACITY);
     b->credit = CS_BUS_BURST;
     b->credit_time = cs_dlog_now();
     *out = b;
@@ -480,6 +688,12 @@ void cs_bus_destroy(cs_bus_t *b)
             lcm_unsubscribe(b->lcm, b->sub_force);
         if (b->sub_command)
             lcm_unsubscribe(b->lcm, b->sub_command);
+        if (b->sub_paint)
+            lcm_unsubscribe(b->lcm, b->sub_paint);
+        if (b->sub_pressure)
+            lcm_unsubscribe(b->lcm, b->sub_pressure);
+        if (b->sub_curve)
+            lcm_unsubscribe(b->lcm, b->sub_curve);
         lcm_destroy(b->lcm);
     }
     if (b->in) {

@@ -2,7 +2,7 @@
  * bus.h — the daemon's LCM adapter: inputs in (forces, commands), state out (snapshots,
  * deltas, status, acks). DESIGN.md "Bus"; the engine never sees LCM.
  *
- * Owns: the lcm_t, its two subscriptions, the queue of decoded inputs, the outbox of encoded
+ * Owns: the lcm_t, its subscriptions (force, command, paint, pressure, curve), the queue of decoded inputs, the outbox of encoded
  * snapshot/delta messages waiting for their paced send, and per object a float32 copy of the
  * surface as last sent (what every in-sync client holds).
  *
@@ -41,6 +41,9 @@
 #define CS_CH_ACK "CUBESIM_ACK"
 #define CS_CH_FORCE "CUBESIM_FORCE"
 #define CS_CH_COMMAND "CUBESIM_COMMAND"
+#define CS_CH_PAINT "CUBESIM_PAINT"
+#define CS_CH_PRESSURE "CUBESIM_PRESSURE"
+#define CS_CH_CURVE "CUBESIM_CURVE"
 
 #define CS_BUS_CHUNK_BYTES 60000       /* payload budget of one snapshot/delta message */
 #define CS_BUS_RATE 48.0e6             /* outbox pacing [bytes/s] */
@@ -49,7 +52,13 @@
 #define CS_BUS_INPUT_MAX 4096          /* queued inputs; more are refused with an error ack */
 #define CS_BUS_QUEUE_CAPACITY 1000     /* LCM subscription queue (LCM's default is 30) */
 
-typedef enum cs_input_kind { CS_INPUT_FORCE = 0, CS_INPUT_COMMAND = 1 } cs_input_kind;
+typedef enum cs_input_kind {
+    CS_INPUT_FORCE = 0,
+    CS_INPUT_COMMAND = 1,
+    CS_INPUT_PAINT = 2,    /* paint_t: point (centre), radius, factors */
+    CS_INPUT_PRESSURE = 3, /* pressure_t: pressure, duration */
+    CS_INPUT_CURVE = 4     /* curve_t: points, stiffness, duration */
+} cs_input_kind;
 
 typedef enum cs_command {
     CS_CMD_PAUSE,
@@ -62,7 +71,7 @@ typedef enum cs_command {
     CS_CMD_UNKNOWN
 } cs_command;
 
-/* One decoded input. Owns object_name and argument (freed by cs_input_clear). */
+/* One decoded input. Owns object_name, argument and points (freed by cs_input_clear). */
 typedef struct cs_input {
     cs_input_kind kind;
     int64_t client_id, command_id;
@@ -80,7 +89,13 @@ typedef struct cs_input {
     /* CS_CMD_FRACTURE, parsed from argument "OBJECT X Y Z NX NY NZ [RADIUS]" on decode: the
      * object is object_id (> 0, from "#ID") or object_name, the point is `point` [m]. */
     double normal[3];   /* splitting plane normal, finite and non-zero */
-    double radius;      /* [m], >= 0; 0: the object's fracture_radius */
+    double radius;      /* [m], >= 0; 0: the object's fracture_radius (PAINT: > 0) */
+    /* CS_INPUT_PAINT (point is the centre), CS_INPUT_PRESSURE, CS_INPUT_CURVE (object as for
+     * forces; stiffness and duration as for a drag) */
+    cs_field_factors factors;
+    double pressure;
+    double *points;     /* 3 per point */
+    int n_points;
 } cs_input;
 
 void cs_input_clear(cs_input *in);

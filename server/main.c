@@ -56,6 +56,7 @@ typedef struct cs_daemon {
     int32_t epoch;
     bool diverged_logged;
     bool fractured;         /* the world's topology changed since it was built from the scene */
+    bool painted;           /* material fields were painted since it was built from the scene */
 
     double next_step;       /* monotonic s (realtime) */
     double next_publish;    /* simulated s */
@@ -392,6 +393,42 @@ static void apply_force(cs_daemon *d, const cs_input *in, char *msg, size_t msgl
         snprintf(msg, msglen, "force: %s", err[0] ? err : cs_status_str(rc));
 }
 
+/* Paint, pressure and curve inputs (seed 001 §4.1): the object as for forces, the engine's
+ * one-line refusal as the ack's message. */
+static void apply_sculpt(cs_daemon *d, const cs_input *in, char *msg, size_t msglen)
+{
+    cs_object_id id = in->object_id > 0 ? (cs_object_id)in->object_id
+                                        : cs_world_find_object(d->world, in->object_name);
+    cs_object_info info;
+    if (id == CS_NULL_OBJECT) {
+        snprintf(msg, msglen, "%s: no object named '%s'", in->request, in->object_name);
+        return;
+    }
+    if (cs_object_get_info(d->world, id, &info) != CS_OK) {
+        snprintf(msg, msglen, "%s: unknown object id %u", in->request, (unsigned)id);
+        return;
+    }
+    char err[256] = "";
+    int rc = CS_ERR_INVALID, touched = 0;
+    if (in->kind == CS_INPUT_PAINT)
+        rc = cs_world_paint(d->world, id, in->point, in->radius, &in->factors, &touched, err,
+                            sizeof err);
+    else if (in->kind == CS_INPUT_PRESSURE)
+        rc = cs_world_pressure(d->world, id, in->pressure, in->duration, err, sizeof err);
+    else if (in->kind == CS_INPUT_CURVE)
+        rc = cs_world_drag_curve(d->world, id, in->points, in->n_points, in->stiffness,
+                                 in->duration, err, sizeof err);
+    if (rc != CS_OK) {
+        snprintf(msg, msglen, "%s: %s", in->request, err[0] ? err : cs_status_str(rc));
+        return;
+    }
+    if (in->kind == CS_INPUT_PAINT && touched > 0)
+        d->painted = true;
+    if (in->kind == CS_INPUT_PAINT)
+        cs_dlog_info(&d->log, "paint of object %u '%s': %d Gauss points", (unsigned)id,
+                     info.name, touched);
+}
+
 static void apply_command(cs_daemon *d, const cs_input *in, double now, char *msg, size_t msglen)
 {
     switch (in->command) {
@@ -413,9 +450,10 @@ static void apply_command(cs_daemon *d, const cs_input *in, double now, char *ms
         cs_dlog_info(&d->log, "stepping %d steps", (int)in->count);
         break;
     case CS_CMD_RESET:
-        if (d->fractured) {
-            /* Pieces cannot be put back together: rebuild the world from the scene as it was
-             * loaded (the same objects, ids and rest shapes a fresh start would have). */
+        if (d->fractured || d->painted) {
+            /* Pieces cannot be put back together, and painting changed the material: rebuild
+             * the world from the scene as it was loaded (the same objects, ids, rest shapes
+             * and design fields a fresh start would have). */
             cs_world_t *world = NULL;
             char err[400] = "";
             if (cs_scene_instantiate(&d->scene, &world, err, sizeof err) != 0) {
@@ -425,6 +463,7 @@ static void apply_command(cs_daemon *d, const cs_input *in, double now, char *ms
             cs_world_destroy(d->world);
             d->world = world;
             d->fractured = false;
+            d->painted = false;
         } else {
             cs_world_reset(d->world);
         }
@@ -455,6 +494,7 @@ static void apply_command(cs_daemon *d, const cs_input *in, double now, char *ms
         d->scene = scene;
         d->world = world;
         d->fractured = false;
+        d->painted = false;
         d->epoch++;
         d->step_budget = 0;
         new_epoch(d, now);
@@ -505,16 +545,18 @@ static void apply_inputs(cs_daemon *d, double now)
         } else {
             if (in.kind == CS_INPUT_FORCE)
                 apply_force(d, &in, msg, sizeof msg);
-            else
+            else if (in.kind == CS_INPUT_COMMAND)
                 apply_command(d, &in, now, msg, sizeof msg);
+            else
+                apply_sculpt(d, &in, msg, sizeof msg);
             char key[48];
             snprintf(key, sizeof key, "refused input, client %lld", (long long)in.client_id);
             if (msg[0])
                 cs_dlog_warn(&d->log, key,
                              "refused %s from client %lld (command %lld): %s", in.request,
                              (long long)in.client_id, (long long)in.command_id, msg);
-            else if (in.kind == CS_INPUT_FORCE)
-                cs_dlog_info(&d->log, "force from client %lld (command %lld) applied",
+            else if (in.kind != CS_INPUT_COMMAND)
+                cs_dlog_info(&d->log, "%s from client %lld (command %lld) applied", in.request,
                              (long long)in.client_id, (long long)in.command_id);
         }
         sync_context(d);

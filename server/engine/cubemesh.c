@@ -112,8 +112,9 @@ void cs_cubemesh_free(cs_cubemesh *cm)
     free(cm->cell_ijk);
     free(cm->cell_nodes);
     free(cm->node_rest);
+    free(cm->spline_nodes);
     cs_ijk_hash_free(&cm->cells);
-    cm->cell_ijk = cm->cell_nodes = NULL;
+    cm->cell_ijk = cm->cell_nodes = cm->spline_nodes = NULL;
     cm->node_rest = NULL;
     cm->n_cells = cm->n_nodes = 0;
 }

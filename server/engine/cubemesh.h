@@ -46,6 +46,11 @@ typedef struct cs_cubemesh {
     int n_nodes;
     double *node_rest;    /* 3 per node */
     cs_ijk_hash cells;    /* (i,j,k) -> cell index */
+    int32_t *spline_nodes; /* NULL, or 64 per cell: the control nodes of the tricubic B-spline
+                              map of cells whose full 4×4×4 node neighbourhood exists (lattice
+                              order ix + 4·iy + 16·iz from the cell's lattice point − 1; entry 0
+                              is -1 on other cells). Built by the localframe model
+                              (cs_lf_classify); skinning follows it (surface.c). */
 } cs_cubemesh;
 
 /*

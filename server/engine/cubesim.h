@@ -52,7 +52,7 @@ typedef enum cs_model {
     CS_MODEL_LINEAR = 0,       /* small-strain hexahedral FEM (seed 000 App. A) */
     CS_MODEL_COROTATIONAL = 1, /* the same with per-element rotation (seed 000 §2.2) */
     CS_MODEL_MSS = 2,          /* hexahedral mass-spring element (seed 004) — not yet built */
-    CS_MODEL_LOCALFRAME = 3,   /* local-frame B-spline model (seed 001) — not yet built */
+    CS_MODEL_LOCALFRAME = 3,   /* local-frame B-spline model (seed 001 §3.2–3.4) */
     CS_MODEL_RIGID = 4         /* rigid cube sets (seed 000 §2.4): rigid.c */
 } cs_model;
 
@@ -66,7 +66,8 @@ typedef enum cs_integrator {
     CS_INTEGRATOR_IMPLICIT_EULER = 1,    /* seed 000: (M + dt C + dt² K) v1 = M v + dt f, CG */
     CS_INTEGRATOR_SYMPLECTIC_EULER = 2,  /* explicit (seed 004) — not yet built */
     CS_INTEGRATOR_VERLET = 3,            /* explicit velocity Verlet (seed 004) — not yet built */
-    CS_INTEGRATOR_CENTRAL_DIFFERENCE = 4 /* seed 001 Eq. (20), solved by CG — not yet built */
+    CS_INTEGRATOR_CENTRAL_DIFFERENCE = 4 /* seed 001 Eq. (20), solved by CG; conditionally
+                                            stable: dt above the limit is refused */
 } cs_integrator;
 
 /* "default", "implicit_euler", "symplectic_euler", "verlet", "central_difference". */
@@ -95,6 +96,43 @@ typedef struct cs_load {
     cs_aabb box;
     double force[3]; /* [N] */
 } cs_load;
+
+/* ---------------------------------------------------------------- material fields (seed 001 §3.3) */
+
+/* Which factors a cs_field_factors sets (bits). */
+#define CS_FIELD_YOUNG 1u
+#define CS_FIELD_DENSITY 2u
+#define CS_FIELD_DAMPING 4u
+
+/* Factors on the object's material: young and density in [1e-6, 1e6], damping (on both
+ * Rayleigh coefficients) in [0, 1e6]; only those whose bit is in `which` apply. */
+typedef struct cs_field_factors {
+    double young, density, damping;
+    unsigned which; /* CS_FIELD_* bits, at least one */
+} cs_field_factors;
+
+typedef enum cs_field_shape {
+    CS_FIELD_SPHERE = 0,   /* factor f inside the ball (centre, radius), 1 outside */
+    CS_FIELD_BOX = 1,      /* factor f inside box, 1 outside */
+    CS_FIELD_GRADIENT = 2, /* 1 at `from`, f at `to`, linear along from→to, constant beyond */
+    CS_FIELD_RADIAL = 3    /* 1 + (f − 1)·(1 − (r/radius)²)² within radius of centre, 1 beyond */
+} cs_field_shape;
+
+/* A design region of an object's material fields, evaluated at every Gauss point's rest
+ * position; regions multiply the fields in order (start: all 1). */
+typedef struct cs_field_region {
+    cs_field_shape shape;
+    double centre[3], radius; /* SPHERE, RADIAL; radius > 0 */
+    cs_aabb box;              /* BOX */
+    double from[3], to[3];    /* GRADIENT; distinct */
+    cs_field_factors factors;
+} cs_field_region;
+
+/* How held ("fixed") nodes are held (seed 001 §4.2). */
+typedef enum cs_constraint_mode {
+    CS_CONSTRAINT_REMOVE = 0, /* their degrees of freedom are removed from the solve */
+    CS_CONSTRAINT_PENALTY = 1 /* a spring per node pulls each to its rest position */
+} cs_constraint_mode;
 
 typedef enum cs_geometry_kind {
     CS_GEOMETRY_MESH = 0,  /* a closed triangle surface, voxelized (seed 000 §2.1) */
@@ -127,6 +165,11 @@ typedef struct cs_object_def {
     int n_fixed;
     const cs_load *loads;     /* constant loads. Borrowed. */
     int n_loads;
+    const cs_field_region *fields; /* material design regions, applied in order. Borrowed. */
+    int n_fields;
+    cs_constraint_mode constraints;/* default CS_CONSTRAINT_REMOVE */
+    double penalty_stiffness; /* [N/m] per held node, >= 0 (PENALTY only); 0: automatic,
+                                 1e4·E·h (a held node then yields |reaction|/(1e4·E·h)) */
 } cs_object_def;
 
 cs_object_def cs_object_def_default(void);
@@ -180,7 +223,40 @@ int cs_world_apply_force(cs_world_t *w, cs_object_id id, const double point[3],
 int cs_world_drag(cs_world_t *w, cs_object_id id, const double grab[3], const double target[3],
                   double stiffness, double seconds, char *err, size_t errlen);
 
-/* Advance one dt: inputs, rotations, implicit Euler solve, ground, skinning, sleep. */
+/*
+ * A drag along a curve (seed 001 §4.1): the material point nearest to points[0] is pulled by a
+ * spring of `stiffness` [N/m] towards a target that moves along the polyline points (n of
+ * them, 3 doubles each, 2 <= n <= CS_MAX_CURVE_POINTS) at constant speed, reaching its end
+ * after `seconds` (> 0) of simulated time; then the input ends. Refused if anything is not
+ * finite, the curve has zero length, or stiffness × (largest distance from the grabbed point
+ * to the curve) exceeds max_force.
+ */
+#define CS_MAX_CURVE_POINTS 64
+int cs_world_drag_curve(cs_world_t *w, cs_object_id id, const double *points, int n,
+                        double stiffness, double seconds, char *err, size_t errlen);
+/*
+ * Inflate (pressure > 0) or deflate (< 0): a normal traction of `pressure` [Pa] on every
+ * triangle of the object's surface, outward positive, following the current shape, for
+ * `seconds` (0: one step). Refused if not finite or |pressure| × surface area > max_force.
+ */
+int cs_world_pressure(cs_world_t *w, cs_object_id id, double pressure, double seconds,
+                      char *err, size_t errlen);
+/*
+ * Paint the material fields: every Gauss point whose current position lies within `radius`
+ * (> 0) [m] of `centre` gets the factors in f (those in f->which; set, not multiplied).
+ * Masses and the gravity load follow the density at once (velocities are kept). Returns CS_OK with *touched (if
+ * non-NULL) the number of Gauss points painted (0 is not an error), or an error naming the
+ * bad argument.
+ */
+int cs_world_paint(cs_world_t *w, cs_object_id id, const double centre[3], double radius,
+                   const cs_field_factors *f, int *touched, char *err, size_t errlen);
+/* The fields of an object: 8 factors per cell each (Gauss point order as CS_CORNER), n cells.
+ * Valid until the next mutating call. */
+int cs_object_fields(const cs_world_t *w, cs_object_id id, const double **young,
+                     const double **density, const double **damping, int *n);
+
+/* Advance one dt: inputs, each object's integrator (implicit Euler or central differences),
+ * ground, skinning, sleep. */
 int cs_world_step(cs_world_t *w);
 /*
  * Static equilibrium under gravity, loads and held forces, from the current state. For
@@ -188,7 +264,8 @@ int cs_world_step(cs_world_t *w);
  * Newton iterations with the corotated tangent). Velocities are zeroed.
  */
 int cs_world_solve_static(cs_world_t *w);
-/* Every object back to its rest shape, at rest; time and inputs cleared. */
+/* Every object back to its rest shape, at rest; time and inputs cleared. Painted material
+ * fields are kept (they are the material, not the state). */
 void cs_world_reset(cs_world_t *w);
 
 double cs_world_time(const cs_world_t *w);

@@ -13,6 +13,11 @@
  *                 FEM the warped R K Rᵀ of the last update)
  *   diag_blocks   the 3×3 diagonal blocks of that K, 9 per node (preconditioner)
  *   tangent       the Newton operator of static solves; models without a better one use K
+ *   apply_M       y += c·M p with the model's mass matrix: the lumped o->m for FEM, the
+ *                 consistent (B-spline) mass for localframe (central differences use it)
+ *   mass_diag     its diagonal, one per node (preconditioner)
+ *   mass_rows     its row sums (= ∫ρN_a, the consistent nodal share of gravity), or NULL
+ *                 when the mass is o->m itself
  */
 #ifndef CS_ELASTIC_H
 #define CS_ELASTIC_H
@@ -30,6 +35,10 @@ void cs_elastic_force(cs_object *o, const double *x, double *f, double *energy);
 double cs_elastic_energy(cs_object *o, const double *x);
 void cs_elastic_apply_K(cs_object *o, const double *p, double *y);
 void cs_elastic_diag_blocks(cs_object *o, double *blocks);
+
+void cs_elastic_apply_M(cs_object *o, const double *p, double *y, double coef);
+const double *cs_elastic_mass_diag(const cs_object *o);
+const double *cs_elastic_mass_rows(const cs_object *o);
 
 /* Static solves: returns 0 when a tangent better than K is ready for apply_tangent. */
 int cs_elastic_prepare_tangent(cs_object *o, const double *x);

@@ -21,14 +21,14 @@ static const double SGN[8][3] = {
     {-1, -1, 1},  {1, -1, 1},  {1, 1, 1},  {-1, 1, 1},
 };
 
-void cs_cube_stiffness(double young, double poisson, double h, double K[24 * 24])
+/* K += the Gauss point gp term of the cube's stiffness. */
+static void gauss_term(double young, double poisson, double h, int gp, double K[24 * 24])
 {
     const double lambda = young * poisson / ((1 + poisson) * (1 - 2 * poisson));
     const double mu = young / (2 * (1 + poisson));
     const double g = 1.0 / sqrt(3.0);
     const double detj = h * h * h / 8.0;
-    memset(K, 0, sizeof(double) * 576);
-    for (int gp = 0; gp < 8; gp++) {
+    {
         const double xi[3] = {SGN[gp][0] * g, SGN[gp][1] * g, SGN[gp][2] * g};
         double grad[8][3];
         for (int k = 0; k < 8; k++) {
@@ -52,6 +52,19 @@ void cs_cube_stiffness(double young, double poisson, double h, double K[24 * 24]
                     }
             }
     }
+}
+
+void cs_cube_stiffness(double young, double poisson, double h, double K[24 * 24])
+{
+    memset(K, 0, sizeof(double) * 576);
+    for (int gp = 0; gp < 8; gp++)
+        gauss_term(young, poisson, h, gp, K);
+}
+
+void cs_cube_stiffness_gauss(double young, double poisson, double h, int g, double K[24 * 24])
+{
+    memset(K, 0, sizeof(double) * 576);
+    gauss_term(young, poisson, h, g, K);
 }
 
 void cs_quat_to_mat(const double q[4], double R[9])
@@ -156,10 +169,26 @@ int cs_fem_init(cs_fem *fem, const cs_cubemesh *cm, double young, double poisson
      * barrier for a scheduler timeslice): small objects run on one thread. */
     fem->threads = threads > 1 && cm->n_cells >= CS_FEM_PARALLEL_CELLS ? threads : 1;
     cs_cube_stiffness(young, poisson, cm->h, fem->K);
+    fem->lambda = young * poisson / ((1 + poisson) * (1 - 2 * poisson));
+    fem->mu = young / (2 * (1 + poisson));
+    fem->detj = cm->h * cm->h * cm->h / 8.0;
+    for (int g = 0; g < 8; g++)
+        for (int k = 0; k < 8; k++) {
+            double fa[3];
+            for (int a = 0; a < 3; a++)
+                fa[a] = 1 + SGN[k][a] * SGN[g][a] / sqrt(3.0);
+            fem->gq[g][k][0] = SGN[k][0] * fa[1] * fa[2] / 8.0 * (2.0 / cm->h);
+            fem->gq[g][k][1] = SGN[k][1] * fa[0] * fa[2] / 8.0 * (2.0 / cm->h);
+            fem->gq[g][k][2] = SGN[k][2] * fa[0] * fa[1] / 8.0 * (2.0 / cm->h);
+        }
+    fem->Kg = malloc(8 * 576 * sizeof *fem->Kg);
+    if (fem->Kg)
+        for (int g = 0; g < 8; g++)
+            cs_cube_stiffness_gauss(young, poisson, cm->h, g, fem->Kg + 576 * g);
     fem->R = malloc((size_t)cm->n_cells * 9 * sizeof *fem->R);
     fem->q = malloc((size_t)cm->n_cells * 4 * sizeof *fem->q);
     fem->fe = malloc((size_t)cm->n_cells * 24 * sizeof *fem->fe);
-    if (!fem->R || !fem->q || !fem->fe || cs_fem_relink(fem, cm) != 0) {
+    if (!fem->Kg || !fem->R || !fem->q || !fem->fe || cs_fem_relink(fem, cm) != 0) {
         cs_fem_free(fem);
         return -1;
     }
@@ -175,6 +204,7 @@ void cs_fem_free(cs_fem *fem)
     free(fem->adj_start);
     free(fem->adj);
     free(fem->tg);
+    free(fem->Kg);
     memset(fem, 0, sizeof *fem);
 }
 
@@ -233,6 +263,54 @@ kmul(const double *restrict K, const double *restrict x, double *restrict y)
         y[i] = acc[i];
 }
 
+static void graded_kmul(const cs_fem *fem, const double *f, const double *restrict x,
+                        double *restrict y);
+
+/* y = K_e x for cell c with the Gauss-point factors kf (8 per cell; NULL: all 1). */
+static void cell_kmul(const cs_fem *fem, const double *kf, int c, const double *restrict x,
+                      double *restrict y)
+{
+    if (!kf) {
+        kmul(fem->K, x, y);
+        return;
+    }
+    const double *f = kf + 8 * (size_t)c;
+    if (f[0] == f[1] && f[0] == f[2] && f[0] == f[3] && f[0] == f[4] && f[0] == f[5] &&
+        f[0] == f[6] && f[0] == f[7]) {
+        kmul(fem->K, x, y);
+        if (f[0] != 1.0)
+            for (int i = 0; i < 24; i++)
+                y[i] *= f[0];
+        return;
+    }
+    graded_kmul(fem, f, x, y);
+}
+
+/* A graded cell: y_k = Σ_g f_g·detJ·σ_g ∇N_k(ξ_g), σ_g = λ tr(H) I + μ (H + Hᵀ),
+ * H = Σ_k x_k ⊗ ∇N_k(ξ_g): the same sum as Σ_g f_g K_g x, without 24×24 products. */
+__attribute__((target_clones("arch=x86-64-v3", "default"))) static void
+graded_kmul(const cs_fem *fem, const double *f, const double *restrict x, double *restrict y)
+{
+    for (int i = 0; i < 24; i++)
+        y[i] = 0;
+    for (int g = 0; g < 8; g++) {
+        const double(*G)[3] = fem->gq[g];
+        double H[9] = {0};
+        for (int k = 0; k < 8; k++)
+            for (int i = 0; i < 3; i++)
+                for (int j = 0; j < 3; j++)
+                    H[3 * i + j] += x[3 * k + i] * G[k][j];
+        const double s = f[g] * fem->detj, ltr = fem->lambda * (H[0] + H[4] + H[8]);
+        double S[9];
+        for (int i = 0; i < 3; i++)
+            for (int j = 0; j < 3; j++)
+                S[3 * i + j] = s * ((i == j ? ltr : 0.0) + fem->mu * (H[3 * i + j] + H[3 * j + i]));
+        for (int k = 0; k < 8; k++)
+            for (int i = 0; i < 3; i++)
+                y[3 * k + i] += S[3 * i] * G[k][0] + S[3 * i + 1] * G[k][1] + S[3 * i + 2] * G[k][2];
+    }
+}
+
 double cs_fem_energy(const cs_fem *fem, const double *x)
 {
     double e_sum = 0;
@@ -255,7 +333,7 @@ double cs_fem_energy(const cs_fem *fem, const double *x)
                 u[3 * k + i] = R[i] * d[0] + R[3 + i] * d[1] + R[6 + i] * d[2] -
                                fem->h * CS_CORNER[k][i];
         }
-        kmul(fem->K, u, ku);
+        cell_kmul(fem, fem->kf, c, u, ku);
         for (int i = 0; i < 24; i++)
             e += u[i] * ku[i];
         e_sum += 0.5 * e;
@@ -298,7 +376,7 @@ void cs_fem_elastic_force(cs_fem *fem, const double *x, double *f, double *energ
                 u[3 * k + i] = R[i] * d[0] + R[3 + i] * d[1] + R[6 + i] * d[2] -
                                h * CS_CORNER[k][i];
         }
-        kmul(fem->K, u, ku);
+        cell_kmul(fem, fem->kf, c, u, ku);
         double *out = fem->fe + 24 * c;
         double e = 0;
         for (int k = 0; k < 8; k++) {
@@ -316,6 +394,11 @@ void cs_fem_elastic_force(cs_fem *fem, const double *x, double *f, double *energ
 
 void cs_fem_apply_K(cs_fem *fem, const double *p, double *y)
 {
+    cs_fem_apply_Kw(fem, fem->kf, p, y);
+}
+
+void cs_fem_apply_Kw(cs_fem *fem, const double *kf, const double *p, double *y)
+{
 #pragma omp parallel for num_threads(fem->threads) schedule(static)
     for (int c = 0; c < fem->n_cells; c++) {
         const int32_t *nd = fem->cell_nodes + 8 * c;
@@ -326,7 +409,7 @@ void cs_fem_apply_K(cs_fem *fem, const double *p, double *y)
             for (int i = 0; i < 3; i++)
                 u[3 * k + i] = R[i] * d[0] + R[3 + i] * d[1] + R[6 + i] * d[2];
         }
-        kmul(fem->K, u, ku);
+        cell_kmul(fem, kf, c, u, ku);
         double *out = fem->fe + 24 * c;
         for (int k = 0; k < 8; k++) {
             const double *l = ku + 3 * k;
@@ -339,16 +422,34 @@ void cs_fem_apply_K(cs_fem *fem, const double *p, double *y)
 
 void cs_fem_diag_blocks(cs_fem *fem, double *blocks)
 {
+    cs_fem_diag_blocks_w(fem, fem->kf, blocks);
+}
+
+void cs_fem_diag_blocks_w(cs_fem *fem, const double *kf, double *blocks)
+{
     memset(blocks, 0, sizeof(double) * 9 * (size_t)fem->n_nodes);
     /* Serial: called once per step, 8·n_cells small products. */
     for (int c = 0; c < fem->n_cells; c++) {
         const int32_t *nd = fem->cell_nodes + 8 * c;
         const double *R = fem->R + 9 * c;
+        bool uniform = true;
+        for (int g = 1; kf && g < 8; g++)
+            uniform = uniform && kf[8 * (size_t)c + g] == kf[8 * (size_t)c];
         for (int k = 0; k < 8; k++) {
             double Kk[9], T[9];
+            const int at = (3 * k) * 24 + 3 * k;
             for (int i = 0; i < 3; i++)
-                for (int j = 0; j < 3; j++)
-                    Kk[3 * i + j] = fem->K[(3 * k + i) * 24 + 3 * k + j];
+                for (int j = 0; j < 3; j++) {
+                    const int ij = at + 24 * i + j;
+                    if (!kf || uniform) {
+                        Kk[3 * i + j] = kf ? kf[8 * (size_t)c] * fem->K[ij] : fem->K[ij];
+                        continue;
+                    }
+                    double s = 0;
+                    for (int g = 0; g < 8; g++)
+                        s += kf[8 * (size_t)c + g] * fem->Kg[576 * g + ij];
+                    Kk[3 * i + j] = s;
+                }
             /* T = R Kk, then blocks += T Rᵀ */
             for (int i = 0; i < 3; i++)
                 for (int j = 0; j < 3; j++)
@@ -395,7 +496,7 @@ int cs_fem_prepare_tangent(cs_fem *fem, const double *x)
                                h * CS_CORNER[k][i];
             }
         }
-        kmul(fem->K, u, ku);
+        cell_kmul(fem, fem->kf, c, u, ku);
         /* S = Rᵀ F, then A = tr(S)·I − S (symmetrized), G = A⁻¹ */
         for (int i = 0; i < 3; i++)
             for (int j = 0; j < 3; j++)
@@ -444,7 +545,7 @@ void cs_fem_apply_tangent(cs_fem *fem, const double *p, double *y)
             for (int i = 0; i < 3; i++)
                 b[i] += t[i];
         }
-        kmul(fem->K, q, kq);
+        cell_kmul(fem, fem->kf, c, q, kq);
         double w1[3], w2[3];
         for (int i = 0; i < 3; i++) {
             w1[i] = G[3 * i] * a[0] + G[3 * i + 1] * a[1] + G[3 * i + 2] * a[2];

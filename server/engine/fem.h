@@ -11,7 +11,14 @@
  * own slot, a node pass gathers them through a node→(cell,corner) list in a fixed order, so
  * results are identical for any number of threads.
  *
- * Owns: R, q, fe, adj_start, adj. Borrows: cell_nodes (from the object's cube mesh).
+ * Material fields (world_internal.h, seed 001 §3.3): with kf set (8 factors per cell, one per
+ * Gauss point), cell c's stiffness is K_e = Σ_g kf[8c+g]·K_g, K_g the shared unit matrix of
+ * Gauss point g (Σ_g K_g = K). A cell whose 8 factors are equal costs one product with K (scaled);
+ * a graded cell's product is taken point by point, Σ_g kf_g·B_gᵀ C B_g u (strain, stress,
+ * nodal forces: about twice a product with K). No matrix is stored per element.
+ *
+ * Owns: R, q, fe, adj_start, adj, Kg. Borrows: cell_nodes (from the object's cube mesh) and kf
+ * (the object's young field).
  */
 #ifndef CS_FEM_H
 #define CS_FEM_H
@@ -30,6 +37,10 @@ typedef struct cs_fem {
     bool corotational;
     int threads;        /* worker threads for this object's products (1 when small) */
     double K[24 * 24];
+    double *Kg;         /* 8 × 576: the unit matrix of each Gauss point (Σ_g = K) */
+    double gq[8][8][3]; /* ∂N_k/∂x at Gauss point g: graded products as Σ_g B_gᵀ C B_g */
+    double lambda, mu, detj;
+    const double *kf;   /* 8 per cell: stiffness factor per Gauss point; NULL = all 1. Borrowed */
     double *R;          /* 9 per cell, row-major; identity for the linear model */
     double *q;          /* 4 per cell (w,x,y,z): warm start of the rotation extraction */
     double *fe;         /* 24 per cell: scratch of the element pass */
@@ -63,6 +74,12 @@ double cs_fem_energy(const cs_fem *fem, const double *x);
 
 /* y = Σ R K Rᵀ p over elements (3 per node, overwritten). */
 void cs_fem_apply_K(cs_fem *fem, const double *p, double *y);
+/* The same with the factors kf (8 per cell) instead of fem->kf (damping: K_d). */
+void cs_fem_apply_Kw(cs_fem *fem, const double *kf, const double *p, double *y);
+/* Diagonal blocks of that weighted K (9 per node, overwritten). */
+void cs_fem_diag_blocks_w(cs_fem *fem, const double *kf, double *blocks);
+/* The unit matrix of Gauss point g (0..7) of a cube: K = Σ_g Kg. */
+void cs_cube_stiffness_gauss(double young, double poisson, double h, int g, double K[24 * 24]);
 /*
  * Geometric stiffness for Newton's method on corotational statics. With F = R S at an
  * element's centre, dR = R[ω]× where ω = (tr(S)·I − S)⁻¹ axial(RᵀdF − dFᵀR); the force

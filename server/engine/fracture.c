@@ -197,7 +197,11 @@ static double max_eigen(const double S[9], double dir[3])
  */
 static double cell_max_stress(const cs_object *o, int c, double dir[3])
 {
-    const double h = o->cm.h, E = o->mat.young, nu = o->mat.poisson;
+    /* the cell's stiffness: its mean Gauss-point factor of the young field */
+    double kf = 0;
+    for (int g = 0; g < 8; g++)
+        kf += o->fld.young ? o->fld.young[8 * (size_t)c + g] / 8.0 : 1.0 / 8.0;
+    const double h = o->cm.h, E = o->mat.young * kf, nu = o->mat.poisson;
     const double lambda = E * nu / ((1 + nu) * (1 - 2 * nu)), mu = E / (2 * (1 + nu));
     const int32_t *nd = o->cm.cell_nodes + 8 * (size_t)c;
     const double *R = o->fem.R + 9 * (size_t)c;
@@ -952,6 +956,7 @@ static int split_nodes(cs_object *o, const crack_face *F, int nF, const pairkey 
             resize(&o->x, 3 * sizeof(double), (size_t)n1) ||
             resize(&o->v, 3 * sizeof(double), (size_t)n1) ||
             resize(&o->mask, 3, (size_t)n1) || resize(&o->contact, 1, (size_t)n1) ||
+            resize(&o->pin, 1, (size_t)n1) ||
             resize(&o->corner_vertex, sizeof(int32_t), (size_t)n1))
             goto out;
         for (int j = 0; j < newsrc.n; j++) {
@@ -961,6 +966,7 @@ static int split_nodes(cs_object *o, const crack_face *F, int nF, const pairkey 
             memcpy(o->x + 3 * (size_t)d, o->x + 3 * (size_t)s, 3 * sizeof(double));
             memcpy(o->v + 3 * (size_t)d, o->v + 3 * (size_t)s, 3 * sizeof(double));
             memcpy(o->mask + 3 * (size_t)d, o->mask + 3 * (size_t)s, 3);
+            o->pin[d] = o->pin[s];
             o->contact[d] = o->contact[s];
             o->corner_vertex[d] = -1; /* assigned when the surface is split */
         }
@@ -1006,11 +1012,13 @@ static int refresh_node_state(cs_world_t *w, cs_object *o, int n_old, const ivec
         free(m_old);
         return -1;
     }
-    const double mc = o->mat.density * cm->h * cm->h * cm->h;
-    memset(o->m, 0, (size_t)n1 * sizeof(double));
-    for (int c = 0; c < cm->n_cells; c++)
-        for (int k = 0; k < 8; k++)
-            o->m[cm->cell_nodes[8 * (size_t)c + k]] += mc / 8.0;
+    /* the masses of the density field (world_internal.h) at the new node count */
+    o->n = n1;
+    if (cs_object_lump_mass(o) != 0) {
+        free(load);
+        free(m_old);
+        return -1;
+    }
     /* A split node's cells are shared out among its copies, so their masses add up to the
      * old node's: each copy takes the load share of its mass fraction. */
     for (int i = 0; i < n1; i++) {
@@ -1024,7 +1032,7 @@ static int refresh_node_state(cs_world_t *w, cs_object *o, int n_old, const ivec
     o->n = n1;
     o->n_fixed_nodes = 0;
     for (int i = 0; i < n1; i++)
-        if (o->mask[3 * i] && o->mask[3 * i + 1] && o->mask[3 * i + 2])
+        if ((o->mask[3 * i] && o->mask[3 * i + 1] && o->mask[3 * i + 2]) || o->pin[i])
             o->n_fixed_nodes++;
     cs_cg_work_free(&o->cg);
     if (cs_cg_work_init(&o->cg, 3 * n1) != 0 || cs_elastic_relink(o) != 0)
@@ -1979,11 +1987,29 @@ static cs_object *make_piece(cs_world_t *w, const cs_object *o, const int32_t *c
         memcpy(p->v + 3 * (size_t)i, o->v + 3 * (size_t)nd, 3 * sizeof(double));
         memcpy(p->f_const + 3 * (size_t)i, o->f_const + 3 * (size_t)nd, 3 * sizeof(double));
         memcpy(p->mask + 3 * (size_t)i, o->mask + 3 * (size_t)nd, 3);
+        p->pin[i] = o->pin[nd];
         p->m[i] = o->m[nd];
-        p->mass += p->m[i];
         p->contact[i] = o->contact[nd];
-        if (p->mask[3 * i] && p->mask[3 * i + 1] && p->mask[3 * i + 2])
+        if ((p->mask[3 * i] && p->mask[3 * i + 1] && p->mask[3 * i + 2]) || p->pin[i])
             p->n_fixed_nodes++;
+    }
+    /* the material fields of its cells; masses from them (a node the piece shares with
+     * another one only at an edge or corner keeps its own cells' share), gravity to match */
+    p->penalty = o->penalty;
+    if (cs_fields_alloc(p) != 0)
+        goto fail;
+    for (int i = 0; i < nc; i++) {
+        const size_t a = 8 * (size_t)i, b = 8 * (size_t)cells[i];
+        memcpy(p->fld.young + a, o->fld.young + b, 8 * sizeof(double));
+        memcpy(p->fld.density + a, o->fld.density + b, 8 * sizeof(double));
+        memcpy(p->fld.damping + a, o->fld.damping + b, 8 * sizeof(double));
+    }
+    if (cs_object_lump_mass(p) != 0)
+        goto fail;
+    for (int i = 0; i < p->n; i++) {
+        const double dm = p->m[i] - o->m[nl.a[i]];
+        for (int a = 0; a < 3; a++)
+            p->f_const[3 * (size_t)i + a] += dm * w->def.gravity[a];
     }
     /* surface */
     for (int t = 0; t < s->n_triangles; t++) {
@@ -2055,7 +2081,9 @@ static cs_object *make_piece(cs_world_t *w, const cs_object *o, const int32_t *c
     }
     /* inputs acting on its cells move with it */
     for (int i = 0; i < o->n_inputs; i++)
-        if (cell_map[o->inputs[i].cell] >= 0) {
+        if (o->inputs[i].kind == CS_INPUT_PRESSURE) /* on every piece's surface */
+            p->inputs[p->n_inputs++] = o->inputs[i];
+        else if (cell_map[o->inputs[i].cell] >= 0) {
             p->inputs[p->n_inputs] = o->inputs[i];
             p->inputs[p->n_inputs++].cell = cell_map[o->inputs[i].cell];
         }

@@ -490,6 +490,9 @@ static void apply_inputs(const cs_world_t *w, cs_object *o)
     }
     for (int i = 0; i < o->n_inputs; i++) {
         const cs_input *in = &o->inputs[i];
+        /* a uniform pressure on a closed surface has no net force or torque on a rigid body */
+        if (in->delay > 0 || in->kind == CS_INPUT_PRESSURE || in->cell < 0)
+            continue;
         const int32_t *nd = o->cm.cell_nodes + 8 * (size_t)in->cell;
         double p[3] = {0, 0, 0}, r[3];
         for (int k = 0; k < 8; k++)
@@ -506,9 +509,17 @@ static void apply_inputs(const cs_world_t *w, cs_object *o)
             double K[9], A[9], adj[9], vp[3], wr[3], rhs[3];
             point_mass_matrix(rb, r, K);
             cross3(rb->w, r, wr);
+            /* the target: fixed (drag) or moving along its segment (curve) */
+            double tg[3];
+            const double sc = in->kind == CS_INPUT_CURVE && in->steps_total > 0
+                                  ? (double)(in->steps_total - in->steps_left + 1) / in->steps_total
+                                  : 0.0;
+            for (int a = 0; a < 3; a++)
+                tg[a] = in->target[a] +
+                        (in->kind == CS_INPUT_CURVE ? sc * (in->target1[a] - in->target[a]) : 0.0);
             for (int a = 0; a < 3; a++) {
                 vp[a] = rb->v[a] + wr[a];
-                rhs[a] = dt * in->stiffness * (in->target[a] - p[a] - dt * vp[a]);
+                rhs[a] = dt * in->stiffness * (tg[a] - p[a] - dt * vp[a]);
             }
             for (int k = 0; k < 9; k++)
                 A[k] = dt * dt * in->stiffness * K[k] + (k % 4 == 0);
@@ -521,12 +532,15 @@ static void apply_inputs(const cs_world_t *w, cs_object *o)
     }
 }
 
+/* As world.c's expire_inputs: a delayed input counts its delay down first. */
 static void expire(cs_object *o)
 {
     int j = 0;
-    for (int i = 0; i < o->n_inputs; i++)
-        if (--o->inputs[i].steps_left > 0)
-            o->inputs[j++] = o->inputs[i];
+    for (int i = 0; i < o->n_inputs; i++) {
+        cs_input *in = &o->inputs[i];
+        if (in->delay > 0 ? (in->delay--, true) : --in->steps_left > 0)
+            o->inputs[j++] = *in;
+    }
     o->n_inputs = j;
 }
 

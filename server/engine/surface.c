@@ -9,7 +9,8 @@
  * tol/h), so skinning at rest and under affine node maps is exact.
  * Each cell's triangle list holds every triangle meeting the cell grown by tol
  * (exact SAT), so a triangle is always listed in the cell its centroid is assigned to.
- * Skinning is the trilinear interpolation of the cell's 8 nodes: the hot path, no allocation.
+ * Skinning is the trilinear interpolation of the cell's 8 nodes, or, in the B-spline cells of a
+ * localframe object (cm->spline_nodes), the tricubic map of its 64: the hot path, no allocation.
  * cs_surface_of_cells builds the closed boundary of a cell set on an integer sub-lattice, which
  * makes welding exact.
  */
@@ -20,6 +21,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "localframe.h"
 #include "voxelize.h"
 
 
@@ -213,9 +215,30 @@ void cs_surface_skin(cs_surface *s, const cs_cubemesh *cm, const double *node_po
     const int32_t *vc = s->vert_cell;
     const double *uvw = s->vert_uvw;
     double *out = s->pos;
+    const int32_t *spline = cm->spline_nodes;
     for (int i = 0; i < nv; i++) {
-        const int32_t *nodes = cm->cell_nodes + 8 * (size_t)vc[i];
         const double u = uvw[3 * i], v = uvw[3 * i + 1], w = uvw[3 * i + 2];
+        const int32_t *sn = spline ? spline + 64 * (size_t)vc[i] : NULL;
+        if (sn && sn[0] >= 0) {
+            /* B-spline cell: the tricubic map of the localframe model (seed 001 §3.4.1),
+             * applied to displacements so that rest positions map to themselves exactly. */
+            double bx[4], by[4], bz[4], d[3] = {0.0, 0.0, 0.0};
+            cs_bspline_basis(u, bx, NULL);
+            cs_bspline_basis(v, by, NULL);
+            cs_bspline_basis(w, bz, NULL);
+            for (int a = 0; a < 64; a++) {
+                const double wa = bx[a % 4] * by[(a / 4) % 4] * bz[a / 16];
+                const double *p = node_pos + 3 * (size_t)sn[a];
+                const double *r = cm->node_rest + 3 * (size_t)sn[a];
+                d[0] += wa * (p[0] - r[0]);
+                d[1] += wa * (p[1] - r[1]);
+                d[2] += wa * (p[2] - r[2]);
+            }
+            for (int k = 0; k < 3; k++)
+                out[3 * i + k] = s->rest[3 * i + k] + d[k];
+            continue;
+        }
+        const int32_t *nodes = cm->cell_nodes + 8 * (size_t)vc[i];
         const double wx[2] = {1.0 - u, u}, wy[2] = {1.0 - v, v}, wz[2] = {1.0 - w, w};
         double x = 0.0, y = 0.0, z = 0.0;
         for (int k = 0; k < 8; k++) {

@@ -47,7 +47,8 @@ void cs_surface_free(cs_surface *s);
  */
 int cs_surface_build_cell_lists(cs_surface *s, const cs_cubemesh *cm, double tol);
 
-/* Recompute s->pos from node positions (3 per node) by trilinear interpolation. */
+/* Recompute s->pos from node positions (3 per node) by trilinear interpolation, or by the
+ * tricubic B-spline map in cells that have one (cm->spline_nodes, localframe objects). */
 void cs_surface_skin(cs_surface *s, const cs_cubemesh *cm, const double *node_pos);
 
 /*

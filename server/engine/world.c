@@ -21,6 +21,7 @@
 #include <time.h>
 
 #include "elastic.h"
+#include "localframe.h"
 #include "rigid.h"
 #include "voxelize.h"
 #include "world_internal.h"
@@ -202,6 +203,8 @@ void cs_object_free_internal(cs_object *o)
     free(o->mask);
     free(o->smask);
     free(o->contact);
+    free(o->pin);
+    cs_fields_free(&o->fld);
     cs_cg_work_free(&o->cg);
     free(o);
 }
@@ -385,10 +388,34 @@ int cs_object_alloc_state(cs_object *o)
     o->mask = calloc(n3, 1);
     o->smask = calloc(n3, 1);
     o->contact = calloc((size_t)o->n, 1);
+    o->pin = calloc((size_t)(o->n ? o->n : 1), 1);
     if (!o->x || !o->v || !o->m || !o->f_const || !o->f || !o->b || !o->v1 || !o->blocks ||
-        !o->mask || !o->smask || !o->contact || cs_cg_work_init(&o->cg, (int)n3) != 0)
+        !o->mask || !o->smask || !o->contact || !o->pin || cs_cg_work_init(&o->cg, (int)n3) != 0)
         return -1;
     return 0;
+}
+
+/*
+ * Central differences (seed 001 Eq. 20) are conditionally stable: with Rayleigh damping
+ * centred as in Eq. (19), a mode of frequency ω is stable iff ω·dt < 2, whatever the
+ * damping. ω is bounded by the largest element eigenvalue (cs_lf_omega2_bound).
+ */
+static int check_central_difference(const cs_world_t *w, const cs_object_def *def, char *err,
+                                    size_t errlen)
+{
+    const cs_material *m = &def->material;
+    double omega2;
+    if (cs_lf_omega2_bound(def->model, m->young, m->poisson, m->density, def->cube_size,
+                           &omega2) != 0)
+        return cs_engine_fail(err, errlen, CS_ERR_NOMEM, "out of memory");
+    const double limit = 2.0 / sqrt(omega2);
+    if (w->def.dt > limit)
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID,
+                              "dt %.4g s is above the central_difference stability limit %.4g s "
+                              "for '%s' (E %g Pa, density %g, cube_size %g m): lower dt or use "
+                              "implicit_euler",
+                              w->def.dt, limit, def->name, m->young, m->density, def->cube_size);
+    return CS_OK;
 }
 
 int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *id, char *err,
@@ -404,12 +431,12 @@ int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *i
     if (cs_world_find_object(w, def->name) != CS_NULL_OBJECT)
         return cs_engine_fail(err, errlen, CS_ERR_INVALID, "object name '%s' is already used", def->name);
     if (def->model != CS_MODEL_LINEAR && def->model != CS_MODEL_COROTATIONAL &&
-        def->model != CS_MODEL_RIGID)
+        def->model != CS_MODEL_LOCALFRAME && def->model != CS_MODEL_RIGID)
         return cs_engine_fail(err, errlen, CS_ERR_INVALID, "model '%s' is not implemented yet",
                     cs_model_name(def->model));
     const cs_integrator integ = def->integrator == CS_INTEGRATOR_DEFAULT
                                     ? default_integrator(def->model) : def->integrator;
-    if (integ != CS_INTEGRATOR_IMPLICIT_EULER)
+    if (integ != CS_INTEGRATOR_IMPLICIT_EULER && integ != CS_INTEGRATOR_CENTRAL_DIFFERENCE)
         return cs_engine_fail(err, errlen, CS_ERR_INVALID,
                               "integrator '%s' is not implemented yet", cs_integrator_name(integ));
     if (!(def->cube_size > 0 && isfinite(def->cube_size)))
@@ -418,12 +445,29 @@ int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *i
     int rc = check_material(&def->material, err, errlen);
     if (rc)
         return rc;
+    if (integ == CS_INTEGRATOR_CENTRAL_DIFFERENCE) {
+        rc = check_central_difference(w, def, err, errlen);
+        if (rc)
+            return rc;
+    }
     if (!(def->fracture_radius >= 0 && isfinite(def->fracture_radius)))
         return cs_engine_fail(err, errlen, CS_ERR_INVALID, "fracture_radius must be >= 0 m, got %g",
                     def->fracture_radius);
     for (int i = 0; i < def->n_fixed; i++)
         if (!finite3(def->fixed[i].min) || !finite3(def->fixed[i].max))
             return cs_engine_fail(err, errlen, CS_ERR_INVALID, "fixed[%d]: values must be finite", i);
+    if (def->n_fields < 0 || (def->n_fields > 0 && !def->fields))
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "fields: bad count or NULL array");
+    for (int i = 0; i < def->n_fields; i++)
+        if ((rc = cs_fields_check_region(&def->fields[i], i, err, errlen)) != CS_OK)
+            return rc;
+    if (def->constraints != CS_CONSTRAINT_REMOVE && def->constraints != CS_CONSTRAINT_PENALTY)
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "constraints: unknown mode %d",
+                              (int)def->constraints);
+    if (!(def->penalty_stiffness >= 0 && def->penalty_stiffness <= 1e15))
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID,
+                              "penalty_stiffness must be in [0, 1e15] N/m, got %g",
+                              def->penalty_stiffness);
 
     cs_object *o = calloc(1, sizeof *o);
     if (!o)
@@ -433,6 +477,9 @@ int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *i
     o->integrator = integ;
     o->mat = def->material;
     o->fracture = def->fracture;
+    o->penalty = def->constraints != CS_CONSTRAINT_PENALTY ? 0.0
+                 : def->penalty_stiffness > 0 ? def->penalty_stiffness
+                 : 1e4 * def->material.young * def->cube_size;
     o->topology_version = 1; /* 0 means "no such object yet" in a topology change */
     o->fracture_radius = def->fracture_radius > 0 ? def->fracture_radius : 1.5 * def->cube_size;
     if (!o->name) {
@@ -454,23 +501,30 @@ int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *i
         rc = cs_engine_fail(err, errlen, CS_ERR_NOMEM, "out of memory");
         goto fail;
     }
-    /* Lumped mass: ρh³, an eighth to each corner; gravity on every cube's mass. */
-    const double h = def->cube_size, mc = def->material.density * h * h * h;
-    for (int c = 0; c < o->cm.n_cells; c++)
-        for (int k = 0; k < 8; k++)
-            o->m[o->cm.cell_nodes[8 * c + k]] += mc / 8.0;
-    for (int i = 0; i < o->n; i++) {
-        o->mass += o->m[i];
+    /* Material fields (all 1, then the design regions), then the lumped mass that follows
+     * the density field (ρh³/8 to each corner when uniform); gravity on every node's mass. */
+    if (cs_fields_alloc(o) != 0) {
+        rc = cs_engine_fail(err, errlen, CS_ERR_NOMEM, "out of memory for the material fields");
+        goto fail;
+    }
+    cs_fields_apply_regions(o, def->fields, def->n_fields);
+    if (cs_object_lump_mass(o) != 0) {
+        rc = cs_engine_fail(err, errlen, CS_ERR_NOMEM, "out of memory");
+        goto fail;
+    }
+    for (int i = 0; i < o->n; i++)
         for (int a = 0; a < 3; a++)
             o->f_const[3 * i + a] = o->m[i] * w->def.gravity[a];
-    }
     rc = apply_loads(o, def, err, errlen);
     if (rc)
         goto fail;
     for (int i = 0; i < o->n; i++)
         for (int b = 0; b < def->n_fixed; b++)
             if (in_box(&def->fixed[b], o->cm.node_rest + 3 * i)) {
-                o->mask[3 * i] = o->mask[3 * i + 1] = o->mask[3 * i + 2] = 1;
+                if (def->constraints == CS_CONSTRAINT_PENALTY)
+                    o->pin[i] = 1;
+                else
+                    o->mask[3 * i] = o->mask[3 * i + 1] = o->mask[3 * i + 2] = 1;
                 o->n_fixed_nodes++;
                 break;
             }
@@ -625,21 +679,222 @@ int cs_world_drag(cs_world_t *w, cs_object_id id, const double grab[3], const do
     return add_input(w, id, &in, grab, seconds, err, errlen);
 }
 
-/* f = f_const + point forces + drag forces at the current positions. */
-static void gather_forces(cs_object *o)
+int cs_world_drag_curve(cs_world_t *w, cs_object_id id, const double *points, int n,
+                        double stiffness, double seconds, char *err, size_t errlen)
+{
+    if (!w || !points)
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "NULL argument");
+    if (n < 2 || n > CS_MAX_CURVE_POINTS)
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID,
+                              "curve must have 2 to %d points, got %d", CS_MAX_CURVE_POINTS, n);
+    for (int i = 0; i < n; i++)
+        if (!finite3(points + 3 * i))
+            return cs_engine_fail(err, errlen, CS_ERR_INVALID, "curve point %d is not finite", i);
+    if (!(stiffness > 0 && isfinite(stiffness)))
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID,
+                              "drag stiffness must be > 0 N/m, got %g", stiffness);
+    if (!(seconds > 0 && seconds <= 1e6))
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID,
+                              "curve duration must be in (0, 1e6] s, got %g", seconds);
+    cs_object *o = cs_world_find_internal(w, id);
+    if (!o)
+        return cs_engine_fail(err, errlen, CS_ERR_UNKNOWN_OBJECT, "no object with id %u",
+                              (unsigned)id);
+    double len[CS_MAX_CURVE_POINTS], total = 0, dmax = 0;
+    len[0] = 0;
+    for (int i = 1; i < n; i++) {
+        const double *a = points + 3 * (i - 1), *b = points + 3 * i;
+        total += norm3((double[3]){b[0] - a[0], b[1] - a[1], b[2] - a[2]});
+        len[i] = total;
+    }
+    if (!(total > 0))
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "curve has zero length");
+    cs_input in = {.kind = CS_INPUT_CURVE, .stiffness = stiffness};
+    nearest_material_point(o, points, &in.cell, in.w);
+    const int32_t *nd = o->cm.cell_nodes + 8 * in.cell;
+    double grab[3] = {0, 0, 0};
+    for (int k = 0; k < 8; k++)
+        for (int a = 0; a < 3; a++)
+            grab[a] += in.w[k] * o->x[3 * nd[k] + a];
+    for (int i = 0; i < n; i++) {
+        const double *q = points + 3 * i;
+        dmax = fmax(dmax, norm3((double[3]){q[0] - grab[0], q[1] - grab[1], q[2] - grab[2]}));
+    }
+    if (stiffness * dmax > w->def.max_force)
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID,
+                              "curve drag force of %g N (stiffness x distance) exceeds max_force "
+                              "%g N", stiffness * dmax, w->def.max_force);
+    /* Step j (1..S) has the target at arc length total·j/S: segment i covers the steps
+     * (S·len[i]/total, S·len[i+1]/total], rounded; segments that get no step are skipped. */
+    double sd = ceil(seconds / w->def.dt - 1e-9);
+    const int S = sd < 1 ? 1 : sd > 1e9 ? 1000000000 : (int)sd;
+    int segs = 0;
+    for (int i = 0; i + 1 < n; i++)
+        if (llround(S * len[i + 1] / total) > llround(S * len[i] / total))
+            segs++;
+    if (o->n_inputs + segs > CS_MAX_INPUTS)
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID,
+                              "object '%s' has room for %d more inputs, the curve needs %d",
+                              o->name, CS_MAX_INPUTS - o->n_inputs, segs);
+    for (int i = 0; i + 1 < n; i++) {
+        const int s0 = (int)llround(S * len[i] / total), s1 = (int)llround(S * len[i + 1] / total);
+        if (s1 <= s0)
+            continue;
+        in.delay = s0;
+        in.steps_total = in.steps_left = s1 - s0;
+        memcpy(in.target, points + 3 * i, sizeof in.target);
+        memcpy(in.target1, points + 3 * (i + 1), sizeof in.target1);
+        o->inputs[o->n_inputs++] = in;
+    }
+    o->sleeping = false;
+    o->still_steps = 0;
+    return CS_OK;
+}
+
+/* Area-weighted outward normal sum of the current surface and its area. */
+static double surface_area(const cs_object *o)
+{
+    double area = 0;
+    for (int t = 0; t < o->surf.n_triangles; t++) {
+        const int32_t *q = o->surf.tris + 3 * (size_t)t;
+        const double *a = o->surf.pos + 3 * (size_t)q[0], *b = o->surf.pos + 3 * (size_t)q[1],
+                     *c = o->surf.pos + 3 * (size_t)q[2];
+        const double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]};
+        const double v[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+        const double n[3] = {u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2],
+                             u[0] * v[1] - u[1] * v[0]};
+        area += 0.5 * norm3(n);
+    }
+    return area;
+}
+
+int cs_world_pressure(cs_world_t *w, cs_object_id id, double pressure, double seconds,
+                      char *err, size_t errlen)
+{
+    if (!w)
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "NULL argument");
+    if (!isfinite(pressure))
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "pressure is not finite");
+    if (!(seconds >= 0 && seconds <= 1e6))
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID,
+                              "duration must be in [0, 1e6] s, got %g", seconds);
+    cs_object *o = cs_world_find_internal(w, id);
+    if (!o)
+        return cs_engine_fail(err, errlen, CS_ERR_UNKNOWN_OBJECT, "no object with id %u",
+                              (unsigned)id);
+    const double area = surface_area(o);
+    if (fabs(pressure) * area > w->def.max_force)
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID,
+                              "pressure force of %g N (|pressure| x area %g m^2) exceeds "
+                              "max_force %g N", fabs(pressure) * area, area, w->def.max_force);
+    if (o->n_inputs == CS_MAX_INPUTS)
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID,
+                              "object '%s' already has %d active inputs", o->name, CS_MAX_INPUTS);
+    double steps = ceil(seconds / w->def.dt - 1e-9);
+    cs_input in = {.kind = CS_INPUT_PRESSURE, .cell = -1, .pressure = pressure,
+                   .steps_left = steps < 1 ? 1 : (int)steps};
+    o->inputs[o->n_inputs++] = in;
+    o->sleeping = false;
+    o->still_steps = 0;
+    return CS_OK;
+}
+
+/* The target of a spring input at its current step. */
+static void spring_target(const cs_input *in, double t[3])
+{
+    if (in->kind != CS_INPUT_CURVE) {
+        memcpy(t, in->target, 3 * sizeof *t);
+        return;
+    }
+    const double s = (double)(in->steps_total - in->steps_left + 1) / in->steps_total;
+    for (int a = 0; a < 3; a++)
+        t[a] = in->target[a] + s * (in->target1[a] - in->target[a]);
+}
+
+/* Pressure: p·(area-weighted outward normal) of each triangle, a third to each vertex, and
+ * from the vertex to its cell's corners by its skinning weights. */
+static void add_pressure(cs_object *o, double pressure, double *f)
+{
+    const cs_surface *sf = &o->surf;
+    for (int t = 0; t < sf->n_triangles; t++) {
+        const int32_t *q = sf->tris + 3 * (size_t)t;
+        const double *a = sf->pos + 3 * (size_t)q[0], *b = sf->pos + 3 * (size_t)q[1],
+                     *c = sf->pos + 3 * (size_t)q[2];
+        const double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]};
+        const double v[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+        /* ½ u × v is the area vector; a third of p times it to each vertex */
+        const double F[3] = {pressure / 6.0 * (u[1] * v[2] - u[2] * v[1]),
+                             pressure / 6.0 * (u[2] * v[0] - u[0] * v[2]),
+                             pressure / 6.0 * (u[0] * v[1] - u[1] * v[0])};
+        for (int j = 0; j < 3; j++) {
+            const int32_t vx = q[j], cell = sf->vert_cell[vx];
+            const double *uvw = sf->vert_uvw + 3 * (size_t)vx;
+            const int32_t *nd = o->cm.cell_nodes + 8 * (size_t)cell;
+            for (int k = 0; k < 8; k++) {
+                const double wk = (CS_CORNER[k][0] ? uvw[0] : 1 - uvw[0]) *
+                                  (CS_CORNER[k][1] ? uvw[1] : 1 - uvw[1]) *
+                                  (CS_CORNER[k][2] ? uvw[2] : 1 - uvw[2]);
+                for (int e = 0; e < 3; e++)
+                    f[3 * (size_t)nd[k] + e] += wk * F[e];
+            }
+        }
+    }
+}
+
+/* f += k_p (X − x) at every penalty-held node (seed 001 §4.2); returns ½ k_p Σ |x − X|². */
+static double add_penalty_force(const cs_object *o, const double *x, double *f)
+{
+    double e = 0;
+    if (o->penalty <= 0)
+        return 0;
+    for (int i = 0; i < o->n; i++) {
+        if (!o->pin[i])
+            continue;
+        for (int a = 0; a < 3; a++) {
+            const double d = x[3 * i + a] - o->cm.node_rest[3 * i + a];
+            f[3 * i + a] -= o->penalty * d;
+            e += 0.5 * o->penalty * d * d;
+        }
+    }
+    return e;
+}
+
+/* y += coef · k_p p at every penalty-held node. */
+static void add_penalty_operator(const cs_object *o, double coef, const double *p, double *y)
+{
+    if (o->penalty <= 0 || coef == 0)
+        return;
+    for (int i = 0; i < o->n; i++)
+        if (o->pin[i])
+            for (int a = 0; a < 3; a++)
+                y[3 * i + a] += coef * o->penalty * p[3 * i + a];
+}
+
+/* f = f_const + point forces + drag and curve springs + pressure at the current positions
+ * (+ the penalty springs of held nodes if `penalty`). */
+static void gather_forces_ex(cs_object *o, bool penalty)
 {
     memcpy(o->f, o->f_const, (size_t)o->n * 3 * sizeof(double));
+    if (penalty)
+        add_penalty_force(o, o->x, o->f);
     for (int i = 0; i < o->n_inputs; i++) {
         const cs_input *in = &o->inputs[i];
+        if (in->delay > 0)
+            continue;
+        if (in->kind == CS_INPUT_PRESSURE) {
+            add_pressure(o, in->pressure, o->f);
+            continue;
+        }
         const int32_t *nd = o->cm.cell_nodes + 8 * in->cell;
         double F[3] = {in->force[0], in->force[1], in->force[2]};
-        if (in->kind == CS_INPUT_DRAG) {
-            double p[3] = {0, 0, 0};
+        if (cs_input_is_spring(in)) {
+            double p[3] = {0, 0, 0}, t[3];
+            spring_target(in, t);
             for (int k = 0; k < 8; k++)
                 for (int a = 0; a < 3; a++)
                     p[a] += in->w[k] * o->x[3 * nd[k] + a];
             for (int a = 0; a < 3; a++)
-                F[a] = in->stiffness * (in->target[a] - p[a]);
+                F[a] = in->stiffness * (t[a] - p[a]);
         }
         for (int k = 0; k < 8; k++)
             for (int a = 0; a < 3; a++)
@@ -647,12 +902,19 @@ static void gather_forces(cs_object *o)
     }
 }
 
+static void gather_forces(cs_object *o)
+{
+    gather_forces_ex(o, true);
+}
+
 static void expire_inputs(cs_object *o)
 {
     int j = 0;
-    for (int i = 0; i < o->n_inputs; i++)
-        if (--o->inputs[i].steps_left > 0)
-            o->inputs[j++] = o->inputs[i];
+    for (int i = 0; i < o->n_inputs; i++) {
+        cs_input *in = &o->inputs[i];
+        if (in->delay > 0 ? (in->delay--, true) : --in->steps_left > 0)
+            o->inputs[j++] = *in;
+    }
     o->n_inputs = j;
 }
 
@@ -668,11 +930,24 @@ static void step_operator(void *ctx, const double *p, double *y)
     for (int i = 0; i < o->n; i++)
         for (int a = 0; a < 3; a++)
             y[3 * i + a] = kc * y[3 * i + a] + mc * o->m[i] * p[3 * i + a];
+    if (o->fld.has_damping && (o->cmcoef != 0 || o->ckcoef != 0)) {
+        /* the damping field: + dt·α M_d p + dt·β K_d p */
+        double *t = o->fld.tmp;
+        if (o->ckcoef != 0) {
+            cs_fem_apply_Kw(&o->fem, o->fld.kd, p, t);
+            for (int d = 0; d < 3 * o->n; d++)
+                y[d] += o->ckcoef * t[d];
+        }
+        for (int i = 0; i < o->n; i++)
+            for (int a = 0; a < 3; a++)
+                y[3 * i + a] += o->cmcoef * o->fld.md[i] * p[3 * i + a];
+    }
+    add_penalty_operator(o, o->pcoef, p, y);
     if (o->dcoef == 0)
         return;
     for (int i = 0; i < o->n_inputs; i++) {
         const cs_input *in = &o->inputs[i];
-        if (in->kind != CS_INPUT_DRAG)
+        if (!cs_input_is_spring(in) || in->delay > 0)
             continue;
         const int32_t *nd = o->cm.cell_nodes + 8 * in->cell;
         double s[3] = {0, 0, 0};
@@ -690,6 +965,7 @@ static void tangent_operator(void *ctx, const double *p, double *y)
 {
     cs_object *o = ctx;
     cs_elastic_apply_tangent(o, p, y);
+    add_penalty_operator(o, o->pcoef, p, y);
 }
 
 /* Block-Jacobi preconditioner of the current operator, inverted. */
@@ -701,11 +977,19 @@ static void build_preconditioner(cs_object *o)
         for (int k = 0; k < 9; k++)
             B[k] *= o->kcoef;
         for (int a = 0; a < 3; a++)
-            B[4 * a] += o->mcoef * o->m[i];
+            B[4 * a] += o->mcoef * o->m[i] +
+                        (o->fld.has_damping ? o->cmcoef * o->fld.md[i] : 0.0) +
+                        (o->pin[i] ? o->pcoef * o->penalty : 0.0);
+    }
+    if (o->fld.has_damping && o->ckcoef != 0) {
+        /* + dt·β diag(K_d) */
+        cs_fem_diag_blocks_w(&o->fem, o->fld.kd, o->fld.tmp);
+        for (size_t d = 0; d < 9 * (size_t)o->n; d++)
+            o->blocks[d] += o->ckcoef * o->fld.tmp[d];
     }
     for (int i = 0; o->dcoef != 0 && i < o->n_inputs; i++) {
         const cs_input *in = &o->inputs[i];
-        if (in->kind != CS_INPUT_DRAG)
+        if (!cs_input_is_spring(in) || in->delay > 0)
             continue;
         for (int k = 0; k < 8; k++)
             for (int a = 0; a < 3; a++)
@@ -795,6 +1079,24 @@ static bool all_finite(const double *a, size_t n)
     return true;
 }
 
+/* The implicit Euler operator (M + dt C + dt² K [+ dt² springs]) with Rayleigh damping
+ * C = α M + β K, or α M_d + β K_d where a damping field is painted. */
+static void set_implicit_coefs(cs_object *o, double dt)
+{
+    if (o->fld.has_damping) {
+        o->mcoef = 1;
+        o->kcoef = dt * dt;
+        o->cmcoef = dt * o->mat.damping[0];
+        o->ckcoef = dt * o->mat.damping[1];
+    } else {
+        o->mcoef = 1 + dt * o->mat.damping[0];
+        o->kcoef = dt * o->mat.damping[1] + dt * dt;
+        o->cmcoef = o->ckcoef = 0;
+    }
+    o->dcoef = dt * dt;
+    o->pcoef = dt * dt;
+}
+
 /* Implicit Euler (seed 000 §2.2): one linear solve per step for the new velocities. */
 static int step_implicit_euler(cs_world_t *w, cs_object *o, cs_step_stats *st)
 {
@@ -812,9 +1114,7 @@ static int step_implicit_euler(cs_world_t *w, cs_object *o, cs_step_stats *st)
             size_t d = 3 * (size_t)i + a;
             o->b[d] = o->m[i] * o->v[d] + dt * (o->f[d] + o->b[d]);
         }
-    o->mcoef = 1 + dt * o->mat.damping[0];
-    o->kcoef = dt * o->mat.damping[1] + dt * dt;
-    o->dcoef = dt * dt;
+    set_implicit_coefs(o, dt);
     build_preconditioner(o);
     for (size_t d = 0; d < n3; d++)
         o->v1[d] = o->mask[d] ? 0.0 : o->v[d];
@@ -866,11 +1166,185 @@ static int step_implicit_euler(cs_world_t *w, cs_object *o, cs_step_stats *st)
     return CS_OK;
 }
 
+/* ---------------------------------------------------------------- central differences */
+
+/*
+ * y = mcoef·M p + kcoef·K_R p + dcoef·Σ drags k w (w·p), M the model's mass (consistent for
+ * localframe, lumped otherwise): the operator of the central-difference step.
+ */
+static void cd_operator(void *ctx, const double *p, double *y)
+{
+    cs_object *o = ctx;
+    const double kc = o->kcoef;
+    if (kc != 0) {
+        cs_elastic_apply_K(o, p, y);
+        for (size_t d = 0; d < 3 * (size_t)o->n; d++)
+            y[d] *= kc;
+    } else {
+        memset(y, 0, 3 * (size_t)o->n * sizeof(double)); /* no stiffness damping: M alone */
+    }
+    cs_elastic_apply_M(o, p, y, o->mcoef);
+    if (o->dcoef == 0)
+        return;
+    for (int i = 0; i < o->n_inputs; i++) {
+        const cs_input *in = &o->inputs[i];
+        if (in->kind != CS_INPUT_DRAG)
+            continue;
+        const int32_t *nd = o->cm.cell_nodes + 8 * in->cell;
+        double s[3] = {0, 0, 0};
+        for (int k = 0; k < 8; k++)
+            for (int a = 0; a < 3; a++)
+                s[a] += in->w[k] * p[3 * nd[k] + a];
+        for (int k = 0; k < 8; k++)
+            for (int a = 0; a < 3; a++)
+                y[3 * nd[k] + a] += o->dcoef * in->stiffness * in->w[k] * s[a];
+    }
+}
+
+static void cd_preconditioner(cs_object *o)
+{
+    const double *md = cs_elastic_mass_diag(o);
+    if (o->kcoef != 0)
+        cs_elastic_diag_blocks(o, o->blocks);
+    else
+        memset(o->blocks, 0, 9 * (size_t)o->n * sizeof(double));
+    for (int i = 0; i < o->n; i++) {
+        double *B = o->blocks + 9 * i;
+        for (int k = 0; k < 9; k++)
+            B[k] *= o->kcoef;
+        for (int a = 0; a < 3; a++)
+            B[4 * a] += o->mcoef * md[i];
+    }
+    for (int i = 0; o->dcoef != 0 && i < o->n_inputs; i++) {
+        const cs_input *in = &o->inputs[i];
+        if (in->kind != CS_INPUT_DRAG)
+            continue;
+        for (int k = 0; k < 8; k++)
+            for (int a = 0; a < 3; a++)
+                o->blocks[9 * o->cm.cell_nodes[8 * in->cell + k] + 4 * a] +=
+                    o->dcoef * in->stiffness * in->w[k] * in->w[k];
+    }
+    cs_invert_blocks(o->blocks, o->n);
+}
+
+/*
+ * Central differences, seed 001 Eq. (20): (2M + dt D) p⁺ = 2dt²(f − K_R p) + 4M p −
+ * (2M − dt D) p⁻, D = αM + βK_R (Rayleigh; the mass part is §3.2.1's ∫γΓᵀΓ with γ = αρ),
+ * "K_R p" the model's elastic force at p (local frames: it is −R K d̂). Written for the
+ * increment p⁺ − p = dt·v1 (o->v holds (p − p⁻)/dt, so no extra state survives fracture
+ * or reset):
+ *   ((2 + dtα) M + dtβ K_R + 2dt²·drags) v1 = 2dt (f + f_el(p)) + ((2 − dtα) M − dtβ K_R) v,
+ * solved by PCG warm-started from v. Drag springs are taken at p⁺ (implicitly) so that a
+ * stiff drag cannot break the stability limit checked at add time (ω·dt < 2). Ground
+ * contact holds a touching node's normal velocity in the solve, as in implicit Euler.
+ */
+static int step_central_difference(cs_world_t *w, cs_object *o, cs_step_stats *st)
+{
+    const double dt = w->def.dt, al = o->mat.damping[0], be = o->mat.damping[1];
+    const size_t n3 = (size_t)o->n * 3;
+    double t0 = now_ms();
+    gather_forces(o);
+    /* Gravity with the model's consistent nodal masses where they differ from o->m. */
+    const double *mrow = cs_elastic_mass_rows(o);
+    if (mrow)
+        for (int i = 0; i < o->n; i++)
+            for (int a = 0; a < 3; a++)
+                o->f[3 * i + a] += (mrow[i] - o->m[i]) * w->def.gravity[a];
+    double t1 = now_ms();
+    cs_elastic_update(o, o->x);
+    double t2 = now_ms();
+    /* b = ((2 − dtα) M − dtβ K_R) v + 2dt (f + f_el) */
+    o->mcoef = 2.0 - dt * al;
+    o->kcoef = -dt * be;
+    o->dcoef = 0;
+    cd_operator(o, o->v, o->b);
+    cs_elastic_force(o, o->x, o->v1, NULL);
+    /* Warm start: the step with the row-sum lumped mass, v + dt·(f + f_el)/m_row. It is the
+     * exact answer for a lumped mass without damping and drags; with the consistent B-spline
+     * mass CG only corrects the difference, which cuts its iterations several-fold. */
+    const double *mr = mrow ? mrow : o->m;
+    for (size_t d = 0; d < n3; d++) {
+        const double F = o->f[d] + o->v1[d];
+        o->b[d] += 2.0 * dt * F;
+        o->v1[d] = o->mask[d] ? 0.0 : o->v[d] + dt * F / mr[d / 3];
+    }
+    o->mcoef = 2.0 + dt * al;
+    o->kcoef = dt * be;
+    o->dcoef = 2.0 * dt * dt;
+    cd_preconditioner(o);
+    int contacts = constrain_ground(w, o);
+    double t3 = now_ms();
+    cs_cg_result r = cs_pcg(&o->cg, cd_operator, o, o->blocks, o->smask, o->b, o->v1,
+                            w->def.cg_tolerance, w->def.cg_max_iterations, cs_elastic_threads(o));
+    double t4 = now_ms();
+    if (!all_finite(o->v1, n3))
+        return CS_ERR_DIVERGED;
+    if (w->def.has_ground && contacts > 0) {
+        /* The held rows' residual is the ground's reaction: 2dt·f_c = (A v1 − b). */
+        double *av = o->cg.q;
+        const double mu = w->def.ground_friction;
+        cd_operator(o, o->v1, av);
+        for (int i = 0; i < o->n; i++) {
+            if (o->contact[i] != 1)
+                continue;
+            const double fn = (av[3 * i + 2] - o->b[3 * i + 2]) / (2.0 * dt);
+            if (fn < 0) {
+                o->contact[i] = 2;
+                continue;
+            }
+            double *v = o->v1 + 3 * i;
+            const double vt = sqrt(v[0] * v[0] + v[1] * v[1]);
+            const double dv = mu * fn * dt / o->m[i];
+            const double sc = vt > dv ? (vt - dv) / vt : 0.0;
+            v[0] *= sc;
+            v[1] *= sc;
+        }
+    }
+    memcpy(o->v, o->v1, n3 * sizeof(double));
+    for (size_t d = 0; d < n3; d++)
+        o->x[d] += dt * o->v[d];
+    ground_project(w, o);
+    o->elastic_energy_valid = false;
+    double vmax2 = 0;
+    for (size_t d = 0; d < n3; d += 3) {
+        double s = o->v[d] * o->v[d] + o->v[d + 1] * o->v[d + 1] + o->v[d + 2] * o->v[d + 2];
+        if (s > vmax2)
+            vmax2 = s;
+    }
+    expire_inputs(o);
+    double t5 = now_ms();
+    cs_surface_skin(&o->surf, &o->cm, o->x);
+    double t6 = now_ms();
+    if (w->def.sleep_steps > 0 && o->n_inputs == 0 && sqrt(vmax2) < w->def.sleep_speed) {
+        if (++o->still_steps >= w->def.sleep_steps) {
+            o->sleeping = true;
+            memset(o->v, 0, n3 * sizeof(double));
+        }
+    } else {
+        o->still_steps = 0;
+    }
+    st->ms_inputs += t1 - t0;
+    st->ms_rotations += t2 - t1;
+    st->ms_rhs += t3 - t2;
+    st->ms_solve += t4 - t3;
+    st->ms_post += t5 - t4;
+    st->ms_skin += t6 - t5;
+    st->cg_iterations += r.iterations;
+    if (r.relres > st->cg_residual)
+        st->cg_residual = r.relres;
+    if (!r.converged)
+        st->converged = false;
+    st->objects_stepped++;
+    return CS_OK;
+}
+
 static int step_object(cs_world_t *w, cs_object *o, cs_step_stats *st)
 {
     switch (o->integrator) {
     case CS_INTEGRATOR_IMPLICIT_EULER:
         return step_implicit_euler(w, o, st);
+    case CS_INTEGRATOR_CENTRAL_DIFFERENCE:
+        return step_central_difference(w, o, st);
     default: /* refused when the object was added */
         return CS_ERR_INVALID;
     }
@@ -941,12 +1415,13 @@ static double static_residual(cs_object *o, double load, double *res, double *po
     double e = 0, work = 0;
     cs_elastic_update(o, o->x);
     cs_elastic_force(o, o->x, res, pot ? &e : NULL);
+    const double ep = add_penalty_force(o, o->x, res); /* the supports, not scaled by load */
     for (int d = 0; d < 3 * o->n; d++) {
         res[d] = o->mask[d] ? 0.0 : res[d] + load * o->f[d];
         work += load * o->f[d] * (o->x[d] - o->cm.node_rest[d]);
     }
     if (pot)
-        *pot = e - work;
+        *pot = e + ep - work;
     return masked_norm(o, res);
 }
 
@@ -958,7 +1433,7 @@ static double static_residual(cs_object *o, double load, double *res, double *po
 static int solve_static_object(cs_world_t *w, cs_object *o, cs_step_stats *st)
 {
     const int n3 = 3 * o->n;
-    gather_forces(o);
+    gather_forces_ex(o, false); /* the penalty springs are in static_residual */
     const double fnorm = masked_norm(o, o->f);
     memset(o->v, 0, (size_t)n3 * sizeof(double));
     if (fnorm == 0)
@@ -974,6 +1449,8 @@ static int solve_static_object(cs_world_t *w, cs_object *o, cs_step_stats *st)
     o->mcoef = 0;
     o->kcoef = 1;
     o->dcoef = 0;
+    o->cmcoef = o->ckcoef = 0;
+    o->pcoef = 1;
     double load = 0, dl = 1;
     int rc = CS_OK;
     while (load < 1) {

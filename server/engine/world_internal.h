@@ -2,7 +2,7 @@
  * world_internal.h — the engine's private object and world records, shared by world.c (the
  * step, inputs, reading) and fracture.c (seed 000 §2.3, §3.1–3.2). Not part of the API.
  *
- * Owns (through cs_object): the cube mesh, the bound surface, the FEM data and every
+ * Owns (through cs_object): the cube mesh, the bound surface, the FEM (and localframe) data and every
  * per-node array; (through cs_world) every object, and the events and topology changes of
  * the last mutating call.
  */
@@ -18,17 +18,69 @@
 #define CS_MAX_INPUTS 1024
 #define CS_MAX_NAME 255
 
-typedef enum { CS_INPUT_FORCE = 0, CS_INPUT_DRAG = 1 } cs_input_kind;
+/*
+ * Inputs. FORCE: a constant force at a material point. DRAG: a spring (stiffness) from the
+ * material point to `target`. CURVE: one segment of a drag along a polyline (seed 001 §4.1):
+ * after `delay` steps the target moves from `target` to `target1` in `steps_total` steps
+ * (reaching target1 on its last step); a polyline is one CURVE input per segment sharing the
+ * material point. PRESSURE: a normal traction `pressure` [Pa] on every surface triangle
+ * (outward positive: inflate), spread to the triangle's vertices and from each vertex to its
+ * cell's corners by its skinning weights; `cell` is unused (-1) and the input belongs to every
+ * piece the object breaks into. An input acts while delay == 0 and steps_left > 0.
+ */
+typedef enum {
+    CS_INPUT_FORCE = 0,
+    CS_INPUT_DRAG = 1,
+    CS_INPUT_CURVE = 2,
+    CS_INPUT_PRESSURE = 3
+} cs_input_kind;
 
 typedef struct cs_input {
     cs_input_kind kind;
     int32_t cell;
     double w[8];          /* trilinear weight of each corner of `cell` */
     double force[3];      /* CS_INPUT_FORCE */
-    double target[3];     /* CS_INPUT_DRAG */
-    double stiffness;
+    double target[3];     /* CS_INPUT_DRAG, CS_INPUT_CURVE (segment start) */
+    double target1[3];    /* CS_INPUT_CURVE: segment end */
+    double stiffness;     /* DRAG, CURVE [N/m] */
+    double pressure;      /* CS_INPUT_PRESSURE [Pa] */
     int steps_left;
+    int steps_total;      /* CURVE: steps of the segment */
+    int delay;            /* steps before the input starts acting */
 } cs_input;
+
+/* Springs (DRAG, CURVE) enter the implicit operator; FORCE and PRESSURE are loads. */
+static inline bool cs_input_is_spring(const cs_input *in)
+{
+    return in->kind == CS_INPUT_DRAG || in->kind == CS_INPUT_CURVE;
+}
+
+/*
+ * Material fields (seed 001 §3.3), the representation every element model honours.
+ *
+ * Each cell carries three factors at each of its 8 Gauss points (the 2×2×2 rule: point g at
+ * ξ = (2·CS_CORNER[g] − 1)/√3 in the cell's [−1,1]³, i.e. rest position
+ * origin + h·(ijk + ½ + (CS_CORNER[g] − ½)/√3)):
+ *   young[8c+g]    factor on mat.young     (> 0)
+ *   density[8c+g]  factor on mat.density   (> 0)
+ *   damping[8c+g]  factor on both Rayleigh coefficients mat.damping (>= 0)
+ * A model samples them at its own quadrature points (a per-cube model may use the mean of a
+ * cell's 8). FEM: K_e = Σ_g young_g·K_g with 8 shared unit per-Gauss-point matrices K_g
+ * (fem.h), never a matrix per element. Lumped mass (cs_object_lump_mass): node k of cell c gets
+ * Σ_g ρ·density_g·N_k(ξ_g)·h³/8 (the row sum of the consistent mass; ρh³/8 when uniform).
+ * Damping: C = α·M_d + β·K_d with M_d lumped like M from density·damping and
+ * K_d = Σ_g young_g·damping_g·K_g; while every damping factor is 1 (has_damping false) that is
+ * the plain α M + β K and the integrators use M and K. Every array is always allocated
+ * (all 1 for a plain object); fracture copies them with the cells.
+ */
+typedef struct cs_fields {
+    double *young, *density, *damping; /* 8 per cell */
+    double *kd;       /* 8 per cell: young·damping (valid when has_damping) */
+    double *md;       /* per node: the lumped α-damping mass (valid when has_damping) */
+    double *tmp;      /* 9 per node: scratch of the damping products (when has_damping) */
+    bool has_damping; /* some damping factor differs from 1 */
+    bool has_young;   /* some young factor differs from 1 (else the models may ignore it) */
+} cs_fields;
 
 typedef struct cs_object {
     cs_object_id id;
@@ -48,6 +100,7 @@ typedef struct cs_object {
     cs_cubemesh cm;
     cs_surface surf;
     cs_fem fem;
+    struct cs_lf *lf;      /* localframe model data (localframe.h); NULL for other models */
     int n;                 /* nodes */
     double *x, *v, *m;     /* 3, 3, 1 per node */
     double *f_const;       /* gravity + scene loads, 3 per node */
@@ -55,7 +108,16 @@ typedef struct cs_object {
     uint8_t *mask;         /* per dof: held */
     uint8_t *smask;        /* per dof: held or in ground contact during this step's solve */
     uint8_t *contact;      /* per node: 1 constrained by the ground this step, 2 released */
-    int n_fixed_nodes;
+    int n_fixed_nodes;     /* held nodes (removed dofs or penalty springs) */
+    /* Constraints (seed 001 §4.2): with penalty == 0 held nodes' dofs are removed (mask);
+     * with penalty > 0 they stay free and a spring of that stiffness [N/m] per node pulls
+     * each towards its rest position (pin[node] = 1, mask 0). */
+    double penalty;
+    uint8_t *pin;          /* per node: held by a penalty spring */
+    /* An integrator honours them through world.c: gather_forces adds k_p (X − x) at pinned
+     * nodes, and an implicit operator adds pcoef·k_p on their diagonal (step_operator and
+     * build_preconditioner do). An explicit integrator must keep dt below 2·sqrt(m/k_p). */
+    cs_fields fld;
     double mass;
     cs_cg_work cg;
     cs_input inputs[CS_MAX_INPUTS];
@@ -69,6 +131,9 @@ typedef struct cs_object {
     bool elastic_energy_valid;
     /* operator coefficients of the current solve */
     double mcoef, kcoef, dcoef;
+    double pcoef;          /* on the penalty springs (dt² in a step, 1 in statics) */
+    double cmcoef, ckcoef; /* on α·M_d and β·K_d when fld.has_damping (then mcoef = 1 and
+                              kcoef carries only the dt² of K) */
     /* CS_MODEL_RIGID: pose, velocities and mass properties (rigid.h); NULL otherwise */
     struct cs_rigid *rb;
 } cs_object;
@@ -96,7 +161,7 @@ struct cs_world {
     struct cs_rigid_world *rigid; /* rigid.c's per-step scratch; NULL until a rigid step */
 };
 
-/* Defined in world.c, used by fracture.c. */
+/* Defined in world.c and fields.c, used by fracture.c and each other. */
 /* Write the message to err (if any) and return code: the engine's runtime-error idiom. */
 int cs_engine_fail(char *err, size_t errlen, int code, const char *fmt, ...)
     __attribute__((format(printf, 4, 5)));
@@ -104,6 +169,18 @@ cs_object *cs_world_find_internal(const cs_world_t *w, cs_object_id id);
 int cs_world_append_object(cs_world_t *w, cs_object *o);
 void cs_object_free_internal(cs_object *o);
 int cs_object_alloc_state(cs_object *o);
+/* Allocate o->fld for o->cm.n_cells cells, every factor 1. Returns -1 on out of memory. */
+int cs_fields_alloc(cs_object *o);
+void cs_fields_free(cs_fields *f);
+/* Check design region i (message names "fields[i]"); CS_OK or CS_ERR_INVALID. */
+int cs_fields_check_region(const cs_field_region *r, int i, char *err, size_t errlen);
+/* Multiply the fields by every region, evaluated at each Gauss point's rest position. */
+void cs_fields_apply_regions(cs_object *o, const cs_field_region *r, int n);
+/* Lumped masses o->m and o->mass from the density field, and M_d, K_d (fld.md reallocated
+ * to o->n nodes) from the damping field; has_young, has_damping and the FEM's o->fem.kf
+ * (NULL while every young factor is 1) follow the fields. f_const is left alone. Returns -1 on out of
+ * memory. */
+int cs_object_lump_mass(cs_object *o);
 
 /* Defined in fracture.c, used by world.c. */
 void cs_fracture_clear_step(cs_world_t *w);

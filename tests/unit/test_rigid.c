@@ -631,3 +631,21 @@ TEST(rigid_scene_loads_push_and_turn)
     ENSURE_NEAR(s.angular_velocity[2], 0.2 * 2 / Izz * dt, 1e-9);
     cs_world_destroy(w);
 }
+
+TEST(rigid_pressure_has_no_net_effect)
+{
+    /* a uniform pressure on a closed surface: no net force or torque on a rigid body */
+    cs_world_t *w = world(false, false);
+    char err[256] = "";
+    cs_object_id id = add_box(w, "p", 2, 2, 1, 0.1, (double[3]){0, 0, 0}, cs_material_default(),
+                              false, CS_MODEL_RIGID, NULL, err);
+    ENSURE_MSG(id != CS_NULL_OBJECT, "%s", err);
+    ENSURE_MSG(cs_world_pressure(w, id, 500, 0.5, err, sizeof err) == CS_OK, "%s", err);
+    for (int i = 0; i < 40; i++)
+        ENSURE(cs_world_step(w) == CS_OK);
+    cs_rigid_state s;
+    cs_object_rigid_state(w, id, &s);
+    ENSURE(norm3(s.velocity) == 0 && norm3(s.angular_velocity) == 0);
+    ENSURE(node_pose_error(w, id) < 1e-15);
+    cs_world_destroy(w);
+}
