@@ -1487,14 +1487,43 @@ static int substep(cs_world_t *w, cs_rigid_world *rw, bool last, cs_step_stats *
         apply_inputs(w, o);
         node_aabb(o, body_margin(o, dt));
     }
-    /* 2. contacts: ground, then sort-and-sweep over the bodies' boxes */
-    for (int i = 0; i < rw->n_body && w->def.has_ground; i++)
-        if (rw->dyn[i] && ground_contacts(w, rw, i) != 0)
-            return CS_ERR_NOMEM;
+    /* 2. sort-and-sweep over the bodies' boxes. A sleeping body that a moving one may reach
+     * this step wakes now, so that the collision exchanges momentum with it (were it fixed
+     * for this step, the mover would bounce off it as off a wall). Moving: faster than
+     * twice the sleep speed before this step's forces. */
     for (int i = 0; i < rw->n_body; i++)
         rw->order[i] = i;
     if (rw->n_body > 1)
         qsort_r(rw->order, (size_t)rw->n_body, sizeof *rw->order, cmp_aabb_x, rw);
+    for (int s = 0; s < rw->n_body; s++) {
+        const int ia = rw->order[s];
+        for (int t = s + 1; t < rw->n_body; t++) {
+            const int ib = rw->order[t];
+            const cs_rigid *a = rw->body[ia]->rb, *b = rw->body[ib]->rb;
+            if (b->aabb_min[0] > a->aabb_max[0])
+                break;
+            if (rw->dyn[ia] == rw->dyn[ib] || b->aabb_min[1] > a->aabb_max[1] ||
+                b->aabb_max[1] < a->aabb_min[1] || b->aabb_min[2] > a->aabb_max[2] ||
+                b->aabb_max[2] < a->aabb_min[2])
+                continue;
+            const int mv = rw->dyn[ia] ? ia : ib, sl = rw->dyn[ia] ? ib : ia;
+            const cs_rigid *m = rw->body[mv]->rb;
+            cs_object *o = rw->body[sl];
+            if (!o->sleeping || o->n_fixed_nodes > 0 ||
+                sqrt(dot3(m->v_pre, m->v_pre)) + sqrt(dot3(m->w_pre, m->w_pre)) * m->radius <=
+                    2 * w->def.sleep_speed)
+                continue;
+            o->sleeping = false;
+            o->still_steps = 0;
+            rw->dyn[sl] = 1;
+            apply_inputs(w, o);
+            node_aabb(o, body_margin(o, dt));
+        }
+    }
+    /* 3. contacts: ground, then the overlapping pairs */
+    for (int i = 0; i < rw->n_body && w->def.has_ground; i++)
+        if (rw->dyn[i] && ground_contacts(w, rw, i) != 0)
+            return CS_ERR_NOMEM;
     for (int s = 0; s < rw->n_body; s++) {
         const int ia = rw->order[s];
         const cs_rigid *a = rw->body[ia]->rb;
@@ -1507,21 +1536,8 @@ static int substep(cs_world_t *w, cs_rigid_world *rw, bool last, cs_step_stats *
                 b->aabb_max[1] < a->aabb_min[1] || b->aabb_min[2] > a->aabb_max[2] ||
                 b->aabb_max[2] < a->aabb_min[2])
                 continue;
-            const int c0 = rw->nc;
             if (body_pair(w, rw, ia, ib) != 0)
                 return CS_ERR_NOMEM;
-            /* a sleeping body touched by a moving one wakes (it acts as fixed this step) */
-            for (int k = 0; k < 2 && rw->nc > c0; k++) {
-                const int x = k ? ia : ib, y = k ? ib : ia;
-                cs_object *sl = rw->body[x];
-                const cs_rigid *mv = rw->body[y]->rb;
-                if (sl->sleeping && rw->dyn[y] &&
-                    sqrt(dot3(mv->v, mv->v)) + sqrt(dot3(mv->w, mv->w)) * mv->radius >
-                        2 * w->def.sleep_speed) {
-                    sl->sleeping = false;
-                    sl->still_steps = 0;
-                }
-            }
         }
     }
     /* contacts whose normal must point towards a dynamic body: swap so that a is dynamic */
@@ -1555,7 +1571,7 @@ static int substep(cs_world_t *w, cs_rigid_world *rw, bool last, cs_step_stats *
     }
     deformable_contacts(w, rw, n_objects);
     const double t2 = now_ms();
-    /* 3. poses, nodes, sleep */
+    /* 4. poses, nodes, sleep */
     for (int i = 0; i < rw->n_body; i++) {
         cs_object *o = rw->body[i];
         cs_rigid *rb = o->rb;
@@ -1617,7 +1633,7 @@ static int substep(cs_world_t *w, cs_rigid_world *rw, bool last, cs_step_stats *
         memset(o->v, 0, (size_t)o->n * 3 * sizeof(double));
     }
     const double t3 = now_ms();
-    /* 4. impact fracture */
+    /* 5. impact fracture */
     const double gn = sqrt(dot3(w->def.gravity, w->def.gravity));
     const int n_body = rw->n_body;
     for (int i = 0; i < n_body; i++) {

@@ -649,3 +649,47 @@ TEST(rigid_pressure_has_no_net_effect)
     ENSURE(node_pose_error(w, id) < 1e-15);
     cs_world_destroy(w);
 }
+
+TEST(rigid_sleeping_body_takes_momentum)
+{
+    /* a box sliding on frictionless ground into a sleeping box of the same mass: the
+     * sleeper wakes before the collision is solved, so momentum passes on (inelastic: both
+     * go on at half the speed) instead of the mover bouncing off a momentarily fixed wall */
+    cs_world_t *w = world(true, true);
+    char err[256] = "";
+    cs_material m = cs_material_default();
+    m.friction = 0;
+    m.restitution = 0;
+    cs_object_id a = add_box(w, "a", 2, 2, 2, 0.1, (double[3]){0, 0, 0}, m, false,
+                             CS_MODEL_RIGID, NULL, err);
+    cs_object_id b = add_box(w, "b", 2, 2, 2, 0.1, (double[3]){0.99, 0, 0}, m, false,
+                             CS_MODEL_RIGID, NULL, err);
+    ENSURE_MSG(a != CS_NULL_OBJECT && b != CS_NULL_OBJECT, "%s", err);
+    cs_object_info info;
+    for (int i = 0; i < 120; i++)
+        ENSURE(cs_world_step(w) == CS_OK);
+    cs_object_get_info(w, b, &info);
+    ENSURE_MSG(info.sleeping, "the target box should be asleep");
+    /* 2 m/s along +x: half the impulse at each of two corners level with the centre */
+    const double dt = cs_world_get_def(w)->dt, F = 8 * 2.0 / dt / 2;
+    ENSURE(cs_world_apply_force(w, a, (double[3]){0, 0, 0.1}, (double[3]){F, 0, 0}, 0, err,
+                                sizeof err) == CS_OK);
+    ENSURE(cs_world_apply_force(w, a, (double[3]){0, 0.2, 0.1}, (double[3]){F, 0, 0}, 0, err,
+                                sizeof err) == CS_OK);
+    ENSURE(cs_world_step(w) == CS_OK);
+    cs_rigid_state sa, sb;
+    cs_object_rigid_state(w, a, &sa);
+    const double p0 = sa.mass * sa.velocity[0];
+    ENSURE_NEAR(sa.velocity[0], 2.0, 1e-6);
+    for (int i = 0; i < 60; i++)
+        ENSURE(cs_world_step(w) == CS_OK);
+    cs_object_rigid_state(w, a, &sa);
+    cs_object_rigid_state(w, b, &sb);
+    const double p1 = sa.mass * sa.velocity[0] + sb.mass * sb.velocity[0];
+    printf("    after the hit: v_a = %.4f, v_b = %.4f m/s (momentum %.6f of %.6f)\n",
+           sa.velocity[0], sb.velocity[0], p1, p0);
+    ENSURE_NEAR(p1, p0, 1e-3 * p0);
+    ENSURE_NEAR(sb.velocity[0], 1.0, 0.05);
+    ENSURE_NEAR(sa.velocity[0], 1.0, 0.05);
+    cs_world_destroy(w);
+}
