@@ -2,32 +2,39 @@
  * rigid.c — rigid bodies, their contacts and impact fracture (seed 000 §2.4, after Müller et
  * al.: every face-connected set of cubes of a rigid object is one rigid body).
  *
- * Time integration, per step of dt (semi-implicit):
- *   1. v += dt (g + F/m), ω += dt I⁻¹ τ for client forces (acting at their material point);
- *      drags are implicit springs on the point's effective mass (stable at any stiffness).
- *   2. contacts: speculative (generated while the gap is below the distance the bodies can
+ * Time integration, per step of dt (semi-implicit), in substeps so that no body moves more
+ * than its cube edge in one (at most MAX_SUBSTEPS):
+ *   1. v += dt (F/m), ω += dt I⁻¹ τ for gravity, scene loads and client forces (acting at
+ *      their material point); drags and curves are implicit springs on the point's effective
+ *      mass (stable at any stiffness); a pressure has no net effect on a closed rigid body.
+ *   2. sleeping bodies that a moving body's box reaches wake (they take part in this step).
+ *   3. contacts: speculative (generated while the gap is below the distance the bodies can
  *      close in one step), solved by sequential impulses (projected Gauss–Seidel on the
- *      accumulated normal impulse ≥ 0 and Coulomb friction |jt| ≤ μ jn per tangent), with
- *      restitution above an approach speed of 2|g|dt and Baumgarte push-out beyond a slop.
- *   3. c += dt v; the rotation by the Lie–Poisson implicit midpoint rule: in body axes
+ *      accumulated normal impulse ≥ 0 and Coulomb friction |jt| ≤ μ jn per tangent, warm
+ *      started from the same contacts of the last step), with restitution above an approach
+ *      speed of 2|g|dt and Baumgarte push-out beyond a slop.
+ *   4. c += dt v; the rotation by the Lie–Poisson implicit midpoint rule: in body axes
  *      I (ω1 − ω0) + dt ω½ × I ω½ = 0 (ω½ = (ω0+ω1)/2, solved by Newton), then
  *      R1 = R0 cay(dt [ω½]), the Cayley rotation (quaternion (1, dt ω½/2) normalised). Both
  *      quadratic invariants of free rotation, |L| and ½ ωᵀIω, are conserved exactly by the
  *      midpoint rule, and the Cayley update makes R1 L1 = R0 L0, so the world angular
  *      momentum of a free body is conserved to rounding, tumbling about any axis.
- *   4. nodes x = c + R (X − C), velocities v + ω × (x − c), surface skinned; sleep test.
+ *      Nodes x = c + R (X − C), velocities v + ω × (x − c), surface skinned; bodies resting
+ *      on each other (contact islands) fall asleep together.
+ *   5. impact fracture (below).
  *
  * Collision detection: an AABB per body (grown by its speculative margin), sort-and-sweep on
  * x over bodies; for an overlapping pair, the cubes of the smaller body near the other are
- * looked up in the other's lattice (its hash), so only cube pairs within reach are tested;
- * each pair is tested by libccd (GJK + EPA penetration of two oriented boxes grown by the
- * margin; MPR's direction follows the line between the centres and is too rough for resting
- * contact), the normal snapped to a face normal of either cube when within ~14° of one, and
- * its contact points are the corners of either cube that lie against the other (libccd's
- * point when none does, edge–edge). Normals that would push through a face shared with a
- * neighbouring cube of the same body are dropped. The ground is a plane against the nodes.
- * Deformable objects: their nodes inside a rigid body's cubes are pushed out through the
- * nearest exposed face of that cube, with an equal and opposite impulse on the body.
+ * looked up in the other's lattice (its hash), so only cube pairs within reach are tested.
+ * A cube pair: libccd's MPR tells whether the two oriented boxes (grown by the margin) meet;
+ * the normal and depth come from the separating-axis test over the 15 box axes (exact for
+ * boxes; libccd's EPA stalls on the coplanar faces resting cubes always have, MPR's direction
+ * follows the line between the centres), snapped to a face normal of either cube when within
+ * ~14° of one; the contact points are the corners of either cube that lie against the other
+ * (libccd's MPR point when none does, edge–edge). Normals that would push through a face
+ * shared with a neighbouring cube of the same body are dropped. The ground is a plane against
+ * the nodes. Deformable objects: their nodes inside a rigid body's cubes are pushed out
+ * through the exposed face they came in by, with an equal and opposite impulse on the body.
  *
  * Impact fracture: when the contact force (impulse/dt) on a body with fracture enabled exceeds
  * strength·h² and twice its weight, the body's cube mesh is solved statically (linear FEM,
