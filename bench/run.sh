@@ -95,3 +95,5 @@ fi
 # Rigid bodies: the drop demo headless (real-time factor, pieces checked closed).
 echo "bench_rigid: scenes/drop.json, 2 s"
 build/bin/bench_rigid scenes/drop.json 2 | tee "$out/rigid_drop.txt"
+echo "bench_rigid: boxes falling and sleeping, N = 4, 8, 16 (2·N² boxes)"
+for n in 4 8 16; do build/bin/bench_rigid --boxes $n; done | tee "$out/rigid_boxes.txt"
