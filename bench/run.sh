@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # make bench: speed of the corotational implicit step against size, 1 and 2 threads, the
-# cost of a fracture event against surface triangles (bench_fracture), and seed 004's mss
-# studies (bench_mss, at the end).
+# cost of a fracture event against surface triangles (bench_fracture), localframe against
+# corotational FEM, seed 004's mss studies (bench_mss) and the rigid drop demo (bench_rigid).
 # Writes bench/results/blocks.csv, blocks.md (the README table) and blocks.svg (log-log plot).
 # BENCH_SIZES / BENCH_RUNS override the defaults (8,16,32,48 and 5 runs; medians are reported).
 set -euo pipefail
@@ -99,3 +99,9 @@ mref=${BENCH_MSS_REF:-24}
 echo "bench_mss: seed 004 studies, reference FEM at $mref cubes across"
 build/bin/bench_mss --ref "$mref" --lref "${BENCH_MSS_LREF:-24}" --csv-cantilever "$out/mss_cantilever.csv" \
   --csv-lshape "$out/mss_lshape.csv" | tee "$out/mss.md"
+
+# Rigid bodies: the drop demo headless (real-time factor, pieces checked closed).
+echo "bench_rigid: scenes/drop.json, 2 s"
+build/bin/bench_rigid scenes/drop.json 2 | tee "$out/rigid_drop.txt"
+echo "bench_rigid: boxes falling and sleeping, N = 4, 8, 16 (2·N² boxes)"
+for n in 4 8 16; do build/bin/bench_rigid --boxes $n; done | tee "$out/rigid_boxes.txt"

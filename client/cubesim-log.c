@@ -68,7 +68,8 @@ static void on_message(const lcm_recv_buf_t *rbuf, const char *channel, void *us
     cs_seq_table_note(&lg->seq, channel, has ? &h : NULL);
     for (int i = 0; i < lg->seq.n; i++)
         if (!strcmp(lg->seq.t[i].channel, channel) &&
-            (((!strcmp(channel, CS_CH_DELTA) || !strcmp(channel, CS_CH_TOPOLOGY)) &&
+            (((!strcmp(channel, CS_CH_DELTA) || !strcmp(channel, CS_CH_TOPOLOGY) ||
+               !strcmp(channel, CS_CH_POSE)) &&
               lg->seq.t[i].lost > lost0) ||
              lg->seq.t[i].restarts > restarts0))
             lg->want_snapshot = 1;

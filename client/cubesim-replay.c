@@ -12,9 +12,10 @@
  * after the first event. When stdin is a terminal or a pipe it takes single-key commands:
  * p pause/resume, s publish one message (while paused), q quit; SIGINT/SIGTERM quit too.
  *
- * Rebuild reads only CUBESIM_SNAPSHOT, CUBESIM_TOPOLOGY and CUBESIM_DELTA and feeds
- * common/surface_state: the surfaces at frame N are the last complete snapshot of the last
- * session/epoch with frame <= N plus every topology change and delta of frame <= N after it.
+ * Rebuild reads only CUBESIM_SNAPSHOT, CUBESIM_TOPOLOGY, CUBESIM_DELTA and CUBESIM_POSE (rigid
+ * objects) and feeds common/surface_state: the surfaces at frame N are the last complete
+ * snapshot of the last session/epoch with frame <= N plus every topology change, pose and delta
+ * of frame <= N after it.
  * --verify checks, after each frame that changed the surfaces, every object as a piece with
  * cs_check_pieces (closed, oriented, non-degenerate, positive volume); in a frame where a
  * topology change (fracture) was applied, the pieces that descend from one original object
@@ -41,6 +42,7 @@
 
 #include "client_util.h"
 #include "cubesim_delta_t.h"
+#include "cubesim_pose_t.h"
 #include "cubesim_snapshot_t.h"
 #include "cubesim_topology_t.h"
 #include "mesh.h"
@@ -128,8 +130,8 @@ static int rebuild_event(rebuild *rb, cs_log *log, int64_t i, char *err, size_t 
 {
     const char *ch = log->channels[log->ev[i].channel];
     int is_snap = !strcmp(ch, CS_CH_SNAPSHOT), is_delta = !strcmp(ch, CS_CH_DELTA);
-    int is_topo = !strcmp(ch, CS_CH_TOPOLOGY);
-    if (!is_snap && !is_delta && !is_topo)
+    int is_topo = !strcmp(ch, CS_CH_TOPOLOGY), is_pose = !strcmp(ch, CS_CH_POSE);
+    if (!is_snap && !is_delta && !is_topo && !is_pose)
         return 0;
     const uint8_t *data;
     if (cs_log_read(log, i, &data, err, errlen))
@@ -155,6 +157,26 @@ static int rebuild_event(rebuild *rb, cs_log *log, int64_t i, char *err, size_t 
             changed = r == CS_SS_APPLIED;
         }
         cubesim_snapshot_t_decode_cleanup(&s);
+    } else if (is_pose) {
+        cubesim_pose_t m;
+        if (cubesim_pose_t_decode(data, 0, log->ev[i].datalen, &m) < 0) {
+            note_bad(rb, i, "CUBESIM_POSE message of another type (fingerprint mismatch)");
+            return 0;
+        }
+        note_frame(rb, &m.header);
+        cs_ss_pose p = {ss_header(&m.header), m.object_id, m.topology_version,
+                        m.n_vertices_total, m.reference,
+                        {m.position[0], m.position[1], m.position[2]},
+                        {m.orientation[0], m.orientation[1], m.orientation[2], m.orientation[3]}};
+        if (rb->frame_limit < 0 || m.header.frame <= rb->frame_limit) {
+            int r = cs_surface_state_apply_pose(&rb->st, &p, msg, sizeof msg);
+            if (r == CS_SS_REJECTED || r == CS_SS_NOMEM)
+                note_bad(rb, i, msg);
+            changed = r == CS_SS_APPLIED;
+        } else {
+            cs_surface_state_note_pose_seq(&rb->st, &p.header);
+        }
+        cubesim_pose_t_decode_cleanup(&m);
     } else if (is_topo) {
         cubesim_topology_t m;
         if (cubesim_topology_t_decode(data, 0, log->ev[i].datalen, &m) < 0) {
@@ -206,7 +228,8 @@ static int frame_ends_at(cs_log *log, int64_t i, int64_t frame, char *err, size_
 {
     for (int64_t j = i + 1; j < log->n; j++) {
         const char *ch = log->channels[log->ev[j].channel];
-        if (strcmp(ch, CS_CH_SNAPSHOT) && strcmp(ch, CS_CH_DELTA) && strcmp(ch, CS_CH_TOPOLOGY))
+        if (strcmp(ch, CS_CH_SNAPSHOT) && strcmp(ch, CS_CH_DELTA) && strcmp(ch, CS_CH_TOPOLOGY) &&
+            strcmp(ch, CS_CH_POSE))
             continue;
         const uint8_t *data;
         if (cs_log_read(log, j, &data, err, errlen))

@@ -343,7 +343,7 @@ static int get_array(sc_ctx *c, const cJSON *obj, const char *path, const char *
 static int parse_material(sc_ctx *c, const cJSON *m, const char *path, cs_material *out)
 {
     static const char *const keys[] = {"young", "poisson", "density", "damping", "strength",
-                                       NULL};
+                                       "restitution", "friction", NULL};
     if (!cJSON_IsObject(m))
         return fail(c, path, "expected an object, got %s", type_name(m));
     if (check_keys(c, m, path, keys))
@@ -353,7 +353,9 @@ static int parse_material(sc_ctx *c, const cJSON *m, const char *path, cs_materi
         get_number(c, m, path, "poisson", &r.poisson, (sc_range){LO_GE, 0, HI_LT, 0.5}, 0) ||
         get_number(c, m, path, "density", &r.density, POSITIVE, 0) ||
         get_vec(c, m, path, "damping", r.damping, 2, NONNEG, 0) ||
-        get_number(c, m, path, "strength", &r.strength, POSITIVE, 0))
+        get_number(c, m, path, "strength", &r.strength, POSITIVE, 0) ||
+        get_number(c, m, path, "restitution", &r.restitution, (sc_range){LO_GE, 0, HI_LE, 1}, 0) ||
+        get_number(c, m, path, "friction", &r.friction, (sc_range){LO_GE, 0, HI_LE, 100}, 0))
         return -1;
     *out = r;
     return 0;

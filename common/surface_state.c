@@ -78,6 +78,7 @@ static void object_free(cs_ss_object *o)
     free(o->model);
     free(o->xyz);
     free(o->tris);
+    free(o->ref_xyz);
     memset(o, 0, sizeof *o);
 }
 
@@ -565,6 +566,133 @@ int cs_surface_state_apply_delta(cs_surface_state *st, const cs_ss_delta *d, cha
     return CS_SS_APPLIED;
 }
 
+void cs_surface_state_note_pose_seq(cs_surface_state *st, const cs_ss_header *h)
+{
+    if (!st->have_pose_seq || h->session_id != st->pose_session) {
+        st->have_pose_seq = 1;
+        st->pose_session = h->session_id;
+        st->last_pose_seq = h->seq;
+        return;
+    }
+    if (h->seq > st->last_pose_seq + 1) {
+        st->poses_lost += h->seq - st->last_pose_seq - 1;
+        st->stale = 1;
+    }
+    if (h->seq > st->last_pose_seq)
+        st->last_pose_seq = h->seq;
+}
+
+static void pose_matrix(const double q[4], double R[9])
+{
+    const double n = q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3];
+    const double s = n > 0 ? 2.0 / n : 0.0;
+    const double w = q[0], x = q[1], y = q[2], z = q[3];
+    R[0] = 1 - s * (y * y + z * z);
+    R[1] = s * (x * y - w * z);
+    R[2] = s * (x * z + w * y);
+    R[3] = s * (x * y + w * z);
+    R[4] = 1 - s * (x * x + z * z);
+    R[5] = s * (y * z - w * x);
+    R[6] = s * (x * z - w * y);
+    R[7] = s * (y * z + w * x);
+    R[8] = 1 - s * (x * x + y * y);
+}
+
+void cs_pose_transform(const float *ref, int nv, const double q_r[4], const double c_r[3],
+                       const double q[4], const double c[3], float *out)
+{
+    double Rr[9], R[9], M[9];
+    pose_matrix(q_r, Rr);
+    pose_matrix(q, R);
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++)
+            M[3 * i + j] = R[3 * i] * Rr[3 * j] + R[3 * i + 1] * Rr[3 * j + 1] +
+                           R[3 * i + 2] * Rr[3 * j + 2];
+    for (int v = 0; v < nv; v++) {
+        const double d[3] = {(double)ref[3 * v] - c_r[0], (double)ref[3 * v + 1] - c_r[1],
+                             (double)ref[3 * v + 2] - c_r[2]};
+        for (int a = 0; a < 3; a++)
+            out[3 * v + a] =
+                (float)(c[a] + M[3 * a] * d[0] + M[3 * a + 1] * d[1] + M[3 * a + 2] * d[2]);
+    }
+}
+
+int cs_surface_state_apply_pose(cs_surface_state *st, const cs_ss_pose *p, char *err,
+                                size_t errlen)
+{
+    cs_surface_state_note_pose_seq(st, &p->header);
+    if (observe(st, &p->header)) {
+        snprintf(err, errlen, "pose of epoch %" PRId32 " is older than epoch %" PRId32,
+                 p->header.epoch, st->epoch);
+        return CS_SS_IGNORED;
+    }
+    if (!st->valid) {
+        snprintf(err, errlen, "pose for object %" PRId32 " before any snapshot", p->object_id);
+        return CS_SS_IGNORED;
+    }
+    if (p->header.frame < st->frame) {
+        snprintf(err, errlen, "pose of frame %" PRId64 " is older than the state's frame %" PRId64,
+                 p->header.frame, st->frame);
+        return CS_SS_IGNORED;
+    }
+    cs_ss_object *o = find_mut(st, p->object_id);
+    if (!o) {
+        snprintf(err, errlen, "pose for unknown object %" PRId32, p->object_id);
+        st->stale = 1;
+        return CS_SS_REJECTED;
+    }
+    if (p->topology_version != o->topology_version) {
+        snprintf(err, errlen, "pose for object %" PRId32 " topology version %" PRId32
+                 ", the state has %" PRId32, p->object_id, p->topology_version,
+                 o->topology_version);
+        st->stale = 1;
+        return CS_SS_IGNORED;
+    }
+    if (p->n_vertices_total != o->nv) {
+        snprintf(err, errlen, "pose for object %" PRId32 " says %" PRId32
+                 " vertices, the state has %d", p->object_id, p->n_vertices_total, o->nv);
+        return CS_SS_REJECTED;
+    }
+    double qn = 0;
+    int finite = 1;
+    for (int a = 0; a < 4; a++) {
+        qn += p->orientation[a] * p->orientation[a];
+        finite = finite && isfinite(p->orientation[a]);
+    }
+    for (int a = 0; a < 3; a++)
+        finite = finite && isfinite(p->position[a]);
+    if (!finite || !(fabs(qn - 1) < 1e-6) || (p->reference != 0 && p->reference != 1)) {
+        snprintf(err, errlen, "pose for object %" PRId32 ": not finite, not a unit quaternion "
+                 "or a bad reference flag", p->object_id);
+        return CS_SS_REJECTED;
+    }
+    if (p->reference) {
+        float *r = realloc(o->ref_xyz, 3 * (size_t)(o->nv > 0 ? o->nv : 1) * sizeof *r);
+        if (!r) {
+            snprintf(err, errlen, "out of memory for the pose of object %" PRId32, p->object_id);
+            return CS_SS_NOMEM;
+        }
+        o->ref_xyz = r;
+        if (o->nv)
+            memcpy(r, o->xyz, 3 * (size_t)o->nv * sizeof *r);
+        memcpy(o->ref_q, p->orientation, sizeof o->ref_q);
+        memcpy(o->ref_c, p->position, sizeof o->ref_c);
+        o->has_ref = 1;
+    } else {
+        if (!o->has_ref) {
+            snprintf(err, errlen, "pose for object %" PRId32 " without its reference pose",
+                     p->object_id);
+            st->stale = 1;
+            return CS_SS_IGNORED;
+        }
+        cs_pose_transform(o->ref_xyz, o->nv, o->ref_q, o->ref_c, p->orientation, p->position,
+                          o->xyz);
+    }
+    st->frame = p->header.frame;
+    st->sim_time = p->header.sim_time;
+    return CS_SS_APPLIED;
+}
+
 uint64_t cs_surface_hash_floats(const float *xyz, int nv)
 {
     uint64_t h = 14695981039346656037ULL;
@@ -912,6 +1040,9 @@ static int apply_change(cs_surface_state *st, const cs_ss_tpending *p, char *err
     }
     free(o->xyz);
     free(o->tris);
+    free(o->ref_xyz);
+    o->ref_xyz = NULL;
+    o->has_ref = 0; /* its vertices changed: the daemon sends a new reference pose */
     o->xyz = xyz;
     o->tris = tris;
     o->nv = p->nv_total;

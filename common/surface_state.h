@@ -112,7 +112,20 @@ typedef struct cs_ss_object {
     float *xyz;              /* owned, 3 per vertex */
     int nt;
     int32_t *tris;           /* owned, 3 per triangle */
+    /* rigid objects (CUBESIM_POSE): the copy and pose of the last reference pose; has_ref is
+     * 0 until one arrives and again after a snapshot or topology change of the object */
+    int has_ref;
+    float *ref_xyz;          /* owned, 3 per vertex */
+    double ref_q[4], ref_c[3];
 } cs_ss_object;
+
+/* One CUBESIM_POSE message (lcmtypes/pose_t.lcm). */
+typedef struct cs_ss_pose {
+    cs_ss_header header;
+    int32_t object_id, topology_version, n_vertices_total;
+    int32_t reference;
+    double position[3], orientation[4];
+} cs_ss_pose;
 
 typedef struct cs_ss_pending cs_ss_pending; /* a snapshot being assembled (private) */
 typedef struct cs_ss_tpending cs_ss_tpending; /* a topology change being assembled (private) */
@@ -134,6 +147,12 @@ typedef struct cs_surface_state {
     int64_t delta_session;
     int64_t last_delta_seq;
     int64_t deltas_lost;     /* messages missing from header.seq gaps, all sessions */
+
+    /* CUBESIM_POSE sequence tracking (per daemon session). */
+    int have_pose_seq;
+    int64_t pose_session;
+    int64_t last_pose_seq;
+    int64_t poses_lost;
 
     /* CUBESIM_TOPOLOGY sequence tracking and counts. */
     int have_topo_seq;
@@ -170,6 +189,20 @@ int cs_surface_state_apply_chunk(cs_surface_state *st, const cs_ss_chunk *c, cha
  * (unknown object — also marked stale: it may be a piece whose topology change was lost —,
  * counts that disagree, index out of range, non-finite coordinate).
  */
+/*
+ * Apply one pose of a rigid object (lcmtypes/pose_t.lcm): with reference = 1 the object's
+ * current copy and this pose become its reference; otherwise every vertex is set from the
+ * reference by cs_pose_transform. Same session/epoch/object/version rules as a delta; a pose
+ * without a reference is ignored (and marks the state stale). Tracks header.seq (gap: stale).
+ */
+int cs_surface_state_apply_pose(cs_surface_state *st, const cs_ss_pose *p, char *err,
+                                size_t errlen);
+void cs_surface_state_note_pose_seq(cs_surface_state *st, const cs_ss_header *h);
+/* out = float(c + R(q) R(q_r)ᵀ (ref − c_r)) for nv vertices, in double: the daemon computes
+ * its record of what it sent with this same function, so both stay identical. */
+void cs_pose_transform(const float *ref, int nv, const double q_r[4], const double c_r[3],
+                       const double q[4], const double c[3], float *out);
+
 int cs_surface_state_apply_delta(cs_surface_state *st, const cs_ss_delta *d, char *err,
                                  size_t errlen);
 

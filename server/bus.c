@@ -24,6 +24,8 @@
 #include "cubesim_paint_t.h"
 #include "cubesim_pressure_t.h"
 #include "cubesim_delta_t.h"
+#include "cubesim_pose_t.h"
+#include "surface_state.h"
 #include "cubesim_force_t.h"
 #include "cubesim_snapshot_t.h"
 #include "cubesim_status_t.h"
@@ -42,6 +44,10 @@ typedef struct sent_object {
     int nv, nt;
     float *xyz; /* 3·nv: the floats last sent */
     bool settled; /* asleep, and its last motion already compared and sent */
+    /* rigid objects: the reference pose last sent (lcmtypes/pose_t.lcm) and the copy then */
+    bool has_ref;
+    float *ref_xyz;
+    double ref_q[4], ref_c[3];
 } sent_object;
 
 struct cs_bus {
@@ -55,7 +61,7 @@ struct cs_bus {
     int32_t epoch;
     int64_t frame;
     double sim_time;
-    int64_t seq_snapshot, seq_delta, seq_status, seq_ack, seq_topology;
+    int64_t seq_snapshot, seq_delta, seq_status, seq_ack, seq_topology, seq_pose;
     int32_t change_id;            /* last topology change sent */
 
     /* decoded inputs: a ring */
@@ -666,8 +672,10 @@ static void outbox_clear(cs_bus_t *b)
 
 void cs_bus_forget_objects(cs_bus_t *b)
 {
-    for (int i = 0; i < b->n_sent; i++)
+    for (int i = 0; i < b->n_sent; i++) {
         free(b->sent[i].xyz);
+        free(b->sent[i].ref_xyz);
+    }
     b->n_sent = 0;
 }
 
@@ -1002,6 +1010,7 @@ int32_t cs_bus_queue_snapshot(cs_bus_t *b, const cs_world_t *w, bool coalesce)
         so->nt = nt;
         so->topology_version = info.topology_version;
         so->settled = info.sleeping; /* the snapshot carries its resting surface */
+        so->has_ref = false;         /* rigid: a new reference pose follows */
         for (int j = 0; j < 3 * nv; j++)
             xyz[j] = (float)v[j];
 
@@ -1041,6 +1050,47 @@ int32_t cs_bus_queue_snapshot(cs_bus_t *b, const cs_world_t *w, bool coalesce)
 
 /* ---------------------------------------------------------------- deltas */
 
+static int enc_pose(void *buf, int off, int max, const void *m)
+{
+    return cubesim_pose_t_encode(buf, off, max, m);
+}
+
+/*
+ * The pose of a rigid object (lcmtypes/pose_t.lcm). The first after a snapshot or topology
+ * change is a reference, sent after the object's deltas of that frame (the record, then up to
+ * date, is the reference copy); later ones, sent before the deltas, move the record by
+ * cs_pose_transform exactly as the receivers do, so the deltas that follow (vertices still
+ * off by more than epsilon) keep the bound. Returns 0, or -1 out of memory.
+ */
+static int queue_pose(cs_bus_t *b, sent_object *so, const cs_object_info *info,
+                      const cs_rigid_state *rs)
+{
+    cubesim_pose_t p;
+    memset(&p, 0, sizeof p);
+    p.object_id = (int32_t)so->id;
+    p.topology_version = (int32_t)info->topology_version;
+    p.n_vertices_total = so->nv;
+    memcpy(p.position, rs->position, sizeof p.position);
+    memcpy(p.orientation, rs->orientation, sizeof p.orientation);
+    if (!so->has_ref) {
+        float *r = realloc(so->ref_xyz, 3 * (size_t)(so->nv > 0 ? so->nv : 1) * sizeof *r);
+        if (!r)
+            return -1;
+        so->ref_xyz = r;
+        memcpy(r, so->xyz, 3 * (size_t)so->nv * sizeof *r);
+        memcpy(so->ref_q, rs->orientation, sizeof so->ref_q);
+        memcpy(so->ref_c, rs->position, sizeof so->ref_c);
+        so->has_ref = true;
+        p.reference = 1;
+    } else {
+        cs_pose_transform(so->ref_xyz, so->nv, so->ref_q, so->ref_c, rs->orientation,
+                          rs->position, so->xyz);
+    }
+    p.header = header(b, &b->seq_pose);
+    return encode_push(b, CS_CH_POSE, 0, cubesim_pose_t_encoded_size(&p), enc_pose, &p) < 0
+               ? -1 : 0;
+}
+
 int cs_bus_queue_deltas(cs_bus_t *b, const cs_world_t *w, double eps)
 {
     int n = cs_world_object_ids(w, NULL, 0);
@@ -1073,6 +1123,15 @@ int cs_bus_queue_deltas(cs_bus_t *b, const cs_world_t *w, double eps)
         if (info.sleeping && so->settled)
             continue;
         so->settled = info.sleeping;
+        /* rigid: a pose moves the record (and the receivers' copies) first; the deltas
+         * below then carry only what it left farther than eps */
+        cs_rigid_state rs;
+        const bool rigid = info.model == CS_MODEL_RIGID &&
+                           cs_object_rigid_state(w, ids[i], &rs) == CS_OK;
+        if (rigid && so->has_ref && queue_pose(b, so, &info, &rs) != 0) {
+            free(ids);
+            return -1;
+        }
         if (b->scratch_cap < nv) {
             int32_t *ix = realloc(b->scratch_index, (size_t)nv * sizeof *ix);
             if (ix)
@@ -1100,6 +1159,12 @@ int cs_bus_queue_deltas(cs_bus_t *b, const cs_world_t *w, double eps)
                 m++;
             }
         }
+        /* no reference yet (first motion after a snapshot or topology change): the
+         * record, brought up to date by this frame's deltas, becomes it, at this pose */
+        if (rigid && !so->has_ref && m == 0 && queue_pose(b, so, &info, &rs) != 0) {
+            free(ids);
+            return -1;
+        }
         if (m == 0)
             continue;
         const int per = (CS_BUS_CHUNK_BYTES - 200) / 16;
@@ -1124,6 +1189,10 @@ int cs_bus_queue_deltas(cs_bus_t *b, const cs_world_t *w, double eps)
                 return -1;
             }
             queued++;
+        }
+        if (rigid && !so->has_ref && queue_pose(b, so, &info, &rs) != 0) {
+            free(ids);
+            return -1;
         }
     }
     free(ids);
@@ -1295,6 +1364,7 @@ static int mirror_change(cs_bus_t *b, const cs_topo_change *c)
     so->nt = c->n_triangles_total;
     so->topology_version = c->to_version;
     so->settled = false;
+    so->has_ref = false;
     return 0;
 }
 

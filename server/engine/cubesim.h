@@ -53,7 +53,7 @@ typedef enum cs_model {
     CS_MODEL_COROTATIONAL = 1, /* the same with per-element rotation (seed 000 §2.2) */
     CS_MODEL_MSS = 2,          /* cubic mass-spring element with correction forces (seed 004) */
     CS_MODEL_LOCALFRAME = 3,   /* local-frame B-spline model (seed 001 §3.2–3.4) */
-    CS_MODEL_RIGID = 4         /* rigid cube sets (seed 000 §2.4) — not yet built */
+    CS_MODEL_RIGID = 4         /* rigid cube sets (seed 000 §2.4): rigid.c */
 } cs_model;
 
 /* Parse "linear", "corotational", ...; returns 0 and sets *out, or -1 for an unknown name. */
@@ -81,6 +81,9 @@ typedef struct cs_material {
     double density;       /* ρ [kg/m³], > 0; default 1000 */
     double damping[2];    /* Rayleigh [α (1/s, on mass), β (s, on stiffness)], >= 0; default 0,0 */
     double strength;      /* tensile strength [Pa], > 0 (fracture only); default 1e300 (never) */
+    double restitution;   /* of rigid contacts, in [0, 1]; the larger of the two bodies'; 0.3 */
+    double friction;      /* Coulomb coefficient of rigid contacts, in [0, 100]; the geometric
+                             mean of the two (the ground: with ground_friction); default 0.5 */
 } cs_material;
 
 cs_material cs_material_default(void);
@@ -317,6 +320,22 @@ typedef struct cs_step_stats {
     bool converged;
 } cs_step_stats;
 const cs_step_stats *cs_world_last_stats(const cs_world_t *w);
+
+/* ---------------------------------------------------------------- rigid bodies (seed 000 §2.4) */
+
+typedef struct cs_rigid_state {
+    double position[3];         /* centre of mass, world [m] */
+    double orientation[4];      /* unit quaternion (w, x, y, z): rest frame → world */
+    double com_rest[3];         /* centre of mass in the rest frame: x = position + R (X − com_rest) */
+    double velocity[3];         /* of the centre of mass [m/s] */
+    double angular_velocity[3]; /* world axes [rad/s] */
+    double mass;                /* [kg] */
+    double inertia[9];          /* about the centre of mass, world axes, row-major [kg m²] */
+    double angular_momentum[3]; /* I ω about the centre of mass [kg m²/s] */
+} cs_rigid_state;
+
+/* The pose and motion of a rigid object; CS_ERR_INVALID if its model is not rigid. */
+int cs_object_rigid_state(const cs_world_t *w, cs_object_id id, cs_rigid_state *s);
 
 /* ---------------------------------------------------------------- fracture (seed 000 §2.3, §3) */
 

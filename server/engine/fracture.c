@@ -46,6 +46,7 @@
 #include "closing.h"
 #include "elastic.h"
 #include "voxelize.h"
+#include "rigid.h"
 #include "world_internal.h"
 
 /* ---------------------------------------------------------------- small helpers */
@@ -1933,6 +1934,8 @@ static cs_object *make_piece(cs_world_t *w, const cs_object *o, const int32_t *c
     p->mat = o->mat;
     p->fracture = o->fracture;
     p->fracture_radius = o->fracture_radius;
+    if (o->rb && !(p->rb = cs_rigid_clone(o->rb))) /* rigid: continues o's motion */
+        goto fail;
     /* cube mesh */
     cs_cubemesh *pm = &p->cm;
     pm->h = cm->h;
@@ -2784,6 +2787,8 @@ int cs_world_fracture(cs_world_t *w, cs_object_id id, const double point[3],
     int cut = 0;
     int rc = fracture_event(w, o, label, true, best, n, 0.0, &cut);
     free(label);
+    if (rc == CS_OK)
+        rc = cs_rigid_sync(w); /* rigid pieces: their own mass properties */
     if (rc != CS_OK)
         return cs_engine_fail(err, errlen, rc, "fracture of '%s' failed: %s", o->name, cs_status_str(rc));
     return CS_OK;
@@ -2821,6 +2826,8 @@ int cs_world_cut_face(cs_world_t *w, cs_object_id id, const int32_t ijk[3], int 
     int cut = 0;
     int rc = fracture_event(w, o, label, false, a, n, 0.0, &cut);
     free(label);
+    if (rc == CS_OK)
+        rc = cs_rigid_sync(w);
     if (rc != CS_OK)
         return cs_engine_fail(err, errlen, rc, "cut of '%s' failed: %s", o->name, cs_status_str(rc));
     return CS_OK;

@@ -25,6 +25,7 @@
 
 #include "elastic.h"
 #include "localframe.h"
+#include "rigid.h"
 #include "voxelize.h"
 #include "world_internal.h"
 
@@ -121,7 +122,8 @@ const char *cs_model_name(cs_model m)
 cs_material cs_material_default(void)
 {
     return (cs_material){.young = 1000.0, .poisson = 0.3, .density = 1000.0,
-                         .damping = {0.0, 0.0}, .strength = 1e300};
+                         .damping = {0.0, 0.0}, .strength = 1e300,
+                         .restitution = 0.3, .friction = 0.5};
 }
 
 cs_object_def cs_object_def_default(void)
@@ -192,6 +194,7 @@ void cs_object_free_internal(cs_object *o)
     cs_cubemesh_free(&o->cm);
     cs_surface_free(&o->surf);
     cs_elastic_free(o);
+    cs_rigid_free(o);
     free(o->x);
     free(o->v);
     free(o->m);
@@ -217,6 +220,7 @@ void cs_world_destroy(cs_world_t *w)
         cs_object_free_internal(w->objects[i]);
     free(w->objects);
     cs_world_fracture_free(w);
+    cs_rigid_world_free(w);
     free(w);
 }
 
@@ -248,6 +252,12 @@ static int check_material(const cs_material *m, char *err, size_t errlen)
         return cs_engine_fail(err, errlen, CS_ERR_INVALID, "material damping must be finite and >= 0");
     if (!(m->strength > 0))
         return cs_engine_fail(err, errlen, CS_ERR_INVALID, "material strength must be > 0");
+    if (!(m->restitution >= 0 && m->restitution <= 1))
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID,
+                              "material restitution must be in [0, 1], got %g", m->restitution);
+    if (!(m->friction >= 0 && m->friction <= 100))
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID,
+                              "material friction must be in [0, 100], got %g", m->friction);
     return CS_OK;
 }
 
@@ -424,7 +434,8 @@ int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *i
     if (cs_world_find_object(w, def->name) != CS_NULL_OBJECT)
         return cs_engine_fail(err, errlen, CS_ERR_INVALID, "object name '%s' is already used", def->name);
     if (def->model != CS_MODEL_LINEAR && def->model != CS_MODEL_COROTATIONAL &&
-        def->model != CS_MODEL_LOCALFRAME && def->model != CS_MODEL_MSS)
+        def->model != CS_MODEL_LOCALFRAME && def->model != CS_MODEL_MSS &&
+        def->model != CS_MODEL_RIGID)
         return cs_engine_fail(err, errlen, CS_ERR_INVALID, "model '%s' is not implemented yet",
                     cs_model_name(def->model));
     const cs_integrator integ = def->integrator == CS_INTEGRATOR_DEFAULT
@@ -537,6 +548,13 @@ int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *i
                 break;
             }
     cs_surface_skin(&o->surf, &o->cm, o->x);
+    if (o->model == CS_MODEL_RIGID) {
+        if (cs_rigid_init(o) != 0) {
+            rc = cs_engine_fail(err, errlen, CS_ERR_NOMEM, "out of memory");
+            goto fail;
+        }
+        o->rb->has_loads = def->n_loads > 0;
+    }
     if (cs_world_append_object(w, o) != 0) {
         rc = cs_engine_fail(err, errlen, CS_ERR_NOMEM, "out of memory");
         goto fail;
@@ -1514,6 +1532,8 @@ int cs_world_step(cs_world_t *w)
     const int n_before = w->n_objects; /* pieces made in this step start stepping next step */
     for (int i = 0; i < n_before; i++) {
         cs_object *o = w->objects[i];
+        if (o->model == CS_MODEL_RIGID)
+            continue; /* all rigid bodies step together below */
         if (!needs_step(o)) {
             expire_inputs(o);
             continue;
@@ -1533,6 +1553,9 @@ int cs_world_step(cs_world_t *w)
                 rc = r;
         }
     }
+    int r = cs_rigid_step(w, &st);
+    if (r != CS_OK && rc == CS_OK)
+        rc = r;
     w->time += w->def.dt;
     w->frame++;
     st.ms_total = now_ms() - t0;
@@ -1696,7 +1719,7 @@ int cs_world_solve_static(cs_world_t *w)
     cs_fracture_clear_step(w);
     for (int i = 0; i < w->n_objects; i++) {
         cs_object *o = w->objects[i];
-        if (o->n_fixed_nodes == 0 || o->n_fixed_nodes == o->n)
+        if (o->n_fixed_nodes == 0 || o->n_fixed_nodes == o->n || o->model == CS_MODEL_RIGID)
             continue; /* no equilibrium without supports; nothing to do when all held */
         int r = solve_static_object(w, o, &st);
         if (r != CS_OK)
@@ -1727,6 +1750,8 @@ void cs_world_reset(cs_world_t *w)
         o->elastic_energy_valid = false;
         cs_elastic_reset(o);
         cs_surface_skin(&o->surf, &o->cm, o->x);
+        if (o->rb)
+            cs_rigid_reset(o);
     }
     w->time = 0;
     w->frame = 0;
@@ -1849,11 +1874,48 @@ int cs_object_energy(const cs_world_t *w, cs_object_id id, cs_energy *e)
                          w->def.gravity[2] * x[2]);
     }
     cs_object *mo = (cs_object *)o; /* the cache is not part of the observable state */
+    if (o->rb) {
+        ek = cs_rigid_kinetic_energy(o);
+        mo->elastic_energy = 0;
+        mo->elastic_energy_valid = true;
+    }
     if (!mo->elastic_energy_valid) {
         mo->elastic_energy = cs_elastic_energy(mo, o->x);
         mo->elastic_energy_valid = true;
     }
     const double ee = o->elastic_energy;
     *e = (cs_energy){.kinetic = ek, .elastic = ee, .gravity = eg};
+    return CS_OK;
+}
+
+int cs_object_rigid_state(const cs_world_t *w, cs_object_id id, cs_rigid_state *s)
+{
+    const cs_object *o = cs_world_find_internal(w, id);
+    if (!o || !s)
+        return CS_ERR_UNKNOWN_OBJECT;
+    if (!o->rb)
+        return CS_ERR_INVALID;
+    const cs_rigid *rb = o->rb;
+    *s = (cs_rigid_state){.mass = rb->mass};
+    memcpy(s->position, rb->c, sizeof s->position);
+    memcpy(s->orientation, rb->q, sizeof s->orientation);
+    memcpy(s->com_rest, rb->com_rest, sizeof s->com_rest);
+    memcpy(s->velocity, rb->v, sizeof s->velocity);
+    memcpy(s->angular_velocity, rb->w, sizeof s->angular_velocity);
+    /* I = R I_body Rᵀ */
+    double T[9];
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++) {
+            T[3 * i + j] = 0;
+            for (int k = 0; k < 3; k++)
+                T[3 * i + j] += rb->R[3 * i + k] * rb->I_body[3 * k + j];
+        }
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++)
+            for (int k = 0; k < 3; k++)
+                s->inertia[3 * i + j] += T[3 * i + k] * rb->R[3 * j + k];
+    for (int i = 0; i < 3; i++)
+        for (int k = 0; k < 3; k++)
+            s->angular_momentum[i] += s->inertia[3 * i + k] * rb->w[k];
     return CS_OK;
 }

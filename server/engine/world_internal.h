@@ -136,6 +136,8 @@ typedef struct cs_object {
     double pcoef;          /* on the penalty springs (dt² in a step, 1 in statics) */
     double cmcoef, ckcoef; /* on α·M_d and β·K_d when fld.has_damping (then mcoef = 1 and
                               kcoef carries only the dt² of K) */
+    /* CS_MODEL_RIGID: pose, velocities and mass properties (rigid.h); NULL otherwise */
+    struct cs_rigid *rb;
 } cs_object;
 
 /* The topology changes of one mutating call: their arrays live in one arena. */
@@ -158,6 +160,7 @@ struct cs_world {
     cs_event *events;
     int n_events, cap_events;
     cs_topo_list topo;
+    struct cs_rigid_world *rigid; /* rigid.c's per-step scratch; NULL until a rigid step */
 };
 
 /* Defined in world.c and fields.c, used by fracture.c and each other. */

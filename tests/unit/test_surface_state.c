@@ -5,6 +5,7 @@
  */
 #include "check.h"
 
+#include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
@@ -675,4 +676,64 @@ TEST(surface_state_topology_fuzz)
         }
         cs_surface_state_free(&st);
     }
+}
+
+/* CUBESIM_POSE (rigid objects): a reference pose, then poses move the copy rigidly. */
+TEST(surface_state_pose_moves_rigidly)
+{
+    cs_surface_state st;
+    cs_surface_state_init(&st);
+    char err[256];
+    ENSURE(load_tet(&st, 42, 1) == CS_SS_APPLIED);
+    /* a pose before any reference is ignored and marks the state stale */
+    cs_ss_pose p = {hdr(42, 0, 11, 1), 7, 1, 4, 0, {1, 2, 3}, {1, 0, 0, 0}};
+    ENSURE(cs_surface_state_apply_pose(&st, &p, err, sizeof err) == CS_SS_IGNORED);
+    ENSURE(st.stale);
+    st.stale = 0;
+    /* the reference: the copy as it is, at centre (0.25, 0.25, 0.25), unrotated */
+    cs_ss_pose r = {hdr(42, 0, 11, 2), 7, 1, 4, 1, {0.25, 0.25, 0.25}, {1, 0, 0, 0}};
+    ENSURE_MSG(cs_surface_state_apply_pose(&st, &r, err, sizeof err) == CS_SS_APPLIED, "%s", err);
+    const cs_ss_object *t = cs_surface_state_find(&st, 7);
+    ENSURE(!memcmp(t->xyz, tet_xyz, sizeof tet_xyz));
+    /* 90° about z and moved to (1, 1, 1): x' = c + Rz (x − c_r) */
+    const double h = sqrt(0.5);
+    cs_ss_pose m = {hdr(42, 0, 12, 3), 7, 1, 4, 0, {1, 1, 1}, {h, 0, 0, h}};
+    ENSURE_MSG(cs_surface_state_apply_pose(&st, &m, err, sizeof err) == CS_SS_APPLIED, "%s", err);
+    for (int v = 0; v < 4; v++) {
+        const double d[3] = {tet_xyz[3 * v] - 0.25, tet_xyz[3 * v + 1] - 0.25,
+                             tet_xyz[3 * v + 2] - 0.25};
+        ENSURE_NEAR(t->xyz[3 * v], 1 - d[1], 1e-6);
+        ENSURE_NEAR(t->xyz[3 * v + 1], 1 + d[0], 1e-6);
+        ENSURE_NEAR(t->xyz[3 * v + 2], 1 + d[2], 1e-6);
+    }
+    /* poses are taken from the reference, not chained: back to the reference pose, exactly */
+    cs_ss_pose back = {hdr(42, 0, 13, 4), 7, 1, 4, 0, {0.25, 0.25, 0.25}, {1, 0, 0, 0}};
+    ENSURE(cs_surface_state_apply_pose(&st, &back, err, sizeof err) == CS_SS_APPLIED);
+    ENSURE(!memcmp(t->xyz, tet_xyz, sizeof tet_xyz));
+    /* malformed poses change nothing */
+    cs_ss_pose bad[4] = {
+        {hdr(42, 0, 14, 5), 7, 1, 4, 0, {NAN, 0, 0}, {1, 0, 0, 0}},
+        {hdr(42, 0, 14, 6), 7, 1, 4, 0, {0, 0, 0}, {2, 0, 0, 0}},
+        {hdr(42, 0, 14, 7), 7, 1, 5, 0, {0, 0, 0}, {1, 0, 0, 0}},
+        {hdr(42, 0, 14, 8), 7, 1, 4, 3, {0, 0, 0}, {1, 0, 0, 0}},
+    };
+    for (int i = 0; i < 4; i++) {
+        ENSURE_MSG(cs_surface_state_apply_pose(&st, &bad[i], err, sizeof err) == CS_SS_REJECTED,
+                   "bad pose %d accepted", i);
+        ENSURE(!memcmp(t->xyz, tet_xyz, sizeof tet_xyz));
+    }
+    /* another topology version: ignored, stale */
+    cs_ss_pose other = {hdr(42, 0, 15, 9), 7, 2, 4, 0, {1, 1, 1}, {1, 0, 0, 0}};
+    ENSURE(cs_surface_state_apply_pose(&st, &other, err, sizeof err) == CS_SS_IGNORED);
+    ENSURE(st.stale);
+    /* a gap in the pose sequence marks loss */
+    st.stale = 0;
+    cs_ss_pose gap = {hdr(42, 0, 16, 20), 7, 1, 4, 0, {0.25, 0.25, 0.25}, {1, 0, 0, 0}};
+    ENSURE(cs_surface_state_apply_pose(&st, &gap, err, sizeof err) == CS_SS_APPLIED);
+    ENSURE(st.stale && st.poses_lost == 10);
+    /* a new snapshot drops the reference */
+    ENSURE(load_tet(&st, 42, 2) == CS_SS_APPLIED);
+    cs_ss_pose after = {hdr(42, 0, 17, 21), 7, 1, 4, 0, {1, 1, 1}, {1, 0, 0, 0}};
+    ENSURE(cs_surface_state_apply_pose(&st, &after, err, sizeof err) == CS_SS_IGNORED);
+    cs_surface_state_free(&st);
 }

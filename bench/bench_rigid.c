@@ -1,0 +1,168 @@
+/*
+ * bench_rigid.c — a rigid scene stepped headless (no bus): wall time per step against the
+ * step dt (real-time factor), the pieces made, and every piece checked closed.
+ *
+ *   bench_rigid [SCENE] [SECONDS]     default scenes/drop.json, 3 s
+ *   bench_rigid --boxes N              2·N² boxes (8 cubes each) in two layers fall on the
+ *                                      ground: ms per step while they fall and settle (first
+ *                                      2 s) and once asleep (after 10 s)
+ *
+ * Prints one line per simulated quarter second and a summary; exits 1 if a piece fails the
+ * watertight checker or a step fails.
+ */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "bench_util.h"
+#include "cubesim.h"
+#include "scene.h"
+#include "watertight.h"
+
+#define MAX_OBJECTS 4096
+
+static int check_all(cs_world_t *w, double volume, double *vsum, char *why, size_t n)
+{
+    static cs_object_id ids[MAX_OBJECTS];
+    static cs_piece_view pv[MAX_OBJECTS];
+    int no = cs_world_object_ids(w, ids, MAX_OBJECTS);
+    if (no > MAX_OBJECTS)
+        no = MAX_OBJECTS;
+    for (int i = 0; i < no; i++) {
+        cs_object_surface(w, ids[i], &pv[i].v, &pv[i].nv, &pv[i].t, &pv[i].nt);
+        cs_object_info info;
+        cs_object_get_info(w, ids[i], &info);
+        pv[i].name = info.name;
+    }
+    return cs_check_pieces(pv, no, volume, 0.05, vsum, why, n);
+}
+
+static int boxes(int n)
+{
+    cs_world_def wd = cs_world_def_default();
+    wd.has_ground = true;
+    wd.threads = 1;
+    cs_world_t *w;
+    char err[256];
+    if (cs_world_create(&wd, &w, err, sizeof err) != CS_OK)
+        return 1;
+    int32_t ijk[24];
+    for (int c = 0; c < 8; c++) {
+        ijk[3 * c] = c & 1;
+        ijk[3 * c + 1] = (c >> 1) & 1;
+        ijk[3 * c + 2] = c >> 2;
+    }
+    for (int a = 0; a < n; a++)
+        for (int b = 0; b < n; b++)
+            for (int l = 0; l < 2; l++) {
+                char name[48];
+                snprintf(name, sizeof name, "box%d.%d.%d", a, b, l);
+                cs_object_def d = cs_object_def_default();
+                d.name = name;
+                d.model = CS_MODEL_RIGID;
+                d.cube_size = 0.05;
+                d.cells_ijk = ijk;
+                d.n_cells = 8;
+                d.cells_origin[0] = 0.15 * a + 0.01 * l;
+                d.cells_origin[1] = 0.15 * b;
+                d.cells_origin[2] = 0.05 + 0.3 * l;
+                if (cs_world_add_object(w, &d, NULL, err, sizeof err) != CS_OK) {
+                    fprintf(stderr, "bench_rigid: %s\n", err);
+                    cs_world_destroy(w);
+                    return 1;
+                }
+            }
+    double t0 = now_s();
+    for (int i = 0; i < 120; i++)
+        cs_world_step(w);
+    const double falling = (now_s() - t0) / 120;
+    for (int i = 0; i < 480; i++)
+        cs_world_step(w);
+    t0 = now_s();
+    for (int i = 0; i < 120; i++)
+        cs_world_step(w);
+    const double asleep_ms = (now_s() - t0) / 120;
+    static cs_object_id ids[MAX_OBJECTS];
+    int no = cs_world_object_ids(w, ids, MAX_OBJECTS), asleep = 0;
+    for (int i = 0; i < no && i < MAX_OBJECTS; i++) {
+        cs_object_info info;
+        cs_object_get_info(w, ids[i], &info);
+        asleep += info.sleeping;
+    }
+    printf("%d boxes (%d cubes): falling and settling %.3f ms/step; after 10 s %.4f ms/step, "
+           "%d asleep\n", no, 8 * no, 1e3 * falling, 1e3 * asleep_ms, asleep);
+    cs_world_destroy(w);
+    return 0;
+}
+
+int main(int argc, char **argv)
+{
+    if (argc > 2 && !strcmp(argv[1], "--boxes"))
+        return boxes(atoi(argv[2]));
+    setvbuf(stdout, NULL, _IOLBF, 0);
+    const char *path = argc > 1 ? argv[1] : "scenes/drop.json";
+    const double seconds = argc > 2 ? atof(argv[2]) : 3.0;
+    cs_scene sc;
+    cs_world_t *w = NULL;
+    char err[512];
+    if (cs_scene_load(path, &sc, err, sizeof err) != 0 ||
+        cs_scene_instantiate(&sc, &w, err, sizeof err) != 0) {
+        fprintf(stderr, "bench_rigid: %s\n", err);
+        return 1;
+    }
+    const double dt = cs_world_get_def(w)->dt;
+    const int steps = (int)ceil(seconds / dt);
+    cs_object_id ids[MAX_OBJECTS];
+    int n0 = cs_world_object_ids(w, ids, MAX_OBJECTS), cells = 0;
+    double volume = 0; /* enclosed by the surfaces: the checker's expected sum */
+    for (int i = 0; i < n0; i++) {
+        cs_object_info info;
+        const double *v;
+        const int32_t *t;
+        int nv, nt;
+        cs_object_get_info(w, ids[i], &info);
+        cs_object_surface(w, ids[i], &v, &nv, &t, &nt);
+        volume += cs_mesh_volume(v, t, nt);
+        cells += info.n_cells;
+    }
+    printf("%s: %d objects, %d cubes, dt %.4f s, %d steps\n", path, n0, cells, dt, steps);
+    double total = 0, worst = 0;
+    int fractures = 0, bad = 0, failed = 0;
+    for (int s = 0; s < steps; s++) {
+        const double t0 = now_s();
+        int rc = cs_world_step(w);
+        const double t = now_s() - t0;
+        total += t;
+        worst = fmax(worst, t);
+        if (rc != CS_OK) {
+            fprintf(stderr, "step %d: %s\n", s, cs_status_str(rc));
+            failed = 1;
+        }
+        int ne;
+        const cs_event *ev = cs_world_events(w, &ne);
+        for (int e = 0; e < ne; e++)
+            fractures += ev[e].kind == CS_EVENT_FRACTURE;
+        char why[256] = "";
+        double vsum = 0;
+        if (ne > 0 && !check_all(w, volume, &vsum, why, sizeof why)) {
+            printf("step %d: checker: %s\n", s, why);
+            bad++;
+        }
+        if ((s + 1) % (int)ceil(0.25 / dt) == 0)
+            printf("t %.2f s: %d objects, %d fracture events so far, step %.2f ms (worst %.2f)\n",
+                   (s + 1) * dt, cs_world_object_ids(w, ids, MAX_OBJECTS), fractures, t * 1e3,
+                   worst * 1e3);
+    }
+    char why[256] = "";
+    double vsum = 0;
+    const int ok = check_all(w, volume, &vsum, why, sizeof why);
+    printf("summary: %d pieces, %d fracture events, mean step %.2f ms, worst %.2f ms, "
+           "real-time factor %.1f (dt / mean step), pieces %s (volume %.4g of %.4g m^3)%s%s\n",
+           cs_world_object_ids(w, ids, MAX_OBJECTS), fractures, 1e3 * total / steps,
+           1e3 * worst, dt / (total / steps), ok ? "closed" : "NOT closed", vsum, volume,
+           ok ? "" : ": ", why);
+    cs_world_destroy(w);
+    cs_scene_free(&sc);
+    return failed || bad || !ok;
+}

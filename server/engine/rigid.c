@@ -1,0 +1,1712 @@
+/*
+ * rigid.c — rigid bodies, their contacts and impact fracture (seed 000 §2.4, after Müller et
+ * al.: every face-connected set of cubes of a rigid object is one rigid body).
+ *
+ * Time integration, per step of dt (semi-implicit), in substeps so that no body moves more
+ * than its cube edge in one (at most MAX_SUBSTEPS):
+ *   1. v += dt (F/m), ω += dt I⁻¹ τ for gravity, scene loads and client forces (acting at
+ *      their material point); drags and curves are implicit springs on the point's effective
+ *      mass (stable at any stiffness); a pressure has no net effect on a closed rigid body.
+ *   2. sleeping bodies that a moving body's box reaches wake (they take part in this step).
+ *   3. contacts: speculative (generated while the gap is below the distance the bodies can
+ *      close in one step), solved by sequential impulses (projected Gauss–Seidel on the
+ *      accumulated normal impulse ≥ 0 and Coulomb friction |jt| ≤ μ jn per tangent, warm
+ *      started from the same contacts of the last step), with restitution above an approach
+ *      speed of 2|g|dt and Baumgarte push-out beyond a slop.
+ *   4. c += dt v; the rotation by the Lie–Poisson implicit midpoint rule: in body axes
+ *      I (ω1 − ω0) + dt ω½ × I ω½ = 0 (ω½ = (ω0+ω1)/2, solved by Newton), then
+ *      R1 = R0 cay(dt [ω½]), the Cayley rotation (quaternion (1, dt ω½/2) normalised). Both
+ *      quadratic invariants of free rotation, |L| and ½ ωᵀIω, are conserved exactly by the
+ *      midpoint rule, and the Cayley update makes R1 L1 = R0 L0, so the world angular
+ *      momentum of a free body is conserved to rounding, tumbling about any axis.
+ *      Nodes x = c + R (X − C), velocities v + ω × (x − c), surface skinned; bodies resting
+ *      on each other (contact islands) fall asleep together.
+ *   5. impact fracture (below).
+ *
+ * Collision detection: an AABB per body (grown by its speculative margin), sort-and-sweep on
+ * x over bodies; for an overlapping pair, the cubes of the smaller body near the other are
+ * looked up in the other's lattice (its hash), so only cube pairs within reach are tested.
+ * A cube pair: libccd's MPR tells whether the two oriented boxes (grown by the margin) meet;
+ * the normal and depth come from the separating-axis test over the 15 box axes (exact for
+ * boxes; libccd's EPA stalls on the coplanar faces resting cubes always have, MPR's direction
+ * follows the line between the centres), snapped to a face normal of either cube when within
+ * ~14° of one; the contact points are the corners of either cube that lie against the other
+ * (libccd's MPR point when none does, edge–edge). Normals that would push through a face
+ * shared with a neighbouring cube of the same body are dropped. The ground is a plane against
+ * the nodes. Deformable objects: their nodes inside a rigid body's cubes are pushed out
+ * through the exposed face they came in by, with an equal and opposite impulse on the body.
+ *
+ * Impact fracture: when the contact force (impulse/dt) on a body with fracture enabled exceeds
+ * strength·h² and twice its weight, the body's cube mesh is solved statically (linear FEM,
+ * inertia relief: the contact loads minus the rigid acceleration they cause, K + εM for the
+ * rigid modes) and fracture.c splits it where the stress exceeds the strength; the pieces
+ * become rigid bodies moving with the parent's velocity field.
+ */
+#include "rigid.h"
+
+#include <ccd/ccd.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "elastic.h"
+#include "mat3.h"
+
+#define PGS_ITERATIONS 60
+#define BAUMGARTE 0.2
+#define MAX_SUBSTEPS 8
+#define MAX_SPEED 1e3 /* m/s: beyond it a body's velocity is taken as diverged */
+
+typedef struct contact {
+    int a, b;            /* body indices; b < 0: the ground */
+    double p[3], n[3];   /* point, normal from b towards a */
+    double sep;          /* gap along n (negative: penetration) */
+    double ra[3], rb[3];
+    double t1[3], t2[3];
+    double kn, kt1, kt2; /* effective masses */
+    double target;       /* lowest normal relative velocity allowed */
+    double jn, jt1, jt2;
+    double mu;
+    int32_t node_a, node_b; /* node of each body the point is, or -1 */
+    int32_t cell_a, cell_b; /* cube of each body it touches, or -1 */
+    int64_t key;         /* for removing duplicates within a body pair */
+} contact;
+
+/* A contact's accumulated impulse, kept for the next step (warm start). */
+typedef struct kept_impulse {
+    cs_object_id lo, hi; /* the two object ids in order; the ground is CS_NULL_OBJECT */
+    int64_t key;
+    double n[3];         /* normal towards lo */
+    double J[3];         /* normal + friction impulse on lo, world */
+} kept_impulse;
+
+typedef struct cs_rigid_world {
+    double dt;        /* of the current substep */
+    kept_impulse *kept;
+    int n_kept, cap_kept;
+    cs_object **body;
+    int n_body, cap_body;
+    int *order;
+    int *island;      /* union-find over bodies joined by contacts (sleep together) */
+    int *island_still;
+    uint8_t *dyn;
+    contact *c;
+    int nc, cap_c;
+} cs_rigid_world;
+
+/* cs_world carries the pointer: world_internal.h. */
+
+static double now_ms(void)
+{
+    struct timespec t;
+    clock_gettime(CLOCK_MONOTONIC, &t);
+    return t.tv_sec * 1e3 + t.tv_nsec / 1e6;
+}
+
+/* ---------------------------------------------------------------- small vector algebra */
+
+static double dot3(const double a[3], const double b[3])
+{
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
+
+static void cross3(const double a[3], const double b[3], double c[3])
+{
+    double r[3] = {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
+                   a[0] * b[1] - a[1] * b[0]};
+    memcpy(c, r, sizeof r);
+}
+
+static void mat_vec(const double M[9], const double v[3], double r[3])
+{
+    double t[3] = {M[0] * v[0] + M[1] * v[1] + M[2] * v[2], M[3] * v[0] + M[4] * v[1] + M[5] * v[2],
+                   M[6] * v[0] + M[7] * v[1] + M[8] * v[2]};
+    memcpy(r, t, sizeof t);
+}
+
+static void mat_t_vec(const double M[9], const double v[3], double r[3])
+{
+    double t[3] = {M[0] * v[0] + M[3] * v[1] + M[6] * v[2], M[1] * v[0] + M[4] * v[1] + M[7] * v[2],
+                   M[2] * v[0] + M[5] * v[1] + M[8] * v[2]};
+    memcpy(r, t, sizeof t);
+}
+
+static void quat_to_mat(const double q[4], double R[9])
+{
+    const double w = q[0], x = q[1], y = q[2], z = q[3];
+    R[0] = 1 - 2 * (y * y + z * z);
+    R[1] = 2 * (x * y - w * z);
+    R[2] = 2 * (x * z + w * y);
+    R[3] = 2 * (x * y + w * z);
+    R[4] = 1 - 2 * (x * x + z * z);
+    R[5] = 2 * (y * z - w * x);
+    R[6] = 2 * (x * z - w * y);
+    R[7] = 2 * (y * z + w * x);
+    R[8] = 1 - 2 * (x * x + y * y);
+}
+
+static void quat_mul(const double a[4], const double b[4], double r[4])
+{
+    double t[4] = {a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3],
+                   a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2],
+                   a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1],
+                   a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0]};
+    memcpy(r, t, sizeof t);
+}
+
+static bool finite_n(const double *a, int n)
+{
+    for (int i = 0; i < n; i++)
+        if (!isfinite(a[i]))
+            return false;
+    return true;
+}
+
+/* R I_body⁻¹ Rᵀ */
+static void update_inertia(cs_rigid *rb)
+{
+    double T[9];
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++) {
+            double s = 0;
+            for (int k = 0; k < 3; k++)
+                s += rb->R[3 * i + k] * rb->I_body_inv[3 * k + j];
+            T[3 * i + j] = s;
+        }
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++) {
+            double s = 0;
+            for (int k = 0; k < 3; k++)
+                s += T[3 * i + k] * rb->R[3 * j + k];
+            rb->I_inv_world[3 * i + j] = s;
+        }
+}
+
+/* Δω of an impulse J at arm r: I⁻¹ (r × J). */
+static void apply_impulse(cs_rigid *rb, const double r[3], const double J[3], double sign)
+{
+    double rxj[3], dw[3];
+    cross3(r, J, rxj);
+    mat_vec(rb->I_inv_world, rxj, dw);
+    for (int a = 0; a < 3; a++) {
+        rb->v[a] += sign * rb->inv_mass * J[a];
+        rb->w[a] += sign * dw[a];
+    }
+}
+
+/* ---------------------------------------------------------------- mass properties and pose */
+
+static int mass_properties(cs_object *o, cs_rigid *rb)
+{
+    const cs_cubemesh *cm = &o->cm;
+    const double h = cm->h, mc = o->mat.density * h * h * h;
+    double C[3] = {0, 0, 0};
+    for (int c = 0; c < cm->n_cells; c++)
+        for (int a = 0; a < 3; a++)
+            C[a] += cm->origin[a] + h * (cm->cell_ijk[3 * (size_t)c + a] + 0.5);
+    for (int a = 0; a < 3; a++)
+        C[a] /= cm->n_cells;
+    /* each cube a solid box: m h²/6 about its centre, plus m (|d|² 1 − d dᵀ) (parallel axes) */
+    double I[9] = {0};
+    for (int c = 0; c < cm->n_cells; c++) {
+        double d[3];
+        for (int a = 0; a < 3; a++)
+            d[a] = cm->origin[a] + h * (cm->cell_ijk[3 * (size_t)c + a] + 0.5) - C[a];
+        const double dd = dot3(d, d);
+        for (int i = 0; i < 3; i++)
+            for (int j = 0; j < 3; j++)
+                I[3 * i + j] += mc * ((i == j) * (h * h / 6.0 + dd) - d[i] * d[j]);
+    }
+    rb->mass = mc * cm->n_cells;
+    rb->n_cells = cm->n_cells;
+    rb->n_nodes = o->n;
+    rb->inv_mass = 1.0 / rb->mass;
+    memcpy(rb->com_rest, C, sizeof C);
+    memcpy(rb->I_body, I, sizeof I);
+    double adj[9];
+    const double det = cs_mat3_adjugate(I, adj);
+    if (!(det > 0))
+        return -1;
+    for (int k = 0; k < 9; k++)
+        rb->I_body_inv[k] = adj[k] / det;
+    rb->radius = 0;
+    for (int i = 0; i < o->n; i++) {
+        double d[3];
+        for (int a = 0; a < 3; a++)
+            d[a] = cm->node_rest[3 * (size_t)i + a] - C[a];
+        rb->radius = fmax(rb->radius, sqrt(dot3(d, d)));
+    }
+    return 0;
+}
+
+static void node_aabb(cs_object *o, double margin)
+{
+    cs_rigid *rb = o->rb;
+    for (int a = 0; a < 3; a++) {
+        rb->aabb_min[a] = INFINITY;
+        rb->aabb_max[a] = -INFINITY;
+    }
+    for (int i = 0; i < o->n; i++)
+        for (int a = 0; a < 3; a++) {
+            const double x = o->x[3 * (size_t)i + a];
+            rb->aabb_min[a] = fmin(rb->aabb_min[a], x);
+            rb->aabb_max[a] = fmax(rb->aabb_max[a], x);
+        }
+    for (int a = 0; a < 3; a++) {
+        rb->aabb_min[a] -= margin;
+        rb->aabb_max[a] += margin;
+    }
+}
+
+/* Nodes (and their velocities) from the pose; the surface skinned. O(nodes + vertices). */
+static void place_nodes(cs_object *o)
+{
+    cs_rigid *rb = o->rb;
+    for (int i = 0; i < o->n; i++) {
+        double d[3], r[3], wr[3];
+        for (int a = 0; a < 3; a++)
+            d[a] = o->cm.node_rest[3 * (size_t)i + a] - rb->com_rest[a];
+        mat_vec(rb->R, d, r);
+        cross3(rb->w, r, wr);
+        for (int a = 0; a < 3; a++) {
+            o->x[3 * (size_t)i + a] = rb->c[a] + r[a];
+            o->v[3 * (size_t)i + a] = rb->v[a] + wr[a];
+        }
+    }
+    cs_surface_skin(&o->surf, &o->cm, o->x);
+    o->elastic_energy_valid = false;
+}
+
+int cs_rigid_init(cs_object *o)
+{
+    cs_rigid *rb = calloc(1, sizeof *rb);
+    if (!rb || mass_properties(o, rb) != 0) {
+        free(rb);
+        return -1;
+    }
+    free(o->rb);
+    o->rb = rb;
+    cs_rigid_reset(o);
+    return 0;
+}
+
+void cs_rigid_reset(cs_object *o)
+{
+    cs_rigid *rb = o->rb;
+    rb->q[0] = 1;
+    rb->q[1] = rb->q[2] = rb->q[3] = 0;
+    quat_to_mat(rb->q, rb->R);
+    memcpy(rb->c, rb->com_rest, sizeof rb->c);
+    memset(rb->v, 0, sizeof rb->v);
+    memset(rb->w, 0, sizeof rb->w);
+    rb->impact_force = 0;
+    update_inertia(rb);
+    place_nodes(o);
+    node_aabb(o, 0);
+}
+
+int cs_rigid_refit(cs_object *o, const double q[4], const double c0[3], const double C0[3],
+                   const double v0[3], const double w0[3])
+{
+    cs_rigid *rb = calloc(1, sizeof *rb);
+    if (!rb || mass_properties(o, rb) != 0) {
+        free(rb);
+        return -1;
+    }
+    memcpy(rb->q, q, sizeof rb->q);
+    quat_to_mat(rb->q, rb->R);
+    double d[3], r[3], wr[3];
+    for (int a = 0; a < 3; a++)
+        d[a] = rb->com_rest[a] - C0[a];
+    mat_vec(rb->R, d, r);
+    cross3(w0, r, wr);
+    for (int a = 0; a < 3; a++) {
+        rb->c[a] = c0[a] + r[a];
+        rb->v[a] = v0[a] + wr[a];
+        rb->w[a] = w0[a];
+    }
+    update_inertia(rb);
+    rb->has_loads = o->rb && o->rb->has_loads;
+    free(o->rb);
+    o->rb = rb;
+    place_nodes(o);
+    node_aabb(o, 0);
+    return 0;
+}
+
+cs_rigid *cs_rigid_clone(const cs_rigid *rb)
+{
+    cs_rigid *c = malloc(sizeof *c);
+    if (c)
+        *c = *rb;
+    return c;
+}
+
+int cs_rigid_sync(cs_world_t *w)
+{
+    for (int i = 0; i < w->n_objects; i++) {
+        cs_object *o = w->objects[i];
+        const cs_rigid *rb = o->rb;
+        if (!rb || (rb->n_cells == o->cm.n_cells && rb->n_nodes == o->n))
+            continue;
+        double q[4], c0[3], C0[3], v0[3], w0[3];
+        memcpy(q, rb->q, sizeof q);
+        memcpy(c0, rb->c, sizeof c0);
+        memcpy(C0, rb->com_rest, sizeof C0);
+        memcpy(v0, rb->v, sizeof v0);
+        memcpy(w0, rb->w, sizeof w0);
+        if (cs_rigid_refit(o, q, c0, C0, v0, w0) != 0)
+            return CS_ERR_NOMEM;
+    }
+    return CS_OK;
+}
+
+void cs_rigid_free(cs_object *o)
+{
+    free(o->rb);
+    o->rb = NULL;
+}
+
+double cs_rigid_kinetic_energy(const cs_object *o)
+{
+    const cs_rigid *rb = o->rb;
+    double wb[3], Iw[3];
+    mat_t_vec(rb->R, rb->w, wb);
+    mat_vec(rb->I_body, wb, Iw);
+    return 0.5 * rb->mass * dot3(rb->v, rb->v) + 0.5 * dot3(wb, Iw);
+}
+
+void cs_rigid_world_free(cs_world_t *w)
+{
+    cs_rigid_world *rw = w->rigid;
+    if (!rw)
+        return;
+    free(rw->body);
+    free(rw->order);
+    free(rw->island);
+    free(rw->island_still);
+    free(rw->dyn);
+    free(rw->c);
+    free(rw->kept);
+    free(rw);
+    w->rigid = NULL;
+}
+
+/* ---------------------------------------------------------------- integration */
+
+/*
+ * Free rotation over dt by the Lie–Poisson implicit midpoint rule (see the top of the file).
+ */
+static void rotate(cs_rigid *rb, double dt)
+{
+    const double *I = rb->I_body;
+    double w0[3], wm[3];
+    mat_t_vec(rb->R, rb->w, w0);
+    memcpy(wm, w0, sizeof wm);
+    for (int it = 0; it < 20; it++) {
+        /* G(ωm) = 2 I (ωm − ω0) + dt ωm × I ωm */
+        double Iw[3], d[3], G[3], c[3];
+        mat_vec(I, wm, Iw);
+        for (int a = 0; a < 3; a++)
+            d[a] = wm[a] - w0[a];
+        mat_vec(I, d, G);
+        cross3(wm, Iw, c);
+        for (int a = 0; a < 3; a++)
+            G[a] = 2 * G[a] + dt * c[a];
+        /* J = 2 I + dt ([ωm]× I − [I ωm]×) */
+        double J[9];
+        const double W[9] = {0, -wm[2], wm[1], wm[2], 0, -wm[0], -wm[1], wm[0], 0};
+        const double L[9] = {0, -Iw[2], Iw[1], Iw[2], 0, -Iw[0], -Iw[1], Iw[0], 0};
+        for (int i = 0; i < 3; i++)
+            for (int j = 0; j < 3; j++) {
+                double s = 0;
+                for (int k = 0; k < 3; k++)
+                    s += W[3 * i + k] * I[3 * k + j];
+                J[3 * i + j] = 2 * I[3 * i + j] + dt * (s - L[3 * i + j]);
+            }
+        double adj[9], step[3];
+        const double det = cs_mat3_adjugate(J, adj);
+        if (det == 0 || !isfinite(det))
+            break;
+        mat_vec(adj, G, step);
+        double sn = 0, wn = 0;
+        for (int a = 0; a < 3; a++) {
+            wm[a] -= step[a] / det;
+            sn += (step[a] / det) * (step[a] / det);
+            wn += wm[a] * wm[a];
+        }
+        if (sn <= 1e-30 * (wn + 1e-300))
+            break;
+    }
+    double w1[3];
+    for (int a = 0; a < 3; a++)
+        w1[a] = 2 * wm[a] - w0[a];
+    const double dq[4] = {1, 0.5 * dt * wm[0], 0.5 * dt * wm[1], 0.5 * dt * wm[2]};
+    double q[4];
+    quat_mul(rb->q, dq, q);
+    const double qn = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+    for (int a = 0; a < 4; a++)
+        rb->q[a] = q[a] / qn;
+    quat_to_mat(rb->q, rb->R);
+    mat_vec(rb->R, w1, rb->w);
+    update_inertia(rb);
+}
+
+/* The 3×3 matrix K with Δv(point) = K J for an impulse J at arm r. */
+static void point_mass_matrix(const cs_rigid *rb, const double r[3], double K[9])
+{
+    for (int j = 0; j < 3; j++) {
+        double e[3] = {0, 0, 0}, rxe[3], t[3], col[3];
+        e[j] = 1;
+        cross3(r, e, rxe);
+        mat_vec(rb->I_inv_world, rxe, t);
+        cross3(t, r, col);
+        for (int i = 0; i < 3; i++)
+            K[3 * i + j] = rb->inv_mass * e[i] + col[i];
+    }
+}
+
+/* Gravity and client inputs: velocities of a dynamic body. */
+static void apply_inputs(const cs_world_t *w, cs_object *o)
+{
+    cs_rigid *rb = o->rb;
+    const double dt = w->rigid->dt;
+    if (!rb->has_loads) {
+        for (int a = 0; a < 3; a++)
+            rb->v[a] += dt * w->def.gravity[a];
+    } else {
+        /* gravity and the scene's constant loads, as the nodes carry them (f_const) */
+        double F[3] = {0, 0, 0}, tau[3] = {0, 0, 0};
+        for (int i = 0; i < o->n; i++) {
+            double r[3], t[3];
+            for (int a = 0; a < 3; a++)
+                r[a] = o->x[3 * (size_t)i + a] - rb->c[a];
+            cross3(r, o->f_const + 3 * (size_t)i, t);
+            for (int a = 0; a < 3; a++) {
+                F[a] += o->f_const[3 * (size_t)i + a];
+                tau[a] += t[a];
+            }
+        }
+        double dw[3];
+        mat_vec(rb->I_inv_world, tau, dw);
+        for (int a = 0; a < 3; a++) {
+            rb->v[a] += dt * F[a] * rb->inv_mass;
+            rb->w[a] += dt * dw[a];
+        }
+    }
+    for (int i = 0; i < o->n_inputs; i++) {
+        const cs_input *in = &o->inputs[i];
+        /* a uniform pressure on a closed surface has no net force or torque on a rigid body */
+        if (in->delay > 0 || in->kind == CS_INPUT_PRESSURE || in->cell < 0)
+            continue;
+        const int32_t *nd = o->cm.cell_nodes + 8 * (size_t)in->cell;
+        double p[3] = {0, 0, 0}, r[3];
+        for (int k = 0; k < 8; k++)
+            for (int a = 0; a < 3; a++)
+                p[a] += in->w[k] * o->x[3 * (size_t)nd[k] + a];
+        for (int a = 0; a < 3; a++)
+            r[a] = p[a] - rb->c[a];
+        double J[3];
+        if (in->kind == CS_INPUT_FORCE) {
+            for (int a = 0; a < 3; a++)
+                J[a] = dt * in->force[a];
+        } else {
+            /* implicit spring on the point: (1 + dt² k K) J = dt k (e − dt v_p) */
+            double K[9], A[9], adj[9], vp[3], wr[3], rhs[3];
+            point_mass_matrix(rb, r, K);
+            cross3(rb->w, r, wr);
+            /* the target: fixed (drag) or moving along its segment (curve) */
+            double tg[3];
+            const double sc = in->kind == CS_INPUT_CURVE && in->steps_total > 0
+                                  ? (double)(in->steps_total - in->steps_left + 1) / in->steps_total
+                                  : 0.0;
+            for (int a = 0; a < 3; a++)
+                tg[a] = in->target[a] +
+                        (in->kind == CS_INPUT_CURVE ? sc * (in->target1[a] - in->target[a]) : 0.0);
+            for (int a = 0; a < 3; a++) {
+                vp[a] = rb->v[a] + wr[a];
+                rhs[a] = dt * in->stiffness * (tg[a] - p[a] - dt * vp[a]);
+            }
+            for (int k = 0; k < 9; k++)
+                A[k] = dt * dt * in->stiffness * K[k] + (k % 4 == 0);
+            const double det = cs_mat3_adjugate(A, adj);
+            mat_vec(adj, rhs, J);
+            for (int a = 0; a < 3; a++)
+                J[a] /= det;
+        }
+        apply_impulse(rb, r, J, 1.0);
+    }
+}
+
+/* As world.c's expire_inputs: a delayed input counts its delay down first. */
+static void expire(cs_object *o)
+{
+    int j = 0;
+    for (int i = 0; i < o->n_inputs; i++) {
+        cs_input *in = &o->inputs[i];
+        if (in->delay > 0 ? (in->delay--, true) : --in->steps_left > 0)
+            o->inputs[j++] = *in;
+    }
+    o->n_inputs = j;
+}
+
+/* ---------------------------------------------------------------- contacts */
+
+static contact *new_contact(cs_rigid_world *rw)
+{
+    if (rw->nc == rw->cap_c) {
+        int cap = rw->cap_c ? 2 * rw->cap_c : 256;
+        contact *g = realloc(rw->c, (size_t)cap * sizeof *g);
+        if (!g)
+            return NULL;
+        rw->c = g;
+        rw->cap_c = cap;
+    }
+    contact *c = &rw->c[rw->nc++];
+    memset(c, 0, sizeof *c);
+    c->node_a = c->node_b = c->cell_a = c->cell_b = -1;
+    return c;
+}
+
+/* The distance a body can move towards anything in one step, plus a small persistence
+ * margin so resting contacts stay in the set. */
+static double body_margin(const cs_object *o, double dt)
+{
+    const cs_rigid *rb = o->rb;
+    return dt * (sqrt(dot3(rb->v, rb->v)) + sqrt(dot3(rb->w, rb->w)) * rb->radius) +
+           0.05 * o->cm.h;
+}
+
+static int ground_contacts(cs_world_t *w, cs_rigid_world *rw, int ia)
+{
+    cs_object *o = rw->body[ia];
+    const double g = w->def.ground_height, dt = w->rigid->dt;
+    const double margin = body_margin(o, dt);
+    if (o->rb->aabb_min[2] > g + margin)
+        return 0;
+    for (int i = 0; i < o->n; i++) {
+        const double *x = o->x + 3 * (size_t)i;
+        if (x[2] - g >= margin)
+            continue;
+        contact *c = new_contact(rw);
+        if (!c)
+            return -1;
+        c->a = ia;
+        c->b = -1;
+        memcpy(c->p, x, sizeof c->p);
+        c->n[2] = 1;
+        c->sep = x[2] - g;
+        c->node_a = i;
+        c->key = i;
+    }
+    return 0;
+}
+
+/* An oriented cube for libccd: centre, axes (the body's R columns), half edge. */
+typedef struct obox {
+    double c[3];
+    const double *R;
+    double half;
+} obox;
+
+static void obox_support(const void *obj, const ccd_vec3_t *dir, ccd_vec3_t *out)
+{
+    const obox *b = obj;
+    double d[3] = {dir->v[0], dir->v[1], dir->v[2]}, l[3];
+    mat_t_vec(b->R, d, l);
+    for (int a = 0; a < 3; a++)
+        l[a] = l[a] >= 0 ? b->half : -b->half;
+    double r[3];
+    mat_vec(b->R, l, r);
+    for (int a = 0; a < 3; a++)
+        out->v[a] = b->c[a] + r[a];
+}
+
+static void obox_center(const void *obj, ccd_vec3_t *out)
+{
+    const obox *b = obj;
+    for (int a = 0; a < 3; a++)
+        out->v[a] = b->c[a];
+}
+
+static void cell_centre_world(const cs_object *o, int32_t c, double p[3])
+{
+    const int32_t *nd = o->cm.cell_nodes + 8 * (size_t)c;
+    p[0] = p[1] = p[2] = 0;
+    for (int k = 0; k < 8; k++)
+        for (int a = 0; a < 3; a++)
+            p[a] += o->x[3 * (size_t)nd[k] + a] / 8.0;
+}
+
+/* Whether the face of cell c that a world direction d leaves through is shared with a
+ * neighbouring cell of the same object (then a push along d would be through the body). */
+static bool internal_direction(const cs_object *o, int32_t c, const double d[3])
+{
+    double l[3];
+    mat_t_vec(o->rb->R, d, l);
+    int ax = 0;
+    for (int a = 1; a < 3; a++)
+        if (fabs(l[a]) > fabs(l[ax]))
+            ax = a;
+    if (fabs(l[ax]) < 0.9)
+        return false;
+    const int32_t *q = o->cm.cell_ijk + 3 * (size_t)c;
+    int32_t nb[3] = {q[0], q[1], q[2]};
+    nb[ax] += l[ax] > 0 ? 1 : -1;
+    return cs_cubemesh_find(&o->cm, nb[0], nb[1], nb[2]) >= 0;
+}
+
+/* Is world point p inside cube `box` grown by g? */
+static bool in_obox(const obox *b, const double p[3], double g)
+{
+    double d[3] = {p[0] - b->c[0], p[1] - b->c[1], p[2] - b->c[2]}, l[3];
+    mat_t_vec(b->R, d, l);
+    return fabs(l[0]) <= b->half + g && fabs(l[1]) <= b->half + g && fabs(l[2]) <= b->half + g;
+}
+
+/* Contacts between cube ca of body ia and cube cb of body ib (normal towards ia). */
+static int cube_pair(cs_rigid_world *rw, int ia, int32_t ca, int ib, int32_t cb, double margin)
+{
+    const cs_object *A = rw->body[ia], *B = rw->body[ib];
+    obox ba = {.R = A->rb->R, .half = 0.5 * A->cm.h + 0.5 * margin};
+    obox bbx = {.R = B->rb->R, .half = 0.5 * B->cm.h + 0.5 * margin};
+    cell_centre_world(A, ca, ba.c);
+    cell_centre_world(B, cb, bbx.c);
+    double n[3], depth;
+    ccd_t ccd;
+    CCD_INIT(&ccd);
+    ccd.support1 = obox_support;
+    ccd.support2 = obox_support;
+    ccd.center1 = obox_center;
+    ccd.center2 = obox_center;
+    ccd.max_iterations = 100;
+    ccd.mpr_tolerance = 1e-9 * (A->cm.h + B->cm.h);
+    /* Pieces of one broken body keep its orientation: parallel cubes need no GJK/MPR */
+    double par = 0;
+    for (int k = 0; k < 9; k++)
+        par = fmax(par, fabs(A->rb->R[k] - B->rb->R[k]));
+    if (par >= 1e-9 && !ccdMPRIntersect(&bbx, &ba, &ccd))
+        return 0;
+    /* The separating-axis test over the 15 axes of two boxes gives the exact minimum
+     * translation (libccd's EPA is that too in principle, but stalls on the touching,
+     * coplanar faces that resting cubes always have; MPR's direction is too rough). */
+    {
+        double d[3], axes[15][3];
+        int na = 0;
+        for (int a = 0; a < 3; a++)
+            d[a] = ba.c[a] - bbx.c[a];
+        for (int s2 = 0; s2 < 2; s2++)
+            for (int k = 0; k < 3; k++) {
+                const double *R = s2 ? A->rb->R : B->rb->R;
+                axes[na][0] = R[k];
+                axes[na][1] = R[3 + k];
+                axes[na][2] = R[6 + k];
+                na++;
+            }
+        if (par >= 1e-9)
+            for (int i = 0; i < 3; i++)
+                for (int j = 3; j < 6; j++) {
+                    double c[3];
+                    cross3(axes[i], axes[j], c);
+                    const double l = sqrt(dot3(c, c));
+                    if (l < 1e-6)
+                        continue;
+                    for (int a = 0; a < 3; a++)
+                        axes[na][a] = c[a] / l;
+                    na++;
+                }
+        depth = INFINITY;
+        int best = -1;
+        for (int k = 0; k < na; k++) {
+            double ra = 0, rb = 0;
+            for (int j = 0; j < 3; j++) {
+                ra += ba.half * fabs(dot3(axes[3 + j], axes[k]));
+                rb += bbx.half * fabs(dot3(axes[j], axes[k]));
+            }
+            const double ov = ra + rb - fabs(dot3(d, axes[k]));
+            if (ov < 0)
+                return 0;
+            /* face axes win ties against edge axes (1e-9 of h) */
+            if (ov < depth - (k >= 6 ? 1e-9 * (A->cm.h + B->cm.h) : 0)) {
+                depth = ov;
+                best = k;
+            }
+        }
+        const double sg = dot3(d, axes[best]) >= 0 ? 1 : -1;
+        for (int a = 0; a < 3; a++)
+            n[a] = sg * axes[best][a];
+    }
+    /* Face contacts: the normal of the face (of either cube) it is within ~14° of, so that
+     * every cube pair of one face-to-face contact pushes along the same direction; the penetration
+     * direction varies with the overlap of each pair and makes stacks creep. */
+    {
+        double best = 0, u[3] = {0, 0, 0};
+        for (int s = 0; s < 2; s++)
+            for (int ax = 0; ax < 3; ax++) {
+                const double *R = s ? B->rb->R : A->rb->R;
+                const double col[3] = {R[ax], R[3 + ax], R[6 + ax]};
+                const double d = dot3(col, n);
+                if (fabs(d) > best) {
+                    best = fabs(d);
+                    for (int a = 0; a < 3; a++)
+                        u[a] = d > 0 ? col[a] : -col[a];
+                }
+            }
+        if (best > 0.97)
+            memcpy(n, u, sizeof u);
+    }
+    const double minus_n[3] = {-n[0], -n[1], -n[2]};
+    if (internal_direction(B, cb, n) || internal_direction(A, ca, minus_n))
+        return 0;
+    /* extents along n of the true (ungrown) cubes */
+    const int32_t *na = A->cm.cell_nodes + 8 * (size_t)ca, *nb = B->cm.cell_nodes + 8 * (size_t)cb;
+    double minA = INFINITY, maxB = -INFINITY;
+    for (int k = 0; k < 8; k++) {
+        minA = fmin(minA, dot3(A->x + 3 * (size_t)na[k], n));
+        maxB = fmax(maxB, dot3(B->x + 3 * (size_t)nb[k], n));
+    }
+    if (minA - maxB >= margin)
+        return 0; /* apart along the (snapped) normal */
+    ba.half = 0.5 * A->cm.h;
+    bbx.half = 0.5 * B->cm.h;
+    const double tol = 1e-6 * (A->cm.h + B->cm.h);
+    int made = 0;
+    for (int side = 0; side < 2; side++)
+        for (int k = 0; k < 8; k++) {
+            const int32_t node = side == 0 ? na[k] : nb[k];
+            const double *p = (side == 0 ? A->x : B->x) + 3 * (size_t)node;
+            const double sep = side == 0 ? dot3(p, n) - maxB : minA - dot3(p, n);
+            if (sep >= margin || !in_obox(side == 0 ? &bbx : &ba, p, fabs(sep) + tol))
+                continue;
+            /* only points on the facing side: a corner of A near B's face, not behind it */
+            if (side == 0 && dot3(p, n) > minA + fmax(margin, 0.25 * A->cm.h))
+                continue;
+            if (side == 1 && dot3(p, n) < maxB - fmax(margin, 0.25 * B->cm.h))
+                continue;
+            contact *c = new_contact(rw);
+            if (!c)
+                return -1;
+            c->a = ia;
+            c->b = ib;
+            memcpy(c->p, p, sizeof c->p);
+            memcpy(c->n, n, sizeof c->n);
+            c->sep = sep;
+            c->cell_a = ca;
+            c->cell_b = cb;
+            if (side == 0)
+                c->node_a = node;
+            else
+                c->node_b = node;
+            /* the same key whichever body ends up as a: the node and whose it is */
+            c->key = 2 * (int64_t)node + ((side == 0) == (A->id < B->id));
+            made++;
+        }
+    if (made == 0) {
+        /* edge against edge: libccd's contact point */
+        ccd_real_t cdepth;
+        ccd_vec3_t dir, pos;
+        if (ccdMPRPenetration(&bbx, &ba, &ccd, &cdepth, &dir, &pos) != 0)
+            return 0;
+        contact *c = new_contact(rw);
+        if (!c)
+            return -1;
+        c->a = ia;
+        c->b = ib;
+        for (int a = 0; a < 3; a++)
+            c->p[a] = pos.v[a];
+        memcpy(c->n, n, sizeof c->n);
+        c->sep = minA - maxB;
+        c->cell_a = ca;
+        c->cell_b = cb;
+        c->key = -1 - ((int64_t)ca << 31 | (int64_t)cb); /* never a duplicate */
+    }
+    return 0;
+}
+
+static int cmp_contact(const void *x, const void *y)
+{
+    const contact *a = x, *b = y;
+    if (a->key != b->key)
+        return a->key < b->key ? -1 : 1;
+    return a->sep < b->sep ? -1 : a->sep > b->sep;
+}
+
+/* Contacts between bodies ia and ib, whose grown AABBs overlap. */
+static int body_pair(const cs_world_t *w, cs_rigid_world *rw, int ia, int ib)
+{
+    /* look up the cubes of the body with fewer cells in the other's lattice */
+    if (rw->body[ia]->cm.n_cells > rw->body[ib]->cm.n_cells) {
+        int t = ia;
+        ia = ib;
+        ib = t;
+    }
+    const cs_object *A = rw->body[ia], *B = rw->body[ib];
+    const double margin = body_margin(A, w->rigid->dt) + body_margin(B, w->rigid->dt);
+    const double hA = A->cm.h, hB = B->cm.h;
+    const double reach = 0.5 * sqrt(3.0) * (hA + hB) + margin;
+    const int start = rw->nc;
+    for (int32_t ca = 0; ca < A->cm.n_cells; ca++) {
+        double xa[3], d[3], X[3];
+        cell_centre_world(A, ca, xa);
+        bool out = false;
+        for (int a = 0; a < 3; a++)
+            if (xa[a] < B->rb->aabb_min[a] - reach || xa[a] > B->rb->aabb_max[a] + reach)
+                out = true;
+        if (out)
+            continue;
+        for (int a = 0; a < 3; a++)
+            d[a] = xa[a] - B->rb->c[a];
+        mat_t_vec(B->rb->R, d, X);
+        double u[3];
+        for (int a = 0; a < 3; a++)
+            u[a] = (X[a] + B->rb->com_rest[a] - B->cm.origin[a]) / hB - 0.5;
+        const double rc = reach / hB;
+        int lo[3], hi[3];
+        for (int a = 0; a < 3; a++) {
+            lo[a] = (int)ceil(u[a] - rc);
+            hi[a] = (int)floor(u[a] + rc);
+        }
+        for (int i = lo[0]; i <= hi[0]; i++)
+            for (int j = lo[1]; j <= hi[1]; j++)
+                for (int k = lo[2]; k <= hi[2]; k++) {
+                    const double e[3] = {i - u[0], j - u[1], k - u[2]};
+                    if (dot3(e, e) > rc * rc)
+                        continue;
+                    int32_t cb = cs_cubemesh_find(&B->cm, i, j, k);
+                    if (cb >= 0 && cube_pair(rw, ia, ca, ib, cb, margin) != 0)
+                        return -1;
+                }
+    }
+    /* one contact per node of either body (the deepest), however many cube pairs found it */
+    if (rw->nc - start > 1)
+        qsort(rw->c + start, (size_t)(rw->nc - start), sizeof *rw->c, cmp_contact);
+    int k = start;
+    for (int i = start; i < rw->nc; i++)
+        if (i == start || rw->c[i].key < 0 || rw->c[i].key != rw->c[k - 1].key)
+            rw->c[k++] = rw->c[i];
+    rw->nc = k;
+    return 0;
+}
+
+static const cs_rigid *body_rb(const cs_rigid_world *rw, int i)
+{
+    return i >= 0 ? rw->body[i]->rb : NULL;
+}
+
+static void tangents(const double n[3], double t1[3], double t2[3])
+{
+    double a[3] = {0, 0, 0};
+    a[fabs(n[0]) < 0.57 ? 0 : (fabs(n[1]) < 0.57 ? 1 : 2)] = 1;
+    cross3(n, a, t1);
+    const double l = sqrt(dot3(t1, t1));
+    for (int k = 0; k < 3; k++)
+        t1[k] /= l;
+    cross3(n, t1, t2);
+}
+
+static double eff_mass(const cs_rigid_world *rw, const contact *c, const double d[3])
+{
+    double k = 0;
+    for (int s = 0; s < 2; s++) {
+        const int i = s ? c->b : c->a;
+        if (i < 0 || !rw->dyn[i])
+            continue;
+        const cs_rigid *rb = body_rb(rw, i);
+        double rxd[3], t[3];
+        cross3(s ? c->rb : c->ra, d, rxd);
+        mat_vec(rb->I_inv_world, rxd, t);
+        k += rb->inv_mass + dot3(rxd, t);
+    }
+    return k > 0 ? 1.0 / k : 0.0;
+}
+
+/* Relative velocity of a over b at the contact (before this step's forces if pre). */
+static void rel_velocity_at(const cs_rigid_world *rw, const contact *c, double v[3], bool pre)
+{
+    v[0] = v[1] = v[2] = 0;
+    for (int s = 0; s < 2; s++) {
+        const int i = s ? c->b : c->a;
+        if (i < 0)
+            continue;
+        const cs_rigid *rb = body_rb(rw, i);
+        const double *bv = pre ? rb->v_pre : rb->v, *bw = pre ? rb->w_pre : rb->w;
+        double wr[3];
+        cross3(bw, s ? c->rb : c->ra, wr);
+        for (int a = 0; a < 3; a++)
+            v[a] += (s ? -1 : 1) * (bv[a] + wr[a]);
+    }
+}
+
+static void rel_velocity(const cs_rigid_world *rw, const contact *c, double v[3])
+{
+    rel_velocity_at(rw, c, v, false);
+}
+
+static void contact_impulse(cs_rigid_world *rw, const contact *c, const double J[3])
+{
+    if (rw->dyn[c->a])
+        apply_impulse(rw->body[c->a]->rb, c->ra, J, 1.0);
+    if (c->b >= 0 && rw->dyn[c->b])
+        apply_impulse(rw->body[c->b]->rb, c->rb, J, -1.0);
+}
+
+static void prepare_contacts(const cs_world_t *w, cs_rigid_world *rw)
+{
+    const double dt = w->rigid->dt;
+    const double gn = sqrt(dot3(w->def.gravity, w->def.gravity));
+    const double v_bounce = 2 * gn * dt + 1e-3;
+    for (int i = 0; i < rw->nc; i++) {
+        contact *c = &rw->c[i];
+        const cs_object *A = rw->body[c->a], *B = c->b >= 0 ? rw->body[c->b] : NULL;
+        for (int a = 0; a < 3; a++) {
+            c->ra[a] = c->p[a] - A->rb->c[a];
+            c->rb[a] = B ? c->p[a] - B->rb->c[a] : 0;
+        }
+        tangents(c->n, c->t1, c->t2);
+        c->kn = eff_mass(rw, c, c->n);
+        c->kt1 = eff_mass(rw, c, c->t1);
+        c->kt2 = eff_mass(rw, c, c->t2);
+        double vr[3];
+        rel_velocity(rw, c, vr);
+        const double vn0 = dot3(vr, c->n);
+        rel_velocity_at(rw, c, vr, true);
+        const double vn_pre = dot3(vr, c->n);
+        const double slop = 0.01 * A->cm.h;
+        c->target = c->sep > 0 ? -c->sep / dt
+                               : BAUMGARTE * fmin(fmax(0, -c->sep - slop), 0.1 * A->cm.h) / dt;
+        const double e = B ? fmax(A->mat.restitution, B->mat.restitution) : A->mat.restitution;
+        /* restitution reverses the approach speed before this step's forces, so that a
+         * bounce retraces the fall (symplectic Euler is time-symmetric that way) */
+        if (vn_pre < -v_bounce && vn0 * dt < -c->sep)
+            c->target = fmax(c->target, -e * vn_pre);
+        c->mu = B ? sqrt(A->mat.friction * B->mat.friction)
+                  : sqrt(A->mat.friction * w->def.ground_friction);
+        c->jn = c->jt1 = c->jt2 = 0;
+    }
+}
+
+static int cmp_kept(const void *x, const void *y)
+{
+    const kept_impulse *a = x, *b = y;
+    if (a->lo != b->lo)
+        return a->lo < b->lo ? -1 : 1;
+    if (a->hi != b->hi)
+        return a->hi < b->hi ? -1 : 1;
+    return a->key < b->key ? -1 : a->key > b->key;
+}
+
+/* The contact's identity across steps; *sign is +1 if a is lo, else −1. */
+static kept_impulse contact_id(const cs_rigid_world *rw, const contact *c, double *sign)
+{
+    const cs_object_id a = rw->body[c->a]->id, b = c->b >= 0 ? rw->body[c->b]->id : CS_NULL_OBJECT;
+    *sign = a < b ? 1.0 : -1.0;
+    return (kept_impulse){.lo = a < b ? a : b, .hi = a < b ? b : a, .key = c->key};
+}
+
+/* Start from last step's impulses of the same contacts (same bodies, same node, normal
+ * within ~8°): resting stacks then need few iterations and do not creep. */
+static void warm_start(cs_rigid_world *rw)
+{
+    for (int i = 0; i < rw->nc && rw->n_kept > 0; i++) {
+        contact *c = &rw->c[i];
+        if (c->key < 0)
+            continue;
+        double sg;
+        kept_impulse k = contact_id(rw, c, &sg);
+        const kept_impulse *f = bsearch(&k, rw->kept, (size_t)rw->n_kept, sizeof k, cmp_kept);
+        if (!f || sg * dot3(f->n, c->n) < 0.99)
+            continue;
+        c->jn = fmax(0, sg * dot3(f->J, c->n));
+        const double lim = c->mu * c->jn;
+        c->jt1 = fmin(lim, fmax(-lim, sg * dot3(f->J, c->t1)));
+        c->jt2 = fmin(lim, fmax(-lim, sg * dot3(f->J, c->t2)));
+        double J[3];
+        for (int a = 0; a < 3; a++)
+            J[a] = c->jn * c->n[a] + c->jt1 * c->t1[a] + c->jt2 * c->t2[a];
+        contact_impulse(rw, c, J);
+    }
+}
+
+static int keep_impulses(cs_rigid_world *rw)
+{
+    if (rw->nc > rw->cap_kept) {
+        kept_impulse *g = realloc(rw->kept, (size_t)rw->nc * sizeof *g);
+        if (!g)
+            return -1;
+        rw->kept = g;
+        rw->cap_kept = rw->nc;
+    }
+    int n = 0;
+    for (int i = 0; i < rw->nc; i++) {
+        const contact *c = &rw->c[i];
+        if (c->key < 0)
+            continue;
+        double sg;
+        kept_impulse k = contact_id(rw, c, &sg);
+        for (int a = 0; a < 3; a++) {
+            k.n[a] = sg * c->n[a];
+            k.J[a] = sg * (c->jn * c->n[a] + c->jt1 * c->t1[a] + c->jt2 * c->t2[a]);
+        }
+        rw->kept[n++] = k;
+    }
+    if (n > 1)
+        qsort(rw->kept, (size_t)n, sizeof *rw->kept, cmp_kept);
+    rw->n_kept = n;
+    return 0;
+}
+
+static void solve_contacts(cs_rigid_world *rw)
+{
+    for (int it = 0; it < PGS_ITERATIONS; it++)
+        for (int i = 0; i < rw->nc; i++) {
+            contact *c = &rw->c[i];
+            if (c->kn == 0)
+                continue;
+            double vr[3];
+            rel_velocity(rw, c, vr);
+            double dj = (c->target - dot3(vr, c->n)) * c->kn;
+            double jn = fmax(0, c->jn + dj);
+            dj = jn - c->jn;
+            c->jn = jn;
+            double J[3];
+            for (int a = 0; a < 3; a++)
+                J[a] = dj * c->n[a];
+            contact_impulse(rw, c, J);
+            /* friction, each tangent clamped to μ jn */
+            rel_velocity(rw, c, vr);
+            const double lim = c->mu * c->jn;
+            double *jt[2] = {&c->jt1, &c->jt2};
+            const double *t[2] = {c->t1, c->t2}, kt[2] = {c->kt1, c->kt2};
+            for (int s = 0; s < 2; s++) {
+                double d = -dot3(vr, t[s]) * kt[s];
+                double nj = fmin(lim, fmax(-lim, *jt[s] + d));
+                d = nj - *jt[s];
+                *jt[s] = nj;
+                for (int a = 0; a < 3; a++)
+                    J[a] = d * t[s][a];
+                contact_impulse(rw, c, J);
+            }
+        }
+}
+
+/*
+ * Nodes of deformable objects inside a rigid body's cubes: pushed out through the nearest
+ * exposed face of the cube they are in, their velocity into the body removed by an impulse
+ * whose opposite acts on the body (friction limited by μ times it).
+ */
+static void deformable_contacts(cs_world_t *w, cs_rigid_world *rw, int n_objects)
+{
+    const double dt = w->rigid->dt;
+    for (int d = 0; d < n_objects; d++) {
+        cs_object *D = w->objects[d];
+        if (D->model == CS_MODEL_RIGID || D->n == 0)
+            continue;
+        double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+        bool any_overlap = false;
+        for (int b = 0; b < rw->n_body && !any_overlap; b++) {
+            if (b == 0)
+                for (int i = 0; i < D->n; i++)
+                    for (int a = 0; a < 3; a++) {
+                        lo[a] = fmin(lo[a], D->x[3 * (size_t)i + a]);
+                        hi[a] = fmax(hi[a], D->x[3 * (size_t)i + a]);
+                    }
+            const cs_rigid *rb = rw->body[b]->rb;
+            any_overlap = lo[0] <= rb->aabb_max[0] && hi[0] >= rb->aabb_min[0] &&
+                          lo[1] <= rb->aabb_max[1] && hi[1] >= rb->aabb_min[1] &&
+                          lo[2] <= rb->aabb_max[2] && hi[2] >= rb->aabb_min[2];
+        }
+        if (!any_overlap)
+            continue;
+        bool moved = false;
+        for (int b = 0; b < rw->n_body; b++) {
+            cs_object *B = rw->body[b];
+            cs_rigid *rb = B->rb;
+            const double h = B->cm.h;
+            for (int i = 0; i < D->n; i++) {
+                double *x = D->x + 3 * (size_t)i, *v = D->v + 3 * (size_t)i;
+                if (D->mask[3 * (size_t)i] || x[0] < rb->aabb_min[0] || x[0] > rb->aabb_max[0] ||
+                    x[1] < rb->aabb_min[1] || x[1] > rb->aabb_max[1] ||
+                    x[2] < rb->aabb_min[2] || x[2] > rb->aabb_max[2])
+                    continue;
+                double dl[3], X[3], u[3];
+                int32_t ijk[3];
+                for (int a = 0; a < 3; a++)
+                    dl[a] = x[a] - rb->c[a];
+                mat_t_vec(rb->R, dl, X);
+                for (int a = 0; a < 3; a++) {
+                    u[a] = (X[a] + rb->com_rest[a] - B->cm.origin[a]) / h;
+                    ijk[a] = (int32_t)floor(u[a]);
+                }
+                /* a node on a face of the body (up to rounding) belongs to it too */
+                int32_t cell = cs_cubemesh_find(&B->cm, ijk[0], ijk[1], ijk[2]);
+                for (int a = 0; a < 3 && cell < 0; a++) {
+                    const double f = u[a] - ijk[a];
+                    const int step = f < 1e-7 ? -1 : (f > 1 - 1e-7 ? 1 : 0);
+                    if (!step)
+                        continue;
+                    ijk[a] += step;
+                    cell = cs_cubemesh_find(&B->cm, ijk[0], ijk[1], ijk[2]);
+                    if (cell < 0)
+                        ijk[a] -= step;
+                }
+                if (cell < 0)
+                    continue;
+                /* the exposed face it is nearest to, counting the distance it moved in
+                 * (relative to the body) in the last step: a node the body overtook is
+                 * pushed back out the way it came, not through a nearer side */
+                double vrel_l[3], rr[3], wrr[3], vv[3];
+                for (int a = 0; a < 3; a++)
+                    rr[a] = x[a] - rb->c[a];
+                cross3(rb->w, rr, wrr);
+                for (int a = 0; a < 3; a++)
+                    vv[a] = v[a] - rb->v[a] - wrr[a];
+                mat_t_vec(rb->R, vv, vrel_l);
+                double best = INFINITY, score_best = INFINITY;
+                int bax = -1, bdir = 0;
+                for (int ax = 0; ax < 3; ax++)
+                    for (int dir = -1; dir <= 1; dir += 2) {
+                        int32_t nb[3] = {ijk[0], ijk[1], ijk[2]};
+                        nb[ax] += dir;
+                        if (cs_cubemesh_find(&B->cm, nb[0], nb[1], nb[2]) >= 0)
+                            continue;
+                        const double f = u[ax] - ijk[ax];
+                        const double dist = (dir > 0 ? 1 - f : f) * h;
+                        if (dist < 1e-7 * h)
+                            continue; /* on that face's plane: not in through it */
+                        const double score = dist + 2 * dt * dir * vrel_l[ax];
+                        if (score < score_best) {
+                            score_best = score;
+                            best = dist;
+                            bax = ax;
+                            bdir = dir;
+                        }
+                    }
+                if (bax < 0)
+                    continue;
+                double nl[3] = {0, 0, 0}, n[3], r[3], wr[3], vr[3];
+                nl[bax] = bdir;
+                mat_vec(rb->R, nl, n);
+                for (int a = 0; a < 3; a++)
+                    x[a] += best * n[a];
+                moved = true;
+                const bool dyn = !B->sleeping && B->n_fixed_nodes == 0;
+                for (int a = 0; a < 3; a++)
+                    r[a] = x[a] - rb->c[a];
+                cross3(rb->w, r, wr);
+                for (int a = 0; a < 3; a++)
+                    vr[a] = v[a] - rb->v[a] - wr[a];
+                const double vn = fmin(0.0, dot3(vr, n));
+                const double mi = D->m[i] > 0 ? D->m[i] : 1e-12;
+                double rxn[3], t[3];
+                cross3(r, n, rxn);
+                mat_vec(rb->I_inv_world, rxn, t);
+                const double k = 1.0 / mi + (dyn ? rb->inv_mass + dot3(rxn, t) : 0.0);
+                /* the push-out moved the node by `best` in this step: the body takes that
+                 * momentum too (else a body resting on a soft object sinks into it) */
+                const double j = -vn / k, jpos = BAUMGARTE * best / dt / k;
+                double vt[3];
+                for (int a = 0; a < 3; a++)
+                    vt[a] = vr[a] - vn * n[a];
+                const double vtn = sqrt(dot3(vt, vt));
+                const double mu = sqrt(B->mat.friction * D->mat.friction);
+                const double jt = vtn > 0 ? fmin(mu * j, vtn / k) : 0.0;
+                double J[3];
+                for (int a = 0; a < 3; a++) {
+                    J[a] = j * n[a] - (vtn > 0 ? jt * vt[a] / vtn : 0.0);
+                    v[a] += J[a] / mi;
+                }
+                double Jb[3];
+                for (int a = 0; a < 3; a++)
+                    Jb[a] = J[a] + jpos * n[a];
+                if (dyn)
+                    apply_impulse(rb, r, Jb, -1.0);
+                else if (-vn > 2 * w->def.sleep_speed && B->sleeping) {
+                    B->sleeping = false;
+                    B->still_steps = 0;
+                }
+                rb->impact_force += sqrt(dot3(Jb, Jb)) / dt;
+            }
+        }
+        if (moved) {
+            cs_surface_skin(&D->surf, &D->cm, D->x);
+            D->elastic_energy_valid = false;
+            D->sleeping = false;
+            D->still_steps = 0;
+        }
+    }
+}
+
+/* ---------------------------------------------------------------- impact fracture */
+
+typedef struct relief_ctx {
+    cs_object *o;
+    double eps;
+} relief_ctx;
+
+static void relief_operator(void *ctx, const double *p, double *y)
+{
+    relief_ctx *r = ctx;
+    cs_fem_apply_K(&r->o->fem, p, y);
+    for (int i = 0; i < r->o->n; i++)
+        for (int a = 0; a < 3; a++)
+            y[3 * i + a] += r->eps * r->o->m[i] * p[3 * i + a];
+}
+
+/* Add world force F at contact point p to the node loads f of body o (the node itself, or
+ * the corners of cell by trilinear weights of p in it). */
+static void add_load(const cs_object *o, double *f, int32_t node, int32_t cell, const double p[3],
+                     const double F[3])
+{
+    if (node >= 0) {
+        for (int a = 0; a < 3; a++)
+            f[3 * (size_t)node + a] += F[a];
+        return;
+    }
+    if (cell < 0)
+        return;
+    const cs_rigid *rb = o->rb;
+    double d[3], X[3], u[3];
+    for (int a = 0; a < 3; a++)
+        d[a] = p[a] - rb->c[a];
+    mat_t_vec(rb->R, d, X);
+    for (int a = 0; a < 3; a++) {
+        u[a] = (X[a] + rb->com_rest[a] - o->cm.origin[a]) / o->cm.h - o->cm.cell_ijk[3 * (size_t)cell + a];
+        u[a] = fmin(1, fmax(0, u[a]));
+    }
+    for (int k = 0; k < 8; k++) {
+        const double wk = (CS_CORNER[k][0] ? u[0] : 1 - u[0]) * (CS_CORNER[k][1] ? u[1] : 1 - u[1]) *
+                          (CS_CORNER[k][2] ? u[2] : 1 - u[2]);
+        const int32_t nd = o->cm.cell_nodes[8 * (size_t)cell + k];
+        for (int a = 0; a < 3; a++)
+            f[3 * (size_t)nd + a] += wk * F[a];
+    }
+}
+
+/*
+ * Static deformation of body bi under this step's contact forces (inertia relief), then the
+ * stress test and fracture of fracture.c; pieces become rigid bodies. Returns CS_OK or an
+ * error.
+ */
+static int impact_fracture(cs_world_t *w, cs_rigid_world *rw, int bi)
+{
+    cs_object *o = rw->body[bi];
+    cs_rigid *rb = o->rb;
+    const int n = o->n;
+    const size_t n3 = 3 * (size_t)n;
+    const double dt = w->rigid->dt;
+    double *f = o->f, *u = o->v1;
+    memset(f, 0, n3 * sizeof *f);
+    for (int i = 0; i < rw->nc; i++) {
+        const contact *c = &rw->c[i];
+        if (c->a != bi && c->b != bi)
+            continue;
+        double F[3];
+        for (int a = 0; a < 3; a++)
+            F[a] = (c->jn * c->n[a] + c->jt1 * c->t1[a] + c->jt2 * c->t2[a]) / dt *
+                   (c->a == bi ? 1 : -1);
+        if (c->a == bi)
+            add_load(o, f, c->node_a, c->cell_a, c->p, F);
+        else
+            add_load(o, f, c->node_b, c->cell_b, c->p, F);
+    }
+    /* body axes; minus the rigid acceleration the loads cause (inertia relief) */
+    double Ft[3] = {0, 0, 0}, tau[3] = {0, 0, 0};
+    for (int i = 0; i < n; i++) {
+        double fb[3], d[3], t[3];
+        mat_t_vec(rb->R, f + 3 * (size_t)i, fb);
+        memcpy(f + 3 * (size_t)i, fb, sizeof fb);
+        for (int a = 0; a < 3; a++)
+            d[a] = o->cm.node_rest[3 * (size_t)i + a] - rb->com_rest[a];
+        cross3(d, fb, t);
+        for (int a = 0; a < 3; a++) {
+            Ft[a] += fb[a];
+            tau[a] += t[a];
+        }
+    }
+    /* with the lumped node masses (their sum is the mass, their centre the centre of mass,
+     * but their inertia is not the cubes'), so that the loads balance exactly */
+    double Il[9] = {0}, Il_adj[9], acc[3], alpha[3];
+    for (int i = 0; i < n; i++) {
+        double d[3];
+        for (int a = 0; a < 3; a++)
+            d[a] = o->cm.node_rest[3 * (size_t)i + a] - rb->com_rest[a];
+        const double dd = dot3(d, d);
+        for (int r = 0; r < 3; r++)
+            for (int c = 0; c < 3; c++)
+                Il[3 * r + c] += o->m[i] * ((r == c) * dd - d[r] * d[c]);
+    }
+    const double il_det = cs_mat3_adjugate(Il, Il_adj);
+    mat_vec(Il_adj, tau, alpha);
+    for (int a = 0; a < 3; a++) {
+        alpha[a] /= il_det;
+        acc[a] = Ft[a] * rb->inv_mass;
+    }
+    for (int i = 0; i < n; i++) {
+        double d[3], axd[3];
+        for (int a = 0; a < 3; a++)
+            d[a] = o->cm.node_rest[3 * (size_t)i + a] - rb->com_rest[a];
+        cross3(alpha, d, axd);
+        for (int a = 0; a < 3; a++)
+            f[3 * (size_t)i + a] -= o->m[i] * (acc[a] + axd[a]);
+    }
+    /* (K + εM) u = f, linear (rest rotations); ε makes the rigid modes definite */
+    cs_fem_reset_rotations(&o->fem);
+    cs_fem_diag_blocks(&o->fem, o->blocks);
+    double kd = 0, md = 0;
+    for (int i = 0; i < n; i++) {
+        kd += o->blocks[9 * (size_t)i] + o->blocks[9 * (size_t)i + 4] + o->blocks[9 * (size_t)i + 8];
+        md += 3 * o->m[i];
+    }
+    relief_ctx ctx = {.o = o, .eps = 1e-6 * kd / md};
+    for (int i = 0; i < n; i++)
+        for (int a = 0; a < 3; a++)
+            o->blocks[9 * (size_t)i + 4 * a] += ctx.eps * o->m[i];
+    cs_invert_blocks(o->blocks, n);
+    memset(u, 0, n3 * sizeof *u);
+    /* a stress test, not a trajectory: 1e-4 of the loads is plenty */
+    cs_pcg(&o->cg, relief_operator, &ctx, o->blocks, o->mask, f, u, fmax(w->def.cg_tolerance, 1e-4),
+           4 * w->def.cg_max_iterations, cs_elastic_threads(o));
+    if (!finite_n(u, (int)n3)) {
+        place_nodes(o);
+        return CS_OK;
+    }
+    /* remove what is left of the rigid modes (mass-weighted translation and rotation) */
+    {
+        double t[3] = {0, 0, 0}, L[3] = {0, 0, 0}, wv[3];
+        for (int i = 0; i < n; i++) {
+            double d[3], dxu[3];
+            for (int a = 0; a < 3; a++) {
+                d[a] = o->cm.node_rest[3 * (size_t)i + a] - rb->com_rest[a];
+                t[a] += o->m[i] * u[3 * (size_t)i + a] * rb->inv_mass;
+            }
+            cross3(d, u + 3 * (size_t)i, dxu);
+            for (int a = 0; a < 3; a++)
+                L[a] += o->m[i] * dxu[a];
+        }
+        mat_vec(Il_adj, L, wv);
+        for (int i = 0; i < n; i++) {
+            double d[3], wxd[3];
+            for (int a = 0; a < 3; a++)
+                d[a] = o->cm.node_rest[3 * (size_t)i + a] - rb->com_rest[a];
+            cross3(wv, d, wxd);
+            for (int a = 0; a < 3; a++)
+                u[3 * (size_t)i + a] -= t[a] + wxd[a] / il_det;
+        }
+    }
+    for (int i = 0; i < n; i++) {
+        double d[3], r[3];
+        for (int a = 0; a < 3; a++)
+            d[a] = o->cm.node_rest[3 * (size_t)i + a] - rb->com_rest[a] + u[3 * (size_t)i + a];
+        mat_vec(rb->R, d, r);
+        for (int a = 0; a < 3; a++)
+            o->x[3 * (size_t)i + a] = rb->c[a] + r[a];
+    }
+    /* the pose and motion before the split: every piece continues it */
+    double q[4], c0[3], C0[3], v0[3], w0[3];
+    memcpy(q, rb->q, sizeof q);
+    memcpy(c0, rb->c, sizeof c0);
+    memcpy(C0, rb->com_rest, sizeof C0);
+    memcpy(v0, rb->v, sizeof v0);
+    memcpy(w0, rb->w, sizeof w0);
+    int rc = cs_fracture_after_step(w, o);
+    /* o's nodes may have been duplicated and its cells reduced; pieces carry a copy of its
+     * pose (make_piece): every part gets its mass properties and continues the motion. o is
+     * refitted even if nothing changed, to undo the static deformation. */
+    if (cs_rigid_refit(o, q, c0, C0, v0, w0) != 0 || cs_rigid_sync(w) != CS_OK)
+        return CS_ERR_NOMEM;
+    return rc;
+}
+
+/* ---------------------------------------------------------------- the step */
+
+static int cmp_aabb_x(const void *x, const void *y, void *ctx)
+{
+    const cs_rigid_world *rw = ctx;
+    const double a = rw->body[*(const int *)x]->rb->aabb_min[0];
+    const double b = rw->body[*(const int *)y]->rb->aabb_min[0];
+    return a < b ? -1 : a > b;
+}
+
+static int island_find(int *p, int x)
+{
+    while (p[x] != x) {
+        p[x] = p[p[x]];
+        x = p[x];
+    }
+    return x;
+}
+
+static int gather_bodies(cs_world_t *w, cs_rigid_world *rw)
+{
+    rw->n_body = 0;
+    rw->nc = 0;
+    for (int i = 0; i < w->n_objects; i++) {
+        cs_object *o = w->objects[i];
+        if (o->model != CS_MODEL_RIGID || !o->rb)
+            continue;
+        if (rw->n_body == rw->cap_body) {
+            int cap = rw->cap_body ? 2 * rw->cap_body : 16;
+            cs_object **b = realloc(rw->body, (size_t)cap * sizeof *b);
+            int *ord = b ? realloc(rw->order, (size_t)cap * sizeof *ord) : NULL;
+            if (b)
+                rw->body = b;
+            if (ord)
+                rw->order = ord;
+            uint8_t *dy = ord ? realloc(rw->dyn, (size_t)cap) : NULL;
+            if (dy)
+                rw->dyn = dy;
+            int *isl = dy ? realloc(rw->island, (size_t)cap * sizeof *isl) : NULL;
+            if (isl)
+                rw->island = isl;
+            int *ist = isl ? realloc(rw->island_still, (size_t)cap * sizeof *ist) : NULL;
+            if (!ist)
+                return -1;
+            rw->island_still = ist;
+            rw->cap_body = cap;
+        }
+        rw->body[rw->n_body++] = o;
+    }
+    return 0;
+}
+
+/* One substep of rw->dt for every rigid body; `last` ends the frame (sleep, inputs). */
+static int substep(cs_world_t *w, cs_rigid_world *rw, bool last, cs_step_stats *st)
+{
+    const double t0 = now_ms();
+    if (gather_bodies(w, rw) != 0)
+        return CS_ERR_NOMEM;
+    if (rw->n_body == 0)
+        return CS_OK;
+    const int n_objects = w->n_objects;
+    const double dt = rw->dt;
+    int rc = CS_OK;
+    /* 1. forces */
+    for (int i = 0; i < rw->n_body; i++) {
+        cs_object *o = rw->body[i];
+        cs_rigid *rb = o->rb;
+        rw->dyn[i] = !o->sleeping && o->n_fixed_nodes == 0;
+        rb->impact_force = 0;
+        memcpy(rb->v_pre, rb->v, sizeof rb->v);
+        memcpy(rb->w_pre, rb->w, sizeof rb->w);
+        if (!rw->dyn[i])
+            continue;
+        apply_inputs(w, o);
+        node_aabb(o, body_margin(o, dt));
+    }
+    /* 2. sort-and-sweep over the bodies' boxes. A sleeping body that a moving one may reach
+     * this step wakes now, so that the collision exchanges momentum with it (were it fixed
+     * for this step, the mover would bounce off it as off a wall). Moving: faster than
+     * twice the sleep speed before this step's forces. */
+    for (int i = 0; i < rw->n_body; i++)
+        rw->order[i] = i;
+    if (rw->n_body > 1)
+        qsort_r(rw->order, (size_t)rw->n_body, sizeof *rw->order, cmp_aabb_x, rw);
+    for (int s = 0; s < rw->n_body; s++) {
+        const int ia = rw->order[s];
+        for (int t = s + 1; t < rw->n_body; t++) {
+            const int ib = rw->order[t];
+            const cs_rigid *a = rw->body[ia]->rb, *b = rw->body[ib]->rb;
+            if (b->aabb_min[0] > a->aabb_max[0])
+                break;
+            if (rw->dyn[ia] == rw->dyn[ib] || b->aabb_min[1] > a->aabb_max[1] ||
+                b->aabb_max[1] < a->aabb_min[1] || b->aabb_min[2] > a->aabb_max[2] ||
+                b->aabb_max[2] < a->aabb_min[2])
+                continue;
+            const int mv = rw->dyn[ia] ? ia : ib, sl = rw->dyn[ia] ? ib : ia;
+            const cs_rigid *m = rw->body[mv]->rb;
+            cs_object *o = rw->body[sl];
+            if (!o->sleeping || o->n_fixed_nodes > 0 ||
+                sqrt(dot3(m->v_pre, m->v_pre)) + sqrt(dot3(m->w_pre, m->w_pre)) * m->radius <=
+                    2 * w->def.sleep_speed)
+                continue;
+            o->sleeping = false;
+            o->still_steps = 0;
+            rw->dyn[sl] = 1;
+            apply_inputs(w, o);
+            node_aabb(o, body_margin(o, dt));
+        }
+    }
+    /* 3. contacts: ground, then the overlapping pairs */
+    for (int i = 0; i < rw->n_body && w->def.has_ground; i++)
+        if (rw->dyn[i] && ground_contacts(w, rw, i) != 0)
+            return CS_ERR_NOMEM;
+    for (int s = 0; s < rw->n_body; s++) {
+        const int ia = rw->order[s];
+        const cs_rigid *a = rw->body[ia]->rb;
+        for (int t = s + 1; t < rw->n_body; t++) {
+            const int ib = rw->order[t];
+            const cs_rigid *b = rw->body[ib]->rb;
+            if (b->aabb_min[0] > a->aabb_max[0])
+                break;
+            if ((!rw->dyn[ia] && !rw->dyn[ib]) || b->aabb_min[1] > a->aabb_max[1] ||
+                b->aabb_max[1] < a->aabb_min[1] || b->aabb_min[2] > a->aabb_max[2] ||
+                b->aabb_max[2] < a->aabb_min[2])
+                continue;
+            if (body_pair(w, rw, ia, ib) != 0)
+                return CS_ERR_NOMEM;
+        }
+    }
+    /* contacts whose normal must point towards a dynamic body: swap so that a is dynamic */
+    for (int i = 0; i < rw->nc; i++) {
+        contact *c = &rw->c[i];
+        if (c->b >= 0 && !rw->dyn[c->a]) {
+            int t = c->a;
+            c->a = c->b;
+            c->b = t;
+            int32_t tn = c->node_a, tc = c->cell_a;
+            c->node_a = c->node_b;
+            c->cell_a = c->cell_b;
+            c->node_b = tn;
+            c->cell_b = tc;
+            for (int a = 0; a < 3; a++)
+                c->n[a] = -c->n[a];
+        }
+    }
+    const double t1 = now_ms();
+    prepare_contacts(w, rw);
+    warm_start(rw);
+    solve_contacts(rw);
+    if (keep_impulses(rw) != 0)
+        return CS_ERR_NOMEM;
+    for (int i = 0; i < rw->nc; i++) {
+        const contact *c = &rw->c[i];
+        const double J = sqrt(c->jn * c->jn + c->jt1 * c->jt1 + c->jt2 * c->jt2) / dt;
+        rw->body[c->a]->rb->impact_force += J;
+        if (c->b >= 0)
+            rw->body[c->b]->rb->impact_force += J;
+    }
+    deformable_contacts(w, rw, n_objects);
+    const double t2 = now_ms();
+    /* 4. poses, nodes, sleep */
+    for (int i = 0; i < rw->n_body; i++) {
+        cs_object *o = rw->body[i];
+        cs_rigid *rb = o->rb;
+        if (!rw->dyn[i]) {
+            if (last)
+                expire(o);
+            continue;
+        }
+        if (!finite_n(rb->v, 3) || !finite_n(rb->w, 3) ||
+            sqrt(dot3(rb->v, rb->v)) > MAX_SPEED ||
+            sqrt(dot3(rb->w, rb->w)) * rb->radius > MAX_SPEED) {
+            memset(rb->v, 0, sizeof rb->v);
+            memset(rb->w, 0, sizeof rb->w);
+            o->n_inputs = 0;
+            place_nodes(o);
+            rc = CS_ERR_DIVERGED;
+            continue;
+        }
+        for (int a = 0; a < 3; a++)
+            rb->c[a] += dt * rb->v[a];
+        rotate(rb, dt);
+        place_nodes(o);
+        node_aabb(o, 0);
+        if (!last)
+            continue;
+        expire(o);
+        const double speed = sqrt(dot3(rb->v, rb->v)) + sqrt(dot3(rb->w, rb->w)) * rb->radius;
+        if (w->def.sleep_steps > 0 && o->n_inputs == 0 && speed < w->def.sleep_speed) {
+            o->still_steps++;
+        } else {
+            o->still_steps = 0;
+        }
+        st->objects_stepped++;
+    }
+    /* sleep by islands: bodies resting on each other fall asleep together (one alone would
+     * drop its support from the solve and start the others creeping) */
+    for (int i = 0; i < rw->n_body; i++) {
+        rw->island[i] = i;
+        rw->island_still[i] = 1 << 30;
+    }
+    for (int i = 0; i < rw->nc; i++) {
+        const contact *c = &rw->c[i];
+        if (c->b >= 0 && rw->dyn[c->a] && rw->dyn[c->b])
+            rw->island[island_find(rw->island, c->a)] = island_find(rw->island, c->b);
+    }
+    for (int i = 0; i < rw->n_body; i++)
+        if (rw->dyn[i]) {
+            int r = island_find(rw->island, i);
+            if (rw->body[i]->still_steps < rw->island_still[r])
+                rw->island_still[r] = rw->body[i]->still_steps;
+        }
+    for (int i = 0; i < rw->n_body && w->def.sleep_steps > 0 && last; i++) {
+        cs_object *o = rw->body[i];
+        if (!rw->dyn[i] || rw->island_still[island_find(rw->island, i)] < w->def.sleep_steps)
+            continue;
+        o->sleeping = true;
+        memset(o->rb->v, 0, sizeof o->rb->v);
+        memset(o->rb->w, 0, sizeof o->rb->w);
+        memset(o->v, 0, (size_t)o->n * 3 * sizeof(double));
+    }
+    const double t3 = now_ms();
+    /* 5. impact fracture */
+    const double gn = sqrt(dot3(w->def.gravity, w->def.gravity));
+    const int n_body = rw->n_body;
+    for (int i = 0; i < n_body; i++) {
+        cs_object *o = rw->body[i];
+        const double h = o->cm.h;
+        if (!o->fracture || o->cm.n_cells < 2 || !(o->mat.strength < 1e299) ||
+            o->rb->impact_force <= fmax(o->mat.strength * h * h, 2 * o->rb->mass * gn))
+            continue;
+        int r = impact_fracture(w, rw, i);
+        if (r != CS_OK && rc == CS_OK)
+            rc = r;
+    }
+    const double t4 = now_ms();
+    st->ms_inputs += t1 - t0;
+    st->ms_solve += t2 - t1;
+    st->ms_post += t4 - t3;
+    st->ms_skin += t3 - t2;
+    return rc;
+}
+
+/*
+ * The frame is split into substeps so that no body moves more than its cube edge in one (at
+ * most MAX_SUBSTEPS): contacts are speculative, so nothing passes through anything at any
+ * speed, but a bounce is taken where the contact is found, up to one substep's travel
+ * before the surface. (Finer substeps would shrink that gap but break the time symmetry
+ * of a bounce between frames of different substep counts: energy would drift.)
+ */
+int cs_rigid_step(cs_world_t *w, cs_step_stats *st)
+{
+    if (!w->rigid) {
+        bool any = false;
+        for (int i = 0; i < w->n_objects && !any; i++)
+            any = w->objects[i]->model == CS_MODEL_RIGID;
+        if (!any)
+            return CS_OK;
+        if (!(w->rigid = calloc(1, sizeof *w->rigid)))
+            return CS_ERR_NOMEM;
+    }
+    cs_rigid_world *rw = w->rigid;
+    if (cs_rigid_sync(w) != CS_OK)
+        return CS_ERR_NOMEM;
+    const double dt = w->def.dt, gn = sqrt(dot3(w->def.gravity, w->def.gravity));
+    int n_sub = 1;
+    for (int i = 0; i < w->n_objects; i++) {
+        const cs_object *o = w->objects[i];
+        if (o->model != CS_MODEL_RIGID || !o->rb || o->sleeping)
+            continue;
+        const cs_rigid *rb = o->rb;
+        double travel = dt * (sqrt(dot3(rb->v, rb->v)) + gn * dt +
+                              sqrt(dot3(rb->w, rb->w)) * rb->radius);
+        for (int k = 0; k < o->n_inputs; k++)
+            if (o->inputs[k].kind == CS_INPUT_FORCE)
+                travel += dt * dt * sqrt(dot3(o->inputs[k].force, o->inputs[k].force)) *
+                          rb->inv_mass;
+        const double s = ceil(travel / o->cm.h - 1e-9);
+        if (s > n_sub)
+            n_sub = s > MAX_SUBSTEPS ? MAX_SUBSTEPS : (int)s;
+    }
+    rw->dt = dt / n_sub;
+    int rc = CS_OK;
+    for (int k = 0; k < n_sub; k++) {
+        int r = substep(w, rw, k == n_sub - 1, st);
+        if (r != CS_OK && rc == CS_OK)
+            rc = r;
+        if (r == CS_ERR_NOMEM)
+            break;
+    }
+    return rc;
+}

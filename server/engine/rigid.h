@@ -1,0 +1,64 @@
+/*
+ * rigid.h — rigid bodies (seed 000 §2.4): objects of model CS_MODEL_RIGID and the pieces they
+ * break into. Not part of the API.
+ *
+ * A rigid object keeps its cube mesh, nodes and surface like every object; its motion is the
+ * pose (centre of mass c, unit quaternion q: rest frame → world) and the velocities (v, ω in
+ * world axes). After every step its nodes are placed at x = c + R (X − C) and given the rigid
+ * velocity field v + ω × (x − c), so readers, energies, the state hash and skinning are the
+ * same as for deformable objects.
+ *
+ * All rigid objects of a world step together (cs_rigid_step): gravity and client inputs,
+ * contacts (ground, rigid–rigid through libccd between cubes, deformable nodes against rigid
+ * cubes) solved by sequential impulses, then the pose update, sleeping and impact fracture.
+ *
+ * Owns: cs_rigid (through cs_object.rb) and cs_rigid_world (through cs_world.rigid).
+ */
+#ifndef CS_RIGID_H
+#define CS_RIGID_H
+
+#include "world_internal.h"
+
+typedef struct cs_rigid {
+    double mass, inv_mass;
+    double com_rest[3];            /* C: centre of mass in the rest (lattice) frame */
+    double I_body[9], I_body_inv[9]; /* inertia about C, rest-frame axes */
+    double radius;                 /* max |X − C| over the nodes */
+    double q[4];                   /* orientation, w x y z */
+    double R[9];                   /* its matrix, row-major */
+    double c[3];                   /* centre of mass, world */
+    double v[3], w[3];             /* linear and angular velocity, world */
+    double v_pre[3], w_pre[3];     /* the same before this step's forces (restitution) */
+    double I_inv_world[9];         /* R I_body⁻¹ Rᵀ of the current pose */
+    double aabb_min[3], aabb_max[3]; /* of the nodes, grown by the speculative margin */
+    double impact_force;           /* Σ |contact impulse| / dt of the last step [N] */
+    int n_cells, n_nodes;          /* of the object these were computed for */
+    bool has_loads;                /* scene loads: forces from the nodes' f_const, else M g */
+} cs_rigid;
+
+/* Mass properties from o's cells (each a solid box of the material's density) and the pose
+ * at rest (R = I, c = C), at rest. Returns 0 or -1 (out of memory). */
+int cs_rigid_init(cs_object *o);
+/* Mass properties from o's (new) cells; the pose follows the rotation q and the rigid motion
+ * (c0, C0, v0, w0) of the body o was part of: c = c0 + R (C − C0), v = v0 + w0 × (c − c0),
+ * ω = w0. Replaces o->rb. Returns 0 or -1. */
+int cs_rigid_refit(cs_object *o, const double q[4], const double c0[3], const double C0[3],
+                   const double v0[3], const double w0[3]);
+void cs_rigid_free(cs_object *o);
+/* A copy (for a piece made by fracture: it starts from its parent's pose and motion until
+ * cs_rigid_sync fits it to its own cells). NULL if out of memory. */
+cs_rigid *cs_rigid_clone(const cs_rigid *rb);
+/* Refit every rigid object whose cells or nodes changed since its mass properties were
+ * computed (fracture), continuing the motion it had. Returns CS_OK or CS_ERR_NOMEM. */
+int cs_rigid_sync(cs_world_t *w);
+/* Back to the rest pose, at rest. */
+void cs_rigid_reset(cs_object *o);
+/* Kinetic energy ½ m v² + ½ ωᵀ I ω. */
+double cs_rigid_kinetic_energy(const cs_object *o);
+
+/* Step every rigid object of w by one dt (and push deformable nodes out of rigid bodies).
+ * Adds timings and counts to st. Returns CS_OK or the first error. */
+int cs_rigid_step(cs_world_t *w, cs_step_stats *st);
+void cs_rigid_world_free(cs_world_t *w);
+
+#endif
