@@ -788,6 +788,23 @@ static void corner_position(const cs_world_t *w, const surf_edit *e, int32_t nod
     int64_t li[3];
     for (int k = 0; k < 3; k++)
         li[k] = llround((p[k] - cm->origin[k]) / cm->h);
+    /* Another copy of the lattice point (a node split off this one) may have its corner
+     * vertex already: the same position, so that the two sides of a crack close with mirror
+     * images whose volumes cancel exactly (the offset below is shrunk against the triangles
+     * the object holds now, which differ from event to event and between pieces). */
+    for (int dz = -1; dz <= 0; dz++)
+        for (int dy = -1; dy <= 0; dy++)
+            for (int dx = -1; dx <= 0; dx++) {
+                int32_t c = cs_cubemesh_find(cm, (int32_t)li[0] + dx, (int32_t)li[1] + dy,
+                                             (int32_t)li[2] + dz);
+                if (c < 0)
+                    continue;
+                int32_t nd = cm->cell_nodes[8 * (size_t)c + corner_id(-dx, -dy, -dz)];
+                if (nd < o->n && o->corner_vertex[nd] >= 0) {
+                    memcpy(out, sv_rest(e, o->corner_vertex[nd]), 3 * sizeof(double));
+                    return;
+                }
+            }
     uint64_t r = mix64(w->def.seed ^ mix64((uint64_t)li[0] * 73856093u ^
                                            (uint64_t)li[1] * 19349663u ^
                                            (uint64_t)li[2] * 83492791u));
@@ -840,8 +857,10 @@ static int32_t corner_vertex(cs_world_t *w, surf_edit *e, const families *fam, i
     /* a mesh vertex on the lattice point is looked up each time (never cached: the surface
      * split moves its copies between sides) */
     int32_t sv = surface_vertex_at(e, node, cell);
+    /* a corner vertex this event split goes through its family too: the node's own entry
+     * names one copy, the cell's side decides which */
     if (sv < 0 && o->corner_vertex[node] >= 0)
-        return o->corner_vertex[node];
+        sv = o->corner_vertex[node];
     if (sv >= 0) {
         /* a family's first member is the original vertex */
         const int32_t f = family_of(fam, e->nv0, sv);
@@ -1140,9 +1159,13 @@ static int split_surface(cs_object *o, surf_edit *e, const int32_t *cn0, const i
                     if (adjacent && !tri_cut(o, cn0, s->tri_cell[T[a]], s->tri_cell[T[b]]))
                         uf_union(parent, a, b);
                 }
-            /* A corner vertex (§3.2) made for a node, used only by closing triangles, belongs
-             * to that node: it splits exactly as the node did, each copy going with the cells
-             * that reference one copy of the node. */
+            /* A corner vertex (§3.2) made for a node, used only by closing triangles, splits
+             * like any surface vertex: where the triangles' cells stop sharing a node (the
+             * surface opens exactly where the cube mesh came apart). Splitting it per node copy
+             * instead opened slits at a crack's rim, where the node is split but the cells
+             * still share another node (a partially opened face): fans closed those, and the
+             * fans came apart wrongly in later events. Each copy of the node then names the
+             * vertex copy of its cells' group (tn: the node copy of each triangle's cell). */
             int32_t cnode = corner_of[v], tn_buf[64], *tn = NULL;
             for (int a = 0; cnode >= 0 && a < m; a++)
                 if (o->tri_kind[T[a]] == 0)
@@ -1156,12 +1179,6 @@ static int split_surface(cs_object *o, surf_edit *e, const int32_t *cn0, const i
                     const int32_t ct = s->tri_cell[T[a]];
                     const int k = corner_at(&o->cm, ct, p);
                     tn[a] = k >= 0 ? o->cm.cell_nodes[8 * (size_t)ct + k] : cnode;
-                    parent[a] = a;
-                    for (int b = 0; b < a; b++)
-                        if (tn[b] == tn[a]) {
-                            parent[a] = b;
-                            break;
-                        }
                 }
             }
             /* groups in order of their root; the group whose cells hold the vertex's binding
@@ -1178,8 +1195,9 @@ static int split_surface(cs_object *o, surf_edit *e, const int32_t *cn0, const i
             }
             const int32_t vc = s->vert_cell[v];
             for (int g = 0; cnode >= 0 && g < n_groups && keep < 0; g++)
-                if (tn[roots[g]] == cnode)
-                    keep = g;
+                for (int a = 0; a < m && keep < 0; a++)
+                    if (uf_find(parent, a) == roots[g] && tn[a] == cnode)
+                        keep = g;
             if (cnode >= 0 && keep < 0)
                 keep = 0;
             for (int g = 0; g < n_groups && keep < 0; g++)
@@ -1256,8 +1274,9 @@ static int split_surface(cs_object *o, surf_edit *e, const int32_t *cn0, const i
                 }
                 if (ivec_push(&fam->mcopy, copy))
                     goto out_p;
-                if (cnode >= 0)
-                    o->corner_vertex[tn[roots[g]]] = copy;
+                for (int a = 0; cnode >= 0 && a < m; a++)
+                    if (uf_find(parent, a) == roots[g])
+                        o->corner_vertex[tn[a]] = copy;
             }
             if (parent != pbuf)
                 free(parent);
@@ -1324,15 +1343,17 @@ static void face_setup(const cs_object *o, const crack_face *f, cs_close_face *c
  * bounds the region of f inside the surface; left in, its crossings lie exactly on f's edge
  * lines, where a neighbouring closing triangle of an earlier fracture may stand in for its
  * other side. */
-static bool on_side_plane(const cs_close_face *cf, const double *rest, const int32_t *q)
+static bool on_side_plane(const cs_close_face *cf, const double *rest, const int32_t *q,
+                          double tol)
 {
     for (int a = 0; a < 3; a++) {
         if (a == cf->axis)
             continue;
         for (int side = 0; side < 2; side++) {
             const double x = side ? cf->hi[a] : cf->lo[a];
-            if (rest[3 * (size_t)q[0] + a] == x && rest[3 * (size_t)q[1] + a] == x &&
-                rest[3 * (size_t)q[2] + a] == x)
+            if (fabs(rest[3 * (size_t)q[0] + a] - x) <= tol &&
+                fabs(rest[3 * (size_t)q[1] + a] - x) <= tol &&
+                fabs(rest[3 * (size_t)q[2] + a] - x) <= tol)
                 return true;
         }
     }
@@ -1355,7 +1376,7 @@ static int close_faces(cs_world_t *w, cs_object *o, surf_edit *e, const int32_t 
     ivec cand = {0};
     uint8_t *side = NULL;
     int32_t *out = NULL;
-    int cap_side = 0, rc = -1;
+    int cap_side = 0, rc = -1, n_groups = 0;
     /* the rest positions closing.c sees: the surface's, then the four corners of the face at
      * hand (ids nv0 .. nv0+3) */
     double *xr = malloc(((size_t)e->nv0 + 4) * 3 * sizeof *xr);
@@ -1388,7 +1409,8 @@ static int close_faces(cs_world_t *w, cs_object *o, surf_edit *e, const int32_t 
                 for (int j = 0; sd && j < cand.n && !dup; j++)
                     dup = cand.a[j] == t;
                 if (t < e->nt0 && (attempt || o->tri_kind[t] == 0) && !dup &&
-                    !on_side_plane(&cf, s->rest, tris0 + 3 * (size_t)t) && ivec_push(&cand, t))
+                    !on_side_plane(&cf, s->rest, tris0 + 3 * (size_t)t, 1e-9 * o->cm.h) &&
+                    ivec_push(&cand, t))
                     goto out;
             }
         }
@@ -1435,31 +1457,35 @@ static int close_faces(cs_world_t *w, cs_object *o, surf_edit *e, const int32_t 
         }
         if (nt < 0)
             continue; /* the repair closes what is left open */
-        for (int sd = 0; sd < 2; sd++) {
-            const int32_t cell = sd == 0 ? f->c1 : f->c2;
-            const int32_t *nodes = sd == 0 ? n1 : n2;
-            for (int t = 0; t < nt; t++) {
-                int32_t m[3];
-                for (int k = 0; k < 3; k++) {
+        /* t for c1 and t' for c2 are kept or dropped together (one group per pair), so that
+         * the two sides stay mirror images and their volumes cancel */
+        for (int t = 0; t < nt; t++) {
+            int32_t m[2][3];
+            bool ok = true;
+            for (int sd = 0; sd < 2 && ok; sd++) {
+                const int32_t cell = sd == 0 ? f->c1 : f->c2;
+                const int32_t *nodes = sd == 0 ? n1 : n2;
+                for (int k = 0; k < 3 && ok; k++) {
                     int32_t id = out[3 * t + k];
                     if (id >= e->nv0 && id < e->nv0 + 4)
-                        m[k] = corner_vertex(w, e, fam, nodes[id - e->nv0], cell);
+                        m[sd][k] = corner_vertex(w, e, fam, nodes[id - e->nv0], cell);
                     else if (id >= 0 && id < e->nv0)
-                        m[k] = copy_for_cell(o, fam, e->nv0, id, cell);
+                        m[sd][k] = copy_for_cell(o, fam, e->nv0, id, cell);
                     else
-                        m[k] = -1;
-                    if (m[k] < 0)
-                        goto next_tri;
+                        m[sd][k] = -1;
+                    ok = m[sd][k] >= 0;
                 }
-                if (m[0] == m[1] || m[1] == m[2] || m[0] == m[2])
-                    continue;
-                /* t for c1 as given (normal along n_f); t' for c2 reversed */
-                if ((sd == 0 ? ivec_push3(&pl->tri, m[0], m[1], m[2])
-                             : ivec_push3(&pl->tri, m[0], m[2], m[1])) ||
-                    ivec_push(&pl->cell, cell) || ivec_push(&pl->group, i))
-                    goto out;
-            next_tri:;
+                ok = ok && m[sd][0] != m[sd][1] && m[sd][1] != m[sd][2] && m[sd][0] != m[sd][2];
             }
+            if (!ok)
+                continue;
+            /* t for c1 as given (normal along n_f); t' for c2 reversed */
+            if (ivec_push3(&pl->tri, m[0][0], m[0][1], m[0][2]) || ivec_push(&pl->cell, f->c1) ||
+                ivec_push(&pl->group, n_groups) ||
+                ivec_push3(&pl->tri, m[1][0], m[1][2], m[1][1]) || ivec_push(&pl->cell, f->c2) ||
+                ivec_push(&pl->group, n_groups))
+                goto out;
+            n_groups++;
         }
     }
     rc = 0;
