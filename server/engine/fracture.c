@@ -333,6 +333,8 @@ static int push_change(cs_world_t *w, const cs_topo_change *c)
     KEEP(tset_index, c->n_tset, sizeof(int32_t));
     KEEP(tset_tri, c->n_tset, 3 * sizeof(int32_t));
     KEEP(tnew, c->n_tnew, 3 * sizeof(int32_t));
+    if (c->vnew_src)
+        KEEP(vnew_src, c->n_vnew, sizeof(int32_t));
 #undef KEEP
     if (c->name) {
         k.name = keep(w, c->name, strlen(c->name) + 1);
@@ -523,6 +525,7 @@ typedef struct surf_edit {
     int nv0, nt0;     /* counts before the event */
     dvec rest, pos;   /* appended vertices: 3 each */
     ivec vcell;       /* appended vertices: bound cell */
+    ivec vsrc;        /* appended vertices: the vertex (< nv0) each is a copy of, or -1 */
     dvec uvw;         /* appended vertices: 3 each */
     ivec tnew;        /* appended triangles: 3 each */
     ivec tnew_cell;   /* cell of each appended triangle */
@@ -562,7 +565,7 @@ static int32_t sv_append(surf_edit *e, const double p[3], int32_t cell)
     for (int k = 0; k < 3; k++)
         if (dvec_push(&e->rest, p[k]) || dvec_push(&e->pos, x[k]) || dvec_push(&e->uvw, uvw[k]))
             return -1;
-    if (ivec_push(&e->vcell, cell))
+    if (ivec_push(&e->vcell, cell) || ivec_push(&e->vsrc, -1))
         return -1;
     return e->nv0 + e->vcell.n - 1;
 }
@@ -577,8 +580,11 @@ static int32_t sv_append_copy(surf_edit *e, int32_t v, int32_t cell)
     memcpy(x, v < e->nv0 ? e->o->surf.pos + 3 * (size_t)v : e->pos.a + 3 * (size_t)(v - e->nv0),
            sizeof x);
     int32_t c = sv_append(e, p, cell);
-    if (c >= 0)
+    if (c >= 0) {
         memcpy(e->pos.a + 3 * (size_t)(c - e->nv0), x, sizeof x);
+        /* a copy of a copy made in this edit names the first one's source */
+        e->vsrc.a[c - e->nv0] = v < e->nv0 ? v : e->vsrc.a[v - e->nv0];
+    }
     return c;
 }
 
@@ -587,6 +593,7 @@ static void surf_edit_free(surf_edit *e)
     free(e->rest.a);
     free(e->pos.a);
     free(e->vcell.a);
+    free(e->vsrc.a);
     free(e->uvw.a);
     free(e->tnew.a);
     free(e->tnew_cell.a);
@@ -771,16 +778,20 @@ static int32_t surface_vertex_at(const surf_edit *e, int32_t node, int32_t cell)
 }
 
 static void corner_position(const cs_world_t *w, const surf_edit *e, int32_t node,
-                            double out[3])
+                            double out[3], int32_t *from)
 {
     const cs_object *o = e->o;
     int32_t sv = surface_vertex_at(e, node, -1);
+    if (from)
+        *from = -1;
     if (sv >= 0) {
         memcpy(out, sv_rest(e, sv), 3 * sizeof(double));
         return;
     }
     if (o->corner_vertex[node] >= 0) {
         memcpy(out, sv_rest(e, o->corner_vertex[node]), 3 * sizeof(double));
+        if (from)
+            *from = o->corner_vertex[node];
         return;
     }
     const cs_cubemesh *cm = &o->cm;
@@ -802,6 +813,8 @@ static void corner_position(const cs_world_t *w, const surf_edit *e, int32_t nod
                 int32_t nd = cm->cell_nodes[8 * (size_t)c + corner_id(-dx, -dy, -dz)];
                 if (nd < o->n && o->corner_vertex[nd] >= 0) {
                     memcpy(out, sv_rest(e, o->corner_vertex[nd]), 3 * sizeof(double));
+                    if (from)
+                        *from = o->corner_vertex[nd];
                     return;
                 }
             }
@@ -867,9 +880,12 @@ static int32_t corner_vertex(cs_world_t *w, surf_edit *e, const families *fam, i
         const int32_t orig = f >= 0 ? fam->mcopy.a[fam->fstart.a[f]] : sv;
         return copy_for_cell(o, fam, e->nv0, orig, cell);
     }
+    /* a new corner vertex: a copy of another copy's of the lattice point if there is one
+     * (its mirror across the crack: the same position now, so that t and t' coincide) */
     double q[3];
-    corner_position(w, e, node, q);
-    int32_t v = sv_append(e, q, cell);
+    int32_t from;
+    corner_position(w, e, node, q, &from);
+    int32_t v = from >= 0 ? sv_append_copy(e, from, cell) : sv_append(e, q, cell);
     if (v < 0)
         return -1;
     o->corner_vertex[node] = v;
@@ -1391,7 +1407,7 @@ static int close_faces(cs_world_t *w, cs_object *o, surf_edit *e, const int32_t 
         face_setup(o, f, &cf, n1, n2, centre);
         for (int k = 0; k < 4; k++) {
             cf.corner_vertex[k] = e->nv0 + k;
-            corner_position(w, e, n1[k], xr + 3 * ((size_t)e->nv0 + k));
+            corner_position(w, e, n1[k], xr + 3 * ((size_t)e->nv0 + k), NULL);
         }
         /* §3.2 tests the triangles meeting c1; those meeting c2 are added so that both
          * triangles of every edge crossing f are seen even when rounding puts one of them
@@ -1740,13 +1756,24 @@ static int close_loops(cs_world_t *w, surf_edit *e, edge_map *em, ivec *tri, ive
         uint64_t r = w->def.seed;
         for (int a = 0; a < 3; a++)
             r = mix64(r ^ (uint64_t)llround(c[a] / e->o->cm.h * 1e6));
+        double d[3], x[3] = {0, 0, 0};
         for (int a = 0; a < 3; a++) {
             r = mix64(r);
-            c[a] += 1e-3 * e->o->cm.h * ((double)(r >> 11) / 9007199254740992.0 - 0.5);
+            d[a] = 1e-3 * e->o->cm.h * ((double)(r >> 11) / 9007199254740992.0 - 0.5);
+            c[a] += d[a];
         }
         int32_t cv = sv_append(e, c, bcell.a[walk_e.a[0]]);
         if (cv < 0)
             goto out2;
+        /* It starts at the loop's current mean plus the same offset (not where its binding
+         * puts it; the next skin moves it): twin loops lie over copies at the same positions,
+         * so their fans coincide now too and cancel in a client's volume check. */
+        for (int j = 0; j < k; j++)
+            for (int a = 0; a < 3; a++)
+                x[a] += (cyc[j] < e->nv0 ? e->o->surf.pos + 3 * (size_t)cyc[j]
+                                         : e->pos.a + 3 * (size_t)(cyc[j] - e->nv0))[a] / k;
+        for (int a = 0; a < 3; a++)
+            e->pos.a[3 * (size_t)(cv - e->nv0) + a] = x[a] + d[a];
         for (int j = 0; j < k; j++)
             if (ivec_push3(tri, cv, cyc[(j + 1) % k], cyc[j]) ||
                 ivec_push(cell, bcell.a[walk_e.a[j]]))
@@ -1812,7 +1839,7 @@ static int commit_edit(cs_world_t *w, cs_object *o, surf_edit *e, const ivec *tr
         .to_version = o->topology_version + 1, .n_vertices_total = nv1,
         .n_triangles_total = nt1, .n_vnew = nva, .vnew_xyz = s->pos + 3 * (size_t)e->nv0,
         .n_tset = tset_i.n, .tset_index = tset_i.a, .tset_tri = tset_t.a, .n_tnew = nta,
-        .tnew = s->tris + 3 * (size_t)e->nt0};
+        .tnew = s->tris + 3 * (size_t)e->nt0, .vnew_src = e->vsrc.a};
     if (push_change(w, &c))
         goto out;
     o->topology_version++;
@@ -1929,10 +1956,12 @@ static int close_open_loops(cs_world_t *w, cs_object *o, bool record, int *fans)
 
 /*
  * A new object holding cells `cells` (n of them, indices into o) with their nodes, state and
- * surface triangles (those whose centroid cell is among them).
+ * surface triangles (those whose centroid cell is among them). Its surface vertices start
+ * where o's are (the next skin moves the ones bound to other cells than before). If vsrc is
+ * not NULL it receives the o vertex each of the piece's vertices is (owned by the caller).
  */
 static cs_object *make_piece(cs_world_t *w, const cs_object *o, const int32_t *cells, int nc,
-                             const int32_t *cell_map)
+                             const int32_t *cell_map, int32_t **vsrc)
 {
     const cs_cubemesh *cm = &o->cm;
     const cs_surface *s = &o->surf;
@@ -2047,6 +2076,7 @@ static cs_object *make_piece(cs_world_t *w, const cs_object *o, const int32_t *c
     for (int i = 0; i < nv; i++) {
         const int32_t v = vl.a[i];
         memcpy(ps->rest + 3 * (size_t)i, s->rest + 3 * (size_t)v, 3 * sizeof(double));
+        memcpy(ps->pos + 3 * (size_t)i, s->pos + 3 * (size_t)v, 3 * sizeof(double));
         memcpy(ps->vert_uvw + 3 * (size_t)i, s->vert_uvw + 3 * (size_t)v, 3 * sizeof(double));
         ps->vert_cell[i] = cell_map[s->vert_cell[v]];
     }
@@ -2065,7 +2095,6 @@ static cs_object *make_piece(cs_world_t *w, const cs_object *o, const int32_t *c
         int32_t cv = o->corner_vertex ? o->corner_vertex[nl.a[i]] : -1;
         p->corner_vertex[i] = cv >= 0 ? vmap[cv] : -1;
     }
-    cs_surface_skin(ps, pm, p->x);
     ps->cell_tri_start = NULL;
     ps->cell_tri_list = NULL;
     if (rebuild_cell_lists(ps, pm) != 0)
@@ -2085,7 +2114,10 @@ static cs_object *make_piece(cs_world_t *w, const cs_object *o, const int32_t *c
     free(nmap);
     free(vmap);
     free(tl.a);
-    free(vl.a);
+    if (vsrc)
+        *vsrc = vl.a;
+    else
+        free(vl.a);
     free(nl.a);
     return p;
 fail:
@@ -2120,7 +2152,7 @@ static int keep_cells(cs_world_t *w, cs_object *o, const int32_t *kept, int nk,
 {
     cs_surface *s = &o->surf;
     const int nv = s->n_vertices, nt = s->n_triangles;
-    cs_object *p = make_piece(w, o, kept, nk, cell_map);
+    cs_object *p = make_piece(w, o, kept, nk, cell_map, NULL);
     uint8_t *used = calloc((size_t)(nv ? nv : 1), 1);
     int32_t *vid = malloc((size_t)(nv ? nv : 1) * sizeof *vid);
     int32_t *newidx = malloc((size_t)(nv ? nv : 1) * sizeof *newidx);
@@ -2383,10 +2415,12 @@ static int split_pieces(cs_world_t *w, cs_object *o, int *n_rebuilt, int *n_drop
             if (comp[c] == k)
                 list[n++] = c;
         }
-        cs_object *p = make_piece(w, o, list, n, cmap);
+        int32_t *vsrc = NULL;
+        cs_object *p = make_piece(w, o, list, n, cmap, &vsrc);
         if (!p)
             goto out;
         if (p->surf.n_triangles == 0 && !cell_inside(o, list[0])) {
+            free(vsrc);
             /* cubes outside the surface holding none of it: voxels that only grazed it
              * (seed 000 §2.1 keeps every cube the surface touches). No material, nothing to
              * show: dropped rather than made into an invisible object. (Cubes inside with no
@@ -2395,27 +2429,46 @@ static int split_pieces(cs_world_t *w, cs_object *o, int *n_rebuilt, int *n_drop
             (*n_dropped)++;
             continue;
         }
+        const int nv_piece = p->surf.n_vertices;
         p->name = piece_name(w, o->name);
         if (!p->name || cs_world_append_object(w, p) != 0) {
+            free(vsrc);
             cs_object_free_internal(p);
             goto out;
         }
         int fans = 0, rebuilt;
         if (close_open_loops(w, p, false, &fans) != 0 ||
-            (rebuilt = ensure_positive_volume(w, p, false)) < 0)
+            (rebuilt = ensure_positive_volume(w, p, false)) < 0) {
+            free(vsrc);
             goto out;
+        }
         *n_rebuilt += rebuilt;
         p->topology_version = 1;
+        /* sources: o's vertices, then whatever closing the piece's loops added (new points;
+         * a rebuilt surface is all new) */
+        int32_t *grown = rebuilt ? NULL : realloc(vsrc, (size_t)(p->surf.n_vertices + 1) *
+                                                            sizeof *vsrc);
+        if (!grown) {
+            free(vsrc);
+            vsrc = NULL;
+        } else {
+            vsrc = grown;
+            for (int i = nv_piece; i < p->surf.n_vertices; i++)
+                vsrc[i] = -1;
+        }
         cs_topo_change ch = {.object_id = (int32_t)p->id, .parent_id = (int32_t)o->id,
                              .name = p->name, .model = cs_model_name(p->model),
                              .from_version = 0, .to_version = 1,
                              .n_vertices_total = p->surf.n_vertices,
                              .n_triangles_total = p->surf.n_triangles,
                              .n_vnew = p->surf.n_vertices, .vnew_xyz = p->surf.pos,
-                             .n_tnew = p->surf.n_triangles, .tnew = p->surf.tris};
+                             .n_tnew = p->surf.n_triangles, .tnew = p->surf.tris,
+                             .vnew_src = vsrc};
         cs_event ev = {.kind = CS_EVENT_NEW_PIECE, .object = p->id, .parent = o->id,
                        .frame = w->frame};
-        if (push_change(w, &ch) || push_event(w, &ev))
+        const int pushed = push_change(w, &ch);
+        free(vsrc);
+        if (pushed || push_event(w, &ev))
             goto out;
     }
     int n = 0;
