@@ -37,6 +37,7 @@
  *
  * All surface geometry decisions use rest positions, as §3.2 prescribes.
  */
+#include <limits.h>
 #include <math.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -530,6 +531,11 @@ typedef struct surf_edit {
     ivec tnew;        /* appended triangles: 3 each */
     ivec tnew_cell;   /* cell of each appended triangle */
     uint8_t *rewired; /* per original triangle */
+    /* From the surface split (NULL otherwise): the triangles before the event and, per
+     * vertex < nv0, the triangles that held it then (CSR); they let the repair look only at
+     * the triangles around the crack (see repair_region). */
+    const int32_t *tris0;
+    int32_t *vstart, *vtris;
 } surf_edit;
 
 static const double *sv_rest(const surf_edit *e, int32_t v)
@@ -598,6 +604,8 @@ static void surf_edit_free(surf_edit *e)
     free(e->tnew.a);
     free(e->tnew_cell.a);
     free(e->rewired);
+    free(e->vstart);
+    free(e->vtris);
 }
 
 /* ---------------------------------------------------------------- generalized winding number */
@@ -629,6 +637,96 @@ static bool inside_surface(const surf_edit *e, const double p[3])
         total += 2 * atan2(det, den);
     }
     return total / (4 * M_PI) > 0.5;
+}
+
+/*
+ * The same question answered locally: the parity of the surface triangles a ray from p meets,
+ * the ray walked cell by cell through the lattice (the triangles of each cell it passes: seed
+ * 000 Table 1) until it leaves the object's cells. A triangle meets the ray only inside a
+ * cell whose list holds it, so no other triangle can count; the direction is generic (no
+ * lattice plane, edge or mesh symmetry lies along it), so the ray does not graze an edge in
+ * practice, and a closing pair t, t' (the same points, reversed) is met twice or not at all.
+ * Costs the cells along one line instead of every triangle of the surface.
+ */
+static int cmp_i32(const void *x, const void *y)
+{
+    int32_t a = *(const int32_t *)x, b = *(const int32_t *)y;
+    return (a > b) - (a < b);
+}
+
+static int inside_by_ray(const surf_edit *e, const double p[3], const int32_t hi[3],
+                         bool *inside)
+{
+    const cs_object *o = e->o;
+    const cs_cubemesh *cm = &o->cm;
+    const cs_surface *s = &o->surf;
+    static const double dir[3] = {0.7548776662466927, 0.5698402909980532, 0.3247179572447460};
+    ivec seen = {0};
+    int32_t c[3];
+    double tmax[3], tdelta[3];
+    for (int k = 0; k < 3; k++) {
+        const double x = (p[k] - cm->origin[k]) / cm->h;
+        c[k] = (int32_t)floor(x);
+        tdelta[k] = cm->h / dir[k];
+        tmax[k] = (c[k] + 1 - x) * cm->h / dir[k];
+    }
+    /* the direction's components are all positive: once past hi + 1 on any axis, no cell of
+     * the object nor a neighbour of one lies ahead */
+    while (c[0] <= hi[0] + 1 && c[1] <= hi[1] + 1 && c[2] <= hi[2] + 1) {
+        /* a cell the object lacks (outside it, or now another piece's) may still hold a part
+         * of a triangle listed by a neighbour: its neighbours' triangles are taken instead */
+        const int32_t here = cs_cubemesh_find(cm, c[0], c[1], c[2]);
+        const int r = here >= 0 ? 0 : 1;
+        for (int dz = -r; dz <= r; dz++)
+            for (int dy = -r; dy <= r; dy++)
+                for (int dx = -r; dx <= r; dx++) {
+                    int32_t cell = r ? cs_cubemesh_find(cm, c[0] + dx, c[1] + dy, c[2] + dz) : here;
+                    for (int j = cell >= 0 ? s->cell_tri_start[cell] : 0;
+                         cell >= 0 && j < s->cell_tri_start[cell + 1]; j++)
+                        if (s->cell_tri_list[j] < e->nt0 && ivec_push(&seen, s->cell_tri_list[j])) {
+                            free(seen.a);
+                            return -1;
+                        }
+                }
+        const int k = tmax[0] < tmax[1] ? (tmax[0] < tmax[2] ? 0 : 2) : (tmax[1] < tmax[2] ? 1 : 2);
+        c[k]++;
+        tmax[k] += tdelta[k];
+    }
+    if (seen.n > 1)
+        qsort(seen.a, (size_t)seen.n, sizeof *seen.a, cmp_i32);
+    int hits = 0;
+    for (int i = 0; i < seen.n; i++) {
+        if (i > 0 && seen.a[i] == seen.a[i - 1])
+            continue;
+        const int32_t *q = s->tris + 3 * (size_t)seen.a[i];
+        const double *a = sv_rest(e, q[0]), *b = sv_rest(e, q[1]), *cc = sv_rest(e, q[2]);
+        double e1[3], e2[3], pv[3], tv[3], qv[3];
+        for (int k = 0; k < 3; k++) {
+            e1[k] = b[k] - a[k];
+            e2[k] = cc[k] - a[k];
+            tv[k] = p[k] - a[k];
+        }
+        pv[0] = dir[1] * e2[2] - dir[2] * e2[1];
+        pv[1] = dir[2] * e2[0] - dir[0] * e2[2];
+        pv[2] = dir[0] * e2[1] - dir[1] * e2[0];
+        const double det = e1[0] * pv[0] + e1[1] * pv[1] + e1[2] * pv[2];
+        if (det == 0)
+            continue; /* parallel to the ray */
+        const double u = (tv[0] * pv[0] + tv[1] * pv[1] + tv[2] * pv[2]) / det;
+        if (u < 0 || u > 1)
+            continue;
+        qv[0] = tv[1] * e1[2] - tv[2] * e1[1];
+        qv[1] = tv[2] * e1[0] - tv[0] * e1[2];
+        qv[2] = tv[0] * e1[1] - tv[1] * e1[0];
+        const double v = (dir[0] * qv[0] + dir[1] * qv[1] + dir[2] * qv[2]) / det;
+        if (v < 0 || u + v > 1)
+            continue;
+        if ((e2[0] * qv[0] + e2[1] * qv[1] + e2[2] * qv[2]) / det > 0)
+            hits++;
+    }
+    free(seen.a);
+    *inside = hits & 1;
+    return 0;
 }
 
 /* Rebuild the per-cell triangle lists (seed 000 Table 1) after the surface changed. */
@@ -1308,6 +1406,10 @@ static int split_surface(cs_object *o, surf_edit *e, const int32_t *cn0, const i
         }
     }
     rc = 0;
+    e->tris0 = tris0;
+    e->vstart = vstart;
+    e->vtris = vtris;
+    vstart = vtris = NULL;
 out:
     free(vstart);
     free(vtris);
@@ -1398,6 +1500,12 @@ static int close_faces(cs_world_t *w, cs_object *o, surf_edit *e, const int32_t 
     double *xr = malloc(((size_t)e->nv0 + 4) * 3 * sizeof *xr);
     if (!xr)
         return -1;
+    /* the upper corner of the object's lattice box: rays (all going up) end beyond it */
+    int32_t hi[3] = {INT32_MIN, INT32_MIN, INT32_MIN};
+    for (int c = 0; nF > 0 && c < o->cm.n_cells; c++)
+        for (int k = 0; k < 3; k++)
+            if (o->cm.cell_ijk[3 * (size_t)c + k] > hi[k])
+                hi[k] = o->cm.cell_ijk[3 * (size_t)c + k];
     memcpy(xr, s->rest, (size_t)e->nv0 * 3 * sizeof *xr);
     for (int i = 0; i < nF; i++) {
         const crack_face *f = &F[i];
@@ -1443,7 +1551,9 @@ static int close_faces(cs_world_t *w, cs_object *o, surf_edit *e, const int32_t 
             side[k] = s1 != s2 ? s1 : label[ct] == label[f->c1] && label[ct] != 0;
         }
         /* a cell no mesh triangle meets lies inside the surface (seed 000 §2.1) */
-        bool inside = cand.n == 0 || inside_surface(e, centre);
+        bool inside = true;
+        if (cand.n > 0 && inside_by_ray(e, centre, hi, &inside))
+            goto out;
         for (int k = 0; k < 4; k++)
             cf.corner_inside[k] = inside;
         int cap = 8 * cand.n + 16;
@@ -1553,31 +1663,136 @@ static bool is_boundary(edge_map *em, int32_t a, int32_t b)
 }
 
 /*
+ * The part of the surface the repair looks at. Before the event the surface was closed, so an
+ * edge can be open afterwards only if a triangle holding it changed: a rewired triangle (its
+ * edges now or before) or an appended one. Their vertices are marked (vmark, per vertex
+ * < nv0; every vertex appended by the event counts as marked), and the triangles to count
+ * edges over are those holding a marked vertex (list: the original ones; the appended ones
+ * always count), which the split's vertex → triangle lists give (a rewired triangle only
+ * trades vertices for new copies, so an original vertex's triangles now are among its
+ * triangles before). An edge is looked at only if both its ends are marked: then every
+ * triangle holding it is counted. Without the split's lists (closing a piece's loops) the
+ * region is the whole surface (vmark NULL, list NULL).
+ */
+typedef struct region {
+    uint8_t *vmark;
+    int32_t *list;
+    int n_list;
+} region;
+
+static void region_free(region *rg)
+{
+    free(rg->vmark);
+    free(rg->list);
+    memset(rg, 0, sizeof *rg);
+}
+
+static bool marked(const region *rg, const surf_edit *e, int32_t v)
+{
+    return !rg->vmark || v >= e->nv0 || rg->vmark[v];
+}
+
+static bool open_edge(edge_map *em, const region *rg, const surf_edit *e, int32_t a, int32_t b)
+{
+    return marked(rg, e, a) && marked(rg, e, b) && is_boundary(em, a, b);
+}
+
+/* Triangles the region walks: its original ones, then every appended one. */
+static int region_count(const region *rg, const surf_edit *e, const ivec *cell)
+{
+    return (rg->list ? rg->n_list : e->nt0) + cell->n;
+}
+
+static int region_tri(const region *rg, const surf_edit *e, int i)
+{
+    const int n0 = rg->list ? rg->n_list : e->nt0;
+    return i < n0 ? (rg->list ? rg->list[i] : i) : e->nt0 + (i - n0);
+}
+
+static int repair_region(const surf_edit *e, const patch_list *pl, region *rg)
+{
+    memset(rg, 0, sizeof *rg);
+    if (!e->vstart)
+        return 0;
+    const cs_surface *s = &e->o->surf;
+    ivec vs = {0}, tl = {0};
+    uint8_t *tmark = calloc((size_t)(e->nt0 ? e->nt0 : 1), 1);
+    rg->vmark = calloc((size_t)(e->nv0 ? e->nv0 : 1), 1);
+    if (!tmark || !rg->vmark)
+        goto fail;
+#define MARK(v)                                                                                \
+    do {                                                                                       \
+        int32_t v_ = (v);                                                                      \
+        if (v_ < e->nv0 && !rg->vmark[v_]) {                                                   \
+            rg->vmark[v_] = 1;                                                                 \
+            if (ivec_push(&vs, v_))                                                            \
+                goto fail;                                                                     \
+        }                                                                                      \
+    } while (0)
+    for (int t = 0; t < e->nt0; t++)
+        if (e->rewired[t])
+            for (int k = 0; k < 3; k++) {
+                MARK(e->tris0[3 * (size_t)t + k]);
+                MARK(s->tris[3 * (size_t)t + k]);
+            }
+    for (int i = 0; i < pl->tri.n; i++)
+        MARK(pl->tri.a[i]);
+#undef MARK
+    for (int i = 0; i < vs.n; i++) {
+        const int32_t v = vs.a[i];
+        for (int j = e->vstart[v]; j < e->vstart[v + 1]; j++) {
+            const int32_t t = e->vtris[j];
+            if (!tmark[t]) {
+                tmark[t] = 1;
+                if (ivec_push(&tl, t))
+                    goto fail;
+            }
+        }
+    }
+    free(tmark);
+    free(vs.a);
+    rg->list = tl.a;
+    rg->n_list = tl.n;
+    if (!rg->list && !(rg->list = malloc(sizeof *rg->list)))
+        goto fail_nolists;
+    return 0;
+fail:
+    free(tmark);
+    free(vs.a);
+    free(tl.a);
+fail_nolists:
+    region_free(rg);
+    return -1;
+}
+
+/*
  * Split boundary pinch vertices: where boundary loops pass a vertex more than once, the
  * triangles around it form separate fans joined only at that vertex. Each fan beyond the
  * first gets its own copy, so that every boundary loop is simple and its closure is fixed by
  * the loop alone (the two sides of a crack then close their twin loops identically).
  */
-static int split_pinches(surf_edit *e, edge_map *em, ivec *tri, const ivec *cell)
+static int split_pinches(surf_edit *e, edge_map *em, const region *rg, ivec *tri,
+                         const ivec *cell)
 {
     for (int round = 0; round < 4; round++) {
-        const int nt = e->nt0 + cell->n, nvt = e->nv0 + e->vcell.n;
+        const int nt = region_count(rg, e, cell), nvt = e->nv0 + e->vcell.n;
         int32_t *outdeg = calloc((size_t)nvt, sizeof *outdeg);
         ivec pv = {0}, pt = {0};
         int pinches = 0, rc = -1;
         if (!outdeg)
             return -1;
-        for (int t = 0; t < nt; t++) {
-            const int32_t *q = edit_tri(e, tri, t);
+        for (int i = 0; i < nt; i++) {
+            const int32_t *q = edit_tri(e, tri, region_tri(rg, e, i));
             for (int k = 0; k < 3; k++)
-                if (is_boundary(em, q[k], q[(k + 1) % 3]) && ++outdeg[q[k]] == 2)
+                if (open_edge(em, rg, e, q[k], q[(k + 1) % 3]) && ++outdeg[q[k]] == 2)
                     pinches++;
         }
         if (pinches == 0) {
             free(outdeg);
             return 0;
         }
-        for (int t = 0; t < nt; t++) {
+        for (int i = 0; i < nt; i++) {
+            const int t = region_tri(rg, e, i);
             const int32_t *q = edit_tri(e, tri, t);
             for (int k = 0; k < 3; k++)
                 if (outdeg[q[k]] >= 2 && (ivec_push(&pv, q[k]) || ivec_push(&pt, t)))
@@ -1615,8 +1830,8 @@ static int split_pinches(surf_edit *e, edge_map *em, ivec *tri, const ivec *cell
                     const int32_t *qb = edit_tri(e, tri, pt.a[i + b]);
                     for (int x = 0; x < 3; x++)
                         for (int y = 0; y < 3; y++)
-                            if (qa[x] != v && qa[x] == qb[y] && !is_boundary(em, v, qa[x]) &&
-                                !is_boundary(em, qa[x], v))
+                            if (qa[x] != v && qa[x] == qb[y] && !open_edge(em, rg, e, v, qa[x]) &&
+                                !open_edge(em, rg, e, qa[x], v))
                                 uf_union(parent, a, b);
                 }
             int32_t root0 = uf_find(parent, 0);
@@ -1668,18 +1883,19 @@ static int split_pinches(surf_edit *e, edge_map *em, ivec *tri, const ivec *cell
  * vertex; each closing triangle takes the cell of the triangle across its boundary edge.
  * Appends to e (vertices) and tri/cell. Returns the number of fans, or -1.
  */
-static int close_loops(cs_world_t *w, surf_edit *e, edge_map *em, ivec *tri, ivec *cell,
-                       int32_t *n_loops)
+static int close_loops(cs_world_t *w, surf_edit *e, edge_map *em, const region *rg, ivec *tri,
+                       ivec *cell, int32_t *n_loops)
 {
     ivec bsrc = {0}, bdst = {0}, bcell = {0}, walk = {0}, walk_e = {0};
     int fans = 0, rc = -1;
     *n_loops = 0;
-    const int nt = e->nt0 + cell->n;
-    for (int t = 0; t < nt; t++) {
+    const int nt = region_count(rg, e, cell);
+    for (int i = 0; i < nt; i++) {
+        const int t = region_tri(rg, e, i);
         const int32_t *q = edit_tri(e, tri, t);
         for (int k = 0; k < 3; k++) {
             int32_t a = q[k], b = q[(k + 1) % 3];
-            if (is_boundary(em, a, b) &&
+            if (open_edge(em, rg, e, a, b) &&
                 (ivec_push(&bsrc, a) || ivec_push(&bdst, b) ||
                  ivec_push(&bcell, edit_tri_cell(e, cell, t))))
                 goto out;
@@ -1826,7 +2042,7 @@ static int commit_edit(cs_world_t *w, cs_object *o, surf_edit *e, const ivec *tr
     if (nva)
         memcpy(s->pos + 3 * (size_t)e->nv0, e->pos.a, (size_t)nva * 3 * sizeof(double));
     if (!record)
-        return rebuild_cell_lists(s, &o->cm);
+        return cs_surface_extend_cell_lists(s, &o->cm, 1e-9 * o->cm.h, e->nt0);
     ivec tset_i = {0}, tset_t = {0};
     int rc = -1;
     for (int t = 0; t < e->nt0; t++)
@@ -1843,7 +2059,7 @@ static int commit_edit(cs_world_t *w, cs_object *o, surf_edit *e, const ivec *tr
     if (push_change(w, &c))
         goto out;
     o->topology_version++;
-    rc = rebuild_cell_lists(s, &o->cm);
+    rc = cs_surface_extend_cell_lists(s, &o->cm, 1e-9 * o->cm.h, e->nt0);
 out:
     free(tset_i.a);
     free(tset_t.a);
@@ -1865,12 +2081,18 @@ static int repair_and_commit(cs_world_t *w, cs_object *o, surf_edit *e, const pa
 {
     const cs_surface *s = &o->surf;
     edge_map em;
+    region rg;
     ivec tri = {0}, cell = {0};
     int rc = -1;
-    if (edge_map_init(&em, (size_t)3 * (e->nt0 + pl->cell.n) + 64))
+    if (repair_region(e, pl, &rg))
         return -1;
-    for (int t = 0; t < e->nt0; t++)
-        tri_edges_add(&em, s->tris + 3 * (size_t)t, 1);
+    const int n_orig = rg.list ? rg.n_list : e->nt0;
+    if (edge_map_init(&em, (size_t)3 * (n_orig + pl->cell.n) + 64)) {
+        region_free(&rg);
+        return -1;
+    }
+    for (int i = 0; i < n_orig; i++)
+        tri_edges_add(&em, s->tris + 3 * (size_t)(rg.list ? rg.list[i] : i), 1);
     for (int i = 0; i < pl->cell.n;) {
         int j = i;
         while (j < pl->cell.n && pl->group.a[j] == pl->group.a[i])
@@ -1907,9 +2129,9 @@ static int repair_and_commit(cs_world_t *w, cs_object *o, surf_edit *e, const pa
     /* the loops left open: over the original (rewired) triangles and the accepted patches */
     {
         int32_t loops = 0;
-        if (split_pinches(e, &em, &tri, &cell) != 0)
+        if (split_pinches(e, &em, &rg, &tri, &cell) != 0)
             goto out;
-        int f = close_loops(w, e, &em, &tri, &cell, &loops);
+        int f = close_loops(w, e, &em, &rg, &tri, &cell, &loops);
         if (f < 0)
             goto out;
         *fans = f;
@@ -1923,6 +2145,7 @@ static int repair_and_commit(cs_world_t *w, cs_object *o, surf_edit *e, const pa
         rc = commit_edit(w, o, e, &tri, &cell, record);
 out:
     edge_map_free(&em);
+    region_free(&rg);
     free(tri.a);
     free(cell.a);
     return rc;
