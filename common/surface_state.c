@@ -12,6 +12,7 @@
  */
 #include "surface_state.h"
 #include "topo.h"
+#include "watertight.h"
 
 #include <inttypes.h>
 #include <math.h>
@@ -59,6 +60,7 @@ struct cs_ss_tpending {
     uint8_t *fill[5];        /* 1 per item */
     int32_t *vremove, *tremove, *tset_index, *tset_tri, *tnew;
     float *vnew;
+    int32_t *vsrc;           /* per new vertex: its source, -1 where no chunk named one */
 };
 
 static char *dup_str(const char *s)
@@ -118,6 +120,7 @@ static void tpending_free(cs_ss_tpending *p)
     free(p->tset_tri);
     free(p->tnew);
     free(p->vnew);
+    free(p->vsrc);
     free(p);
 }
 
@@ -849,7 +852,9 @@ static int check_topo_chunk(const cs_ss_topo *t, char *err, size_t errlen)
         !slice_ok(t->tremove_offset, t->n_tremove, tot[2], t->tremove) ||
         !slice_ok(t->tset_offset, t->n_tset, tot[3], t->tset_index) ||
         (t->n_tset && !t->tset_tri) ||
-        !slice_ok(t->tnew_offset, t->n_tnew_indices / 3, tot[4], t->tnew)) {
+        !slice_ok(t->tnew_offset, t->n_tnew_indices / 3, tot[4], t->tnew) ||
+        (t->n_vnew_src != 0 && t->n_vnew_src != t->n_vnew_coords / 3) ||
+        (t->n_vnew_src && !t->vnew_src)) {
         snprintf(err, errlen, "topology change %" PRId32 " of object %" PRId32 ": chunk %" PRId32
                  " has a slice that does not fit the totals", t->change_id, t->object_id,
                  t->chunk);
@@ -889,11 +894,15 @@ static cs_ss_tpending *tpending_new(const cs_ss_topo *t)
     p->model = dup_str(t->model);
     p->vremove = malloc((size_t)tot[0] * sizeof(int32_t) + 1);
     p->vnew = malloc(3 * (size_t)tot[1] * sizeof(float) + 1);
+    p->vsrc = malloc((size_t)tot[1] * sizeof(int32_t) + 1);
+    for (int32_t i = 0; p->vsrc && i < tot[1]; i++)
+        p->vsrc[i] = -1;
     p->tremove = malloc((size_t)tot[2] * sizeof(int32_t) + 1);
     p->tset_index = malloc((size_t)tot[3] * sizeof(int32_t) + 1);
     p->tset_tri = malloc(3 * (size_t)tot[3] * sizeof(int32_t) + 1);
     p->tnew = malloc(3 * (size_t)tot[4] * sizeof(int32_t) + 1);
-    if (!ok || !p->got || !p->name || !p->model || !p->vremove || !p->vnew || !p->tremove ||
+    if (!ok || !p->got || !p->name || !p->model || !p->vremove || !p->vnew || !p->vsrc ||
+        !p->tremove ||
         !p->tset_index || !p->tset_tri || !p->tnew) {
         tpending_free(p);
         return NULL;
@@ -937,6 +946,8 @@ static int store_chunk(cs_ss_tpending *p, const cs_ss_topo *t)
         memcpy(p->vremove + t->vremove_offset, t->vremove, (size_t)t->n_vremove * 4);
     if (t->n_vnew_coords)
         memcpy(p->vnew + 3 * (size_t)t->vnew_offset, t->vnew_xyz, (size_t)t->n_vnew_coords * 4);
+    if (t->n_vnew_src)
+        memcpy(p->vsrc + t->vnew_offset, t->vnew_src, (size_t)t->n_vnew_src * 4);
     if (t->n_tremove)
         memcpy(p->tremove + t->tremove_offset, t->tremove, (size_t)t->n_tremove * 4);
     if (t->n_tset) {
@@ -986,11 +997,16 @@ static int apply_change(cs_surface_state *st, const cs_ss_tpending *p, char *err
     }
     for (size_t i = 0; i < 3 * (size_t)p->total[1]; i++)
         vnew[i] = p->vnew[i];
-    cs_topo_change c = {p->object_id, p->parent_id, p->name, p->model,
-                        (uint32_t)p->from_version, (uint32_t)p->to_version, p->nv_total,
-                        p->nt_total, p->total[0], p->vremove, p->total[1], vnew,
-                        p->total[2], p->tremove, p->total[3], p->tset_index, p->tset_tri,
-                        p->total[4], p->tnew};
+    cs_topo_change c = {.object_id = p->object_id, .parent_id = p->parent_id,
+                        .name = p->name, .model = p->model,
+                        .from_version = (uint32_t)p->from_version,
+                        .to_version = (uint32_t)p->to_version, .n_vertices_total = p->nv_total,
+                        .n_triangles_total = p->nt_total, .n_vremove = p->total[0],
+                        .vremove = p->vremove, .n_vnew = p->total[1], .vnew_xyz = vnew,
+                        .n_tremove = p->total[2], .tremove = p->tremove,
+                        .n_tset = p->total[3], .tset_index = p->tset_index,
+                        .tset_tri = p->tset_tri, .n_tnew = p->total[4], .tnew = p->tnew,
+                        .vnew_src = p->vsrc};
     char why[200];
     if (cs_topo_check(&c, nv, nt, why, sizeof why)) {
         free(vnew);
@@ -1030,6 +1046,42 @@ static int apply_change(cs_surface_state *st, const cs_ss_tpending *p, char *err
     if (p->total[1])
         memcpy(xyz + 3 * (size_t)nv1, p->vnew, 3 * (size_t)p->total[1] * sizeof *xyz);
     cs_topo_apply_triangles(&c, tris, nt);
+    double v_before = 0, v_after = 0;
+    if (st->track_volume) {
+        /* the volume after, at the positions before: survivors where they were, a copy at
+         * its source's position (in o, or in the parent of a new piece), a new point at its
+         * vnew_xyz */
+        const cs_ss_object *from = o ? o : find_mut(st, p->parent_id);
+        double *at = malloc(3 * vcap * sizeof *at + sizeof *at), *old = NULL;
+        if (at && o && (old = malloc(3 * (size_t)nv * sizeof *old + sizeof *old)) == NULL) {
+            free(at);
+            at = NULL;
+        }
+        if (!at) {
+            free(xyz);
+            free(tris);
+            free(name);
+            free(model);
+            snprintf(err, errlen, "out of memory applying topology change %" PRId32,
+                     p->change_id);
+            return CS_SS_NOMEM;
+        }
+        for (size_t i = 0; i < 3 * (size_t)nv; i++)
+            at[i] = old[i] = o->xyz[i];
+        if (o)
+            v_before = cs_mesh_volume(old, o->tris, o->nt);
+        int k1 = cs_topo_remove_vertices(&c, at, 3 * sizeof *at, nv);
+        for (int32_t i = 0; i < p->total[1]; i++) {
+            const int32_t sv = p->vsrc[i];
+            for (int a = 0; a < 3; a++)
+                at[3 * (size_t)(k1 + i) + a] = sv >= 0 && from && sv < from->nv
+                                                   ? from->xyz[3 * (size_t)sv + a]
+                                                   : p->vnew[3 * (size_t)i + a];
+        }
+        v_after = cs_mesh_volume(at, tris, p->nt_total);
+        free(at);
+        free(old);
+    }
     if (!o) {
         o = &st->objects[st->n_objects++];
         memset(o, 0, sizeof *o);
@@ -1048,10 +1100,22 @@ static int apply_change(cs_surface_state *st, const cs_ss_tpending *p, char *err
     o->nv = p->nv_total;
     o->nt = p->nt_total;
     o->topology_version = p->to_version;
+    if (st->track_volume) {
+        o->topo_changed = 1;
+        o->topo_dv += v_after - v_before;
+    }
     st->frame = p->frame;
     st->sim_time = p->sim_time;
     st->topology_applied++;
     return CS_SS_APPLIED;
+}
+
+void cs_surface_state_clear_volume_ledger(cs_surface_state *st)
+{
+    for (int i = 0; i < st->n_objects; i++) {
+        st->objects[i].topo_changed = 0;
+        st->objects[i].topo_dv = 0;
+    }
 }
 
 int cs_surface_state_apply_topology(cs_surface_state *st, const cs_ss_topo *t, char *err,

@@ -99,6 +99,8 @@ typedef struct cs_ss_topo {
     const int32_t *tset_tri;
     int32_t tnew_offset, n_tnew_indices;
     const int32_t *tnew;
+    int32_t n_vnew_src;      /* 0 (every new vertex a new point) or n_vnew_coords / 3 */
+    const int32_t *vnew_src; /* the vertex each new one is a copy of, or -1 (topo.h) */
 } cs_ss_topo;
 
 typedef struct cs_ss_object {
@@ -117,6 +119,15 @@ typedef struct cs_ss_object {
     int has_ref;
     float *ref_xyz;          /* owned, 3 per vertex */
     double ref_q[4], ref_c[3];
+    /* Volume ledger (kept when cs_surface_state.track_volume is set; cleared by
+     * cs_surface_state_clear_volume_ledger): topo_dv is the sum, over the topology changes
+     * applied to this object since (topo_changed: any), of the enclosed volume after the
+     * change minus before, both at the positions before it (a copy at its source's
+     * position, a new point at its vnew_xyz; a new piece counts its whole volume, its copies
+     * at its parent's positions). Where the closing surfaces come in mirror pairs, the sum
+     * over an object and its new pieces is 0 up to round-off. */
+    int topo_changed;
+    double topo_dv;
 } cs_ss_object;
 
 /* One CUBESIM_POSE message (lcmtypes/pose_t.lcm). */
@@ -161,6 +172,7 @@ typedef struct cs_surface_state {
     int64_t topology_lost;       /* messages missing from header.seq gaps, all sessions */
     int64_t topology_incomplete; /* changes dropped because a chunk never came */
     int64_t topology_applied;    /* changes applied, all sessions */
+    int track_volume;            /* set by the caller: keep the objects' volume ledgers */
 
     cs_ss_pending *pending;  /* owned */
     cs_ss_tpending *tpending; /* owned */
@@ -225,6 +237,9 @@ int cs_surface_state_apply_topology(cs_surface_state *st, const cs_ss_topo *t, c
 
 /* Track header.seq of a CUBESIM_TOPOLOGY message the caller chooses not to apply. */
 void cs_surface_state_note_topology_seq(cs_surface_state *st, const cs_ss_header *h);
+
+/* Zero every object's volume ledger (topo_changed, topo_dv). */
+void cs_surface_state_clear_volume_ledger(cs_surface_state *st);
 
 /* Object by id, or NULL. */
 const cs_ss_object *cs_surface_state_find(const cs_surface_state *st, int32_t id);

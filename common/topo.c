@@ -67,6 +67,10 @@ int cs_topo_check(const cs_topo_change *c, int nv, int nt, char *err, size_t err
     for (int i = 0; i < 3 * c->n_vnew; i++)
         if (!isfinite(c->vnew_xyz[i]))
             return fail(err, errlen, "topology new vertex %ld is not finite", (long)(i / 3));
+    for (int i = 0; c->vnew_src && i < c->n_vnew; i++)
+        if (c->vnew_src[i] < -1 || (c->from_version > 0 && c->vnew_src[i] >= nv))
+            return fail(err, errlen, "topology new vertex %ld is a copy of vertex %ld, out of "
+                        "range", (long)i, (long)c->vnew_src[i]);
     for (int i = 0; i < c->n_tset; i++) {
         if (c->tset_index[i] < 0 || c->tset_index[i] >= nt1)
             return fail(err, errlen, "topology tset_index[%ld] = %ld is out of range", (long)i,

@@ -48,13 +48,21 @@ typedef struct cs_topo_change {
     const int32_t *tset_tri;  /* 3 per rewired triangle */
     int32_t n_tnew;
     const int32_t *tnew;      /* 3 per new triangle */
+    /* Per new vertex (n_vnew of them), the vertex it is a copy of, or -1 for a new point
+     * (NULL: every one is a new point). A copy starts exactly where its source is at the time
+     * of the change. The index is into the object's vertex array before this change (before
+     * step 1); for a new piece, into its parent's vertex array as it is when the piece's
+     * change is applied. So a client can compare the volume before and after a change at the
+     * same positions: the closing surfaces of a crack come in mirror pairs over copies and new
+     * points at the same positions, whose volumes cancel exactly. */
+    const int32_t *vnew_src;
 } cs_topo_change;
 
 /*
  * Check a change against arrays of nv vertices and nt triangles without applying it: removal
  * indices descending and in range at the time they apply, rewired slots in range, final
  * counts equal to the totals, every final index in range, no triangle with a repeated index,
- * finite positions. Returns 0, or -1 with one line in err naming the first problem.
+ * finite positions, sources in [-1, nv) (a new piece's: >= -1; its parent is not at hand). Returns 0, or -1 with one line in err naming the first problem.
  */
 int cs_topo_check(const cs_topo_change *c, int nv, int nt, char *err, size_t errlen);
 

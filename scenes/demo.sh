@@ -16,7 +16,7 @@
 # Environment: DEMO_SECONDS (wall seconds the daemon runs, default 6, at least 3),
 # DEMO_SCENE (default scenes/default.json; it must have an object named "beam"),
 # DEMO_BIN (default build/bin), DEMO_OUT (default build/demo), DEMO_VOLUME_TOL (passed to
-# cubesim-replay --verify as --volume-tol; default its own).
+# cubesim-replay --verify as --volume-tol: adds its frame-to-frame volume check; default none).
 
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 SELF="$ROOT/scenes/$(basename "${BASH_SOURCE[0]}")"

@@ -1218,7 +1218,7 @@ static int enc_topology(void *buf, int off, int max, const void *m)
 
 /* Bytes per item of the five arrays of a change, in their order on the wire (vremove, vnew,
  * tremove, tset, tnew). */
-static const int topo_item_bytes[5] = {4, 12, 4, 16, 12};
+static const int topo_item_bytes[5] = {4, 16, 4, 16, 12}; /* a new vertex: xyz and source */
 
 /*
  * Split a change into chunks: its five arrays laid end to end, each chunk taking the next
@@ -1321,6 +1321,8 @@ static int send_change(cs_bus_t *b, const cs_world_t *w, const cs_topo_change *c
         m.vnew_offset = sl[k][1][0];
         m.n_vnew_coords = 3 * sl[k][1][1];
         m.vnew_xyz = xyz + 3 * (int64_t)m.vnew_offset;
+        m.n_vnew_src = c->vnew_src ? sl[k][1][1] : 0;
+        m.vnew_src = at32(c->vnew_src, m.vnew_offset);
         m.tremove_offset = sl[k][2][0];
         m.n_tremove = sl[k][2][1];
         m.tremove = at32(c->tremove, m.tremove_offset);

@@ -370,8 +370,9 @@ const cs_event *cs_world_events(const cs_world_t *w, int *count);
 /*
  * Surface topology changes of the last step or forced fracture, in the order they were made
  * (topo.h): per event, the split of the object, each new piece (from_version 0), then the
- * object losing the pieces' cells. Positions in vnew_xyz are current. Valid until the next
- * mutating call.
+ * object losing the pieces' cells. Positions in vnew_xyz are current; vnew_src names the
+ * vertex each new one is a copy of (and sits exactly at), -1 for a new point. Valid until the
+ * next mutating call.
  */
 const cs_topo_change *cs_world_topology_changes(const cs_world_t *w, int *count);
 

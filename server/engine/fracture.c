@@ -37,6 +37,7 @@
  *
  * All surface geometry decisions use rest positions, as §3.2 prescribes.
  */
+#include <limits.h>
 #include <math.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -338,6 +339,8 @@ static int push_change(cs_world_t *w, const cs_topo_change *c)
     KEEP(tset_index, c->n_tset, sizeof(int32_t));
     KEEP(tset_tri, c->n_tset, 3 * sizeof(int32_t));
     KEEP(tnew, c->n_tnew, 3 * sizeof(int32_t));
+    if (c->vnew_src)
+        KEEP(vnew_src, c->n_vnew, sizeof(int32_t));
 #undef KEEP
     if (c->name) {
         k.name = keep(w, c->name, strlen(c->name) + 1);
@@ -528,10 +531,16 @@ typedef struct surf_edit {
     int nv0, nt0;     /* counts before the event */
     dvec rest, pos;   /* appended vertices: 3 each */
     ivec vcell;       /* appended vertices: bound cell */
+    ivec vsrc;        /* appended vertices: the vertex (< nv0) each is a copy of, or -1 */
     dvec uvw;         /* appended vertices: 3 each */
     ivec tnew;        /* appended triangles: 3 each */
     ivec tnew_cell;   /* cell of each appended triangle */
     uint8_t *rewired; /* per original triangle */
+    /* From the surface split (NULL otherwise): the triangles before the event and, per
+     * vertex < nv0, the triangles that held it then (CSR); they let the repair look only at
+     * the triangles around the crack (see repair_region). */
+    const int32_t *tris0;
+    int32_t *vstart, *vtris;
 } surf_edit;
 
 static const double *sv_rest(const surf_edit *e, int32_t v)
@@ -567,7 +576,7 @@ static int32_t sv_append(surf_edit *e, const double p[3], int32_t cell)
     for (int k = 0; k < 3; k++)
         if (dvec_push(&e->rest, p[k]) || dvec_push(&e->pos, x[k]) || dvec_push(&e->uvw, uvw[k]))
             return -1;
-    if (ivec_push(&e->vcell, cell))
+    if (ivec_push(&e->vcell, cell) || ivec_push(&e->vsrc, -1))
         return -1;
     return e->nv0 + e->vcell.n - 1;
 }
@@ -582,8 +591,11 @@ static int32_t sv_append_copy(surf_edit *e, int32_t v, int32_t cell)
     memcpy(x, v < e->nv0 ? e->o->surf.pos + 3 * (size_t)v : e->pos.a + 3 * (size_t)(v - e->nv0),
            sizeof x);
     int32_t c = sv_append(e, p, cell);
-    if (c >= 0)
+    if (c >= 0) {
         memcpy(e->pos.a + 3 * (size_t)(c - e->nv0), x, sizeof x);
+        /* a copy of a copy made in this edit names the first one's source */
+        e->vsrc.a[c - e->nv0] = v < e->nv0 ? v : e->vsrc.a[v - e->nv0];
+    }
     return c;
 }
 
@@ -592,10 +604,13 @@ static void surf_edit_free(surf_edit *e)
     free(e->rest.a);
     free(e->pos.a);
     free(e->vcell.a);
+    free(e->vsrc.a);
     free(e->uvw.a);
     free(e->tnew.a);
     free(e->tnew_cell.a);
     free(e->rewired);
+    free(e->vstart);
+    free(e->vtris);
 }
 
 /* ---------------------------------------------------------------- generalized winding number */
@@ -627,6 +642,96 @@ static bool inside_surface(const surf_edit *e, const double p[3])
         total += 2 * atan2(det, den);
     }
     return total / (4 * M_PI) > 0.5;
+}
+
+/*
+ * The same question answered locally: the parity of the surface triangles a ray from p meets,
+ * the ray walked cell by cell through the lattice (the triangles of each cell it passes: seed
+ * 000 Table 1) until it leaves the object's cells. A triangle meets the ray only inside a
+ * cell whose list holds it, so no other triangle can count; the direction is generic (no
+ * lattice plane, edge or mesh symmetry lies along it), so the ray does not graze an edge in
+ * practice, and a closing pair t, t' (the same points, reversed) is met twice or not at all.
+ * Costs the cells along one line instead of every triangle of the surface.
+ */
+static int cmp_i32(const void *x, const void *y)
+{
+    int32_t a = *(const int32_t *)x, b = *(const int32_t *)y;
+    return (a > b) - (a < b);
+}
+
+static int inside_by_ray(const surf_edit *e, const double p[3], const int32_t hi[3],
+                         bool *inside)
+{
+    const cs_object *o = e->o;
+    const cs_cubemesh *cm = &o->cm;
+    const cs_surface *s = &o->surf;
+    static const double dir[3] = {0.7548776662466927, 0.5698402909980532, 0.3247179572447460};
+    ivec seen = {0};
+    int32_t c[3];
+    double tmax[3], tdelta[3];
+    for (int k = 0; k < 3; k++) {
+        const double x = (p[k] - cm->origin[k]) / cm->h;
+        c[k] = (int32_t)floor(x);
+        tdelta[k] = cm->h / dir[k];
+        tmax[k] = (c[k] + 1 - x) * cm->h / dir[k];
+    }
+    /* the direction's components are all positive: once past hi + 1 on any axis, no cell of
+     * the object nor a neighbour of one lies ahead */
+    while (c[0] <= hi[0] + 1 && c[1] <= hi[1] + 1 && c[2] <= hi[2] + 1) {
+        /* a cell the object lacks (outside it, or now another piece's) may still hold a part
+         * of a triangle listed by a neighbour: its neighbours' triangles are taken instead */
+        const int32_t here = cs_cubemesh_find(cm, c[0], c[1], c[2]);
+        const int r = here >= 0 ? 0 : 1;
+        for (int dz = -r; dz <= r; dz++)
+            for (int dy = -r; dy <= r; dy++)
+                for (int dx = -r; dx <= r; dx++) {
+                    int32_t cell = r ? cs_cubemesh_find(cm, c[0] + dx, c[1] + dy, c[2] + dz) : here;
+                    for (int j = cell >= 0 ? s->cell_tri_start[cell] : 0;
+                         cell >= 0 && j < s->cell_tri_start[cell + 1]; j++)
+                        if (s->cell_tri_list[j] < e->nt0 && ivec_push(&seen, s->cell_tri_list[j])) {
+                            free(seen.a);
+                            return -1;
+                        }
+                }
+        const int k = tmax[0] < tmax[1] ? (tmax[0] < tmax[2] ? 0 : 2) : (tmax[1] < tmax[2] ? 1 : 2);
+        c[k]++;
+        tmax[k] += tdelta[k];
+    }
+    if (seen.n > 1)
+        qsort(seen.a, (size_t)seen.n, sizeof *seen.a, cmp_i32);
+    int hits = 0;
+    for (int i = 0; i < seen.n; i++) {
+        if (i > 0 && seen.a[i] == seen.a[i - 1])
+            continue;
+        const int32_t *q = s->tris + 3 * (size_t)seen.a[i];
+        const double *a = sv_rest(e, q[0]), *b = sv_rest(e, q[1]), *cc = sv_rest(e, q[2]);
+        double e1[3], e2[3], pv[3], tv[3], qv[3];
+        for (int k = 0; k < 3; k++) {
+            e1[k] = b[k] - a[k];
+            e2[k] = cc[k] - a[k];
+            tv[k] = p[k] - a[k];
+        }
+        pv[0] = dir[1] * e2[2] - dir[2] * e2[1];
+        pv[1] = dir[2] * e2[0] - dir[0] * e2[2];
+        pv[2] = dir[0] * e2[1] - dir[1] * e2[0];
+        const double det = e1[0] * pv[0] + e1[1] * pv[1] + e1[2] * pv[2];
+        if (det == 0)
+            continue; /* parallel to the ray */
+        const double u = (tv[0] * pv[0] + tv[1] * pv[1] + tv[2] * pv[2]) / det;
+        if (u < 0 || u > 1)
+            continue;
+        qv[0] = tv[1] * e1[2] - tv[2] * e1[1];
+        qv[1] = tv[2] * e1[0] - tv[0] * e1[2];
+        qv[2] = tv[0] * e1[1] - tv[1] * e1[0];
+        const double v = (dir[0] * qv[0] + dir[1] * qv[1] + dir[2] * qv[2]) / det;
+        if (v < 0 || u + v > 1)
+            continue;
+        if ((e2[0] * qv[0] + e2[1] * qv[1] + e2[2] * qv[2]) / det > 0)
+            hits++;
+    }
+    free(seen.a);
+    *inside = hits & 1;
+    return 0;
 }
 
 /* Rebuild the per-cell triangle lists (seed 000 Table 1) after the surface changed. */
@@ -776,16 +881,20 @@ static int32_t surface_vertex_at(const surf_edit *e, int32_t node, int32_t cell)
 }
 
 static void corner_position(const cs_world_t *w, const surf_edit *e, int32_t node,
-                            double out[3])
+                            double out[3], int32_t *from)
 {
     const cs_object *o = e->o;
     int32_t sv = surface_vertex_at(e, node, -1);
+    if (from)
+        *from = -1;
     if (sv >= 0) {
         memcpy(out, sv_rest(e, sv), 3 * sizeof(double));
         return;
     }
     if (o->corner_vertex[node] >= 0) {
         memcpy(out, sv_rest(e, o->corner_vertex[node]), 3 * sizeof(double));
+        if (from)
+            *from = o->corner_vertex[node];
         return;
     }
     const cs_cubemesh *cm = &o->cm;
@@ -793,6 +902,25 @@ static void corner_position(const cs_world_t *w, const surf_edit *e, int32_t nod
     int64_t li[3];
     for (int k = 0; k < 3; k++)
         li[k] = llround((p[k] - cm->origin[k]) / cm->h);
+    /* Another copy of the lattice point (a node split off this one) may have its corner
+     * vertex already: the same position, so that the two sides of a crack close with mirror
+     * images whose volumes cancel exactly (the offset below is shrunk against the triangles
+     * the object holds now, which differ from event to event and between pieces). */
+    for (int dz = -1; dz <= 0; dz++)
+        for (int dy = -1; dy <= 0; dy++)
+            for (int dx = -1; dx <= 0; dx++) {
+                int32_t c = cs_cubemesh_find(cm, (int32_t)li[0] + dx, (int32_t)li[1] + dy,
+                                             (int32_t)li[2] + dz);
+                if (c < 0)
+                    continue;
+                int32_t nd = cm->cell_nodes[8 * (size_t)c + corner_id(-dx, -dy, -dz)];
+                if (nd < o->n && o->corner_vertex[nd] >= 0) {
+                    memcpy(out, sv_rest(e, o->corner_vertex[nd]), 3 * sizeof(double));
+                    if (from)
+                        *from = o->corner_vertex[nd];
+                    return;
+                }
+            }
     uint64_t r = mix64(w->def.seed ^ mix64((uint64_t)li[0] * 73856093u ^
                                            (uint64_t)li[1] * 19349663u ^
                                            (uint64_t)li[2] * 83492791u));
@@ -845,17 +973,22 @@ static int32_t corner_vertex(cs_world_t *w, surf_edit *e, const families *fam, i
     /* a mesh vertex on the lattice point is looked up each time (never cached: the surface
      * split moves its copies between sides) */
     int32_t sv = surface_vertex_at(e, node, cell);
+    /* a corner vertex this event split goes through its family too: the node's own entry
+     * names one copy, the cell's side decides which */
     if (sv < 0 && o->corner_vertex[node] >= 0)
-        return o->corner_vertex[node];
+        sv = o->corner_vertex[node];
     if (sv >= 0) {
         /* a family's first member is the original vertex */
         const int32_t f = family_of(fam, e->nv0, sv);
         const int32_t orig = f >= 0 ? fam->mcopy.a[fam->fstart.a[f]] : sv;
         return copy_for_cell(o, fam, e->nv0, orig, cell);
     }
+    /* a new corner vertex: a copy of another copy's of the lattice point if there is one
+     * (its mirror across the crack: the same position now, so that t and t' coincide) */
     double q[3];
-    corner_position(w, e, node, q);
-    int32_t v = sv_append(e, q, cell);
+    int32_t from;
+    corner_position(w, e, node, q, &from);
+    int32_t v = from >= 0 ? sv_append_copy(e, from, cell) : sv_append(e, q, cell);
     if (v < 0)
         return -1;
     o->corner_vertex[node] = v;
@@ -1149,9 +1282,13 @@ static int split_surface(cs_object *o, surf_edit *e, const int32_t *cn0, const i
                     if (adjacent && !tri_cut(o, cn0, s->tri_cell[T[a]], s->tri_cell[T[b]]))
                         uf_union(parent, a, b);
                 }
-            /* A corner vertex (§3.2) made for a node, used only by closing triangles, belongs
-             * to that node: it splits exactly as the node did, each copy going with the cells
-             * that reference one copy of the node. */
+            /* A corner vertex (§3.2) made for a node, used only by closing triangles, splits
+             * like any surface vertex: where the triangles' cells stop sharing a node (the
+             * surface opens exactly where the cube mesh came apart). Splitting it per node copy
+             * instead opened slits at a crack's rim, where the node is split but the cells
+             * still share another node (a partially opened face): fans closed those, and the
+             * fans came apart wrongly in later events. Each copy of the node then names the
+             * vertex copy of its cells' group (tn: the node copy of each triangle's cell). */
             int32_t cnode = corner_of[v], tn_buf[64], *tn = NULL;
             for (int a = 0; cnode >= 0 && a < m; a++)
                 if (o->tri_kind[T[a]] == 0)
@@ -1165,12 +1302,6 @@ static int split_surface(cs_object *o, surf_edit *e, const int32_t *cn0, const i
                     const int32_t ct = s->tri_cell[T[a]];
                     const int k = corner_at(&o->cm, ct, p);
                     tn[a] = k >= 0 ? o->cm.cell_nodes[8 * (size_t)ct + k] : cnode;
-                    parent[a] = a;
-                    for (int b = 0; b < a; b++)
-                        if (tn[b] == tn[a]) {
-                            parent[a] = b;
-                            break;
-                        }
                 }
             }
             /* groups in order of their root; the group whose cells hold the vertex's binding
@@ -1187,8 +1318,9 @@ static int split_surface(cs_object *o, surf_edit *e, const int32_t *cn0, const i
             }
             const int32_t vc = s->vert_cell[v];
             for (int g = 0; cnode >= 0 && g < n_groups && keep < 0; g++)
-                if (tn[roots[g]] == cnode)
-                    keep = g;
+                for (int a = 0; a < m && keep < 0; a++)
+                    if (uf_find(parent, a) == roots[g] && tn[a] == cnode)
+                        keep = g;
             if (cnode >= 0 && keep < 0)
                 keep = 0;
             for (int g = 0; g < n_groups && keep < 0; g++)
@@ -1265,8 +1397,9 @@ static int split_surface(cs_object *o, surf_edit *e, const int32_t *cn0, const i
                 }
                 if (ivec_push(&fam->mcopy, copy))
                     goto out_p;
-                if (cnode >= 0)
-                    o->corner_vertex[tn[roots[g]]] = copy;
+                for (int a = 0; cnode >= 0 && a < m; a++)
+                    if (uf_find(parent, a) == roots[g])
+                        o->corner_vertex[tn[a]] = copy;
             }
             if (parent != pbuf)
                 free(parent);
@@ -1282,6 +1415,10 @@ static int split_surface(cs_object *o, surf_edit *e, const int32_t *cn0, const i
         }
     }
     rc = 0;
+    e->tris0 = tris0;
+    e->vstart = vstart;
+    e->vtris = vtris;
+    vstart = vtris = NULL;
 out:
     free(vstart);
     free(vtris);
@@ -1333,15 +1470,17 @@ static void face_setup(const cs_object *o, const crack_face *f, cs_close_face *c
  * bounds the region of f inside the surface; left in, its crossings lie exactly on f's edge
  * lines, where a neighbouring closing triangle of an earlier fracture may stand in for its
  * other side. */
-static bool on_side_plane(const cs_close_face *cf, const double *rest, const int32_t *q)
+static bool on_side_plane(const cs_close_face *cf, const double *rest, const int32_t *q,
+                          double tol)
 {
     for (int a = 0; a < 3; a++) {
         if (a == cf->axis)
             continue;
         for (int side = 0; side < 2; side++) {
             const double x = side ? cf->hi[a] : cf->lo[a];
-            if (rest[3 * (size_t)q[0] + a] == x && rest[3 * (size_t)q[1] + a] == x &&
-                rest[3 * (size_t)q[2] + a] == x)
+            if (fabs(rest[3 * (size_t)q[0] + a] - x) <= tol &&
+                fabs(rest[3 * (size_t)q[1] + a] - x) <= tol &&
+                fabs(rest[3 * (size_t)q[2] + a] - x) <= tol)
                 return true;
         }
     }
@@ -1364,12 +1503,18 @@ static int close_faces(cs_world_t *w, cs_object *o, surf_edit *e, const int32_t 
     ivec cand = {0};
     uint8_t *side = NULL;
     int32_t *out = NULL;
-    int cap_side = 0, rc = -1;
+    int cap_side = 0, rc = -1, n_groups = 0;
     /* the rest positions closing.c sees: the surface's, then the four corners of the face at
      * hand (ids nv0 .. nv0+3) */
     double *xr = malloc(((size_t)e->nv0 + 4) * 3 * sizeof *xr);
     if (!xr)
         return -1;
+    /* the upper corner of the object's lattice box: rays (all going up) end beyond it */
+    int32_t hi[3] = {INT32_MIN, INT32_MIN, INT32_MIN};
+    for (int c = 0; nF > 0 && c < o->cm.n_cells; c++)
+        for (int k = 0; k < 3; k++)
+            if (o->cm.cell_ijk[3 * (size_t)c + k] > hi[k])
+                hi[k] = o->cm.cell_ijk[3 * (size_t)c + k];
     memcpy(xr, s->rest, (size_t)e->nv0 * 3 * sizeof *xr);
     for (int i = 0; i < nF; i++) {
         const crack_face *f = &F[i];
@@ -1379,7 +1524,7 @@ static int close_faces(cs_world_t *w, cs_object *o, surf_edit *e, const int32_t 
         face_setup(o, f, &cf, n1, n2, centre);
         for (int k = 0; k < 4; k++) {
             cf.corner_vertex[k] = e->nv0 + k;
-            corner_position(w, e, n1[k], xr + 3 * ((size_t)e->nv0 + k));
+            corner_position(w, e, n1[k], xr + 3 * ((size_t)e->nv0 + k), NULL);
         }
         /* §3.2 tests the triangles meeting c1; those meeting c2 are added so that both
          * triangles of every edge crossing f are seen even when rounding puts one of them
@@ -1397,7 +1542,8 @@ static int close_faces(cs_world_t *w, cs_object *o, surf_edit *e, const int32_t 
                 for (int j = 0; sd && j < cand.n && !dup; j++)
                     dup = cand.a[j] == t;
                 if (t < e->nt0 && (attempt || o->tri_kind[t] == 0) && !dup &&
-                    !on_side_plane(&cf, s->rest, tris0 + 3 * (size_t)t) && ivec_push(&cand, t))
+                    !on_side_plane(&cf, s->rest, tris0 + 3 * (size_t)t, 1e-9 * o->cm.h) &&
+                    ivec_push(&cand, t))
                     goto out;
             }
         }
@@ -1414,7 +1560,9 @@ static int close_faces(cs_world_t *w, cs_object *o, surf_edit *e, const int32_t 
             side[k] = s1 != s2 ? s1 : label[ct] == label[f->c1] && label[ct] != 0;
         }
         /* a cell no mesh triangle meets lies inside the surface (seed 000 §2.1) */
-        bool inside = cand.n == 0 || inside_surface(e, centre);
+        bool inside = true;
+        if (cand.n > 0 && inside_by_ray(e, centre, hi, &inside))
+            goto out;
         for (int k = 0; k < 4; k++)
             cf.corner_inside[k] = inside;
         int cap = 8 * cand.n + 16;
@@ -1444,31 +1592,35 @@ static int close_faces(cs_world_t *w, cs_object *o, surf_edit *e, const int32_t 
         }
         if (nt < 0)
             continue; /* the repair closes what is left open */
-        for (int sd = 0; sd < 2; sd++) {
-            const int32_t cell = sd == 0 ? f->c1 : f->c2;
-            const int32_t *nodes = sd == 0 ? n1 : n2;
-            for (int t = 0; t < nt; t++) {
-                int32_t m[3];
-                for (int k = 0; k < 3; k++) {
+        /* t for c1 and t' for c2 are kept or dropped together (one group per pair), so that
+         * the two sides stay mirror images and their volumes cancel */
+        for (int t = 0; t < nt; t++) {
+            int32_t m[2][3];
+            bool ok = true;
+            for (int sd = 0; sd < 2 && ok; sd++) {
+                const int32_t cell = sd == 0 ? f->c1 : f->c2;
+                const int32_t *nodes = sd == 0 ? n1 : n2;
+                for (int k = 0; k < 3 && ok; k++) {
                     int32_t id = out[3 * t + k];
                     if (id >= e->nv0 && id < e->nv0 + 4)
-                        m[k] = corner_vertex(w, e, fam, nodes[id - e->nv0], cell);
+                        m[sd][k] = corner_vertex(w, e, fam, nodes[id - e->nv0], cell);
                     else if (id >= 0 && id < e->nv0)
-                        m[k] = copy_for_cell(o, fam, e->nv0, id, cell);
+                        m[sd][k] = copy_for_cell(o, fam, e->nv0, id, cell);
                     else
-                        m[k] = -1;
-                    if (m[k] < 0)
-                        goto next_tri;
+                        m[sd][k] = -1;
+                    ok = m[sd][k] >= 0;
                 }
-                if (m[0] == m[1] || m[1] == m[2] || m[0] == m[2])
-                    continue;
-                /* t for c1 as given (normal along n_f); t' for c2 reversed */
-                if ((sd == 0 ? ivec_push3(&pl->tri, m[0], m[1], m[2])
-                             : ivec_push3(&pl->tri, m[0], m[2], m[1])) ||
-                    ivec_push(&pl->cell, cell) || ivec_push(&pl->group, i))
-                    goto out;
-            next_tri:;
+                ok = ok && m[sd][0] != m[sd][1] && m[sd][1] != m[sd][2] && m[sd][0] != m[sd][2];
             }
+            if (!ok)
+                continue;
+            /* t for c1 as given (normal along n_f); t' for c2 reversed */
+            if (ivec_push3(&pl->tri, m[0][0], m[0][1], m[0][2]) || ivec_push(&pl->cell, f->c1) ||
+                ivec_push(&pl->group, n_groups) ||
+                ivec_push3(&pl->tri, m[1][0], m[1][2], m[1][1]) || ivec_push(&pl->cell, f->c2) ||
+                ivec_push(&pl->group, n_groups))
+                goto out;
+            n_groups++;
         }
     }
     rc = 0;
@@ -1520,31 +1672,136 @@ static bool is_boundary(edge_map *em, int32_t a, int32_t b)
 }
 
 /*
+ * The part of the surface the repair looks at. Before the event the surface was closed, so an
+ * edge can be open afterwards only if a triangle holding it changed: a rewired triangle (its
+ * edges now or before) or an appended one. Their vertices are marked (vmark, per vertex
+ * < nv0; every vertex appended by the event counts as marked), and the triangles to count
+ * edges over are those holding a marked vertex (list: the original ones; the appended ones
+ * always count), which the split's vertex → triangle lists give (a rewired triangle only
+ * trades vertices for new copies, so an original vertex's triangles now are among its
+ * triangles before). An edge is looked at only if both its ends are marked: then every
+ * triangle holding it is counted. Without the split's lists (closing a piece's loops) the
+ * region is the whole surface (vmark NULL, list NULL).
+ */
+typedef struct region {
+    uint8_t *vmark;
+    int32_t *list;
+    int n_list;
+} region;
+
+static void region_free(region *rg)
+{
+    free(rg->vmark);
+    free(rg->list);
+    memset(rg, 0, sizeof *rg);
+}
+
+static bool marked(const region *rg, const surf_edit *e, int32_t v)
+{
+    return !rg->vmark || v >= e->nv0 || rg->vmark[v];
+}
+
+static bool open_edge(edge_map *em, const region *rg, const surf_edit *e, int32_t a, int32_t b)
+{
+    return marked(rg, e, a) && marked(rg, e, b) && is_boundary(em, a, b);
+}
+
+/* Triangles the region walks: its original ones, then every appended one. */
+static int region_count(const region *rg, const surf_edit *e, const ivec *cell)
+{
+    return (rg->list ? rg->n_list : e->nt0) + cell->n;
+}
+
+static int region_tri(const region *rg, const surf_edit *e, int i)
+{
+    const int n0 = rg->list ? rg->n_list : e->nt0;
+    return i < n0 ? (rg->list ? rg->list[i] : i) : e->nt0 + (i - n0);
+}
+
+static int repair_region(const surf_edit *e, const patch_list *pl, region *rg)
+{
+    memset(rg, 0, sizeof *rg);
+    if (!e->vstart)
+        return 0;
+    const cs_surface *s = &e->o->surf;
+    ivec vs = {0}, tl = {0};
+    uint8_t *tmark = calloc((size_t)(e->nt0 ? e->nt0 : 1), 1);
+    rg->vmark = calloc((size_t)(e->nv0 ? e->nv0 : 1), 1);
+    if (!tmark || !rg->vmark)
+        goto fail;
+#define MARK(v)                                                                                \
+    do {                                                                                       \
+        int32_t v_ = (v);                                                                      \
+        if (v_ < e->nv0 && !rg->vmark[v_]) {                                                   \
+            rg->vmark[v_] = 1;                                                                 \
+            if (ivec_push(&vs, v_))                                                            \
+                goto fail;                                                                     \
+        }                                                                                      \
+    } while (0)
+    for (int t = 0; t < e->nt0; t++)
+        if (e->rewired[t])
+            for (int k = 0; k < 3; k++) {
+                MARK(e->tris0[3 * (size_t)t + k]);
+                MARK(s->tris[3 * (size_t)t + k]);
+            }
+    for (int i = 0; i < pl->tri.n; i++)
+        MARK(pl->tri.a[i]);
+#undef MARK
+    for (int i = 0; i < vs.n; i++) {
+        const int32_t v = vs.a[i];
+        for (int j = e->vstart[v]; j < e->vstart[v + 1]; j++) {
+            const int32_t t = e->vtris[j];
+            if (!tmark[t]) {
+                tmark[t] = 1;
+                if (ivec_push(&tl, t))
+                    goto fail;
+            }
+        }
+    }
+    free(tmark);
+    free(vs.a);
+    rg->list = tl.a;
+    rg->n_list = tl.n;
+    if (!rg->list && !(rg->list = malloc(sizeof *rg->list)))
+        goto fail_nolists;
+    return 0;
+fail:
+    free(tmark);
+    free(vs.a);
+    free(tl.a);
+fail_nolists:
+    region_free(rg);
+    return -1;
+}
+
+/*
  * Split boundary pinch vertices: where boundary loops pass a vertex more than once, the
  * triangles around it form separate fans joined only at that vertex. Each fan beyond the
  * first gets its own copy, so that every boundary loop is simple and its closure is fixed by
  * the loop alone (the two sides of a crack then close their twin loops identically).
  */
-static int split_pinches(surf_edit *e, edge_map *em, ivec *tri, const ivec *cell)
+static int split_pinches(surf_edit *e, edge_map *em, const region *rg, ivec *tri,
+                         const ivec *cell)
 {
     for (int round = 0; round < 4; round++) {
-        const int nt = e->nt0 + cell->n, nvt = e->nv0 + e->vcell.n;
+        const int nt = region_count(rg, e, cell), nvt = e->nv0 + e->vcell.n;
         int32_t *outdeg = calloc((size_t)nvt, sizeof *outdeg);
         ivec pv = {0}, pt = {0};
         int pinches = 0, rc = -1;
         if (!outdeg)
             return -1;
-        for (int t = 0; t < nt; t++) {
-            const int32_t *q = edit_tri(e, tri, t);
+        for (int i = 0; i < nt; i++) {
+            const int32_t *q = edit_tri(e, tri, region_tri(rg, e, i));
             for (int k = 0; k < 3; k++)
-                if (is_boundary(em, q[k], q[(k + 1) % 3]) && ++outdeg[q[k]] == 2)
+                if (open_edge(em, rg, e, q[k], q[(k + 1) % 3]) && ++outdeg[q[k]] == 2)
                     pinches++;
         }
         if (pinches == 0) {
             free(outdeg);
             return 0;
         }
-        for (int t = 0; t < nt; t++) {
+        for (int i = 0; i < nt; i++) {
+            const int t = region_tri(rg, e, i);
             const int32_t *q = edit_tri(e, tri, t);
             for (int k = 0; k < 3; k++)
                 if (outdeg[q[k]] >= 2 && (ivec_push(&pv, q[k]) || ivec_push(&pt, t)))
@@ -1582,8 +1839,8 @@ static int split_pinches(surf_edit *e, edge_map *em, ivec *tri, const ivec *cell
                     const int32_t *qb = edit_tri(e, tri, pt.a[i + b]);
                     for (int x = 0; x < 3; x++)
                         for (int y = 0; y < 3; y++)
-                            if (qa[x] != v && qa[x] == qb[y] && !is_boundary(em, v, qa[x]) &&
-                                !is_boundary(em, qa[x], v))
+                            if (qa[x] != v && qa[x] == qb[y] && !open_edge(em, rg, e, v, qa[x]) &&
+                                !open_edge(em, rg, e, qa[x], v))
                                 uf_union(parent, a, b);
                 }
             int32_t root0 = uf_find(parent, 0);
@@ -1635,18 +1892,19 @@ static int split_pinches(surf_edit *e, edge_map *em, ivec *tri, const ivec *cell
  * vertex; each closing triangle takes the cell of the triangle across its boundary edge.
  * Appends to e (vertices) and tri/cell. Returns the number of fans, or -1.
  */
-static int close_loops(cs_world_t *w, surf_edit *e, edge_map *em, ivec *tri, ivec *cell,
-                       int32_t *n_loops)
+static int close_loops(cs_world_t *w, surf_edit *e, edge_map *em, const region *rg, ivec *tri,
+                       ivec *cell, int32_t *n_loops)
 {
     ivec bsrc = {0}, bdst = {0}, bcell = {0}, walk = {0}, walk_e = {0};
     int fans = 0, rc = -1;
     *n_loops = 0;
-    const int nt = e->nt0 + cell->n;
-    for (int t = 0; t < nt; t++) {
+    const int nt = region_count(rg, e, cell);
+    for (int i = 0; i < nt; i++) {
+        const int t = region_tri(rg, e, i);
         const int32_t *q = edit_tri(e, tri, t);
         for (int k = 0; k < 3; k++) {
             int32_t a = q[k], b = q[(k + 1) % 3];
-            if (is_boundary(em, a, b) &&
+            if (open_edge(em, rg, e, a, b) &&
                 (ivec_push(&bsrc, a) || ivec_push(&bdst, b) ||
                  ivec_push(&bcell, edit_tri_cell(e, cell, t))))
                 goto out;
@@ -1723,13 +1981,24 @@ static int close_loops(cs_world_t *w, surf_edit *e, edge_map *em, ivec *tri, ive
         uint64_t r = w->def.seed;
         for (int a = 0; a < 3; a++)
             r = mix64(r ^ (uint64_t)llround(c[a] / e->o->cm.h * 1e6));
+        double d[3], x[3] = {0, 0, 0};
         for (int a = 0; a < 3; a++) {
             r = mix64(r);
-            c[a] += 1e-3 * e->o->cm.h * ((double)(r >> 11) / 9007199254740992.0 - 0.5);
+            d[a] = 1e-3 * e->o->cm.h * ((double)(r >> 11) / 9007199254740992.0 - 0.5);
+            c[a] += d[a];
         }
         int32_t cv = sv_append(e, c, bcell.a[walk_e.a[0]]);
         if (cv < 0)
             goto out2;
+        /* It starts at the loop's current mean plus the same offset (not where its binding
+         * puts it; the next skin moves it): twin loops lie over copies at the same positions,
+         * so their fans coincide now too and cancel in a client's volume check. */
+        for (int j = 0; j < k; j++)
+            for (int a = 0; a < 3; a++)
+                x[a] += (cyc[j] < e->nv0 ? e->o->surf.pos + 3 * (size_t)cyc[j]
+                                         : e->pos.a + 3 * (size_t)(cyc[j] - e->nv0))[a] / k;
+        for (int a = 0; a < 3; a++)
+            e->pos.a[3 * (size_t)(cv - e->nv0) + a] = x[a] + d[a];
         for (int j = 0; j < k; j++)
             if (ivec_push3(tri, cv, cyc[(j + 1) % k], cyc[j]) ||
                 ivec_push(cell, bcell.a[walk_e.a[j]]))
@@ -1782,7 +2051,7 @@ static int commit_edit(cs_world_t *w, cs_object *o, surf_edit *e, const ivec *tr
     if (nva)
         memcpy(s->pos + 3 * (size_t)e->nv0, e->pos.a, (size_t)nva * 3 * sizeof(double));
     if (!record)
-        return rebuild_cell_lists(s, &o->cm);
+        return cs_surface_extend_cell_lists(s, &o->cm, 1e-9 * o->cm.h, e->nt0);
     ivec tset_i = {0}, tset_t = {0};
     int rc = -1;
     for (int t = 0; t < e->nt0; t++)
@@ -1795,11 +2064,11 @@ static int commit_edit(cs_world_t *w, cs_object *o, surf_edit *e, const ivec *tr
         .to_version = o->topology_version + 1, .n_vertices_total = nv1,
         .n_triangles_total = nt1, .n_vnew = nva, .vnew_xyz = s->pos + 3 * (size_t)e->nv0,
         .n_tset = tset_i.n, .tset_index = tset_i.a, .tset_tri = tset_t.a, .n_tnew = nta,
-        .tnew = s->tris + 3 * (size_t)e->nt0};
+        .tnew = s->tris + 3 * (size_t)e->nt0, .vnew_src = e->vsrc.a};
     if (push_change(w, &c))
         goto out;
     o->topology_version++;
-    rc = rebuild_cell_lists(s, &o->cm);
+    rc = cs_surface_extend_cell_lists(s, &o->cm, 1e-9 * o->cm.h, e->nt0);
 out:
     free(tset_i.a);
     free(tset_t.a);
@@ -1821,12 +2090,18 @@ static int repair_and_commit(cs_world_t *w, cs_object *o, surf_edit *e, const pa
 {
     const cs_surface *s = &o->surf;
     edge_map em;
+    region rg;
     ivec tri = {0}, cell = {0};
     int rc = -1;
-    if (edge_map_init(&em, (size_t)3 * (e->nt0 + pl->cell.n) + 64))
+    if (repair_region(e, pl, &rg))
         return -1;
-    for (int t = 0; t < e->nt0; t++)
-        tri_edges_add(&em, s->tris + 3 * (size_t)t, 1);
+    const int n_orig = rg.list ? rg.n_list : e->nt0;
+    if (edge_map_init(&em, (size_t)3 * (n_orig + pl->cell.n) + 64)) {
+        region_free(&rg);
+        return -1;
+    }
+    for (int i = 0; i < n_orig; i++)
+        tri_edges_add(&em, s->tris + 3 * (size_t)(rg.list ? rg.list[i] : i), 1);
     for (int i = 0; i < pl->cell.n;) {
         int j = i;
         while (j < pl->cell.n && pl->group.a[j] == pl->group.a[i])
@@ -1863,9 +2138,9 @@ static int repair_and_commit(cs_world_t *w, cs_object *o, surf_edit *e, const pa
     /* the loops left open: over the original (rewired) triangles and the accepted patches */
     {
         int32_t loops = 0;
-        if (split_pinches(e, &em, &tri, &cell) != 0)
+        if (split_pinches(e, &em, &rg, &tri, &cell) != 0)
             goto out;
-        int f = close_loops(w, e, &em, &tri, &cell, &loops);
+        int f = close_loops(w, e, &em, &rg, &tri, &cell, &loops);
         if (f < 0)
             goto out;
         *fans = f;
@@ -1879,6 +2154,7 @@ static int repair_and_commit(cs_world_t *w, cs_object *o, surf_edit *e, const pa
         rc = commit_edit(w, o, e, &tri, &cell, record);
 out:
     edge_map_free(&em);
+    region_free(&rg);
     free(tri.a);
     free(cell.a);
     return rc;
@@ -1912,10 +2188,12 @@ static int close_open_loops(cs_world_t *w, cs_object *o, bool record, int *fans)
 
 /*
  * A new object holding cells `cells` (n of them, indices into o) with their nodes, state and
- * surface triangles (those whose centroid cell is among them).
+ * surface triangles (those whose centroid cell is among them). Its surface vertices start
+ * where o's are (the next skin moves the ones bound to other cells than before). If vsrc is
+ * not NULL it receives the o vertex each of the piece's vertices is (owned by the caller).
  */
 static cs_object *make_piece(cs_world_t *w, const cs_object *o, const int32_t *cells, int nc,
-                             const int32_t *cell_map)
+                             const int32_t *cell_map, int32_t **vsrc)
 {
     const cs_cubemesh *cm = &o->cm;
     const cs_surface *s = &o->surf;
@@ -2050,6 +2328,7 @@ static cs_object *make_piece(cs_world_t *w, const cs_object *o, const int32_t *c
     for (int i = 0; i < nv; i++) {
         const int32_t v = vl.a[i];
         memcpy(ps->rest + 3 * (size_t)i, s->rest + 3 * (size_t)v, 3 * sizeof(double));
+        memcpy(ps->pos + 3 * (size_t)i, s->pos + 3 * (size_t)v, 3 * sizeof(double));
         memcpy(ps->vert_uvw + 3 * (size_t)i, s->vert_uvw + 3 * (size_t)v, 3 * sizeof(double));
         ps->vert_cell[i] = cell_map[s->vert_cell[v]];
     }
@@ -2068,7 +2347,6 @@ static cs_object *make_piece(cs_world_t *w, const cs_object *o, const int32_t *c
         int32_t cv = o->corner_vertex ? o->corner_vertex[nl.a[i]] : -1;
         p->corner_vertex[i] = cv >= 0 ? vmap[cv] : -1;
     }
-    cs_surface_skin(ps, pm, p->x);
     ps->cell_tri_start = NULL;
     ps->cell_tri_list = NULL;
     if (rebuild_cell_lists(ps, pm) != 0)
@@ -2090,7 +2368,10 @@ static cs_object *make_piece(cs_world_t *w, const cs_object *o, const int32_t *c
     free(nmap);
     free(vmap);
     free(tl.a);
-    free(vl.a);
+    if (vsrc)
+        *vsrc = vl.a;
+    else
+        free(vl.a);
     free(nl.a);
     return p;
 fail:
@@ -2125,7 +2406,7 @@ static int keep_cells(cs_world_t *w, cs_object *o, const int32_t *kept, int nk,
 {
     cs_surface *s = &o->surf;
     const int nv = s->n_vertices, nt = s->n_triangles;
-    cs_object *p = make_piece(w, o, kept, nk, cell_map);
+    cs_object *p = make_piece(w, o, kept, nk, cell_map, NULL);
     uint8_t *used = calloc((size_t)(nv ? nv : 1), 1);
     int32_t *vid = malloc((size_t)(nv ? nv : 1) * sizeof *vid);
     int32_t *newidx = malloc((size_t)(nv ? nv : 1) * sizeof *newidx);
@@ -2388,10 +2669,12 @@ static int split_pieces(cs_world_t *w, cs_object *o, int *n_rebuilt, int *n_drop
             if (comp[c] == k)
                 list[n++] = c;
         }
-        cs_object *p = make_piece(w, o, list, n, cmap);
+        int32_t *vsrc = NULL;
+        cs_object *p = make_piece(w, o, list, n, cmap, &vsrc);
         if (!p)
             goto out;
         if (p->surf.n_triangles == 0 && !cell_inside(o, list[0])) {
+            free(vsrc);
             /* cubes outside the surface holding none of it: voxels that only grazed it
              * (seed 000 §2.1 keeps every cube the surface touches). No material, nothing to
              * show: dropped rather than made into an invisible object. (Cubes inside with no
@@ -2400,27 +2683,46 @@ static int split_pieces(cs_world_t *w, cs_object *o, int *n_rebuilt, int *n_drop
             (*n_dropped)++;
             continue;
         }
+        const int nv_piece = p->surf.n_vertices;
         p->name = piece_name(w, o->name);
         if (!p->name || cs_world_append_object(w, p) != 0) {
+            free(vsrc);
             cs_object_free_internal(p);
             goto out;
         }
         int fans = 0, rebuilt;
         if (close_open_loops(w, p, false, &fans) != 0 ||
-            (rebuilt = ensure_positive_volume(w, p, false)) < 0)
+            (rebuilt = ensure_positive_volume(w, p, false)) < 0) {
+            free(vsrc);
             goto out;
+        }
         *n_rebuilt += rebuilt;
         p->topology_version = 1;
+        /* sources: o's vertices, then whatever closing the piece's loops added (new points;
+         * a rebuilt surface is all new) */
+        int32_t *grown = rebuilt ? NULL : realloc(vsrc, (size_t)(p->surf.n_vertices + 1) *
+                                                            sizeof *vsrc);
+        if (!grown) {
+            free(vsrc);
+            vsrc = NULL;
+        } else {
+            vsrc = grown;
+            for (int i = nv_piece; i < p->surf.n_vertices; i++)
+                vsrc[i] = -1;
+        }
         cs_topo_change ch = {.object_id = (int32_t)p->id, .parent_id = (int32_t)o->id,
                              .name = p->name, .model = cs_model_name(p->model),
                              .from_version = 0, .to_version = 1,
                              .n_vertices_total = p->surf.n_vertices,
                              .n_triangles_total = p->surf.n_triangles,
                              .n_vnew = p->surf.n_vertices, .vnew_xyz = p->surf.pos,
-                             .n_tnew = p->surf.n_triangles, .tnew = p->surf.tris};
+                             .n_tnew = p->surf.n_triangles, .tnew = p->surf.tris,
+                             .vnew_src = vsrc};
         cs_event ev = {.kind = CS_EVENT_NEW_PIECE, .object = p->id, .parent = o->id,
                        .frame = w->frame};
-        if (push_change(w, &ch) || push_event(w, &ev))
+        const int pushed = push_change(w, &ch);
+        free(vsrc);
+        if (pushed || push_event(w, &ev))
             goto out;
     }
     int n = 0;

@@ -140,16 +140,13 @@ fail:
     return -1;
 }
 
-int cs_surface_build_cell_lists(cs_surface *s, const cs_cubemesh *cm, double tol)
+/* The (cell, triangle) overlaps of triangles [t0, t1), appended to *pairs. */
+static int overlap_pairs(const cs_surface *s, const cs_cubemesh *cm, double tol, int t0, int t1,
+                         pair **pairs, int *n_pairs, int *cap_pairs)
 {
     const double h = cm->h, tol_h = tol / h, grown = 0.5 * h + tol;
     const double half[3] = {grown, grown, grown};
-    pair *pairs = NULL;
-    int n_pairs = 0, cap_pairs = 0;
-    int32_t *start = calloc((size_t)cm->n_cells + 1, sizeof *start), *list = NULL;
-    if (!start)
-        return -1;
-    for (int t = 0; t < s->n_triangles; t++) {
+    for (int t = t0; t < t1; t++) {
         const int32_t *tri = s->tris + 3 * (size_t)t;
         const double *a = s->rest + 3 * (size_t)tri[0], *b = s->rest + 3 * (size_t)tri[1],
                      *c = s->rest + 3 * (size_t)tri[2];
@@ -170,29 +167,53 @@ int cs_surface_build_cell_lists(cs_surface *s, const cs_cubemesh *cm, double tol
                     /* the centroid's cell always lists its triangle */
                     if (cell != s->tri_cell[t] && !cs_tri_box_overlap(cc, half, a, b, c))
                         continue;
-                    if (n_pairs == cap_pairs) {
-                        int nc = cap_pairs ? 2 * cap_pairs : 1024;
-                        pair *np = realloc(pairs, (size_t)nc * sizeof *np);
+                    if (*n_pairs == *cap_pairs) {
+                        int nc = *cap_pairs ? 2 * *cap_pairs : 1024;
+                        pair *np = realloc(*pairs, (size_t)nc * sizeof *np);
                         if (!np)
-                            goto oom;
-                        pairs = np;
-                        cap_pairs = nc;
+                            return -1;
+                        *pairs = np;
+                        *cap_pairs = nc;
                     }
-                    pairs[n_pairs++] = (pair){cell, t};
+                    (*pairs)[(*n_pairs)++] = (pair){cell, t};
                 }
     }
-    /* CSR by counting sort on the cell; triangles stay in increasing order within a cell */
-    list = malloc((size_t)(n_pairs ? n_pairs : 1) * sizeof *list);
+    return 0;
+}
+
+/* Lists of triangles [0, first) kept from s's current lists (first = 0: none), the overlaps of
+ * [first, n_triangles) added; triangles stay in increasing order within a cell. */
+static int cell_lists(cs_surface *s, const cs_cubemesh *cm, double tol, int first)
+{
+    pair *pairs = NULL;
+    int n_pairs = 0, cap_pairs = 0;
+    const int32_t *old_start = first > 0 ? s->cell_tri_start : NULL;
+    int32_t *start = calloc((size_t)cm->n_cells + 1, sizeof *start), *list = NULL;
+    if (!start)
+        return -1;
+    if (overlap_pairs(s, cm, tol, first, s->n_triangles, &pairs, &n_pairs, &cap_pairs))
+        goto oom;
+    const int n_old = old_start ? old_start[cm->n_cells] : 0;
+    /* CSR by counting sort on the cell: the kept entries first, then the new ones */
+    list = malloc((size_t)(n_pairs + n_old ? n_pairs + n_old : 1) * sizeof *list);
     int32_t *fill = malloc((size_t)(cm->n_cells ? cm->n_cells : 1) * sizeof *fill);
     if (!list || !fill) {
         free(fill);
         goto oom;
     }
+    for (int c = 0; old_start && c < cm->n_cells; c++)
+        start[c + 1] = old_start[c + 1] - old_start[c];
     for (int p = 0; p < n_pairs; p++)
         start[pairs[p].cell + 1]++;
     for (int c = 0; c < cm->n_cells; c++)
         start[c + 1] += start[c];
     memcpy(fill, start, (size_t)cm->n_cells * sizeof *fill);
+    for (int c = 0; old_start && c < cm->n_cells; c++) {
+        const int n = old_start[c + 1] - old_start[c];
+        if (n)
+            memcpy(list + fill[c], s->cell_tri_list + old_start[c], (size_t)n * sizeof *list);
+        fill[c] += n;
+    }
     for (int p = 0; p < n_pairs; p++)
         list[fill[pairs[p].cell]++] = pairs[p].tri;
     free(fill);
@@ -207,6 +228,18 @@ oom:
     free(start);
     free(list);
     return -1;
+}
+
+int cs_surface_build_cell_lists(cs_surface *s, const cs_cubemesh *cm, double tol)
+{
+    return cell_lists(s, cm, tol, 0);
+}
+
+int cs_surface_extend_cell_lists(cs_surface *s, const cs_cubemesh *cm, double tol, int first)
+{
+    if (first <= 0 || !s->cell_tri_start)
+        return cell_lists(s, cm, tol, 0);
+    return cell_lists(s, cm, tol, first);
 }
 
 void cs_surface_skin(cs_surface *s, const cs_cubemesh *cm, const double *node_pos)

@@ -46,6 +46,10 @@ void cs_surface_free(cs_surface *s);
  * lists unchanged).
  */
 int cs_surface_build_cell_lists(cs_surface *s, const cs_cubemesh *cm, double tol);
+/* The same after triangles [first, n_triangles) were appended to a surface whose lists are
+ * current for triangles [0, first) and the same cells (their rest geometry unchanged): only the
+ * appended ones are tested. first <= 0 or no lists: a full build. */
+int cs_surface_extend_cell_lists(cs_surface *s, const cs_cubemesh *cm, double tol, int first);
 
 /* Recompute s->pos from node positions (3 per node) by trilinear interpolation, or by the
  * tricubic B-spline map in cells that have one (cm->spline_nodes, localframe objects). */

@@ -2,7 +2,12 @@
 # clients_topology — the clients on CUBESIM_TOPOLOGY, from hand-made logs (cs_it_mklog: a bar
 # of two cubes breaks into two cubes at frame 2; see tests/it/tools/mklog.c), so this runs
 # before the engine makes real fractures:
-#   topo_verify_good        replay --verify passes every frame (closed pieces, volume kept)
+#   topo_verify_good        replay --verify passes every frame (closed pieces, volume kept at
+#                           unchanged positions to 1e-9)
+#   topo_verify_sources     the piece's crack vertices sent 0.5 mm off the client's copy of
+#                           the left cube's (positions the client lags behind): naming their
+#                           sources (topology_t.vnew_src), the volume still checks to 1e-9;
+#                           without sources the same log fails at frame 2
 #   topo_export_frame       --export --frame 2 writes both pieces (8 vertices, 12 triangles,
 #                           one OBJ group each, named bar and bar.1)
 #   topo_chunked            the same changes in 40-byte chunks rebuild bit-identical surfaces
@@ -19,12 +24,18 @@ for b in cs_it_mklog cubesim-replay cubesim-log; do
     [ -x "$B/$b" ] || { cs_fail clients_topology "missing $B/$b (run make)"; cs_finish; }
 done
 cd "$CS_TMP" || exit 1
-for m in good badvolume open gap; do "$B/cs_it_mklog" $m.lcm $m || cs_fail "mklog_$m" "cs_it_mklog failed"; done
+for m in good badvolume open gap lagged nosrc; do "$B/cs_it_mklog" $m.lcm $m || cs_fail "mklog_$m" "cs_it_mklog failed"; done
 "$B/cs_it_mklog" chunked.lcm good --chunk-bytes 40
 
-out=$("$B/cubesim-replay" good.lcm --verify 2>&1); rc=$?
+out=$("$B/cubesim-replay" good.lcm --verify --topology-tol 1e-9 2>&1); rc=$?
 [ $rc -eq 0 ] && grep -q '^verify: 5 frames checked, 0 failed (2 topology changes' <<<"$out" \
     && cs_pass "topo_verify_good ($(tail -1 <<<"$out"))" || cs_fail topo_verify_good "exit $rc: $out"
+
+out=$("$B/cubesim-replay" lagged.lcm --verify --topology-tol 1e-9 2>&1); rc=$?
+out2=$("$B/cubesim-replay" nosrc.lcm --verify --topology-tol 1e-9 2>&1); rc2=$?
+[ $rc -eq 0 ] && [ $rc2 -eq 1 ] && grep -q '^frame 2: .*unchanged positions.*expected' <<<"$out2" \
+    && cs_pass "topo_verify_sources ($(sed -n 's/.*\(largest relative change [^,]*\).*/\1/p' <<<"$out"))" \
+    || cs_fail topo_verify_sources "exit $rc/$rc2: $(tr '\n' '|' <<<"$out$out2")"
 
 out=$("$B/cubesim-replay" good.lcm --export f2.obj --frame 2 2>&1); rc=$?
 if [ $rc -eq 0 ] && grep -q "object 1 'bar': 8 vertices, 12 triangles" <<<"$out" \

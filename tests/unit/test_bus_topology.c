@@ -52,12 +52,16 @@ static void flush(cs_bus_t *b)
 
 typedef struct counts {
     int snapshots, topology, max_len, applied, rejected;
+    int src_items;         /* vnew_src items received, all changes */
+    int32_t *src77;        /* if not NULL: the sources received for object 77, by item */
 } counts;
 
 /* Feed every snapshot and topology message of the log to st. */
 static void read_log(const char *path, cs_surface_state *st, counts *n)
 {
+    int32_t *src77 = n->src77;
     memset(n, 0, sizeof *n);
+    n->src77 = src77;
     lcm_eventlog_t *log = lcm_eventlog_create(path, "r");
     if (!log)
         return;
@@ -93,7 +97,10 @@ static void read_log(const char *path, cs_surface_state *st, counts *n)
                                 m.n_vnew_coords, m.vnew_xyz, m.tremove_offset, m.n_tremove,
                                 m.tremove, m.tset_offset, m.n_tset, m.tset_index,
                                 m.n_tset_indices, m.tset_tri, m.tnew_offset, m.n_tnew_indices,
-                                m.tnew};
+                                m.tnew, m.n_vnew_src, m.vnew_src};
+                n->src_items += m.n_vnew_src;
+                for (int i = 0; n->src77 && m.object_id == 77 && i < m.n_vnew_src; i++)
+                    n->src77[m.vnew_offset + i] = m.vnew_src[i];
                 int r = cs_surface_state_apply_topology(st, &t, err, sizeof err);
                 n->applied += r == CS_SS_APPLIED;
                 n->rejected += r == CS_SS_REJECTED;
@@ -133,14 +140,16 @@ TEST(bus_topology_reaches_clients_exactly)
     int32_t tnew[6] = {0, nv - 1, 2, 3, 1, nv - 2};
     cs_topo_change ch[3];
     memset(ch, 0, sizeof ch);
+    int32_t src0[2] = {3, -1}; /* a copy of vertex 3 and a new point */
     ch[0] = (cs_topo_change){(int32_t)id, 0, NULL, NULL, info.topology_version,
                              info.topology_version + 1, nv, nt + 1, 2, vrm, 2, vnew, 1, trm,
-                             1, tsi, tst, 2, tnew};
+                             1, tsi, tst, 2, tnew, src0};
     /* 2. a big new piece: 9000 vertices and triangles, several chunks */
     int big = 9000;
     double *pv = malloc(3 * (size_t)big * sizeof *pv);
     int32_t *pt = malloc(3 * (size_t)big * sizeof *pt);
-    ENSURE(pv && pt);
+    int32_t *ps = malloc((size_t)big * sizeof *ps), *got = malloc((size_t)big * sizeof *got);
+    ENSURE(pv && pt && ps && got);
     for (int i = 0; i < big; i++) {
         pv[3 * i] = i * 1e-3;
         pv[3 * i + 1] = (i % 7) * 1e-2;
@@ -148,9 +157,11 @@ TEST(bus_topology_reaches_clients_exactly)
         pt[3 * i] = i;
         pt[3 * i + 1] = (i + 1) % big;
         pt[3 * i + 2] = (i + 2) % big;
+        ps[i] = i % 3 ? i % nv : -1; /* copies of the parent's vertices and new points */
+        got[i] = -7;
     }
     ch[1] = (cs_topo_change){77, (int32_t)id, "block.1", "corotational", 0, 1, big, big,
-                             0, NULL, big, pv, 0, NULL, 0, NULL, NULL, big, pt};
+                             0, NULL, big, pv, 0, NULL, 0, NULL, NULL, big, pt, ps};
     /* 3. a change the mirror cannot follow (from a version never sent) */
     ch[2] = ch[0];
     ch[2].from_version = info.topology_version + 5;
@@ -162,11 +173,16 @@ TEST(bus_topology_reaches_clients_exactly)
 
     cs_surface_state st;
     cs_surface_state_init(&st);
-    counts n;
+    counts n = {.src77 = got};
     read_log(path, &st, &n);
     unlink(path);
     ENSURE_MSG(n.topology == q && n.applied == 2 && n.rejected == 0 && n.snapshots >= 1,
                "%d topology messages, %d applied, %d rejected", n.topology, n.applied, n.rejected);
+    /* every source arrives with its vertex, across the piece's chunks */
+    ENSURE_MSG(n.src_items == 2 + big, "%d sources received", n.src_items);
+    ENSURE(!memcmp(got, ps, (size_t)big * sizeof *ps));
+    free(ps);
+    free(got);
     ENSURE_MSG(n.max_len < 65536, "a message of %d bytes", n.max_len);
     /* The client's block: common/topo.c applied to the engine's surface rounded to float. */
     float *want_v = malloc(3 * (size_t)(nv + 2) * sizeof *want_v);

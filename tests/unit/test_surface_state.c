@@ -11,6 +11,7 @@
 #include <string.h>
 
 #include "surface_state.h"
+#include "watertight.h"
 
 /* A unit tetrahedron: 4 vertices, 4 outward triangles. */
 static const float tet_xyz[12] = {0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1};
@@ -735,5 +736,71 @@ TEST(surface_state_pose_moves_rigidly)
     ENSURE(load_tet(&st, 42, 2) == CS_SS_APPLIED);
     cs_ss_pose after = {hdr(42, 0, 17, 21), 7, 1, 4, 0, {1, 1, 1}, {1, 0, 0, 0}};
     ENSURE(cs_surface_state_apply_pose(&st, &after, err, sizeof err) == CS_SS_IGNORED);
+    cs_surface_state_free(&st);
+}
+
+/*
+ * The volume ledger (track_volume): a new piece whose vertices name the tetrahedron's as
+ * their sources counts its volume at the tetrahedron's positions, not at the positions it
+ * was sent with (a client's copy of the parent may lag the daemon's); without sources, at the
+ * positions sent. A change to an existing object counts after minus before. A source count
+ * that is neither 0 nor the chunk's vertex count is refused.
+ */
+TEST(surface_state_volume_ledger_uses_sources)
+{
+    /* the piece: the unit tetrahedron stretched to twice its length along x (volume 1/3) */
+    static const float stretched[12] = {0, 0, 0, 2, 0, 0, 0, 1, 0, 0, 0, 1};
+    static const int32_t src[4] = {0, 1, 2, 3};
+    char err[256];
+    for (int with_src = 0; with_src < 2; with_src++) {
+        cs_surface_state st;
+        cs_surface_state_init(&st);
+        st.track_volume = 1;
+        ENSURE(load_tet(&st, 42, 1) == CS_SS_APPLIED);
+        cs_ss_topo t = piece_topo(1, 1);
+        t.vnew_xyz = stretched;
+        if (with_src) {
+            t.n_vnew_src = 4;
+            t.vnew_src = src;
+        }
+        ENSURE_MSG(cs_surface_state_apply_topology(&st, &t, err, sizeof err) == CS_SS_APPLIED,
+                   "%s", err);
+        const cs_ss_object *p = cs_surface_state_find(&st, 9);
+        ENSURE(p && p->topo_changed && p->xyz[3] == 2.0f); /* shown where it was sent */
+        ENSURE_NEAR(p->topo_dv, with_src ? 1.0 / 6 : 1.0 / 3, 1e-15);
+        const cs_ss_object *o = cs_surface_state_find(&st, 7);
+        ENSURE(o && !o->topo_changed && o->topo_dv == 0);
+        /* the tetrahedron's own change (test_topo's five steps): after minus before */
+        cs_ss_topo c = tet_topo(0, 1, 2, 2);
+        ENSURE_MSG(cs_surface_state_apply_topology(&st, &c, err, sizeof err) == CS_SS_APPLIED,
+                   "%s", err);
+        o = cs_surface_state_find(&st, 7);
+        double *v = cs_ss_object_vertices_double(o);
+        ENSURE(v);
+        double after = cs_mesh_volume(v, o->tris, o->nt);
+        free(v);
+        ENSURE(o->topo_changed);
+        ENSURE_NEAR(o->topo_dv, after - 1.0 / 6, 1e-15);
+        cs_surface_state_clear_volume_ledger(&st);
+        ENSURE(!st.objects[0].topo_changed && st.objects[0].topo_dv == 0 &&
+               !st.objects[1].topo_changed && st.objects[1].topo_dv == 0);
+        cs_surface_state_free(&st);
+    }
+    /* a source count that does not match the chunk's vertices */
+    cs_surface_state st;
+    cs_surface_state_init(&st);
+    ENSURE(load_tet(&st, 42, 1) == CS_SS_APPLIED);
+    cs_ss_topo t = piece_topo(1, 1);
+    t.n_vnew_src = 3;
+    t.vnew_src = src;
+    ENSURE(cs_surface_state_apply_topology(&st, &t, err, sizeof err) == CS_SS_REJECTED);
+    ENSURE(cs_surface_state_find(&st, 9) == NULL);
+    /* a source out of range for an existing object (cs_topo_check) */
+    cs_ss_topo c = tet_topo(0, 1, 2, 2);
+    static const int32_t bad[2] = {4, -1}; /* the tetrahedron has vertices 0..3 */
+    c.n_vnew_src = 2;
+    c.vnew_src = bad;
+    ENSURE(cs_surface_state_apply_topology(&st, &c, err, sizeof err) == CS_SS_REJECTED);
+    ENSURE(strstr(err, "copy of vertex 4"));
     cs_surface_state_free(&st);
 }

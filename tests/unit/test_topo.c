@@ -118,6 +118,11 @@ TEST(topo_new_piece_from_empty)
     c.tnew = tet_t;
     char err[200] = "";
     ENSURE_MSG(cs_topo_check(&c, 0, 0, err, sizeof err) == 0, "%s", err);
+    /* a new piece's sources index its parent's vertices, which the check does not hold:
+     * any index >= -1 passes */
+    static const int32_t src[4] = {-1, 0, 17, 3};
+    c.vnew_src = src;
+    ENSURE_MSG(cs_topo_check(&c, 0, 0, err, sizeof err) == 0, "%s", err);
     double v[12];
     ENSURE(cs_topo_remove_vertices(&c, v, sizeof v[0] * 3, 0) == 0);
     int32_t t[12];
@@ -148,7 +153,10 @@ TEST(topo_check_refusals)
         {"repeated vertex", 4, 4, "repeats a vertex"},
         {"missing array", 4, 4, "missing array"},
         {"negative count", 4, 4, "negative count"},
+        {"source beyond the vertices before the change", 4, 4, "copy of vertex 4"},
+        {"source below -1", 4, 4, "copy of vertex -2"},
     };
+    static const int32_t src_big[2] = {1, 4}, src_neg[2] = {-2, 0};
     static const int32_t asc[2] = {0, 1}, big[1] = {4}, trm_eq[2] = {2, 2};
     static const int32_t bad_slot[1] = {2}, bad_tri[3] = {0, 1, 5}, rep_tri[3] = {3, 3, 2};
     static const double nan_v[6] = {0, 0, 0, NAN, 0, 0};
@@ -168,6 +176,8 @@ TEST(topo_check_refusals)
         case 10: c.tnew = rep_tri; break;
         case 11: c.tremove = NULL; break;
         case 12: c.n_tnew = -1; break;
+        case 13: c.vnew_src = src_big; break;
+        case 14: c.vnew_src = src_neg; break;
         }
         memset(err, 0, sizeof err);
         ENSURE_MSG(cs_topo_check(&c, cases[k].nv, cases[k].nt, err, sizeof err) == -1,

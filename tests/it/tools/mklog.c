@@ -17,7 +17,10 @@
  *   frame 4  snapshot of both (what a client that went stale asks for)
  * MODE: good | badvolume (the piece is 20 % longer along x) | open (the piece lacks its
  * closing face) | gap (the second chunk of the split is left out of the log, as if lost:
- * chunks of 40 bytes unless --chunk-bytes says otherwise; header.seq shows the gap).
+ * chunks of 40 bytes unless --chunk-bytes says otherwise; header.seq shows the gap) |
+ * lagged (the piece's vertices on the crack are sent 0.5 mm off the positions the client
+ * holds for the left cube's, as copies naming their sources: topology_t.vnew_src) | nosrc
+ * (the same without sources).
  * --chunk-bytes B splits every topology change into chunks of at most B payload bytes
  * (default: one chunk each), as the daemon does for large changes.
  * Exit 0, 2 on usage or write errors.
@@ -192,6 +195,7 @@ static int put_change(out *o, int64_t frame, cubesim_topology_t *m, const int32_
         }
         nch++;
     } while (a < 5 && nch < 64);
+    int32_t *src = m->vnew_src; /* the whole change's sources, or NULL */
     m->change_id = ++o->change_id;
     m->n_chunks = nch;
     for (int c = 0; c < nch; c++) {
@@ -203,6 +207,8 @@ static int put_change(out *o, int64_t frame, cubesim_topology_t *m, const int32_
         m->vnew_offset = start[c][1];
         m->n_vnew_coords = 3 * cnt[c][1];
         m->vnew_xyz = (float *)vnew + 3 * start[c][1];
+        m->n_vnew_src = src ? cnt[c][1] : 0;
+        m->vnew_src = src ? src + start[c][1] : NULL;
         m->tremove_offset = start[c][2];
         m->n_tremove = cnt[c][2];
         m->tremove = (int32_t *)trm + start[c][2];
@@ -328,7 +334,7 @@ static int put_split(out *o, int64_t frame, int32_t id, const mesh *old, const m
 }
 
 static int put_piece(out *o, int64_t frame, int32_t id, int32_t parent, const char *name,
-                     const mesh *p)
+                     const mesh *p, const int32_t *src)
 {
     float xyz[3 * 64];
     for (int k = 0; k < 3 * p->nv; k++)
@@ -345,6 +351,7 @@ static int put_piece(out *o, int64_t frame, int32_t id, int32_t parent, const ch
     m.n_triangles_total = p->nt;
     m.total_vnew = p->nv;
     m.total_tnew = p->nt;
+    m.vnew_src = (int32_t *)src; /* put_change slices it with vnew */
     return put_change(o, frame, &m, NULL, xyz, NULL, NULL, NULL, p->t);
 }
 
@@ -357,7 +364,8 @@ static void lift(mesh *m, double dz)
 int main(int argc, char **argv)
 {
     if (argc < 3) {
-        fprintf(stderr, "usage: cs_it_mklog OUT.lcm good|badvolume|open|gap [--chunk-bytes B]\n");
+        fprintf(stderr, "usage: cs_it_mklog OUT.lcm good|badvolume|open|gap|lagged|nosrc "
+                        "[--chunk-bytes B]\n");
         return 2;
     }
     const char *mode = argv[2];
@@ -368,7 +376,7 @@ int main(int argc, char **argv)
         if (!strcmp(argv[i], "--chunk-bytes"))
             o.chunk_bytes = atoi(argv[i + 1]);
     if (strcmp(mode, "good") && strcmp(mode, "badvolume") && strcmp(mode, "open") &&
-        strcmp(mode, "gap")) {
+        strcmp(mode, "gap") && strcmp(mode, "lagged") && strcmp(mode, "nosrc")) {
         fprintf(stderr, "cs_it_mklog: unknown mode '%s'\n", mode);
         return 2;
     }
@@ -412,7 +420,23 @@ int main(int argc, char **argv)
             o.chunk_bytes = 40;
     }
     rc |= put_split(&o, 2, 1, &bar, &left, &fin);
-    rc |= put_piece(&o, 2, 2, 1, "bar.1", &piece);
+    /* lagged, nosrc: the piece's vertices on the crack (x = h) are sent 0.5 mm further along
+     * x than the client holds them (the daemon's positions of copies the client last got
+     * within publish_epsilon); lagged names their sources (the left cube's vertices there),
+     * nosrc does not */
+    int32_t src[64], *srcp = NULL;
+    const int lagged = !strcmp(mode, "lagged"), nosrc = !strcmp(mode, "nosrc");
+    for (int i = 0; i < piece.nv; i++) {
+        src[i] = -1;
+        if ((lagged || nosrc) && piece.v[3 * i] < 1.5 * H)
+            piece.v[3 * i] += 0.0005;
+        for (int j = 0; j < fin.nv; j++)
+            if (fin.lattice[j] == piece.lattice[i])
+                src[i] = j;
+    }
+    if (lagged)
+        srcp = src;
+    rc |= put_piece(&o, 2, 2, 1, "bar.1", &piece, srcp);
     rc |= put_delta(&o, 2, 1, 2, &fin);
 
     lift(&piece, 0.01);
