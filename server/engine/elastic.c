@@ -11,6 +11,7 @@
 #include <string.h>
 
 #include "localframe.h"
+#include "rigid.h"
 
 int cs_elastic_init(cs_object *o, int threads)
 {
@@ -32,7 +33,79 @@ int cs_elastic_init(cs_object *o, int threads)
     if (o->model == CS_MODEL_MSS &&
         cs_mss_init(&o->mss, &o->cm, &o->fem, o->mat.young, o->mat.poisson) != 0)
         return -1;
+    /* fields already there (a piece made by fracture): the models follow them */
+    return o->fld.young ? cs_elastic_fields_changed(o) : 0;
+}
+
+int cs_elastic_fields_changed(cs_object *o)
+{
+    const double *ky = o->fld.has_young ? o->fld.young : NULL;
+    o->fem.kf = ky;
+    if (o->model == CS_MODEL_MSS)
+        o->mss.ky = ky;
+    if (o->lf) {
+        /* mid-fracture (cells or nodes changed, relink to follow) only the pointers */
+        if (o->lf->n_cells == o->cm.n_cells && o->lf->n_nodes == o->n)
+            cs_lf_set_fields(o->lf, ky, o->fld.density);
+        else
+            o->lf->ky = ky, o->lf->km = o->fld.density;
+    }
+    if (o->rb)
+        return cs_rigid_fields_changed(o);
     return 0;
+}
+
+void cs_elastic_apply_Kd(cs_object *o, const double *p, double *y)
+{
+    if (o->lf)
+        cs_lf_apply_Kw(o->lf, o->fld.kd, p, y);
+    else if (o->model == CS_MODEL_MSS)
+        cs_mss_apply_Kw(&o->mss, o->fld.kd, p, y);
+    else
+        cs_fem_apply_Kw(&o->fem, o->fld.kd, p, y);
+}
+
+void cs_elastic_diag_blocks_d(cs_object *o, double *blocks)
+{
+    if (o->lf)
+        cs_lf_diag_blocks_w(o->lf, o->fld.kd, blocks);
+    else if (o->model == CS_MODEL_MSS)
+        cs_mss_diag_blocks_w(&o->mss, o->fld.kd, blocks);
+    else
+        cs_fem_diag_blocks_w(&o->fem, o->fld.kd, blocks);
+}
+
+void cs_elastic_apply_Md(cs_object *o, const double *p, double *y, double coef)
+{
+    if (o->lf) {
+        cs_lf_apply_Mw(o->lf, o->fld.dd, p, y, coef);
+        return;
+    }
+    for (int i = 0; i < o->n; i++)
+        for (int a = 0; a < 3; a++)
+            y[3 * i + a] += coef * o->fld.md[i] * p[3 * i + a];
+}
+
+double cs_elastic_object_omega2(const cs_object *o, double omega2_plain, bool with_penalty)
+{
+    double r = o->cm.n_cells > 0 && o->fld.young && o->fld.density ? 0.0 : 1.0;
+    const cs_fields *fl = &o->fld;
+    if (fl->young && fl->density)
+        for (int c = 0; c < o->cm.n_cells; c++) {
+            const double *y = fl->young + 8 * (size_t)c, *d = fl->density + 8 * (size_t)c;
+            double ymax = y[0], dmin = d[0];
+            for (int g = 1; g < 8; g++) {
+                ymax = fmax(ymax, y[g]);
+                dmin = fmin(dmin, d[g]);
+            }
+            r = fmax(r, ymax / dmin);
+        }
+    double w2 = r * omega2_plain, pk = 0;
+    if (with_penalty && o->penalty > 0 && o->pin)
+        for (int i = 0; i < o->n; i++)
+            if (o->pin[i] && o->m[i] > 0)
+                pk = fmax(pk, o->penalty / o->m[i]);
+    return w2 + pk;
 }
 
 void cs_elastic_free(cs_object *o)
@@ -49,6 +122,10 @@ void cs_elastic_free(cs_object *o)
 int cs_elastic_relink(cs_object *o)
 {
     o->fem.kf = o->fld.has_young ? o->fld.young : NULL;
+    if (o->model == CS_MODEL_MSS)
+        o->mss.ky = o->fem.kf;
+    if (o->lf)
+        o->lf->ky = o->fem.kf, o->lf->km = o->fld.density;
     if (cs_fem_relink(&o->fem, &o->cm) != 0)
         return -1;
     if (o->model == CS_MODEL_MSS)

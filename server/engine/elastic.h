@@ -55,6 +55,31 @@ void cs_elastic_release_tangent(cs_object *o);
 double cs_elastic_max_omega(cs_model model, const cs_material *mat, double h);
 double cs_elastic_critical_dt(cs_model model, const cs_material *mat, double h);
 
+/*
+ * Material fields (world_internal.h). cs_elastic_fields_changed: after o->fld changed (called
+ * by cs_object_lump_mass): each model's borrowed factor pointers and field-dependent data
+ * (localframe's consistent mass rows, a rigid body's mass properties) follow. Returns -1 on
+ * out of memory. The damping operators of C = α M_d + β K_d:
+ *   apply_Kd      y = K_d p (factors young·damping), at the state of the last update
+ *   diag_blocks_d its 3×3 diagonal blocks
+ *   apply_Md      y += c·M_d p: lumped fld.md, or localframe's consistent mass with the
+ *                 factors density·damping
+ * Valid when o->fld.has_damping.
+ */
+int cs_elastic_fields_changed(cs_object *o);
+void cs_elastic_apply_Kd(cs_object *o, const double *p, double *y);
+void cs_elastic_diag_blocks_d(cs_object *o, double *blocks);
+void cs_elastic_apply_Md(cs_object *o, const double *p, double *y, double coef);
+
+/*
+ * The stability limit of one object with its fields and penalty springs: the plain model's
+ * ω²max (ω2_plain, for the object's material at rest) times the largest over cells of
+ * max_g young_g / min_g density_g (K_e ≤ ȳ_max K and M_e ≥ ρ̄_min M in the Loewner order, so
+ * each element eigenvalue grows at most by that ratio), plus max over penalty-held nodes of
+ * k_p/m_i (Weyl: λmax(M⁻¹(K + P)) ≤ λmax(M⁻¹K) + λmax(M⁻¹P)). Returns that ω²max bound.
+ */
+double cs_elastic_object_omega2(const cs_object *o, double omega2_plain, bool with_penalty);
+
 /* Worker threads the model's products use for this object. */
 int cs_elastic_threads(const cs_object *o);
 

@@ -10,6 +10,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "elastic.h"
 #include "world_internal.h"
 
 static bool finite3(const double v[3])
@@ -62,6 +63,7 @@ void cs_fields_free(cs_fields *f)
     free(f->density);
     free(f->damping);
     free(f->kd);
+    free(f->dd);
     free(f->md);
     free(f->tmp);
     memset(f, 0, sizeof *f);
@@ -75,10 +77,12 @@ int cs_fields_alloc(cs_object *o)
     o->fld.density = malloc(n * sizeof(double));
     o->fld.damping = malloc(n * sizeof(double));
     o->fld.kd = malloc(n * sizeof(double));
-    if (!o->fld.young || !o->fld.density || !o->fld.damping || !o->fld.kd)
+    o->fld.dd = malloc(n * sizeof(double));
+    if (!o->fld.young || !o->fld.density || !o->fld.damping || !o->fld.kd || !o->fld.dd)
         return -1;
     for (size_t i = 0; i < n; i++)
-        o->fld.young[i] = o->fld.density[i] = o->fld.damping[i] = o->fld.kd[i] = 1.0;
+        o->fld.young[i] = o->fld.density[i] = o->fld.damping[i] = o->fld.kd[i] =
+            o->fld.dd[i] = 1.0;
     return 0;
 }
 
@@ -98,6 +102,7 @@ int cs_object_lump_mass(cs_object *o)
     fl->has_damping = fl->has_young = false;
     for (size_t i = 0; i < 8 * (size_t)cm->n_cells; i++) {
         fl->kd[i] = fl->young[i] * fl->damping[i];
+        fl->dd[i] = fl->density[i] * fl->damping[i];
         if (fl->damping[i] != 1.0)
             fl->has_damping = true;
         if (fl->young[i] != 1.0)
@@ -143,7 +148,7 @@ int cs_object_lump_mass(cs_object *o)
     o->mass = 0;
     for (int i = 0; i < o->n; i++)
         o->mass += o->m[i];
-    return 0;
+    return cs_elastic_fields_changed(o);
 }
 
 static int check_factors(const cs_field_factors *f, const char *what, char *err, size_t errlen)
@@ -277,6 +282,16 @@ int cs_world_paint(cs_world_t *w, cs_object_id id, const double centre[3], doubl
     for (int i = 0; i < o->n; i++)
         for (int a = 0; a < 3; a++)
             load[3 * i + a] = o->f_const[3 * i + a] - o->m[i] * g[a];
+    /* the old fields, restored if the paint would make the object's step unstable */
+    const size_t nf = 8 * (size_t)(o->cm.n_cells ? o->cm.n_cells : 1);
+    double *old = malloc(3 * nf * sizeof *old);
+    if (!old) {
+        free(load);
+        return cs_engine_fail(err, errlen, CS_ERR_NOMEM, "out of memory");
+    }
+    memcpy(old, o->fld.young, nf * sizeof *old);
+    memcpy(old + nf, o->fld.density, nf * sizeof *old);
+    memcpy(old + 2 * nf, o->fld.damping, nf * sizeof *old);
     int count = 0;
     for (int c = 0; c < o->cm.n_cells; c++)
         for (int k = 0; k < 8; k++) {
@@ -295,8 +310,20 @@ int cs_world_paint(cs_world_t *w, cs_object_id id, const double centre[3], doubl
         }
     if (cs_object_lump_mass(o) != 0) {
         free(load);
+        free(old);
         return cs_engine_fail(err, errlen, CS_ERR_NOMEM, "out of memory");
     }
+    rc = cs_object_check_stability(o, w->def.dt, "paint refused: ", err, errlen);
+    if (rc != CS_OK) {
+        memcpy(o->fld.young, old, nf * sizeof *old);
+        memcpy(o->fld.density, old + nf, nf * sizeof *old);
+        memcpy(o->fld.damping, old + 2 * nf, nf * sizeof *old);
+        const int rc2 = cs_object_lump_mass(o); /* the masses as they were: f_const unchanged */
+        free(load);
+        free(old);
+        return rc2 != 0 ? cs_engine_fail(err, errlen, CS_ERR_NOMEM, "out of memory") : rc;
+    }
+    free(old);
     for (int i = 0; i < o->n; i++)
         for (int a = 0; a < 3; a++)
             o->f_const[3 * i + a] = o->m[i] * g[a] + load[3 * i + a];

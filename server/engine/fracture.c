@@ -2210,6 +2210,7 @@ static cs_object *make_piece(cs_world_t *w, const cs_object *o, const int32_t *c
     p->model = o->model;
     p->integrator = o->integrator;
     p->mat = o->mat;
+    p->omega2_plain = o->omega2_plain;
     p->fracture = o->fracture;
     p->fracture_radius = o->fracture_radius;
     if (o->rb && !(p->rb = cs_rigid_clone(o->rb))) /* rigid: continues o's motion */

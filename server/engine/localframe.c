@@ -219,6 +219,41 @@ void cs_lf_reset(cs_lf *lf)
     }
 }
 
+double cs_lf_cell_factor(const double *f, int c)
+{
+    if (!f)
+        return 1.0;
+    const double *g = f + 8 * (size_t)c;
+    return (g[0] + g[1] + g[2] + g[3] + g[4] + g[5] + g[6] + g[7]) / 8.0;
+}
+
+/* Consistent-mass row sums and diagonal (with the density factors km). */
+static void mass_rows(cs_lf *lf)
+{
+    memset(lf->mrow, 0, (size_t)lf->n_nodes * sizeof(double));
+    memset(lf->mdiag, 0, (size_t)lf->n_nodes * sizeof(double));
+    for (int c = 0; c < lf->n_cells; c++) {
+        const int n = lf->off[c + 1] - lf->off[c];
+        const double *M = n == 64 ? lf->Ms : lf->Ml, sc = cs_lf_cell_factor(lf->km, c);
+        const int32_t *nd = lf->en + lf->off[c];
+        for (int a = 0; a < n; a++) {
+            double r = 0;
+            for (int b = 0; b < n; b++)
+                r += M[a * n + b];
+            lf->mrow[nd[a]] += sc * r;
+            lf->mdiag[nd[a]] += sc * M[a * n + a];
+        }
+    }
+}
+
+void cs_lf_set_fields(cs_lf *lf, const double *young, const double *density)
+{
+    lf->ky = young;
+    lf->km = density;
+    if (lf->mrow && lf->mdiag && lf->off)
+        mass_rows(lf);
+}
+
 int cs_lf_relink(cs_lf *lf, cs_cubemesh *cm)
 {
     const int ns = cs_lf_classify(cm);
@@ -284,19 +319,7 @@ int cs_lf_relink(cs_lf *lf, cs_cubemesh *cm)
     for (size_t e = 0; e < slots; e++)
         lf->adj[fill[lf->en[e]]++] = (int32_t)e;
     free(fill);
-    /* Consistent-mass row sums and diagonal. */
-    for (int c = 0; c < nc; c++) {
-        const int n = lf->off[c + 1] - lf->off[c];
-        const double *M = n == 64 ? lf->Ms : lf->Ml;
-        const int32_t *nd = lf->en + lf->off[c];
-        for (int a = 0; a < n; a++) {
-            double r = 0;
-            for (int b = 0; b < n; b++)
-                r += M[a * n + b];
-            lf->mrow[nd[a]] += r;
-            lf->mdiag[nd[a]] += M[a * n + a];
-        }
-    }
+    mass_rows(lf);
     return 0;
 }
 
@@ -475,9 +498,12 @@ void cs_lf_force(cs_lf *lf, const double *x, double *f, double *energy)
         double u[192], ku[192];
         local_displacements(n, lf->en + lf->off[c], x, R, lf->h, u);
         kmul(stiffness_of(lf, n), u, ku, 3 * n);
+        const double sc = cs_lf_cell_factor(lf->ky, c);
         double e = 0;
-        for (int i = 0; i < 3 * n; i++)
+        for (int i = 0; i < 3 * n; i++) {
+            ku[i] *= sc;
             e += u[i] * ku[i];
+        }
         e_sum += 0.5 * e;
         rotate_out(n, R, ku, lf->fe + 3 * (size_t)lf->off[c]);
     }
@@ -502,12 +528,17 @@ double cs_lf_energy(const cs_lf *lf, const double *x)
         double e = 0;
         for (int i = 0; i < 3 * n; i++)
             e += u[i] * ku[i];
-        e_sum += 0.5 * e;
+        e_sum += 0.5 * cs_lf_cell_factor(lf->ky, c) * e;
     }
     return e_sum;
 }
 
 void cs_lf_apply_K(cs_lf *lf, const double *p, double *y)
+{
+    cs_lf_apply_Kw(lf, lf->ky, p, y);
+}
+
+void cs_lf_apply_Kw(cs_lf *lf, const double *w, const double *p, double *y)
 {
 #pragma omp parallel for num_threads(lf->threads) schedule(static)
     for (int c = 0; c < lf->n_cells; c++) {
@@ -521,6 +552,11 @@ void cs_lf_apply_K(cs_lf *lf, const double *p, double *y)
                 u[3 * a + i] = R[i] * d[0] + R[3 + i] * d[1] + R[6 + i] * d[2];
         }
         kmul(stiffness_of(lf, n), u, ku, 3 * n);
+        if (w) {
+            const double sc = cs_lf_cell_factor(w, c);
+            for (int i = 0; i < 3 * n; i++)
+                ku[i] *= sc;
+        }
         rotate_out(n, R, ku, lf->fe + 3 * (size_t)lf->off[c]);
     }
     gather(lf, y, 1.0, false);
@@ -528,11 +564,17 @@ void cs_lf_apply_K(cs_lf *lf, const double *p, double *y)
 
 void cs_lf_diag_blocks(const cs_lf *lf, double *blocks)
 {
+    cs_lf_diag_blocks_w(lf, lf->ky, blocks);
+}
+
+void cs_lf_diag_blocks_w(const cs_lf *lf, const double *w, double *blocks)
+{
     memset(blocks, 0, sizeof(double) * 9 * (size_t)lf->n_nodes);
     for (int c = 0; c < lf->n_cells; c++) {
         const int n = lf->off[c + 1] - lf->off[c], n3 = 3 * n;
         const int32_t *nd = lf->en + lf->off[c];
         const double *R = lf->R + 9 * (size_t)c, *K = stiffness_of(lf, n);
+        const double sc = cs_lf_cell_factor(w, c);
         for (int a = 0; a < n; a++) {
             double T[9];
             /* T = R K_aa, then block += T Rᵀ */
@@ -546,13 +588,18 @@ void cs_lf_diag_blocks(const cs_lf *lf, double *blocks)
             double *B = blocks + 9 * (size_t)nd[a];
             for (int i = 0; i < 3; i++)
                 for (int j = 0; j < 3; j++)
-                    B[3 * i + j] += T[3 * i] * R[3 * j] + T[3 * i + 1] * R[3 * j + 1] +
-                                    T[3 * i + 2] * R[3 * j + 2];
+                    B[3 * i + j] += sc * (T[3 * i] * R[3 * j] + T[3 * i + 1] * R[3 * j + 1] +
+                                          T[3 * i + 2] * R[3 * j + 2]);
         }
     }
 }
 
 void cs_lf_apply_M(cs_lf *lf, const double *p, double *y, double coef)
+{
+    cs_lf_apply_Mw(lf, lf->km, p, y, coef);
+}
+
+void cs_lf_apply_Mw(cs_lf *lf, const double *w, const double *p, double *y, double coef)
 {
 #pragma omp parallel for num_threads(lf->threads) schedule(static)
     for (int c = 0; c < lf->n_cells; c++) {
@@ -583,8 +630,9 @@ void cs_lf_apply_M(cs_lf *lf, const double *p, double *y, double coef)
                     dst[3 * a + 2] = s2;
                 }
             }
+            const double sc = lf->m1scale * cs_lf_cell_factor(w, c);
             for (int k = 0; k < 192; k++)
-                out[k] = lf->m1scale * B[k];
+                out[k] = sc * B[k];
             continue;
         }
         for (int a = 0; a < n; a++) {
@@ -595,9 +643,10 @@ void cs_lf_apply_M(cs_lf *lf, const double *p, double *y, double coef)
                 s1 += m * q[1];
                 s2 += m * q[2];
             }
-            out[3 * a] = s0;
-            out[3 * a + 1] = s1;
-            out[3 * a + 2] = s2;
+            const double sc = cs_lf_cell_factor(w, c);
+            out[3 * a] = sc * s0;
+            out[3 * a + 1] = sc * s1;
+            out[3 * a + 2] = sc * s2;
         }
     }
     gather(lf, y, coef, true);

@@ -51,6 +51,12 @@ typedef struct cs_lf {
     int32_t *adj;          /* slots, grouped by node */
     double *mrow;          /* per node: row sum of the consistent mass (= ∫ρ N_a) */
     double *mdiag;         /* per node: diagonal entry of the consistent mass */
+    /* Material fields (world_internal.h), borrowed, 8 per cell or NULL (= all 1): each
+     * element's matrices are scaled by the mean of its cell's 8 Gauss-point factors,
+     * K_e = ȳ_c·K, M_e = ρ̄_c·M (a per-cube sampling of the field; still one matrix per
+     * element type). cs_lf_set_fields points them and recomputes mrow and mdiag. */
+    const double *ky;      /* young factors */
+    const double *km;      /* density factors */
 } cs_lf;
 
 /* Uniform cubic B-spline basis on one span, t in [0,1]: b[k] weighs control node i−1+k. */
@@ -76,8 +82,16 @@ void cs_lf_force(cs_lf *lf, const double *x, double *f, double *energy);
 double cs_lf_energy(const cs_lf *lf, const double *x);
 void cs_lf_apply_K(cs_lf *lf, const double *p, double *y);
 void cs_lf_diag_blocks(const cs_lf *lf, double *blocks);
-/* y += coef · M p, M the consistent mass. */
+/* The same with factors w (8 per cell, NULL = all 1) instead of ky (damping: K_d). */
+void cs_lf_apply_Kw(cs_lf *lf, const double *w, const double *p, double *y);
+void cs_lf_diag_blocks_w(const cs_lf *lf, const double *w, double *blocks);
+/* y += coef · M p, M the consistent mass (with km); _w: with factors w instead (M_d). */
 void cs_lf_apply_M(cs_lf *lf, const double *p, double *y, double coef);
+void cs_lf_apply_Mw(cs_lf *lf, const double *w, const double *p, double *y, double coef);
+/* Point ky, km at the object's fields (NULL = all 1) and recompute mrow, mdiag. */
+void cs_lf_set_fields(cs_lf *lf, const double *young, const double *density);
+/* Mean of cell c's 8 factors in f (1 when f is NULL). */
+double cs_lf_cell_factor(const double *f, int c);
 
 /*
  * ω²max = λmax(M⁻¹K) of objects of this model, material and cube size, for the stability

@@ -213,6 +213,15 @@ static void element_apply(const cs_mss *m, const double *st, const double *p, do
         }
 }
 
+/* Mean of cell c's 8 factors in f (1 when f is NULL). */
+static double cell_factor(const double *f, int c)
+{
+    if (!f)
+        return 1.0;
+    const double *g = f + 8 * (size_t)c;
+    return (g[0] + g[1] + g[2] + g[3] + g[4] + g[5] + g[6] + g[7]) / 8.0;
+}
+
 static void gather_corners(const cs_mss *m, const double *x, int c, double *pos)
 {
     const int32_t *nd = m->cell_nodes + 8 * (size_t)c;
@@ -297,7 +306,16 @@ void cs_mss_force(cs_mss *m, const double *x, double *f, double *energy)
     for (int c = 0; c < m->n_cells; c++) {
         double pos[24];
         gather_corners(m, x, c, pos);
-        e_sum += element_force(m, pos, m->fe + 24 * (size_t)c);
+        double *fe = m->fe + 24 * (size_t)c;
+        const double e = element_force(m, pos, fe);
+        if (m->ky) {
+            const double sc = cell_factor(m->ky, c);
+            for (int k = 0; k < 24; k++)
+                fe[k] *= sc;
+            e_sum += sc * e;
+        } else {
+            e_sum += e;
+        }
     }
     gather(m, f, 1.0);
     if (energy)
@@ -310,31 +328,47 @@ double cs_mss_energy(const cs_mss *m, const double *x)
     for (int c = 0; c < m->n_cells; c++) {
         double pos[24], f[24];
         gather_corners(m, x, c, pos);
-        e_sum += element_force(m, pos, f);
+        e_sum += cell_factor(m->ky, c) * element_force(m, pos, f);
     }
     return e_sum;
 }
 
 void cs_mss_apply_K(cs_mss *m, const double *p, double *y)
 {
+    cs_mss_apply_Kw(m, m->ky, p, y);
+}
+
+void cs_mss_apply_Kw(cs_mss *m, const double *w, const double *p, double *y)
+{
 #pragma omp parallel for num_threads(m->threads) schedule(static)
     for (int c = 0; c < m->n_cells; c++) {
         double q[24];
+        double *fe = m->fe + 24 * (size_t)c;
         gather_corners(m, p, c, q);
-        element_apply(m, m->st + CS_MSS_STATE * (size_t)c, q, m->fe + 24 * (size_t)c);
+        element_apply(m, m->st + CS_MSS_STATE * (size_t)c, q, fe);
+        if (w) {
+            const double sc = cell_factor(w, c);
+            for (int k = 0; k < 24; k++)
+                fe[k] *= sc;
+        }
     }
     gather(m, y, 1.0);
 }
 
 void cs_mss_diag_blocks(cs_mss *m, double *blocks)
 {
+    cs_mss_diag_blocks_w(m, m->ky, blocks);
+}
+
+void cs_mss_diag_blocks_w(cs_mss *m, const double *w, double *blocks)
+{
     memset(blocks, 0, sizeof(double) * 9 * (size_t)m->n_nodes);
     for (int c = 0; c < m->n_cells; c++) {
         const int32_t *nd = m->cell_nodes + 8 * (size_t)c;
-        const double *st = m->st + CS_MSS_STATE * (size_t)c;
+        const double *st = m->st + CS_MSS_STATE * (size_t)c, sc = cell_factor(w, c);
         for (int s = 0; s < 16; s++) {
             const double *n = st + 4 * s, g = st[4 * s + 3];
-            const double k = s < 12 ? m->k_edge : m->k_diag;
+            const double k = sc * (s < 12 ? m->k_edge : m->k_diag);
             for (int e = 0; e < 2; e++) {
                 double *B = blocks + 9 * (size_t)nd[SPRING[s][e]];
                 for (int i = 0; i < 3; i++)
@@ -348,10 +382,10 @@ void cs_mss_diag_blocks(cs_mss *m, double *blocks)
             double X[9] = {0};
             for (int i = 0; i < 3; i++)
                 for (int j = 0; j < 3; j++) {
-                    const double w = -0.5 * m->c * m->B[3 * i + j] * SGN[a][i];
+                    const double wij = -0.5 * sc * m->c * m->B[3 * i + j] * SGN[a][i];
                     for (int r = 0; r < 3; r++)
                         for (int q = 0; q < 3; q++)
-                            X[3 * r + q] += w * e[3 * i + r] * kss[24 * j + 3 * a + q];
+                            X[3 * r + q] += wij * e[3 * i + r] * kss[24 * j + 3 * a + q];
                 }
             double *B = blocks + 9 * (size_t)nd[a];
             for (int r = 0; r < 3; r++)

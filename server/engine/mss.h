@@ -62,6 +62,11 @@ typedef struct cs_mss {
     double Mc[9];          /* (A⁻¹ − I)·P: the correction's quadratic energy */
     double *fe;            /* 24 per cell: scratch of the element pass */
     double *st;            /* CS_MSS_STATE per cell: the state of the last update */
+    /* The stiffness field (world_internal.h), borrowed, 8 per cell or NULL (= all 1). A cube's
+     * springs all take the mean ȳ_c of its cell's 8 Gauss-point factors (k = ȳ_c·k(E)): the
+     * element's forces, energy and K are linear in its spring constants, so this scales the
+     * whole element, correction forces included, and a uniform factor equals E·factor. */
+    const double *ky;
 } cs_mss;
 
 /* Spring constants of seed 004 §3.2 for a cube of edge h. */
@@ -85,6 +90,9 @@ double cs_mss_energy(const cs_mss *m, const double *x);
 void cs_mss_apply_K(cs_mss *m, const double *p, double *y);
 /* The 3×3 diagonal blocks of that K (9 per node, overwritten). */
 void cs_mss_diag_blocks(cs_mss *m, double *blocks);
+/* The same with factors w (8 per cell, NULL = all 1) instead of ky (damping: K_d). */
+void cs_mss_apply_Kw(cs_mss *m, const double *w, const double *p, double *y);
+void cs_mss_diag_blocks_w(cs_mss *m, const double *w, double *blocks);
 
 /* The 24×24 stiffness of one cube at rest (what apply_K uses there); row-major. */
 void cs_mss_cube_stiffness(double young, double poisson, double h, double K[24 * 24]);

@@ -201,24 +201,40 @@ static int mass_properties(cs_object *o, cs_rigid *rb)
 {
     const cs_cubemesh *cm = &o->cm;
     const double h = cm->h, mc = o->mat.density * h * h * h;
-    double C[3] = {0, 0, 0};
+    /* The density field (world_internal.h) read as the trilinear function through each cell's
+     * 8 Gauss-point factors: the 2×2×2 Gauss rule integrates its mass, first and second
+     * moments exactly (degree ≤ 3 per axis), so each cube is 8 point masses m_g = ρ d_g h³/8
+     * at its Gauss points; a uniform cube gives exactly m h²/6 about its centre. */
+    const double *dn = o->fld.density;
+    const double gq = 0.5 / sqrt(3.0);
+    double M = 0, C[3] = {0, 0, 0};
     for (int c = 0; c < cm->n_cells; c++)
-        for (int a = 0; a < 3; a++)
-            C[a] += cm->origin[a] + h * (cm->cell_ijk[3 * (size_t)c + a] + 0.5);
+        for (int g = 0; g < 8; g++) {
+            const double mg = mc / 8.0 * (dn ? dn[8 * (size_t)c + g] : 1.0);
+            M += mg;
+            for (int a = 0; a < 3; a++)
+                C[a] += mg * (cm->origin[a] + h * (cm->cell_ijk[3 * (size_t)c + a] + 0.5 +
+                                                   (CS_CORNER[g][a] ? gq : -gq)));
+        }
+    if (!(M > 0))
+        return -1;
     for (int a = 0; a < 3; a++)
-        C[a] /= cm->n_cells;
-    /* each cube a solid box: m h²/6 about its centre, plus m (|d|² 1 − d dᵀ) (parallel axes) */
+        C[a] /= M;
     double I[9] = {0};
-    for (int c = 0; c < cm->n_cells; c++) {
-        double d[3];
-        for (int a = 0; a < 3; a++)
-            d[a] = cm->origin[a] + h * (cm->cell_ijk[3 * (size_t)c + a] + 0.5) - C[a];
-        const double dd = dot3(d, d);
-        for (int i = 0; i < 3; i++)
-            for (int j = 0; j < 3; j++)
-                I[3 * i + j] += mc * ((i == j) * (h * h / 6.0 + dd) - d[i] * d[j]);
-    }
-    rb->mass = mc * cm->n_cells;
+    for (int c = 0; c < cm->n_cells; c++)
+        for (int g = 0; g < 8; g++) {
+            const double mg = mc / 8.0 * (dn ? dn[8 * (size_t)c + g] : 1.0);
+            double d[3];
+            for (int a = 0; a < 3; a++)
+                d[a] = cm->origin[a] +
+                       h * (cm->cell_ijk[3 * (size_t)c + a] + 0.5 + (CS_CORNER[g][a] ? gq : -gq)) -
+                       C[a];
+            const double dd = dot3(d, d);
+            for (int i = 0; i < 3; i++)
+                for (int j = 0; j < 3; j++)
+                    I[3 * i + j] += mg * ((i == j) * dd - d[i] * d[j]);
+        }
+    rb->mass = M;
     rb->n_cells = cm->n_cells;
     rb->n_nodes = o->n;
     rb->inv_mass = 1.0 / rb->mass;
@@ -360,6 +376,20 @@ int cs_rigid_sync(cs_world_t *w)
             return CS_ERR_NOMEM;
     }
     return CS_OK;
+}
+
+int cs_rigid_fields_changed(cs_object *o)
+{
+    const cs_rigid *rb = o->rb;
+    if (!rb || rb->n_cells != o->cm.n_cells || rb->n_nodes != o->n)
+        return 0; /* not built yet, or mid-fracture: cs_rigid_sync refits */
+    double q[4], c0[3], C0[3], v0[3], w0[3];
+    memcpy(q, rb->q, sizeof q);
+    memcpy(c0, rb->c, sizeof c0);
+    memcpy(C0, rb->com_rest, sizeof C0);
+    memcpy(v0, rb->v, sizeof v0);
+    memcpy(w0, rb->w, sizeof w0);
+    return cs_rigid_refit(o, q, c0, C0, v0, w0);
 }
 
 void cs_rigid_free(cs_object *o)

@@ -36,7 +36,8 @@ typedef struct cs_rigid {
     bool has_loads;                /* scene loads: forces from the nodes' f_const, else M g */
 } cs_rigid;
 
-/* Mass properties from o's cells (each a solid box of the material's density) and the pose
+/* Mass properties from o's cells (each a solid box of the material's density times the density
+ * field: exact for the field trilinear in each cell through its Gauss-point factors) and the pose
  * at rest (R = I, c = C), at rest. Returns 0 or -1 (out of memory). */
 int cs_rigid_init(cs_object *o);
 /* Mass properties from o's (new) cells; the pose follows the rotation q and the rigid motion
@@ -45,6 +46,9 @@ int cs_rigid_init(cs_object *o);
 int cs_rigid_refit(cs_object *o, const double q[4], const double c0[3], const double C0[3],
                    const double v0[3], const double w0[3]);
 void cs_rigid_free(cs_object *o);
+/* After the density field changed (painting): mass, centre of mass and inertia again, the
+ * body keeping its pose of the old centre and its velocities (cs_rigid_refit). 0 or -1. */
+int cs_rigid_fields_changed(cs_object *o);
 /* A copy (for a piece made by fracture: it starts from its parent's pose and motion until
  * cs_rigid_sync fits it to its own cells). NULL if out of memory. */
 cs_rigid *cs_rigid_clone(const cs_rigid *rb);

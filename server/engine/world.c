@@ -421,6 +421,56 @@ static int check_central_difference(const cs_world_t *w, const cs_object_def *de
     return CS_OK;
 }
 
+/*
+ * The limits above for the plain material, applied to the object as it is: its stiffness and
+ * density fields raise ω²max by at most max_cells(young_max/density_min) and its penalty
+ * springs by max k_p/m_i (cs_elastic_object_omega2). Explicit steps (Jury's test with the
+ * damping field's largest factor on α and β): ω²dt² + 2dt(α + βω_K²)·d_max ≤ 4. Central
+ * differences take the penalty springs implicitly (like drags), so only the fields count
+ * there: ω dt < 2.
+ */
+int cs_object_check_stability(const cs_object *o, double dt, const char *what, char *err,
+                              size_t errlen)
+{
+    const bool expl = o->integrator == CS_INTEGRATOR_SYMPLECTIC_EULER ||
+                      o->integrator == CS_INTEGRATOR_VERLET;
+    if (o->model == CS_MODEL_RIGID || o->omega2_plain <= 0 ||
+        (!expl && o->integrator != CS_INTEGRATOR_CENTRAL_DIFFERENCE))
+        return CS_OK;
+    const double wk2 = cs_elastic_object_omega2(o, o->omega2_plain, false);
+    if (!expl) {
+        const double limit = 2.0 / sqrt(wk2);
+        if (dt > limit)
+            return cs_engine_fail(err, errlen, CS_ERR_INVALID,
+                                  "%sdt %.4g s is above the central_difference stability limit "
+                                  "%.4g s of '%s' with its stiffness/density fields (omega_max "
+                                  "%g rad/s): lower dt, soften or lighten less, or use "
+                                  "implicit_euler",
+                                  what, dt, limit, o->name, sqrt(wk2));
+        return CS_OK;
+    }
+    const double w2 = cs_elastic_object_omega2(o, o->omega2_plain, true);
+    double dmax = 1.0;
+    if (o->fld.has_damping) {
+        dmax = 0;
+        for (size_t i = 0; i < 8 * (size_t)o->cm.n_cells; i++)
+            dmax = fmax(dmax, o->fld.damping[i]);
+    }
+    const double g = dmax * (o->mat.damping[0] + o->mat.damping[1] * wk2);
+    const double limit = (-g + sqrt(g * g + 4 * w2)) / w2;
+    if (dt > limit) {
+        const bool pen = w2 > wk2 * (1 + 1e-12);
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID,
+                              "%sintegrator '%s' is unstable for object '%s': dt %g s exceeds "
+                              "the explicit stability limit %g s with its material fields%s "
+                              "(omega_max %g rad/s); use dt <= %g s%s, or implicit_euler",
+                              what, cs_integrator_name(o->integrator), o->name, dt, limit,
+                              pen ? " and penalty springs" : "", sqrt(w2), limit,
+                              pen ? ", a softer penalty_stiffness" : "");
+    }
+    return CS_OK;
+}
+
 int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *id, char *err,
                         size_t errlen)
 {
@@ -547,6 +597,20 @@ int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *i
                 o->n_fixed_nodes++;
                 break;
             }
+    /* the stability limits with the scene's fields and penalty springs */
+    if (explicit_integ) {
+        const double wm = cs_elastic_max_omega(def->model, &def->material, def->cube_size);
+        o->omega2_plain = wm * wm;
+    } else if (integ == CS_INTEGRATOR_CENTRAL_DIFFERENCE &&
+               cs_lf_omega2_bound(def->model, def->material.young, def->material.poisson,
+                                  def->material.density, def->cube_size,
+                                  &o->omega2_plain) != 0) {
+        rc = cs_engine_fail(err, errlen, CS_ERR_NOMEM, "out of memory");
+        goto fail;
+    }
+    rc = cs_object_check_stability(o, w->def.dt, "", err, errlen);
+    if (rc)
+        goto fail;
     cs_surface_skin(&o->surf, &o->cm, o->x);
     if (o->model == CS_MODEL_RIGID) {
         if (cs_rigid_init(o) != 0) {
@@ -953,7 +1017,7 @@ static void step_operator(void *ctx, const double *p, double *y)
         /* the damping field: + dt·α M_d p + dt·β K_d p */
         double *t = o->fld.tmp;
         if (o->ckcoef != 0) {
-            cs_fem_apply_Kw(&o->fem, o->fld.kd, p, t);
+            cs_elastic_apply_Kd(o, p, t);
             for (int d = 0; d < 3 * o->n; d++)
                 y[d] += o->ckcoef * t[d];
         }
@@ -1002,7 +1066,7 @@ static void build_preconditioner(cs_object *o)
     }
     if (o->fld.has_damping && o->ckcoef != 0) {
         /* + dt·β diag(K_d) */
-        cs_fem_diag_blocks_w(&o->fem, o->fld.kd, o->fld.tmp);
+        cs_elastic_diag_blocks_d(o, o->fld.tmp);
         for (size_t d = 0; d < 9 * (size_t)o->n; d++)
             o->blocks[d] += o->ckcoef * o->fld.tmp[d];
     }
@@ -1203,6 +1267,18 @@ static void cd_operator(void *ctx, const double *p, double *y)
         memset(y, 0, 3 * (size_t)o->n * sizeof(double)); /* no stiffness damping: M alone */
     }
     cs_elastic_apply_M(o, p, y, o->mcoef);
+    if (o->fld.has_damping) {
+        /* the damping field: cmcoef·α-part M_d p + ckcoef·K_d p */
+        if (o->ckcoef != 0) {
+            double *t = o->fld.tmp;
+            cs_elastic_apply_Kd(o, p, t);
+            for (size_t d = 0; d < 3 * (size_t)o->n; d++)
+                y[d] += o->ckcoef * t[d];
+        }
+        if (o->cmcoef != 0)
+            cs_elastic_apply_Md(o, p, y, o->cmcoef);
+    }
+    add_penalty_operator(o, o->pcoef, p, y);
     if (o->dcoef == 0)
         return;
     for (int i = 0; i < o->n_inputs; i++) {
@@ -1232,7 +1308,14 @@ static void cd_preconditioner(cs_object *o)
         for (int k = 0; k < 9; k++)
             B[k] *= o->kcoef;
         for (int a = 0; a < 3; a++)
-            B[4 * a] += o->mcoef * md[i];
+            B[4 * a] += o->mcoef * md[i] +
+                        (o->fld.has_damping ? o->cmcoef * o->fld.md[i] : 0.0) +
+                        (o->pin[i] ? o->pcoef * o->penalty : 0.0);
+    }
+    if (o->fld.has_damping && o->ckcoef != 0) {
+        cs_elastic_diag_blocks_d(o, o->fld.tmp);
+        for (size_t d = 0; d < 9 * (size_t)o->n; d++)
+            o->blocks[d] += o->ckcoef * o->fld.tmp[d];
     }
     for (int i = 0; o->dcoef != 0 && i < o->n_inputs; i++) {
         const cs_input *in = &o->inputs[i];
@@ -1272,10 +1355,15 @@ static int step_central_difference(cs_world_t *w, cs_object *o, cs_step_stats *s
     double t1 = now_ms();
     cs_elastic_update(o, o->x);
     double t2 = now_ms();
-    /* b = ((2 − dtα) M − dtβ K_R) v + 2dt (f + f_el) */
-    o->mcoef = 2.0 - dt * al;
-    o->kcoef = -dt * be;
+    /* b = ((2 − dtα) M − dtβ K_R) v + 2dt (f + f_el); with a damping field
+     * (2M − dt(α M_d + β K_d)) v. The penalty springs, like drags, only on the left. */
+    const bool dfield = o->fld.has_damping;
+    o->mcoef = dfield ? 2.0 : 2.0 - dt * al;
+    o->kcoef = dfield ? 0.0 : -dt * be;
+    o->cmcoef = dfield ? -dt * al : 0.0;
+    o->ckcoef = dfield ? -dt * be : 0.0;
     o->dcoef = 0;
+    o->pcoef = 0;
     cd_operator(o, o->v, o->b);
     cs_elastic_force(o, o->x, o->v1, NULL);
     /* Warm start: the step with the row-sum lumped mass, v + dt·(f + f_el)/m_row. It is the
@@ -1287,9 +1375,12 @@ static int step_central_difference(cs_world_t *w, cs_object *o, cs_step_stats *s
         o->b[d] += 2.0 * dt * F;
         o->v1[d] = o->mask[d] ? 0.0 : o->v[d] + dt * F / mr[d / 3];
     }
-    o->mcoef = 2.0 + dt * al;
-    o->kcoef = dt * be;
+    o->mcoef = dfield ? 2.0 : 2.0 + dt * al;
+    o->kcoef = dfield ? 0.0 : dt * be;
+    o->cmcoef = dfield ? dt * al : 0.0;
+    o->ckcoef = dfield ? dt * be : 0.0;
     o->dcoef = 2.0 * dt * dt;
+    o->pcoef = 2.0 * dt * dt; /* penalty springs at p⁺: no limit on k_p */
     cd_preconditioner(o);
     int contacts = constrain_ground(w, o);
     double t3 = now_ms();
@@ -1360,8 +1451,9 @@ static int step_central_difference(cs_world_t *w, cs_object *o, cs_step_stats *s
 /* ---------------------------------------------------------------- explicit steps */
 
 /*
- * ftot = inputs (gather_forces, at the current o->x) + elastic force at o->x − β K v; the
- * mass-proportional damping α M v is applied with the acceleration.
+ * ftot = inputs (gather_forces, at the current o->x, penalty springs included) + elastic force
+ * at o->x − β K v (β K_d v with a damping field); the mass-proportional damping α M v (α M_d v)
+ * is applied with the acceleration.
  */
 static void explicit_force(cs_object *o, const double *v, double *ftot)
 {
@@ -1371,7 +1463,10 @@ static void explicit_force(cs_object *o, const double *v, double *ftot)
     const size_t n3 = (size_t)o->n * 3;
     if (o->mat.damping[1] > 0) {
         double *kv = o->cg.z; /* scratch: no solve in an explicit step */
-        cs_elastic_apply_K(o, v, kv);
+        if (o->fld.has_damping)
+            cs_elastic_apply_Kd(o, v, kv); /* the damping field: β K_d v */
+        else
+            cs_elastic_apply_K(o, v, kv);
         for (size_t d = 0; d < n3; d++)
             ftot[d] -= o->mat.damping[1] * kv[d];
     }
@@ -1379,15 +1474,18 @@ static void explicit_force(cs_object *o, const double *v, double *ftot)
         ftot[d] += o->f[d];
 }
 
-/* v += s·dt·(M⁻¹ftot − α v) on free dofs; held dofs keep zero velocity. */
+/* v += s·dt·(M⁻¹ftot − α M⁻¹M_d v) on free dofs; held dofs keep zero velocity. */
 static void explicit_kick(cs_object *o, const double *ftot, double sdt)
 {
     const double alpha = o->mat.damping[0];
-    for (int i = 0; i < o->n; i++)
+    for (int i = 0; i < o->n; i++) {
+        /* α M_d v: per node α·md_i/m_i where a damping field is painted */
+        const double al = o->fld.has_damping ? alpha * o->fld.md[i] / o->m[i] : alpha;
         for (int a = 0; a < 3; a++) {
             const size_t d = 3 * (size_t)i + a;
-            o->v[d] = o->mask[d] ? 0.0 : o->v[d] + sdt * (ftot[d] / o->m[i] - alpha * o->v[d]);
+            o->v[d] = o->mask[d] ? 0.0 : o->v[d] + sdt * (ftot[d] / o->m[i] - al * o->v[d]);
         }
+    }
 }
 
 static void explicit_drift(cs_object *o, double dt)

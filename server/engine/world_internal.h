@@ -71,12 +71,16 @@ static inline bool cs_input_is_spring(const cs_input *in)
  * Σ_g ρ·density_g·N_k(ξ_g)·h³/8 (the row sum of the consistent mass; ρh³/8 when uniform).
  * Damping: C = α·M_d + β·K_d with M_d lumped like M from density·damping and
  * K_d = Σ_g young_g·damping_g·K_g; while every damping factor is 1 (has_damping false) that is
- * the plain α M + β K and the integrators use M and K. Every array is always allocated
+ * the plain α M + β K and the integrators use M and K. Every model honours the fields
+ * through elastic.h (cs_elastic_fields_changed after any change; K_d, M_d products); mss and
+ * localframe use each cell's mean factor, rigid bodies integrate the density at the Gauss
+ * points. Every array is always allocated
  * (all 1 for a plain object); fracture copies them with the cells.
  */
 typedef struct cs_fields {
     double *young, *density, *damping; /* 8 per cell */
     double *kd;       /* 8 per cell: young·damping (valid when has_damping) */
+    double *dd;       /* 8 per cell: density·damping (valid when has_damping) */
     double *md;       /* per node: the lumped α-damping mass (valid when has_damping) */
     double *tmp;      /* 9 per node: scratch of the damping products (when has_damping) */
     bool has_damping; /* some damping factor differs from 1 */
@@ -120,6 +124,8 @@ typedef struct cs_object {
      * nodes, and an implicit operator adds pcoef·k_p on their diagonal (step_operator and
      * build_preconditioner do). An explicit integrator must keep dt below 2·sqrt(m/k_p). */
     cs_fields fld;
+    double omega2_plain;   /* explicit / central differences: ω²max of the plain material
+                              (fields and penalty not included); 0 for other integrators */
     double mass;
     cs_cg_work cg;
     cs_input inputs[CS_MAX_INPUTS];
@@ -183,6 +189,12 @@ void cs_fields_apply_regions(cs_object *o, const cs_field_region *r, int n);
  * (NULL while every young factor is 1) follow the fields. f_const is left alone. Returns -1 on out of
  * memory. */
 int cs_object_lump_mass(cs_object *o);
+/* The object's explicit or central-difference stability with its current fields and penalty
+ * springs at world step dt (elastic.h: cs_elastic_object_critical_dt): CS_OK, or
+ * CS_ERR_INVALID with a message saying what is unstable (`what`: "" or a prefix such as
+ * "paint: "). Implicit Euler and rigid objects always pass. */
+int cs_object_check_stability(const cs_object *o, double dt, const char *what, char *err,
+                              size_t errlen);
 
 /* Defined in fracture.c, used by world.c. */
 void cs_fracture_clear_step(cs_world_t *w);
