@@ -1336,8 +1336,9 @@ static void cd_preconditioner(cs_object *o)
  * increment p⁺ − p = dt·v1 (o->v holds (p − p⁻)/dt, so no extra state survives fracture
  * or reset):
  *   ((2 + dtα) M + dtβ K_R + 2dt²·drags) v1 = 2dt (f + f_el(p)) + ((2 − dtα) M − dtβ K_R) v,
- * solved by PCG warm-started from v. Drag springs are taken at p⁺ (implicitly) so that a
- * stiff drag cannot break the stability limit checked at add time (ω·dt < 2). Ground
+ * solved by PCG warm-started from v. Drag and penalty springs are taken at p⁺ (implicitly)
+ * so that a stiff one cannot break the stability limit checked at add time (ω·dt < 2). With a
+ * damping field D = α M_d + β K_d (cmcoef, ckcoef; the model's M_d and K_d, elastic.h). Ground
  * contact holds a touching node's normal velocity in the solve, as in implicit Euler.
  */
 static int step_central_difference(cs_world_t *w, cs_object *o, cs_step_stats *st)

@@ -122,7 +122,8 @@ typedef struct cs_object {
     uint8_t *pin;          /* per node: held by a penalty spring */
     /* An integrator honours them through world.c: gather_forces adds k_p (X − x) at pinned
      * nodes, and an implicit operator adds pcoef·k_p on their diagonal (step_operator and
-     * build_preconditioner do). An explicit integrator must keep dt below 2·sqrt(m/k_p). */
+     * build_preconditioner do; central differences' cd_operator too, with 2dt²). An explicit
+     * integrator must keep dt below 2·sqrt(m/k_p): cs_object_check_stability refuses it. */
     cs_fields fld;
     double omega2_plain;   /* explicit / central differences: ω²max of the plain material
                               (fields and penalty not included); 0 for other integrators */
