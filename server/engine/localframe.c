@@ -81,8 +81,8 @@ static void axis_basis(int nb, double t, double *N, double *dN)
  * K (3n×3n) and M (n×n) of one element with nb basis functions per axis (2: trilinear,
  * 4: tricubic B-spline), nodes in lexicographic order a = ix + nb·iy + nb²·iz.
  */
-static void element_matrices(int nb, double lambda, double mu, double rho, double h, double *K,
-                             double *M)
+static void element_matrices_oct(int nb, int oct, double lambda, double mu, double rho, double h,
+                                 double *K, double *M)
 {
     const int n = nb * nb * nb, n3 = 3 * n;
     double xg[4], wg[4];
@@ -93,6 +93,11 @@ static void element_matrices(int nb, double lambda, double mu, double rho, doubl
     for (int gz = 0; gz < 4; gz++)
         for (int gy = 0; gy < 4; gy++)
             for (int gx = 0; gx < 4; gx++) {
+                /* oct ≥ 0: only the points of that octant (the 2×2×2 Gauss point g = oct of
+                 * the fields nearest to them) */
+                if (oct >= 0 && ((gx >= 2) != CS_CORNER[oct][0] || (gy >= 2) != CS_CORNER[oct][1] ||
+                                 (gz >= 2) != CS_CORNER[oct][2]))
+                    continue;
                 const double w = wg[gx] * wg[gy] * wg[gz] * h * h * h;
                 double Nx[4], Ny[4], Nz[4], dx[4], dy[4], dz[4];
                 axis_basis(nb, xg[gx], Nx, dx);
@@ -119,6 +124,12 @@ static void element_matrices(int nb, double lambda, double mu, double rho, doubl
             }
 }
 
+static void element_matrices(int nb, double lambda, double mu, double rho, double h, double *K,
+                             double *M)
+{
+    element_matrices_oct(nb, -1, lambda, mu, rho, h, K, M);
+}
+
 /* Lexicographic index of corner k of a linear element. */
 static int corner_lex(int k)
 {
@@ -126,11 +137,11 @@ static int corner_lex(int k)
 }
 
 /* The linear element in corner order. */
-static void linear_matrices(double lambda, double mu, double rho, double h, double Kl[576],
-                            double Ml[64])
+static void linear_matrices_oct(int oct, double lambda, double mu, double rho, double h,
+                                double Kl[576], double Ml[64])
 {
     double K[576], M[64];
-    element_matrices(2, lambda, mu, rho, h, K, M);
+    element_matrices_oct(2, oct, lambda, mu, rho, h, K, M);
     for (int k = 0; k < 8; k++)
         for (int l = 0; l < 8; l++) {
             const int a = corner_lex(k), b = corner_lex(l);
@@ -139,6 +150,12 @@ static void linear_matrices(double lambda, double mu, double rho, double h, doub
                 for (int j = 0; j < 3; j++)
                     Kl[(3 * k + i) * 24 + 3 * l + j] = K[(3 * a + i) * 24 + 3 * b + j];
         }
+}
+
+static void linear_matrices(double lambda, double mu, double rho, double h, double Kl[576],
+                            double Ml[64])
+{
+    linear_matrices_oct(-1, lambda, mu, rho, h, Kl, Ml);
 }
 
 static void lame(double young, double poisson, double *lambda, double *mu)
@@ -196,6 +213,8 @@ void cs_lf_free(cs_lf *lf)
         return;
     free(lf->Ks);
     free(lf->Ms);
+    free(lf->Kso);
+    free(lf->Kso_l);
     free(lf->off);
     free(lf->en);
     free(lf->R);
@@ -219,12 +238,31 @@ void cs_lf_reset(cs_lf *lf)
     }
 }
 
-double cs_lf_cell_factor(const double *f, int c)
+/* Whether cell c's 8 factors in w are equal (w NULL: all 1); *u their value. */
+static bool uniform_factor(const double *w, int c, double *u)
 {
-    if (!f)
-        return 1.0;
-    const double *g = f + 8 * (size_t)c;
-    return (g[0] + g[1] + g[2] + g[3] + g[4] + g[5] + g[6] + g[7]) / 8.0;
+    if (!w) {
+        *u = 1.0;
+        return true;
+    }
+    const double *f = w + 8 * (size_t)c;
+    *u = f[0];
+    for (int g = 1; g < 8; g++)
+        if (f[g] != f[0])
+            return false;
+    return true;
+}
+
+/* Octant g's stiffness (K of an n-node element over that eighth of the cell). */
+static const double *octant_K(const cs_lf *lf, int n, int g)
+{
+    return n == 64 ? lf->Kso + (size_t)g * 192 * 192 : lf->Kso_l + (size_t)g * 640;
+}
+
+/* Octant g's 1-D half-span Gram matrix along axis a. */
+static const double *octant_m1(const cs_lf *lf, int g, int a)
+{
+    return lf->m1h + 16 * CS_CORNER[g][a];
 }
 
 /* Consistent-mass row sums and diagonal (with the density factors km). */
@@ -234,14 +272,45 @@ static void mass_rows(cs_lf *lf)
     memset(lf->mdiag, 0, (size_t)lf->n_nodes * sizeof(double));
     for (int c = 0; c < lf->n_cells; c++) {
         const int n = lf->off[c + 1] - lf->off[c];
-        const double *M = n == 64 ? lf->Ms : lf->Ml, sc = cs_lf_cell_factor(lf->km, c);
+        const double *M = n == 64 ? lf->Ms : lf->Ml;
         const int32_t *nd = lf->en + lf->off[c];
-        for (int a = 0; a < n; a++) {
-            double r = 0;
-            for (int b = 0; b < n; b++)
-                r += M[a * n + b];
-            lf->mrow[nd[a]] += sc * r;
-            lf->mdiag[nd[a]] += sc * M[a * n + a];
+        double sc;
+        if (uniform_factor(lf->km, c, &sc)) {
+            for (int a = 0; a < n; a++) {
+                double r = 0;
+                for (int b = 0; b < n; b++)
+                    r += M[a * n + b];
+                lf->mrow[nd[a]] += sc * r;
+                lf->mdiag[nd[a]] += sc * M[a * n + a];
+            }
+            continue;
+        }
+        const double *f = lf->km + 8 * (size_t)c;
+        for (int g = 0; g < 8; g++) {
+            if (n == 64) { /* m1scale · m1h_x ⊗ m1h_y ⊗ m1h_z */
+                double rs[3][4], dg[3][4];
+                for (int ax = 0; ax < 3; ax++) {
+                    const double *m = octant_m1(lf, g, ax);
+                    for (int i = 0; i < 4; i++) {
+                        rs[ax][i] = m[4 * i] + m[4 * i + 1] + m[4 * i + 2] + m[4 * i + 3];
+                        dg[ax][i] = m[5 * i];
+                    }
+                }
+                for (int a = 0; a < 64; a++) {
+                    const int ix = a % 4, iy = (a / 4) % 4, iz = a / 16;
+                    lf->mrow[nd[a]] += f[g] * lf->m1scale * rs[0][ix] * rs[1][iy] * rs[2][iz];
+                    lf->mdiag[nd[a]] += f[g] * lf->m1scale * dg[0][ix] * dg[1][iy] * dg[2][iz];
+                }
+            } else {
+                const double *Mg = lf->Kso_l + (size_t)g * 640 + 576;
+                for (int a = 0; a < 8; a++) {
+                    double r = 0;
+                    for (int b = 0; b < 8; b++)
+                        r += Mg[8 * a + b];
+                    lf->mrow[nd[a]] += f[g] * r;
+                    lf->mdiag[nd[a]] += f[g] * Mg[9 * a];
+                }
+            }
         }
     }
 }
@@ -339,15 +408,35 @@ int cs_lf_init(cs_lf *lf, cs_cubemesh *cm, double young, double poisson, double 
         return -1;
     }
     element_matrices(4, lambda, mu, density, cm->h, lf->Ks, lf->Ms);
+    /* the octant matrices of graded cells (fields): 8 of each, no mass kept for the B-spline
+     * one (its octant masses are products of half-span Gram matrices, m1h) */
+    lf->Kso = malloc(8 * 192 * 192 * sizeof(double));
+    lf->Kso_l = malloc(8 * (576 + 64) * sizeof(double));
+    double *Mtmp = malloc(64 * 64 * sizeof(double));
+    if (!lf->Kso || !lf->Kso_l || !Mtmp) {
+        free(Mtmp);
+        cs_lf_free(lf);
+        return -1;
+    }
+    for (int g = 0; g < 8; g++) {
+        element_matrices_oct(4, g, lambda, mu, density, cm->h, lf->Kso + (size_t)g * 192 * 192,
+                             Mtmp);
+        linear_matrices_oct(g, lambda, mu, density, cm->h, lf->Kso_l + (size_t)g * 640,
+                            lf->Kso_l + (size_t)g * 640 + 576);
+    }
+    free(Mtmp);
     double xg[4], wg[4];
     gauss4(xg, wg);
     memset(lf->m1, 0, sizeof lf->m1);
+    memset(lf->m1h, 0, sizeof lf->m1h);
     for (int g = 0; g < 4; g++) {
         double b[4], db[4];
         cs_bspline_basis(xg[g], b, db);
         for (int i = 0; i < 4; i++)
-            for (int j = 0; j < 4; j++)
+            for (int j = 0; j < 4; j++) {
                 lf->m1[4 * i + j] += wg[g] * b[i] * b[j];
+                lf->m1h[16 * (g >= 2) + 4 * i + j] += wg[g] * b[i] * b[j];
+            }
     }
     lf->m1scale = density * cm->h * cm->h * cm->h;
     if (cs_lf_relink(lf, cm) != 0) {
@@ -488,6 +577,32 @@ static const double *stiffness_of(const cs_lf *lf, int n)
     return n == 64 ? lf->Ks : lf->Kl;
 }
 
+/* ku = K_e u for cell c (n nodes) with the factors w: s·K when its 8 are equal, else
+ * Σ_g w_g K_g over the octant matrices. */
+static void cell_stiffness(const cs_lf *lf, const double *w, int c, int n, const double *u,
+                           double *ku)
+{
+    double s;
+    const int n3 = 3 * n;
+    if (uniform_factor(w, c, &s)) {
+        kmul(stiffness_of(lf, n), u, ku, n3);
+        if (s != 1.0)
+            for (int i = 0; i < n3; i++)
+                ku[i] *= s;
+        return;
+    }
+    const double *f = w + 8 * (size_t)c;
+    double t[192];
+    memset(ku, 0, (size_t)n3 * sizeof *ku);
+    for (int g = 0; g < 8; g++) {
+        if (f[g] == 0)
+            continue;
+        kmul(octant_K(lf, n, g), u, t, n3);
+        for (int i = 0; i < n3; i++)
+            ku[i] += f[g] * t[i];
+    }
+}
+
 void cs_lf_force(cs_lf *lf, const double *x, double *f, double *energy)
 {
     double e_sum = 0;
@@ -497,13 +612,10 @@ void cs_lf_force(cs_lf *lf, const double *x, double *f, double *energy)
         const double *R = lf->R + 9 * (size_t)c;
         double u[192], ku[192];
         local_displacements(n, lf->en + lf->off[c], x, R, lf->h, u);
-        kmul(stiffness_of(lf, n), u, ku, 3 * n);
-        const double sc = cs_lf_cell_factor(lf->ky, c);
+        cell_stiffness(lf, lf->ky, c, n, u, ku);
         double e = 0;
-        for (int i = 0; i < 3 * n; i++) {
-            ku[i] *= sc;
+        for (int i = 0; i < 3 * n; i++)
             e += u[i] * ku[i];
-        }
         e_sum += 0.5 * e;
         rotate_out(n, R, ku, lf->fe + 3 * (size_t)lf->off[c]);
     }
@@ -524,11 +636,11 @@ double cs_lf_energy(const cs_lf *lf, const double *x)
         cs_extract_rotation(F, q, 30);
         cs_quat_to_mat(q, R);
         local_displacements(n, nd, x, R, lf->h, u);
-        kmul(stiffness_of(lf, n), u, ku, 3 * n);
+        cell_stiffness(lf, lf->ky, c, n, u, ku);
         double e = 0;
         for (int i = 0; i < 3 * n; i++)
             e += u[i] * ku[i];
-        e_sum += 0.5 * cs_lf_cell_factor(lf->ky, c) * e;
+        e_sum += 0.5 * e;
     }
     return e_sum;
 }
@@ -551,12 +663,7 @@ void cs_lf_apply_Kw(cs_lf *lf, const double *w, const double *p, double *y)
             for (int i = 0; i < 3; i++)
                 u[3 * a + i] = R[i] * d[0] + R[3 + i] * d[1] + R[6 + i] * d[2];
         }
-        kmul(stiffness_of(lf, n), u, ku, 3 * n);
-        if (w) {
-            const double sc = cs_lf_cell_factor(w, c);
-            for (int i = 0; i < 3 * n; i++)
-                ku[i] *= sc;
-        }
+        cell_stiffness(lf, w, c, n, u, ku);
         rotate_out(n, R, ku, lf->fe + 3 * (size_t)lf->off[c]);
     }
     gather(lf, y, 1.0, false);
@@ -574,22 +681,32 @@ void cs_lf_diag_blocks_w(const cs_lf *lf, const double *w, double *blocks)
         const int n = lf->off[c + 1] - lf->off[c], n3 = 3 * n;
         const int32_t *nd = lf->en + lf->off[c];
         const double *R = lf->R + 9 * (size_t)c, *K = stiffness_of(lf, n);
-        const double sc = cs_lf_cell_factor(w, c);
+        double sc;
+        const bool uni = uniform_factor(w, c, &sc);
+        const double *f = w ? w + 8 * (size_t)c : NULL;
         for (int a = 0; a < n; a++) {
-            double T[9];
-            /* T = R K_aa, then block += T Rᵀ */
-            for (int i = 0; i < 3; i++)
+            double Ka[9], T[9];
+            /* K_aa (s·K, or Σ_g f_g K_g for a graded cell); T = R K_aa, block += T Rᵀ */
+            for (int k = 0; k < 3; k++)
                 for (int j = 0; j < 3; j++) {
-                    double s = 0;
-                    for (int k = 0; k < 3; k++)
-                        s += R[3 * i + k] * K[(size_t)(3 * a + k) * n3 + 3 * a + j];
-                    T[3 * i + j] = s;
+                    const size_t e = (size_t)(3 * a + k) * n3 + 3 * a + j;
+                    double v = 0;
+                    if (uni)
+                        v = sc * K[e];
+                    else
+                        for (int g = 0; g < 8; g++)
+                            v += f[g] * octant_K(lf, n, g)[e];
+                    Ka[3 * k + j] = v;
                 }
+            for (int i = 0; i < 3; i++)
+                for (int j = 0; j < 3; j++)
+                    T[3 * i + j] = R[3 * i] * Ka[j] + R[3 * i + 1] * Ka[3 + j] +
+                                   R[3 * i + 2] * Ka[6 + j];
             double *B = blocks + 9 * (size_t)nd[a];
             for (int i = 0; i < 3; i++)
                 for (int j = 0; j < 3; j++)
-                    B[3 * i + j] += sc * (T[3 * i] * R[3 * j] + T[3 * i + 1] * R[3 * j + 1] +
-                                          T[3 * i + 2] * R[3 * j + 2]);
+                    B[3 * i + j] += T[3 * i] * R[3 * j] + T[3 * i + 1] * R[3 * j + 1] +
+                                    T[3 * i + 2] * R[3 * j + 2];
         }
     }
 }
@@ -599,54 +716,83 @@ void cs_lf_apply_M(cs_lf *lf, const double *p, double *y, double coef)
     cs_lf_apply_Mw(lf, lf->km, p, y, coef);
 }
 
+/* B (192) = (mx ⊗ my ⊗ mz) A (192): three 4×4 passes, one per axis (sum factorization). */
+static void kron3_apply(const double *const m[3], const double *A0, double *B)
+{
+    double A[192];
+    memcpy(A, A0, sizeof A);
+    for (int ax = 0, stride = 1; ax < 3; ax++, stride *= 4) {
+        const double *src = ax == 1 ? B : A;
+        double *dst = ax == 1 ? A : B;
+        for (int a = 0; a < 64; a++) {
+            const int i = (a / stride) % 4, base = a - i * stride;
+            double s0 = 0, s1 = 0, s2 = 0;
+            for (int j = 0; j < 4; j++) {
+                const double mm = m[ax][4 * i + j], *q = src + 3 * (base + j * stride);
+                s0 += mm * q[0];
+                s1 += mm * q[1];
+                s2 += mm * q[2];
+            }
+            dst[3 * a] = s0;
+            dst[3 * a + 1] = s1;
+            dst[3 * a + 2] = s2;
+        }
+    }
+}
+
 void cs_lf_apply_Mw(cs_lf *lf, const double *w, const double *p, double *y, double coef)
 {
 #pragma omp parallel for num_threads(lf->threads) schedule(static)
     for (int c = 0; c < lf->n_cells; c++) {
         const int n = lf->off[c + 1] - lf->off[c];
         const int32_t *nd = lf->en + lf->off[c];
-        const double *M = n == 64 ? lf->Ms : lf->Ml;
         double *out = lf->fe + 3 * (size_t)lf->off[c];
+        double sc;
+        const bool uni = uniform_factor(w, c, &sc);
+        const double *f = w ? w + 8 * (size_t)c : NULL;
         if (n == 64) {
             /* Ms = ρh³ m⊗m⊗m (m the 4×4 Gram matrix of the cubic B-splines on one span):
-             * three 4×4 passes, one per axis (sum factorization), instead of 64×64. */
+             * three 4×4 passes instead of 64×64; a graded cell sums its 8 octants, each
+             * ρh³ f_g m_x⊗m_y⊗m_z with the half-span Gram matrices of its sides. */
             double A[192], B[192];
             for (int a = 0; a < 64; a++)
                 memcpy(A + 3 * a, p + 3 * (size_t)nd[a], 3 * sizeof(double));
-            for (int ax = 0, stride = 1; ax < 3; ax++, stride *= 4) {
-                const double *src = ax == 1 ? B : A;
-                double *dst = ax == 1 ? A : B;
-                for (int a = 0; a < 64; a++) {
-                    const int i = (a / stride) % 4, base = a - i * stride;
-                    double s0 = 0, s1 = 0, s2 = 0;
-                    for (int j = 0; j < 4; j++) {
-                        const double m = lf->m1[4 * i + j], *q = src + 3 * (base + j * stride);
-                        s0 += m * q[0];
-                        s1 += m * q[1];
-                        s2 += m * q[2];
-                    }
-                    dst[3 * a] = s0;
-                    dst[3 * a + 1] = s1;
-                    dst[3 * a + 2] = s2;
-                }
+            if (uni) {
+                const double *const m[3] = {lf->m1, lf->m1, lf->m1};
+                kron3_apply(m, A, B);
+                for (int k = 0; k < 192; k++)
+                    out[k] = lf->m1scale * sc * B[k];
+                continue;
             }
-            const double sc = lf->m1scale * cs_lf_cell_factor(w, c);
-            for (int k = 0; k < 192; k++)
-                out[k] = sc * B[k];
+            memset(out, 0, 192 * sizeof *out);
+            for (int g = 0; g < 8; g++) {
+                if (f[g] == 0)
+                    continue;
+                const double *const m[3] = {octant_m1(lf, g, 0), octant_m1(lf, g, 1),
+                                            octant_m1(lf, g, 2)};
+                kron3_apply(m, A, B);
+                for (int k = 0; k < 192; k++)
+                    out[k] += lf->m1scale * f[g] * B[k];
+            }
             continue;
         }
         for (int a = 0; a < n; a++) {
             double s0 = 0, s1 = 0, s2 = 0;
             for (int b = 0; b < n; b++) {
-                const double m = M[a * n + b], *q = p + 3 * (size_t)nd[b];
+                double m = 0;
+                if (uni)
+                    m = sc * lf->Ml[a * n + b];
+                else
+                    for (int g = 0; g < 8; g++)
+                        m += f[g] * lf->Kso_l[(size_t)g * 640 + 576 + a * n + b];
+                const double *q = p + 3 * (size_t)nd[b];
                 s0 += m * q[0];
                 s1 += m * q[1];
                 s2 += m * q[2];
             }
-            const double sc = cs_lf_cell_factor(w, c);
-            out[3 * a] = sc * s0;
-            out[3 * a + 1] = sc * s1;
-            out[3 * a + 2] = sc * s2;
+            out[3 * a] = s0;
+            out[3 * a + 1] = s1;
+            out[3 * a + 2] = s2;
         }
     }
     gather(lf, y, coef, true);

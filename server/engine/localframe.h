@@ -42,6 +42,9 @@ typedef struct cs_lf {
     double Kl[24 * 24], Ml[8 * 8]; /* linear hexahedron, corner order of cubemesh.h */
     double *Ks, *Ms;       /* tricubic: 192×192 and 64×64, node a = ix + 4·iy + 16·iz */
     double m1[16], m1scale; /* Ms = m1scale · m1⊗m1⊗m1 (1D Gram matrix of one span) */
+    double m1h[32];        /* m1 of the span's lower and upper half (m1 = their sum) */
+    double *Kso;           /* 8 × 192×192: Ks integrated over one octant of the cell */
+    double *Kso_l;         /* 8 × (576 + 64): Kl and Ml over one octant, corner order */
     int32_t *off;          /* n_cells + 1: each cell's first slot in en */
     int32_t *en;           /* element nodes: 8 (corner order) or 64 (lattice order) per cell */
     double *R;             /* 9 per cell: the local frame's rotation, row-major */
@@ -51,10 +54,13 @@ typedef struct cs_lf {
     int32_t *adj;          /* slots, grouped by node */
     double *mrow;          /* per node: row sum of the consistent mass (= ∫ρ N_a) */
     double *mdiag;         /* per node: diagonal entry of the consistent mass */
-    /* Material fields (world_internal.h), borrowed, 8 per cell or NULL (= all 1): each
-     * element's matrices are scaled by the mean of its cell's 8 Gauss-point factors,
-     * K_e = ȳ_c·K, M_e = ρ̄_c·M (a per-cube sampling of the field; still one matrix per
-     * element type). cs_lf_set_fields points them and recomputes mrow and mdiag. */
+    /* Material fields (world_internal.h), borrowed, 8 per cell or NULL (= all 1). Each of the
+     * 4×4×4 quadrature points takes the factor of the nearest of the cell's 8 Gauss points
+     * (the one in its octant), so K_e = Σ_g f_g K_g and M_e = Σ_g ρ_g M_g with 8 octant
+     * matrices per element type (Kso, Kso_l; the B-spline octant masses are products of
+     * half-span Gram matrices): still no matrix per element. A cell whose 8 factors are
+     * equal costs one product with K (or M) scaled; a graded one 8. cs_lf_set_fields points
+     * them and recomputes mrow and mdiag. */
     const double *ky;      /* young factors */
     const double *km;      /* density factors */
 } cs_lf;
@@ -90,8 +96,7 @@ void cs_lf_apply_M(cs_lf *lf, const double *p, double *y, double coef);
 void cs_lf_apply_Mw(cs_lf *lf, const double *w, const double *p, double *y, double coef);
 /* Point ky, km at the object's fields (NULL = all 1) and recompute mrow, mdiag. */
 void cs_lf_set_fields(cs_lf *lf, const double *young, const double *density);
-/* Mean of cell c's 8 factors in f (1 when f is NULL). */
-double cs_lf_cell_factor(const double *f, int c);
+
 
 /*
  * ω²max = λmax(M⁻¹K) of objects of this model, material and cube size, for the stability
