@@ -72,10 +72,10 @@ static inline bool cs_input_is_spring(const cs_input *in)
  * Damping: C = α·M_d + β·K_d with M_d lumped like M from density·damping and
  * K_d = Σ_g young_g·damping_g·K_g; while every damping factor is 1 (has_damping false) that is
  * the plain α M + β K and the integrators use M and K. Every model honours the fields
- * through elastic.h (cs_elastic_fields_changed after any change; K_d, M_d products); mss and
- * localframe use each cell's mean factor, rigid bodies integrate the density at the Gauss
- * points. Every array is always allocated
- * (all 1 for a plain object); fracture copies them with the cells.
+ * through elastic.h (cs_elastic_fields_changed after any change; K_d, M_d products): mss uses
+ * each cell's mean factor, localframe the nearest Gauss point's at each of its quadrature
+ * points (8 octant matrices), rigid bodies integrate the density at the Gauss points. Every
+ * array is always allocated (all 1 for a plain object); fracture copies them with the cells.
  */
 typedef struct cs_fields {
     double *young, *density, *damping; /* 8 per cell */
