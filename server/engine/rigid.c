@@ -68,6 +68,7 @@ typedef struct contact {
     double target;       /* lowest normal relative velocity allowed */
     double jn, jt1, jt2;
     double mu;
+    double bounce;       /* restitution taken at this contact this substep, or −1 */
     int32_t node_a, node_b; /* node of each body the point is, or -1 */
     int32_t cell_a, cell_b; /* cube of each body it touches, or -1 */
     int64_t key;         /* for removing duplicates within a body pair */
@@ -90,6 +91,7 @@ typedef struct cs_rigid_world {
     int *order;
     int *island;      /* union-find over bodies joined by contacts (sleep together) */
     int *island_still;
+    int *bounce_c;    /* per body: its bouncing contact with the least gap, −1 none, −2 barred */
     uint8_t *dyn;
     contact *c;
     int nc, cap_c;
@@ -386,6 +388,7 @@ void cs_rigid_world_free(cs_world_t *w)
     free(rw->order);
     free(rw->island);
     free(rw->island_still);
+    free(rw->bounce_c);
     free(rw->dyn);
     free(rw->c);
     free(rw->kept);
@@ -978,8 +981,11 @@ static void prepare_contacts(const cs_world_t *w, cs_rigid_world *rw)
         const double e = B ? fmax(A->mat.restitution, B->mat.restitution) : A->mat.restitution;
         /* restitution reverses the approach speed before this step's forces, so that a
          * bounce retraces the fall (symplectic Euler is time-symmetric that way) */
-        if (vn_pre < -v_bounce && vn0 * dt < -c->sep)
+        c->bounce = -1;
+        if (vn_pre < -v_bounce && vn0 * dt < -c->sep) {
             c->target = fmax(c->target, -e * vn_pre);
+            c->bounce = e;
+        }
         c->mu = B ? sqrt(A->mat.friction * B->mat.friction)
                   : sqrt(A->mat.friction * w->def.ground_friction);
         c->jn = c->jt1 = c->jt2 = 0;
@@ -1088,6 +1094,60 @@ static void solve_contacts(cs_rigid_world *rw)
                 contact_impulse(rw, c, J);
             }
         }
+}
+
+/*
+ * Time of impact of a bounce within the substep. A body that bounces off something that does
+ * not move (the ground, a sleeping or fixed body) while still in flight (every contact of
+ * it has a gap) would turn at the gap, up to one substep's travel above the surface: its
+ * velocity is reversed at the start of the substep. It is moved by −(1+e)·gap along the
+ * normal, which puts it where the exact motion at its approach speed, reaching the surface
+ * at gap/|v| into the substep and leaving at e|v|, would be at the end: the reflection of
+ * the free motion in the surface; its rebound speed gains gravity's work over that drop.
+ * The contact with the least gap decides, so no other
+ * contact point is moved through the surface by it.
+ */
+static void bounce_positions(const cs_world_t *w, cs_rigid_world *rw)
+{
+    const double dt = rw->dt;
+    for (int i = 0; i < rw->n_body; i++)
+        rw->bounce_c[i] = -1;
+    for (int i = 0; i < rw->nc; i++) {
+        const contact *c = &rw->c[i];
+        if (!rw->dyn[c->a])
+            continue;
+        int *bc = &rw->bounce_c[c->a];
+        if (c->sep <= 0 || (c->b >= 0 && rw->dyn[c->b])) {
+            /* touching, or against a moving body: no correction for either side */
+            *bc = -2;
+            if (c->b >= 0)
+                rw->bounce_c[c->b] = -2;
+            continue;
+        }
+        if (*bc == -2)
+            continue;
+        if (*bc == -1 || c->sep < rw->c[*bc].sep)
+            *bc = i;
+    }
+    for (int i = 0; i < rw->n_body; i++) {
+        const int k = rw->bounce_c[i];
+        if (k < 0 || !rw->dyn[i] || rw->c[k].bounce < 0 || rw->c[k].jn <= 0)
+            continue;
+        const contact *c = &rw->c[k];
+        cs_rigid *rb = rw->body[i]->rb;
+        const double d = (1 + c->bounce) * c->sep, gn = -dot3(w->def.gravity, c->n);
+        /* gravity's work over the extra drop d goes into the rebound: symplectic Euler
+         * keeps ½v² + g z − ½ g dt v exactly in flight, so keep it across the shift too
+         * (the position update that follows moves by dt v, so the shift makes up for the
+         * velocity change) */
+        const double vn = dot3(rb->v, c->n);
+        const double disc = 0.25 * gn * gn * dt * dt + vn * vn - gn * dt * vn + 2 * gn * d;
+        const double vn1 = vn > 0 && disc >= 0 ? 0.5 * gn * dt + sqrt(disc) : vn;
+        for (int a = 0; a < 3; a++) {
+            rb->c[a] -= (d + dt * (vn1 - vn)) * c->n[a];
+            rb->v[a] += (vn1 - vn) * c->n[a];
+        }
+    }
 }
 
 /*
@@ -1460,9 +1520,12 @@ static int gather_bodies(cs_world_t *w, cs_rigid_world *rw)
             if (isl)
                 rw->island = isl;
             int *ist = isl ? realloc(rw->island_still, (size_t)cap * sizeof *ist) : NULL;
-            if (!ist)
+            if (ist)
+                rw->island_still = ist;
+            int *bc = ist ? realloc(rw->bounce_c, (size_t)cap * sizeof *bc) : NULL;
+            if (!bc)
                 return -1;
-            rw->island_still = ist;
+            rw->bounce_c = bc;
             rw->cap_body = cap;
         }
         rw->body[rw->n_body++] = o;
@@ -1576,6 +1639,7 @@ static int substep(cs_world_t *w, cs_rigid_world *rw, bool last, cs_step_stats *
         if (c->b >= 0)
             rw->body[c->b]->rb->impact_force += J;
     }
+    bounce_positions(w, rw);
     deformable_contacts(w, rw, n_objects);
     const double t2 = now_ms();
     /* 4. poses, nodes, sleep */

@@ -239,31 +239,43 @@ TEST(rigid_elastic_bounce_keeps_energy)
     cs_object_id id = add_box(w, "ball", 2, 2, 2, 0.1, (double[3]){0, 0, 0.9}, m, false,
                               CS_MODEL_RIGID, NULL, err);
     ENSURE_MSG(id != CS_NULL_OBJECT, "%s", err);
+    const double dt = cs_world_get_def(w)->dt;
     cs_energy e;
     cs_object_energy(w, id, &e);
     const double E0 = e.kinetic + e.gravity;
     /* symplectic Euler's energy oscillates by ~m g |v| dt within a flight; at the apexes
-     * (v ≈ 0) it is the energy of the flight: compare those */
-    double zmin = 1e9, maxdev = 0, prev_vz = 0;
+     * (v ≈ 0) it is the energy of the flight: compare those. Where a bounce turns: from the
+     * frames before (z0, v0 < 0) and after (z1, v1 > 0) it, moving at v0 until the time of
+     * impact τ and at v1 after, z0 + v0 τ = z1 − v1 (dt − τ); the turning height is z0 + v0 τ
+     * (0 for a bounce at the surface, up to |v0| dt = 7 cm for one taken where it was found). */
+    double zmin = 1e9, maxdev = 0, prev_vz = 0, prev_z = 0.9, turn_max = 0;
     int bounces = 0, apexes = 0;
     cs_rigid_state s;
     for (int i = 0; i < 300; i++) {
         ENSURE(cs_world_step(w) == CS_OK);
         cs_object_rigid_state(w, id, &s);
         cs_object_energy(w, id, &e);
-        zmin = fmin(zmin, s.position[2] - 0.1);
-        if (s.velocity[2] > 0 && prev_vz < 0)
+        const double z = s.position[2] - 0.1;
+        zmin = fmin(zmin, z);
+        if (s.velocity[2] > 0 && prev_vz < 0) {
             bounces++;
+            const double v0 = prev_vz, v1 = s.velocity[2];
+            const double tau = (z - v1 * dt - prev_z) / (v0 - v1);
+            turn_max = fmax(turn_max, fabs(prev_z + v0 * tau));
+        }
         if (s.velocity[2] <= 0 && prev_vz > 0) {
             apexes++;
             maxdev = fmax(maxdev, fabs(e.kinetic + e.gravity - E0) / E0);
         }
         prev_vz = s.velocity[2];
+        prev_z = z;
     }
-    printf("    elastic bounce: %d bounces in 5 s, lowest bottom %.4f m, apex energy within "
-           "%.2e of the drop's\n", bounces, zmin, maxdev);
+    printf("    elastic bounce: %d bounces in 5 s, lowest bottom %.4f m, turning %.2e m from "
+           "the ground at worst, apex energy within %.2e of the drop's\n",
+           bounces, zmin, turn_max, maxdev);
     ENSURE_MSG(bounces >= 2 && apexes >= 2, "%d bounces, %d apexes", bounces, apexes);
     ENSURE_MSG(zmin > -0.005, "sank %.4f m into the ground", -zmin);
+    ENSURE_MSG(turn_max < 1e-3, "a bounce turned %.4f m from the ground", turn_max);
     ENSURE_MSG(maxdev < 0.01, "apex energy deviated by %.3g", maxdev);
     /* no spin from a flat landing */
     ENSURE(norm3(s.angular_velocity) < 1e-6);
