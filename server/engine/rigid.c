@@ -55,6 +55,12 @@
 
 #define PGS_ITERATIONS 60
 #define BAUMGARTE 0.2
+/* Against a deformable object: its side takes part of the push-out velocity and its own
+ * step pulls its nodes back towards its elastic rest every frame, so the bias must be the
+ * whole depth per substep (test_rigid: 0.2 leaves a box 0.09 h deep in a soft block, 1.0
+ * 0.04 h; moving the deformable nodes out instead, a projection, pumps energy: the box
+ * jitters and never sleeps). */
+#define BAUMGARTE_SOFT 1.0
 #define MAX_SUBSTEPS 8
 #define MAX_SPEED 1e3 /* m/s: beyond it a body's velocity is taken as diverged */
 
@@ -72,6 +78,10 @@ typedef struct contact {
     int32_t node_a, node_b; /* node of each body the point is, or -1 */
     int32_t cell_a, cell_b; /* cube of each body it touches, or -1 */
     int64_t key;         /* for removing duplicates within a body pair */
+    /* against a deformable object D (then b < 0): the face point is Σ dw[k] x[dn[k]] */
+    cs_object *D;
+    int32_t dn[4];
+    double dw[4];
 } contact;
 
 /* A contact's accumulated impulse, kept for the next step (warm start). */
@@ -921,6 +931,11 @@ static double eff_mass(const cs_rigid_world *rw, const contact *c, const double 
         mat_vec(rb->I_inv_world, rxd, t);
         k += rb->inv_mass + dot3(rxd, t);
     }
+    for (int j = 0; c->D && j < 4; j++) {
+        const size_t nk = (size_t)c->dn[j];
+        if (!c->D->mask[3 * nk] && c->D->m[nk] > 0)
+            k += c->dw[j] * c->dw[j] / c->D->m[nk];
+    }
     return k > 0 ? 1.0 / k : 0.0;
 }
 
@@ -939,6 +954,9 @@ static void rel_velocity_at(const cs_rigid_world *rw, const contact *c, double v
         for (int a = 0; a < 3; a++)
             v[a] += (s ? -1 : 1) * (bv[a] + wr[a]);
     }
+    for (int j = 0; c->D && j < 4; j++)
+        for (int a = 0; a < 3; a++)
+            v[a] -= c->dw[j] * c->D->v[3 * (size_t)c->dn[j] + a];
 }
 
 static void rel_velocity(const cs_rigid_world *rw, const contact *c, double v[3])
@@ -952,6 +970,13 @@ static void contact_impulse(cs_rigid_world *rw, const contact *c, const double J
         apply_impulse(rw->body[c->a]->rb, c->ra, J, 1.0);
     if (c->b >= 0 && rw->dyn[c->b])
         apply_impulse(rw->body[c->b]->rb, c->rb, J, -1.0);
+    for (int j = 0; c->D && j < 4; j++) {
+        const size_t nk = (size_t)c->dn[j];
+        if (c->D->mask[3 * nk] || !(c->D->m[nk] > 0))
+            continue;
+        for (int a = 0; a < 3; a++)
+            c->D->v[3 * nk + a] -= c->dw[j] * J[a] / c->D->m[nk];
+    }
 }
 
 static void prepare_contacts(const cs_world_t *w, cs_rigid_world *rw)
@@ -977,7 +1002,7 @@ static void prepare_contacts(const cs_world_t *w, cs_rigid_world *rw)
         const double vn_pre = dot3(vr, c->n);
         const double slop = 0.01 * A->cm.h;
         c->target = c->sep > 0 ? -c->sep / dt
-                               : BAUMGARTE * fmin(fmax(0, -c->sep - slop), 0.1 * A->cm.h) / dt;
+                               : (c->D ? BAUMGARTE_SOFT : BAUMGARTE) * fmin(fmax(0, -c->sep - slop), 0.1 * A->cm.h) / dt;
         const double e = B ? fmax(A->mat.restitution, B->mat.restitution) : A->mat.restitution;
         /* restitution reverses the approach speed before this step's forces, so that a
          * bounce retraces the fall (symplectic Euler is time-symmetric that way) */
@@ -987,7 +1012,7 @@ static void prepare_contacts(const cs_world_t *w, cs_rigid_world *rw)
             c->bounce = e;
         }
         c->mu = B ? sqrt(A->mat.friction * B->mat.friction)
-                  : sqrt(A->mat.friction * w->def.ground_friction);
+                  : sqrt(A->mat.friction * (c->D ? c->D->mat.friction : w->def.ground_friction));
         c->jn = c->jt1 = c->jt2 = 0;
     }
 }
@@ -1005,7 +1030,8 @@ static int cmp_kept(const void *x, const void *y)
 /* The contact's identity across steps; *sign is +1 if a is lo, else −1. */
 static kept_impulse contact_id(const cs_rigid_world *rw, const contact *c, double *sign)
 {
-    const cs_object_id a = rw->body[c->a]->id, b = c->b >= 0 ? rw->body[c->b]->id : CS_NULL_OBJECT;
+    const cs_object_id a = rw->body[c->a]->id,
+                       b = c->b >= 0 ? rw->body[c->b]->id : (c->D ? c->D->id : CS_NULL_OBJECT);
     *sign = a < b ? 1.0 : -1.0;
     return (kept_impulse){.lo = a < b ? a : b, .hi = a < b ? b : a, .key = c->key};
 }
@@ -1117,7 +1143,7 @@ static void bounce_positions(const cs_world_t *w, cs_rigid_world *rw)
         if (!rw->dyn[c->a])
             continue;
         int *bc = &rw->bounce_c[c->a];
-        if (c->sep <= 0 || (c->b >= 0 && rw->dyn[c->b])) {
+        if (c->sep <= 0 || c->D || (c->b >= 0 && rw->dyn[c->b])) {
             /* touching, or against a moving body: no correction for either side */
             *bc = -2;
             if (c->b >= 0)
@@ -1155,7 +1181,7 @@ static void bounce_positions(const cs_world_t *w, cs_rigid_world *rw)
  * exposed face of the cube they are in, their velocity into the body removed by an impulse
  * whose opposite acts on the body (friction limited by μ times it).
  */
-static void deformable_contacts(cs_world_t *w, cs_rigid_world *rw, int n_objects)
+static int deformable_contacts(cs_world_t *w, cs_rigid_world *rw, int n_objects)
 {
     const double dt = w->rigid->dt;
     for (int d = 0; d < n_objects; d++) {
@@ -1178,7 +1204,6 @@ static void deformable_contacts(cs_world_t *w, cs_rigid_world *rw, int n_objects
         }
         if (!any_overlap)
             continue;
-        bool moved = false;
         for (int b = 0; b < rw->n_body; b++) {
             cs_object *B = rw->body[b];
             cs_rigid *rb = B->rb;
@@ -1244,55 +1269,206 @@ static void deformable_contacts(cs_world_t *w, cs_rigid_world *rw, int n_objects
                     }
                 if (bax < 0)
                     continue;
-                double nl[3] = {0, 0, 0}, n[3], r[3], wr[3], vr[3];
+                double nl[3] = {0, 0, 0}, n[3];
                 nl[bax] = bdir;
                 mat_vec(rb->R, nl, n);
+                contact *c = new_contact(rw);
+                if (!c)
+                    return -1;
+                c->a = b;
+                c->b = -1;
+                c->D = D;
+                memcpy(c->p, x, sizeof c->p);
                 for (int a = 0; a < 3; a++)
-                    x[a] += best * n[a];
-                moved = true;
-                const bool dyn = !B->sleeping && B->n_fixed_nodes == 0;
-                for (int a = 0; a < 3; a++)
-                    r[a] = x[a] - rb->c[a];
-                cross3(rb->w, r, wr);
-                for (int a = 0; a < 3; a++)
-                    vr[a] = v[a] - rb->v[a] - wr[a];
-                const double vn = fmin(0.0, dot3(vr, n));
-                const double mi = D->m[i] > 0 ? D->m[i] : 1e-12;
-                double rxn[3], t[3];
-                cross3(r, n, rxn);
-                mat_vec(rb->I_inv_world, rxn, t);
-                const double k = 1.0 / mi + (dyn ? rb->inv_mass + dot3(rxn, t) : 0.0);
-                /* the push-out moved the node by `best` in this step: the body takes that
-                 * momentum too (else a body resting on a soft object sinks into it) */
-                const double j = -vn / k, jpos = BAUMGARTE * best / dt / k;
-                double vt[3];
-                for (int a = 0; a < 3; a++)
-                    vt[a] = vr[a] - vn * n[a];
-                const double vtn = sqrt(dot3(vt, vt));
-                const double mu = sqrt(B->mat.friction * D->mat.friction);
-                const double jt = vtn > 0 ? fmin(mu * j, vtn / k) : 0.0;
-                double J[3];
-                for (int a = 0; a < 3; a++) {
-                    J[a] = j * n[a] - (vtn > 0 ? jt * vt[a] / vtn : 0.0);
-                    v[a] += J[a] / mi;
-                }
-                double Jb[3];
-                for (int a = 0; a < 3; a++)
-                    Jb[a] = J[a] + jpos * n[a];
-                if (dyn)
-                    apply_impulse(rb, r, Jb, -1.0);
-                else if (-vn > 2 * w->def.sleep_speed && B->sleeping) {
-                    B->sleeping = false;
-                    B->still_steps = 0;
-                }
-                rb->impact_force += sqrt(dot3(Jb, Jb)) / dt;
+                    c->n[a] = -n[a]; /* from the node towards the body */
+                c->sep = -best;
+                c->cell_a = cell;
+                c->key = ((int64_t)1 << 60) + ((int64_t)i * 3 + bax) * 2 + (bdir > 0);
+                c->dn[0] = c->dn[1] = c->dn[2] = c->dn[3] = i;
+                c->dw[0] = 1;
             }
         }
-        if (moved) {
-            cs_surface_skin(&D->surf, &D->cm, D->x);
+    }
+    return 0;
+}
+
+
+/* The local coordinates u ∈ [0,1]³ of p in the (deformed) hexahedron with corners x[k]
+ * (CS_CORNER order), by Newton on the trilinear map. False if it does not converge or p is
+ * outside (by more than tol). */
+static bool hex_local(const double x[8][3], const double p[3], double u[3], double tol)
+{
+    u[0] = u[1] = u[2] = 0.5;
+    for (int it = 0; it < 8; it++) {
+        double r[3] = {-p[0], -p[1], -p[2]}, J[9] = {0};
+        for (int k = 0; k < 8; k++) {
+            double f[3], df[3];
+            for (int a = 0; a < 3; a++) {
+                f[a] = CS_CORNER[k][a] ? u[a] : 1 - u[a];
+                df[a] = CS_CORNER[k][a] ? 1 : -1;
+            }
+            const double N = f[0] * f[1] * f[2];
+            const double dN[3] = {df[0] * f[1] * f[2], f[0] * df[1] * f[2], f[0] * f[1] * df[2]};
+            for (int a = 0; a < 3; a++) {
+                r[a] += N * x[k][a];
+                for (int b = 0; b < 3; b++)
+                    J[3 * a + b] += x[k][a] * dN[b];
+            }
+        }
+        double Ja[9], du[3];
+        const double det = cs_mat3_adjugate(J, Ja);
+        if (!(fabs(det) > 0))
+            return false;
+        mat_vec(Ja, r, du);
+        double m = 0;
+        for (int a = 0; a < 3; a++) {
+            u[a] -= du[a] / det;
+            m = fmax(m, fabs(du[a] / det));
+            if (!(fabs(u[a] - 0.5) < 2))
+                return false;
+        }
+        if (m < 1e-10)
+            break;
+    }
+    for (int a = 0; a < 3; a++)
+        if (u[a] < -tol || u[a] > 1 + tol)
+            return false;
+    return true;
+}
+
+/*
+ * Rigid nodes (the corners of its cubes) against the cells of deformable objects: a rigid
+ * corner or edge pressing into a deformable face between its nodes, which deformable_contacts
+ * (nodes against cubes) does not see. The node is located in a deformed cell (inverse
+ * trilinear map of its 8 current corners), or within the body's speculative margin outside
+ * it across one face; the contact is the nearest exposed face of the cell (in the cell's own
+ * coordinates), the normal the cell's mean edge across it, the gap the node's distance to it
+ * along that edge (negative inside). The other side of the contact is the face point under
+ * the node, Σ wk x_k over the face's 4 corners with their bilinear weights: it takes part in
+ * the sequential-impulse solve with the bodies' contacts (effective mass Σ wk²/mk on its side,
+ * an impulse −wk J on corner k), so the body and the deformable object exchange momentum
+ * two-way, with friction, warm starting and speculative approach like any contact. Fills
+ * rw->c; returns 0 or -1 (out of memory).
+ */
+static int cell_contacts(cs_world_t *w, cs_rigid_world *rw, int n_objects)
+{
+    const double dt = w->rigid->dt;
+    for (int d = 0; d < n_objects; d++) {
+        cs_object *D = w->objects[d];
+        if (D->model == CS_MODEL_RIGID || D->n == 0 || D->cm.n_cells == 0)
+            continue;
+        for (int b = 0; b < rw->n_body; b++) {
+            cs_object *B = rw->body[b];
+            const cs_rigid *rb = B->rb;
+            /* speculative: nodes within the distance the body can close in a substep */
+            const double margin = body_margin(B, dt), tol = fmin(0.5, margin / D->cm.h);
+            for (int32_t cell = 0; cell < D->cm.n_cells; cell++) {
+                const int32_t *cn = D->cm.cell_nodes + 8 * (size_t)cell;
+                double X[8][3], lo[3] = {INFINITY, INFINITY, INFINITY};
+                double hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+                for (int k = 0; k < 8; k++)
+                    for (int a = 0; a < 3; a++) {
+                        X[k][a] = D->x[3 * (size_t)cn[k] + a];
+                        lo[a] = fmin(lo[a], X[k][a] - margin);
+                        hi[a] = fmax(hi[a], X[k][a] + margin);
+                    }
+                if (lo[0] > rb->aabb_max[0] || hi[0] < rb->aabb_min[0] || lo[1] > rb->aabb_max[1] ||
+                    hi[1] < rb->aabb_min[1] || lo[2] > rb->aabb_max[2] || hi[2] < rb->aabb_min[2])
+                    continue;
+                const int32_t *ijk = D->cm.cell_ijk + 3 * (size_t)cell;
+                for (int i = 0; i < B->n; i++) {
+                    const double *p = B->x + 3 * (size_t)i;
+                    if (p[0] < lo[0] || p[0] > hi[0] || p[1] < lo[1] || p[1] > hi[1] ||
+                        p[2] < lo[2] || p[2] > hi[2])
+                        continue;
+                    double u[3];
+                    if (!hex_local(X, p, u, tol))
+                        continue;
+                    /* outside the cell (within the margin) across one of its faces only:
+                     * a speculative contact with that face if it is exposed */
+                    int n_out = 0, oax = -1;
+                    for (int a = 0; a < 3; a++)
+                        if (u[a] < 0 || u[a] > 1) {
+                            n_out++;
+                            oax = a;
+                        }
+                    if (n_out > 1)
+                        continue;
+                    /* the nearest exposed face (in the cell's own coordinates); f < 0 outside */
+                    int bax = -1, bdir = 0;
+                    double bf = INFINITY;
+                    for (int ax = 0; ax < 3; ax++)
+                        for (int dir = -1; dir <= 1; dir += 2) {
+                            if (n_out && (ax != oax || (dir > 0) != (u[ax] > 1)))
+                                continue;
+                            int32_t nb[3] = {ijk[0], ijk[1], ijk[2]};
+                            nb[ax] += dir;
+                            if (cs_cubemesh_find(&D->cm, nb[0], nb[1], nb[2]) >= 0)
+                                continue;
+                            const double f = dir > 0 ? 1 - u[ax] : u[ax];
+                            if (f < bf) {
+                                bf = f;
+                                bax = ax;
+                                bdir = dir;
+                            }
+                        }
+                    if (bax < 0)
+                        continue;
+                    /* e: the cell's mean edge along bax; the face normal is e's direction
+                     * (sheared cells: close enough, the gap is measured along it) */
+                    double e[3] = {0, 0, 0};
+                    for (int k = 0; k < 8; k++) {
+                        const double sg = CS_CORNER[k][bax] ? 0.25 : -0.25;
+                        for (int a = 0; a < 3; a++)
+                            e[a] += sg * X[k][a];
+                    }
+                    const double el = sqrt(dot3(e, e));
+                    if (!(el > 0) || -bf * el >= margin)
+                        continue;
+                    contact *c = new_contact(rw);
+                    if (!c)
+                        return -1;
+                    c->a = b;
+                    c->b = -1;
+                    c->D = D;
+                    memcpy(c->p, p, sizeof c->p);
+                    for (int a = 0; a < 3; a++)
+                        c->n[a] = bdir * e[a] / el;
+                    c->sep = -bf * el;
+                    c->node_a = i;
+                    c->key = ((int64_t)cell * 6 + 2 * bax + (bdir > 0)) * B->n + i;
+                    const int a1 = (bax + 1) % 3, a2 = (bax + 2) % 3;
+                    int j = 0;
+                    for (int k = 0; k < 8 && j < 4; k++) {
+                        if (CS_CORNER[k][bax] != (bdir > 0))
+                            continue;
+                        const double u1 = fmin(1, fmax(0, u[a1])), u2 = fmin(1, fmax(0, u[a2]));
+                        c->dn[j] = cn[k];
+                        c->dw[j] = (CS_CORNER[k][a1] ? u1 : 1 - u1) * (CS_CORNER[k][a2] ? u2 : 1 - u2);
+                        j++;
+                    }
+                }
+            }
+        }
+    }
+    return 0;
+}
+
+/* After the solve: the deformable objects contacts pushed stay awake; their energies and
+ * surfaces follow the velocities and positions they now have. */
+static void cell_contacts_done(cs_rigid_world *rw)
+{
+    const cs_object *last = NULL; /* contacts come grouped by object: skin each once a group */
+    for (int i = 0; i < rw->nc; i++) {
+        const contact *c = &rw->c[i];
+        cs_object *D = c->D;
+        if (D && c->jn > 0) {
             D->elastic_energy_valid = false;
             D->sleeping = false;
             D->still_steps = 0;
+            if (D != last)
+                cs_surface_skin(&D->surf, &D->cm, D->x);
+            last = D;
         }
     }
 }
@@ -1610,6 +1786,8 @@ static int substep(cs_world_t *w, cs_rigid_world *rw, bool last, cs_step_stats *
                 return CS_ERR_NOMEM;
         }
     }
+    if (cell_contacts(w, rw, n_objects) != 0 || deformable_contacts(w, rw, n_objects) != 0)
+        return CS_ERR_NOMEM;
     /* contacts whose normal must point towards a dynamic body: swap so that a is dynamic */
     for (int i = 0; i < rw->nc; i++) {
         contact *c = &rw->c[i];
@@ -1640,7 +1818,7 @@ static int substep(cs_world_t *w, cs_rigid_world *rw, bool last, cs_step_stats *
             rw->body[c->b]->rb->impact_force += J;
     }
     bounce_positions(w, rw);
-    deformable_contacts(w, rw, n_objects);
+    cell_contacts_done(rw);
     const double t2 = now_ms();
     /* 4. poses, nodes, sleep */
     for (int i = 0; i < rw->n_body; i++) {

@@ -442,10 +442,15 @@ TEST(rigid_against_deformable)
     ENSURE_MSG(box != CS_NULL_OBJECT, "%s", err);
     cs_rigid_state s;
     double zmin = 1e9;
+    int asleep_at = -1;
     for (int i = 0; i < 300; i++) {
         ENSURE(cs_world_step(w) == CS_OK);
         cs_object_rigid_state(w, box, &s);
         zmin = fmin(zmin, s.position[2] - 0.05);
+        cs_object_info info;
+        cs_object_get_info(w, box, &info);
+        if (info.sleeping && asleep_at < 0)
+            asleep_at = i;
     }
     const double *x;
     int n;
@@ -457,13 +462,15 @@ TEST(rigid_against_deformable)
             top = fmax(top, x[3 * i + 2]);
     const double bottom = s.position[2] - 0.05;
     printf("    rigid box on a soft block: box bottom %.4f m (lowest %.4f), block top under it "
-           "%.4f m (rest 0.2)\n", bottom, zmin, top);
-    /* it rests on the block, not on the ground, pressing it down a little; the block's nodes
-     * are pushed out of the box every step but come back in by up to ~h/5 under its weight
-     * (the push-out is a projection with Baumgarte-weighted momentum, not a constraint of
-     * the block's implicit solve) */
+           "%.4f m (rest 0.2): %.3f h inside, asleep after %d steps\n", bottom, zmin, top,
+           (top - bottom) / 0.1, asleep_at);
+    /* it rests on the block, not on the ground, pressing it down a little; the box's corners
+     * take part in the contact solve against the block's faces (two-way), so the block's
+     * nodes stay within 0.05 h of the box's bottom (they were up to h/8 inside when only the
+     * block's nodes were pushed out), and the box falls asleep */
     ENSURE_MSG(bottom > 0.15 && zmin > 0.1, "box sank to %.4f (lowest %.4f)", bottom, zmin);
-    ENSURE_MSG(top - bottom < 0.02, "block nodes %.4f m inside the box", top - bottom);
+    ENSURE_MSG(top - bottom < 0.05 * 0.1, "block nodes %.4f m inside the box", top - bottom);
+    ENSURE_MSG(asleep_at >= 0, "the box did not fall asleep (v %.3g %.3g %.3g w %.3g %.3g %.3g)", s.velocity[0], s.velocity[1], s.velocity[2], s.angular_velocity[0], s.angular_velocity[1], s.angular_velocity[2]);
     ENSURE(fabs(s.velocity[2]) < 0.05);
     cs_world_destroy(w);
 }
@@ -703,5 +710,71 @@ TEST(rigid_sleeping_body_takes_momentum)
     ENSURE_NEAR(p1, p0, 1e-3 * p0);
     ENSURE_NEAR(sb.velocity[0], 1.0, 0.05);
     ENSURE_NEAR(sa.velocity[0], 1.0, 0.05);
+    cs_world_destroy(w);
+}
+
+/* A rigid cube smaller than the deformable block's cells, dropped on the middle of a cell's
+ * top face: no block node lies under it, so only its own corners inside the block's cells
+ * can hold it (before those were tested it fell through to the ground). It must rest on the
+ * face, its corners at most 0.05·h (block cells) below the face under them, push the block
+ * down (the equal and opposite impulse), and fall asleep. */
+TEST(rigid_corner_on_deformable_face)
+{
+    cs_world_t *w = world(true, true);
+    char err[256] = "";
+    const double H = 0.1, hr = 0.05;
+    cs_material soft = cs_material_default();
+    soft.young = 1e5;
+    soft.damping[0] = 1;
+    cs_object_id block = add_box(w, "soft", 4, 4, 2, H, (double[3]){0, 0, 0}, soft, false,
+                                 CS_MODEL_COROTATIONAL, NULL, err);
+    ENSURE_MSG(block != CS_NULL_OBJECT, "%s", err);
+    cs_material hard = cs_material_default();
+    hard.density = 4000;
+    cs_object_id box = add_box(w, "pebble", 1, 1, 1, hr, (double[3]){0.125, 0.125, 0.3}, hard,
+                               false, CS_MODEL_RIGID, NULL, err);
+    ENSURE_MSG(box != CS_NULL_OBJECT, "%s", err);
+    cs_rigid_state s;
+    double zmin = 1e9, pen = 0, top_min = 1e9, far_top = 0;
+    bool asleep = false;
+    int steps = 0;
+    for (; steps < 600 && !asleep; steps++) {
+        ENSURE(cs_world_step(w) == CS_OK);
+        cs_object_rigid_state(w, box, &s);
+        const double bottom = s.position[2] - 0.5 * hr;
+        zmin = fmin(zmin, bottom);
+        /* the block's top face under the pebble: bilinear in the top nodes of its cell */
+        const double *x;
+        int n;
+        cs_object_nodes(w, block, NULL, &x, NULL, &n);
+        double top = 0, far = 0;
+        int nt = 0, nf = 0;
+        for (int i = 0; i < n; i++)
+            if (x[3 * i + 2] > 0.15 && x[3 * i] > 0.05 && x[3 * i] < 0.25 && x[3 * i + 1] > 0.05 &&
+                x[3 * i + 1] < 0.25) {
+                top += x[3 * i + 2];
+                nt++;
+            } else if (x[3 * i + 2] > 0.15 && x[3 * i] > 0.25 && x[3 * i + 1] > 0.25) {
+                far += x[3 * i + 2]; /* the top nodes of the cells away from it */
+                nf++;
+            }
+        far_top = far / nf;
+        ENSURE_MSG(nt == 4, "step %d: %d top nodes, pebble at %g %g %g", steps, nt, s.position[0], s.position[1], s.position[2]);
+        top /= nt;
+        top_min = fmin(top_min, top);
+        pen = top - bottom; /* at the end */
+        cs_object_info info;
+        cs_object_get_info(w, box, &info);
+        asleep = info.sleeping;
+    }
+    printf("    rigid pebble (h/2) on a soft cell face: bottom %.4f m (lowest %.4f), at rest "
+           "%.2e m = %.3f h below the face, face down to %.4f (%.4f elsewhere), asleep after "
+           "%d steps\n", s.position[2] - 0.5 * hr, zmin, pen, pen / H, top_min, far_top, steps);
+    ENSURE_MSG(zmin > 0.15, "the pebble went into the block to %.4f", zmin);
+    ENSURE_MSG(pen < 0.05 * H, "pebble %.4f m inside the face", pen);
+    /* the pebble's weight is on the block: the face under it is lower than the others */
+    ENSURE_MSG(top_min < far_top - 2e-4, "the block was not pushed (top %.6f, elsewhere %.6f)",
+               top_min, far_top);
+    ENSURE_MSG(asleep, "pebble still awake after %d steps", steps);
     cs_world_destroy(w);
 }
