@@ -504,6 +504,13 @@ TEST(rigid_impact_breaks_into_closed_pieces)
         (void)ev;
         if (cs_world_object_ids(w, NULL, 0) > 1) {
             broke_at = i;
+            /* the impact's static solve is bounded (one body broke: at most 100 PCG
+             * iterations; the step's deformable objects: none) and did its work */
+            const cs_step_stats *st = cs_world_last_stats(w);
+            printf("    impact solve: %d PCG iterations, residual %.1e\n", st->cg_iterations,
+                   st->cg_residual);
+            ENSURE_MSG(st->cg_iterations > 0 && st->cg_iterations <= 100, "%d iterations",
+                       st->cg_iterations);
             for (int a = 0; a < 3; a++)
                 p_before[a] = s.mass * s.velocity[a];
         }
