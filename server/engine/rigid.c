@@ -33,8 +33,10 @@
  * ~14° of one; the contact points are the corners of either cube that lie against the other
  * (libccd's MPR point when none does, edge–edge). Normals that would push through a face
  * shared with a neighbouring cube of the same body are dropped. The ground is a plane against
- * the nodes. Deformable objects: their nodes inside a rigid body's cubes are pushed out
- * through the exposed face they came in by, with an equal and opposite impulse on the body.
+ * the nodes. Deformable objects take part in the same solve (two-way): their nodes inside a
+ * rigid body's cubes (out through the exposed face they came in by) and the rigid nodes inside
+ * or just outside their deformed cells (against the cell's nearest exposed face, the face
+ * point weighted bilinearly over its corners) are contacts whose other side is those nodes.
  *
  * Impact fracture: when the contact force (impulse/dt) on a body with fracture enabled exceeds
  * strength·h² and twice its weight, the body's cube mesh is solved statically (linear FEM,
@@ -1914,9 +1916,8 @@ static int substep(cs_world_t *w, cs_rigid_world *rw, bool last, cs_step_stats *
 /*
  * The frame is split into substeps so that no body moves more than its cube edge in one (at
  * most MAX_SUBSTEPS): contacts are speculative, so nothing passes through anything at any
- * speed, but a bounce is taken where the contact is found, up to one substep's travel
- * before the surface. (Finer substeps would shrink that gap but break the time symmetry
- * of a bounce between frames of different substep counts: energy would drift.)
+ * speed; a bounce off a still surface is moved to its time of impact within the substep
+ * (bounce_positions).
  */
 int cs_rigid_step(cs_world_t *w, cs_step_stats *st)
 {
