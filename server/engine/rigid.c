@@ -1216,6 +1216,8 @@ static int deformable_contacts(cs_world_t *w, cs_rigid_world *rw, int n_objects)
             cs_object *B = rw->body[b];
             cs_rigid *rb = B->rb;
             const double h = B->cm.h;
+            if (!rw->dyn[b] && D->sleeping)
+                continue; /* both at rest */
             for (int i = 0; i < D->n; i++) {
                 double *x = D->x + 3 * (size_t)i, *v = D->v + 3 * (size_t)i;
                 if (D->mask[3 * (size_t)i] || x[0] < rb->aabb_min[0] || x[0] > rb->aabb_max[0] ||
@@ -1368,6 +1370,8 @@ static int cell_contacts(cs_world_t *w, cs_rigid_world *rw, int n_objects)
         for (int b = 0; b < rw->n_body; b++) {
             cs_object *B = rw->body[b];
             const cs_rigid *rb = B->rb;
+            if (!rw->dyn[b] && D->sleeping)
+                continue; /* both at rest: nothing to do until one moves */
             /* speculative: nodes within the distance the body can close in a substep */
             const double margin = body_margin(B, dt), tol = fmin(0.5, margin / D->cm.h);
             for (int32_t cell = 0; cell < D->cm.n_cells; cell++) {

@@ -442,7 +442,7 @@ TEST(rigid_against_deformable)
     ENSURE_MSG(box != CS_NULL_OBJECT, "%s", err);
     cs_rigid_state s;
     double zmin = 1e9;
-    int asleep_at = -1;
+    int asleep_at = -1, block_asleep_at = -1;
     for (int i = 0; i < 300; i++) {
         ENSURE(cs_world_step(w) == CS_OK);
         cs_object_rigid_state(w, box, &s);
@@ -451,6 +451,9 @@ TEST(rigid_against_deformable)
         cs_object_get_info(w, box, &info);
         if (info.sleeping && asleep_at < 0)
             asleep_at = i;
+        cs_object_get_info(w, block, &info);
+        if (info.sleeping && block_asleep_at < 0)
+            block_asleep_at = i;
     }
     const double *x;
     int n;
@@ -462,8 +465,8 @@ TEST(rigid_against_deformable)
             top = fmax(top, x[3 * i + 2]);
     const double bottom = s.position[2] - 0.05;
     printf("    rigid box on a soft block: box bottom %.4f m (lowest %.4f), block top under it "
-           "%.4f m (rest 0.2): %.3f h inside, asleep after %d steps\n", bottom, zmin, top,
-           (top - bottom) / 0.1, asleep_at);
+           "%.4f m (rest 0.2): %.3f h inside, asleep after %d steps (the block after %d)\n",
+           bottom, zmin, top, (top - bottom) / 0.1, asleep_at, block_asleep_at);
     /* it rests on the block, not on the ground, pressing it down a little; the box's corners
      * take part in the contact solve against the block's faces (two-way), so the block's
      * nodes stay within 0.05 h of the box's bottom (they were up to h/8 inside when only the
