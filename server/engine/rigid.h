@@ -9,8 +9,9 @@
  * same as for deformable objects.
  *
  * All rigid objects of a world step together (cs_rigid_step): gravity and client inputs,
- * contacts (ground, rigid–rigid through libccd between cubes, deformable nodes against rigid
- * cubes) solved by sequential impulses, then the pose update, sleeping and impact fracture.
+ * contacts (ground, rigid–rigid through libccd between cubes, two-way against deformable
+ * objects: their nodes in rigid cubes, rigid nodes in their deformed cells) solved by
+ * sequential impulses, then the pose update, sleeping and impact fracture.
  *
  * Owns: cs_rigid (through cs_object.rb) and cs_rigid_world (through cs_world.rigid).
  */
@@ -60,7 +61,7 @@ void cs_rigid_reset(cs_object *o);
 /* Kinetic energy ½ m v² + ½ ωᵀ I ω. */
 double cs_rigid_kinetic_energy(const cs_object *o);
 
-/* Step every rigid object of w by one dt (and push deformable nodes out of rigid bodies).
+/* Step every rigid object of w by one dt (with its contacts against deformable objects).
  * Adds timings and counts to st. Returns CS_OK or the first error. */
 int cs_rigid_step(cs_world_t *w, cs_step_stats *st);
 void cs_rigid_world_free(cs_world_t *w);
