@@ -122,6 +122,7 @@ typedef struct cs_object {
     cs_fields fld;
     double mass;
     cs_cg_work cg;
+    struct cs_mg *mg;      /* multigrid hierarchy (mg.h), built on first use; NULL otherwise */
     cs_input inputs[CS_MAX_INPUTS];
     int n_inputs;
     int still_steps;
