@@ -146,12 +146,12 @@ static int coarsen(mg_level *f, mg_level *c)
     int rc = -1;
     const int nf = f->n_cells;
     keyed *ks = malloc((size_t)nf * sizeof *ks);
-    int32_t *slot = NULL, *nid = NULL;
+    int32_t *slot = NULL, *nid = NULL, *ufb = malloc((size_t)nf * sizeof(int32_t));
     f->parent = malloc((size_t)nf * sizeof(int32_t));
     c->own_ijk = malloc((size_t)nf * 3 * sizeof(int32_t));
     c->ch_start = malloc(((size_t)nf + 1) * sizeof(int32_t));
     c->ch = malloc((size_t)nf * sizeof(int32_t));
-    if (!ks || !f->parent || !c->own_ijk || !c->ch_start || !c->ch)
+    if (!ks || !ufb || !f->parent || !c->own_ijk || !c->ch_start || !c->ch)
         goto out;
     for (int i = 0; i < nf; i++) {
         const int32_t *ijk = f->cell_ijk + 3 * i;
@@ -165,8 +165,8 @@ static int coarsen(mg_level *f, mg_level *c)
         int g1 = g0;
         while (g1 < nf && ks[g1].key == ks[g0].key)
             g1++;
-        const int m = g1 - g0; /* <= 8 */
-        int32_t uf[8];
+        const int m = g1 - g0; /* 8 at most, more where split cells share an index */
+        int32_t *uf = ufb + g0;
         for (int a = 0; a < m; a++)
             uf[a] = a;
         for (int a = 0; a < m; a++)
@@ -296,6 +296,7 @@ static int coarsen(mg_level *f, mg_level *c)
     rc = 0;
 out:
     free(ks);
+    free(ufb);
     free(slot);
     free(nid);
     return rc;
@@ -533,9 +534,10 @@ static void smooth(const cs_mg *mg, int level, const double *b, double *x)
     mg_level *l = &mg->lv[level];
     apply(mg, level, x, l->t);
     const int n3 = 3 * l->n_nodes;
+    /* masked: D⁻¹ acts on the free dofs only (Z D⁻¹ Z keeps the cycle symmetric) */
 #pragma omp parallel for num_threads(l->threads) schedule(static)
     for (int d = 0; d < n3; d++)
-        l->t[d] = b[d] - l->t[d];
+        l->t[d] = l->mask[d] ? 0.0 : b[d] - l->t[d];
     jacobi(l, l->t, x, l->omega, true);
 }
 
@@ -680,6 +682,9 @@ static double estimate_lambda(cs_mg *mg, int level)
         if (!(nv > 0))
             break;
         apply(mg, level, v, l->t);
+        for (int d = 0; d < n3; d++)
+            if (l->mask[d])
+                l->t[d] = 0;
         jacobi(l, l->t, w, 1.0, false);
         for (int d = 0; d < n3; d++)
             nw += w[d] * w[d];
