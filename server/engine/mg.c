@@ -61,10 +61,12 @@ static int64_t floordiv2(int32_t v)
     return v >= 0 ? v / 2 : -((-v + 1) / 2);
 }
 
+/* Parent indices are within ±2^19 (cell indices within ±2^20, cubemesh.h): 21 bits each. */
 static int64_t pack(int64_t i, int64_t j, int64_t k)
 {
-    const int64_t o = 1 << 21;
-    return ((i + o) << 44) | ((j + o) << 22) | (k + o);
+    const uint64_t o = 1u << 20, m = (1u << 21) - 1;
+    return (int64_t)((((uint64_t)(i + o) & m) << 42) | (((uint64_t)(j + o) & m) << 21) |
+                     ((uint64_t)(k + o) & m));
 }
 
 typedef struct keyed {

@@ -1218,8 +1218,8 @@ static int step_implicit_euler(cs_world_t *w, cs_object *o, cs_step_stats *st)
     for (size_t d = 0; d < n3; d++)
         o->v1[d] = o->mask[d] ? 0.0 : o->v[d];
     int contacts = constrain_ground(w, o);
-    double t3 = now_ms();
     const bool use_mg = setup_multigrid(w, o, step_operator, o->smask);
+    double t3 = now_ms();
     cs_cg_result r = solve(w, o, use_mg, step_operator, o->smask, o->b, o->v1,
                            w->def.cg_tolerance, w->def.cg_max_iterations);
     double t4 = now_ms();
