@@ -25,16 +25,25 @@
 #include "cubesim.h"
 
 typedef struct result {
-    double steps_per_s, ms_step, iters, ms_rot, ms_rhs, ms_solve, ms_post, ms_skin;
+    double steps_per_s, ms_step, cpu_ms_step, iters, ms_rot, ms_rhs, ms_solve, ms_post, ms_skin;
 } result;
 
 typedef enum { FIELD_NONE, FIELD_CUBES, FIELD_GRADIENT } field_kind;
 
-static int run_once(int n, int threads, int steps, field_kind field, result *r)
+static double cpu_s(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+    return ts.tv_sec + 1e-9 * ts.tv_nsec;
+}
+
+static int run_once(int n, int threads, int steps, field_kind field, cs_preconditioner pc,
+                    result *r)
 {
     char err[256];
     cs_world_def wd = cs_world_def_default();
     wd.threads = threads;
+    wd.preconditioner = pc;
     wd.sleep_steps = 0;
     cs_world_t *w;
     if (cs_world_create(&wd, &w, err, sizeof err) != CS_OK) {
@@ -84,7 +93,7 @@ static int run_once(int n, int threads, int steps, field_kind field, result *r)
     }
     cs_world_step(w); /* warm-up: first touch of every page */
     memset(r, 0, sizeof *r);
-    double t0 = now_s();
+    double t0 = now_s(), c0 = cpu_s();
     for (int s = 0; s < steps; s++) {
         cs_world_step(w);
         const cs_step_stats *st = cs_world_last_stats(w);
@@ -96,6 +105,7 @@ static int run_once(int n, int threads, int steps, field_kind field, result *r)
         r->ms_skin += st->ms_skin;
     }
     double el = now_s() - t0;
+    r->cpu_ms_step = 1e3 * (cpu_s() - c0) / steps;
     r->steps_per_s = steps / el;
     r->ms_step = 1e3 * el / steps;
     r->iters /= steps;
@@ -114,6 +124,8 @@ int main(int argc, char **argv)
     int sizes[16] = {8, 16, 32, 48}, ns = 4, threads[8] = {1, 2}, nt = 2, runs = 5;
     const char *csv = NULL;
     field_kind field = FIELD_NONE;
+    cs_preconditioner pcs[3] = {CS_PRECOND_JACOBI};
+    int npc = 1;
     for (int i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--sizes") && i + 1 < argc)
             ns = parse_list(argv[++i], sizes, 16);
@@ -129,9 +141,22 @@ int main(int argc, char **argv)
             field = FIELD_CUBES, i++;
         else if (!strcmp(argv[i], "--field") && i + 1 < argc && !strcmp(argv[i + 1], "gradient"))
             field = FIELD_GRADIENT, i++;
-        else {
+        else if (!strcmp(argv[i], "--precond") && i + 1 < argc) {
+            /* a comma-separated list of auto, jacobi, multigrid */
+            char buf[64];
+            snprintf(buf, sizeof buf, "%s", argv[++i]);
+            npc = 0;
+            for (char *tok = strtok(buf, ","); tok && npc < 3; tok = strtok(NULL, ","))
+                if (cs_preconditioner_from_name(tok, &pcs[npc++]) != 0) {
+                    fprintf(stderr, "bench_blocks: unknown preconditioner %s\n", tok);
+                    return 2;
+                }
+            if (npc == 0)
+                return 2;
+        } else {
             fprintf(stderr, "usage: bench_blocks [--sizes 8,16,32,48] [--runs 5] "
-                            "[--threads 1,2] [--csv FILE] [--field none|cubes|gradient]\n");
+                            "[--threads 1,2] [--csv FILE] [--field none|cubes|gradient] "
+                            "[--precond jacobi,multigrid,auto]\n");
             return 2;
         }
     }
@@ -143,42 +168,47 @@ int main(int argc, char **argv)
         return 2;
     }
     if (f)
-        fprintf(f, "cubes,threads,runs,steps_per_s,ms_per_step,cg_iters_per_step,ms_rotations,"
+        fprintf(f, "cubes,precond,threads,runs,steps_per_s,ms_per_step,cpu_ms_per_step,cg_iters_per_step,ms_rotations,"
                    "ms_rhs,ms_solve,ms_post,ms_skin\n");
-    printf("| cubes | threads | steps/s | ms/step | CG it/step | rotations | rhs+precond | "
-           "CG solve | post | skin |\n|---|---|---|---|---|---|---|---|---|---|\n");
-    double prev_ms[8] = {0}, prev_cells = 0;
+    printf("| cubes | precond | threads | steps/s | ms/step | CPU ms/step | CG it/step | rotations | "
+           "rhs+precond | CG solve | post | skin |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    static const char *const PCN[] = {"auto", "jacobi", "multigrid"};
+    double prev_ms[3][8] = {{0}}, prev_cells = 0;
     for (int si = 0; si < ns; si++) {
         int n = sizes[si];
         long cells = (long)n * n * n;
         /* About two seconds of stepping per run at most, at least 3 steps. */
         int steps = cells <= 5000 ? 60 : cells <= 40000 ? 12 : 4;
+        for (int pi = 0; pi < npc; pi++)
         for (int ti = 0; ti < nt; ti++) {
             result rs[100];
             double v[100];
             for (int r = 0; r < runs; r++)
-                if (run_once(n, threads[ti], steps, field, &rs[r]) != 0)
+                if (run_once(n, threads[ti], steps, field, pcs[pi], &rs[r]) != 0)
                     return 1;
             result m;
-            double *fields[] = {&m.steps_per_s, &m.ms_step, &m.iters, &m.ms_rot,
+            double *fields[] = {&m.steps_per_s, &m.ms_step, &m.cpu_ms_step, &m.iters, &m.ms_rot,
                                 &m.ms_rhs, &m.ms_solve, &m.ms_post, &m.ms_skin};
-            for (int k = 0; k < 8; k++) {
+            for (int k = 0; k < 9; k++) {
                 for (int r = 0; r < runs; r++)
                     v[r] = *(double *)((char *)&rs[r] + ((char *)fields[k] - (char *)&m));
                 *fields[k] = median(v, runs);
             }
-            printf("| %d³ = %ld | %d | %.2f | %.2f | %.1f | %.2f | %.2f | %.2f | %.2f | %.2f |\n",
-                   n, cells, threads[ti], m.steps_per_s, m.ms_step, m.iters, m.ms_rot, m.ms_rhs,
-                   m.ms_solve, m.ms_post, m.ms_skin);
+            printf("| %d³ = %ld | %s | %d | %.2f | %.2f | %.2f | %.1f | %.2f | %.2f | %.2f | %.2f | "
+                   "%.2f |\n",
+                   n, cells, PCN[pcs[pi]], threads[ti], m.steps_per_s, m.ms_step, m.cpu_ms_step,
+                   m.iters, m.ms_rot, m.ms_rhs, m.ms_solve, m.ms_post, m.ms_skin);
+            fflush(stdout);
             if (f)
-                fprintf(f, "%ld,%d,%d,%.4f,%.4f,%.2f,%.4f,%.4f,%.4f,%.4f,%.4f\n", cells,
-                        threads[ti], runs, m.steps_per_s, m.ms_step, m.iters, m.ms_rot,
-                        m.ms_rhs, m.ms_solve, m.ms_post, m.ms_skin);
-            if (si > 0 && prev_ms[ti] > 0)
-                fprintf(stderr, "  %d thread(s): cost grows as cubes^%.2f from %ld to %ld cubes\n",
-                        threads[ti], log(m.ms_step / prev_ms[ti]) / log(cells / prev_cells),
+                fprintf(f, "%ld,%s,%d,%d,%.4f,%.4f,%.4f,%.2f,%.4f,%.4f,%.4f,%.4f,%.4f\n", cells,
+                        PCN[pcs[pi]], threads[ti], runs, m.steps_per_s, m.ms_step, m.cpu_ms_step,
+                        m.iters, m.ms_rot, m.ms_rhs, m.ms_solve, m.ms_post, m.ms_skin);
+            if (si > 0 && prev_ms[pi][ti] > 0)
+                fprintf(stderr, "  %s, %d thread(s): cost grows as cubes^%.2f from %ld to %ld cubes\n",
+                        PCN[pcs[pi]], threads[ti],
+                        log(m.ms_step / prev_ms[pi][ti]) / log(cells / prev_cells),
                         (long)prev_cells, cells);
-            prev_ms[ti] = m.ms_step;
+            prev_ms[pi][ti] = m.ms_step;
         }
         prev_cells = (double)cells;
     }

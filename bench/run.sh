@@ -10,12 +10,13 @@ out=bench/results
 mkdir -p "$out"
 sizes=${BENCH_SIZES:-8,16,32,48}
 runs=${BENCH_RUNS:-5}
-echo "bench_blocks: sizes $sizes, $runs runs each, threads 1 and 2 ($(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | xargs))"
-build/bin/bench_blocks --sizes "$sizes" --runs "$runs" --threads 1,2 --csv "$out/blocks.csv" \
+echo "bench_blocks: sizes $sizes, $runs runs each, block Jacobi and multigrid, threads 1 and 2 ($(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | xargs))"
+build/bin/bench_blocks --sizes "$sizes" --runs "$runs" --threads 1,2 --precond jacobi,multigrid \
+  --csv "$out/blocks.csv" \
   2> "$out/blocks.growth.txt" | tee "$out/blocks.md"
 cat "$out/blocks.growth.txt"
-# Two-thread speed-up per size.
-awk -F, 'NR>1 { ms[$1","$2]=$5; c[$1]=1 } END { for (k in c) if (ms[k",2"] > 0) printf "  speed-up with 2 threads at %d cubes: %.2fx\n", k, ms[k",1"]/ms[k",2"] }' \
+# Two-thread speed-up per size and preconditioner (columns: cubes,precond,threads,runs,steps_per_s,ms_per_step,...).
+awk -F, 'NR>1 { ms[$1","$2","$3]=$6; c[$1","$2]=1 } END { for (k in c) if (ms[k",2"] > 0) { split(k, a, ","); printf "  speed-up with 2 threads at %d cubes (%s): %.2fx\n", a[1], a[2], ms[k",1"]/ms[k",2"] } }' \
   "$out/blocks.csv" | sort -t' ' -k6 -n | tee "$out/blocks.speedup.txt"
 if command -v gnuplot >/dev/null; then
   gnuplot <<GP
@@ -27,9 +28,11 @@ set xlabel "cubes"
 set ylabel "ms per step (median)"
 set title "corotational implicit Euler step, dt = 1/60 s"
 set key left top
-plot "< awk -F, 'NR>1 && \$2==1' $out/blocks.csv" using 1:5 with linespoints title "1 thread", \
-     "< awk -F, 'NR>1 && \$2==2' $out/blocks.csv" using 1:5 with linespoints title "2 threads", \
-     "< awk -F, 'NR>1 && \$2==1' $out/blocks.csv" using 1:(\$1*0.004) with lines dt 2 title "linear in cubes"
+plot "< awk -F, 'NR>1 && \$2==\"jacobi\" && \$3==1' $out/blocks.csv" using 1:6 with linespoints title "Jacobi, 1 thread", \
+     "< awk -F, 'NR>1 && \$2==\"jacobi\" && \$3==2' $out/blocks.csv" using 1:6 with linespoints title "Jacobi, 2 threads", \
+     "< awk -F, 'NR>1 && \$2==\"multigrid\" && \$3==1' $out/blocks.csv" using 1:6 with linespoints title "multigrid, 1 thread", \
+     "< awk -F, 'NR>1 && \$2==\"multigrid\" && \$3==2' $out/blocks.csv" using 1:6 with linespoints title "multigrid, 2 threads", \
+     "< awk -F, 'NR>1 && \$2==\"jacobi\" && \$3==1' $out/blocks.csv" using 1:(\$1*0.004) with lines dt 2 title "linear in cubes"
 GP
   echo "plot: $out/blocks.svg"
 fi

@@ -432,13 +432,25 @@ static int parse_world(sc_ctx *c, const cJSON *root, cs_scene *s)
     if (get_object(c, root, "", "solver", &o, 0))
         return -1;
     if (o) {
-        static const char *const keys[] = {"tolerance", "max_iterations", "threads", NULL};
+        static const char *const keys[] = {"tolerance", "max_iterations", "threads",
+                                           "preconditioner", NULL};
         if (check_keys(c, o, "solver", keys) ||
             get_number(c, o, "solver", "tolerance", &w->cg_tolerance,
                        (sc_range){LO_GT, 0, HI_LT, 1}, 0) ||
             get_int(c, o, "solver", "max_iterations", &w->cg_max_iterations, 1, 1000000) ||
             get_int(c, o, "solver", "threads", &w->threads, 0, 256))
             return -1;
+        const cJSON *pc = cJSON_GetObjectItemCaseSensitive(o, "preconditioner");
+        if (pc) {
+            char b[48];
+            if (!cJSON_IsString(pc))
+                return fail(c, "solver.preconditioner", "expected a string, got %s",
+                            type_name(pc));
+            if (cs_preconditioner_from_name(pc->valuestring, &w->preconditioner) != 0)
+                return fail(c, "solver.preconditioner",
+                            "unknown preconditioner '%s' (auto, jacobi, multigrid)",
+                            show(pc->valuestring, b));
+        }
     }
     if (get_object(c, root, "", "sleep", &o, 0))
         return -1;

@@ -175,6 +175,19 @@ typedef struct cs_object_def {
 
 cs_object_def cs_object_def_default(void);
 
+/* The CG preconditioner of the FEM solves (implicit Euler, statics). */
+typedef enum cs_preconditioner {
+    CS_PRECOND_AUTO = 0,      /* multigrid for linear/corotational FEM objects of at least
+                                 CS_MG_AUTO_CELLS cells, block Jacobi otherwise */
+    CS_PRECOND_JACOBI = 1,    /* 3×3 block Jacobi */
+    CS_PRECOND_MULTIGRID = 2  /* a geometric multigrid V-cycle per iteration (FEM models; others
+                                 keep block Jacobi) */
+} cs_preconditioner;
+#define CS_MG_AUTO_CELLS 8192
+
+/* Parse "auto", "jacobi", "multigrid"; returns 0 and sets *out, or -1. */
+int cs_preconditioner_from_name(const char *name, cs_preconditioner *out);
+
 typedef struct cs_world_def {
     double dt;               /* time step [s], in (0, 1]; default 1/60 */
     double gravity[3];       /* [m/s²]; default (0, 0, -9.81) */
@@ -183,6 +196,7 @@ typedef struct cs_world_def {
     double ground_friction;  /* Coulomb coefficient at the ground, >= 0; default 0.5 */
     double cg_tolerance;     /* relative residual ‖r‖/‖b‖ of every solve, in (0, 1); 1e-6 */
     int cg_max_iterations;   /* >= 1; default 500 */
+    cs_preconditioner preconditioner; /* default CS_PRECOND_AUTO */
     int threads;             /* worker threads inside a step, >= 0; 0 = all cores; default 0 */
     double sleep_speed;      /* an object whose fastest node is slower than this [m/s] ... */
     int sleep_steps;         /* ... for this many steps in a row sleeps; 0 = never; default 30 */

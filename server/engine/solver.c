@@ -88,9 +88,29 @@ static void precondition(const double *inv, const uint8_t *mask, const double *r
     }
 }
 
+typedef struct jacobi_ctx {
+    const double *inv;
+    const uint8_t *mask;
+    int n_nodes, threads;
+} jacobi_ctx;
+
+static void jacobi_apply(void *ctx, const double *r, double *z)
+{
+    const jacobi_ctx *j = ctx;
+    precondition(j->inv, j->mask, r, z, j->n_nodes, j->threads);
+}
+
 cs_cg_result cs_pcg(cs_cg_work *w, cs_matvec_fn A, void *ctx, const double *inv_blocks,
                     const uint8_t *mask, const double *b, double *x, double tol, int max_iter,
                     int threads)
+{
+    jacobi_ctx j = {inv_blocks, mask, w->n / 3, threads};
+    return cs_pcg_ex(w, A, ctx, jacobi_apply, &j, mask, b, x, tol, max_iter, threads);
+}
+
+cs_cg_result cs_pcg_ex(cs_cg_work *w, cs_matvec_fn A, void *ctx, cs_precond_fn B, void *bctx,
+                       const uint8_t *mask, const double *b, double *x, double tol, int max_iter,
+                       int threads)
 {
     const int n = w->n;
     double *r = w->r, *z = w->z, *p = w->p, *q = w->q;
@@ -114,7 +134,7 @@ cs_cg_result cs_pcg(cs_cg_work *w, cs_matvec_fn A, void *ctx, const double *inv_
         return res;
     }
     const double stop = tol * bnorm;
-    precondition(inv_blocks, mask, r, z, n / 3, threads);
+    B(bctx, r, z);
     memcpy(p, z, (size_t)n * sizeof *p);
     double rz = cs_dot(w, r, z, n, threads);
     int it = 0;
@@ -136,7 +156,7 @@ cs_cg_result cs_pcg(cs_cg_work *w, cs_matvec_fn A, void *ctx, const double *inv_
         rnorm = sqrt(cs_dot(w, r, r, n, threads));
         if (rnorm <= stop)
             break;
-        precondition(inv_blocks, mask, r, z, n / 3, threads);
+        B(bctx, r, z);
         const double rz_new = cs_dot(w, r, z, n, threads);
         const double beta = rz_new / rz;
         rz = rz_new;

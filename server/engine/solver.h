@@ -42,6 +42,15 @@ cs_cg_result cs_pcg(cs_cg_work *w, cs_matvec_fn A, void *ctx, const double *inv_
                     const uint8_t *mask, const double *b, double *x, double tol, int max_iter,
                     int threads);
 
+/*
+ * The same with any symmetric positive definite preconditioner: z = B r (z overwritten; B must
+ * leave z = 0 at masked dofs and be a fixed linear map, e.g. a multigrid V-cycle, mg.h).
+ */
+typedef void (*cs_precond_fn)(void *ctx, const double *r, double *z);
+cs_cg_result cs_pcg_ex(cs_cg_work *w, cs_matvec_fn A, void *ctx, cs_precond_fn B, void *bctx,
+                       const uint8_t *mask, const double *b, double *x, double tol, int max_iter,
+                       int threads);
+
 /* Deterministic dot product (fixed blocks, then a serial sum). */
 double cs_dot(cs_cg_work *w, const double *a, const double *b, int n, int threads);
 

@@ -25,6 +25,7 @@
 
 #include "elastic.h"
 #include "localframe.h"
+#include "mg.h"
 #include "rigid.h"
 #include "voxelize.h"
 #include "world_internal.h"
@@ -80,6 +81,18 @@ int cs_model_from_name(const char *name, cs_model *out)
     for (int i = 0; i < 5; i++)
         if (name && !strcmp(name, MODEL_NAMES[i])) {
             *out = (cs_model)i;
+            return 0;
+        }
+    return -1;
+}
+
+static const char *const PRECOND_NAMES[] = {"auto", "jacobi", "multigrid"};
+
+int cs_preconditioner_from_name(const char *name, cs_preconditioner *out)
+{
+    for (int i = 0; i < 3; i++)
+        if (name && strcmp(name, PRECOND_NAMES[i]) == 0) {
+            *out = (cs_preconditioner)i;
             return 0;
         }
     return -1;
@@ -160,6 +173,9 @@ int cs_world_create(const cs_world_def *def, cs_world_t **out, char *err, size_t
     if (!(def->cg_tolerance > 0 && def->cg_tolerance < 1))
         return cs_engine_fail(err, errlen, CS_ERR_INVALID, "solver tolerance must be in (0, 1), got %g",
                     def->cg_tolerance);
+    if ((int)def->preconditioner < 0 || (int)def->preconditioner > CS_PRECOND_MULTIGRID)
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "preconditioner: unknown value %d",
+                              (int)def->preconditioner);
     if (def->cg_max_iterations < 1 || def->cg_max_iterations > 1000000)
         return cs_engine_fail(err, errlen, CS_ERR_INVALID, "solver max_iterations must be in [1, 1e6]");
     if (def->threads < 0 || def->threads > 256)
@@ -209,6 +225,7 @@ void cs_object_free_internal(cs_object *o)
     free(o->pin);
     cs_fields_free(&o->fld);
     cs_cg_work_free(&o->cg);
+    cs_mg_free(o->mg);
     free(o);
 }
 
@@ -1082,6 +1099,69 @@ static void build_preconditioner(cs_object *o)
     cs_invert_blocks(o->blocks, o->n);
 }
 
+/* Whether this object's solves use the multigrid preconditioner (cs_preconditioner). */
+static bool wants_multigrid(const cs_world_t *w, const cs_object *o)
+{
+    if (o->model != CS_MODEL_LINEAR && o->model != CS_MODEL_COROTATIONAL)
+        return false;
+    if (w->def.preconditioner == CS_PRECOND_JACOBI)
+        return false;
+    if (w->def.preconditioner == CS_PRECOND_MULTIGRID)
+        return true;
+    return o->cm.n_cells >= CS_MG_AUTO_CELLS;
+}
+
+/*
+ * Prepare the multigrid hierarchy for operator A (step_operator's terms with the current
+ * coefficients; build_preconditioner has run) and held dofs mask. Returns false when block
+ * Jacobi is to be used (not wanted, or out of memory: Jacobi still solves).
+ */
+static bool setup_multigrid(const cs_world_t *w, cs_object *o, cs_matvec_fn A,
+                            const uint8_t *mask)
+{
+    if (!wants_multigrid(w, o))
+        return false;
+    if (!cs_mg_matches(o->mg, &o->cm, &o->fem, o->topology_version)) {
+        cs_mg_free(o->mg);
+        o->mg = cs_mg_build(&o->cm, &o->fem, o->topology_version);
+        if (!o->mg)
+            return false;
+    }
+    double *s = cs_mg_cell_scale(o->mg), *dg = cs_mg_node_diag(o->mg);
+    const double *kf = o->fem.kf, *kd = o->fld.has_damping ? o->fld.kd : NULL;
+    for (int c = 0; c < o->cm.n_cells; c++) {
+        double a = 0, d = 0;
+        for (int g = 0; g < 8; g++) {
+            a += kf ? kf[8 * (size_t)c + g] : 1.0;
+            d += kd ? kd[8 * (size_t)c + g] : 0.0;
+        }
+        s[c] = o->kcoef * a / 8 + (kd ? o->ckcoef * d / 8 : 0.0);
+    }
+    for (int i = 0; i < o->n; i++)
+        dg[i] = o->mcoef * o->m[i] + (o->fld.has_damping ? o->cmcoef * o->fld.md[i] : 0.0) +
+                (o->pin[i] ? o->pcoef * o->penalty : 0.0);
+    for (int i = 0; o->dcoef != 0 && i < o->n_inputs; i++) {
+        const cs_input *in = &o->inputs[i];
+        if (!cs_input_is_spring(in) || in->delay > 0)
+            continue;
+        /* the spring k w wᵀ lumped by rows (Σ w = 1) */
+        for (int k = 0; k < 8; k++)
+            dg[o->cm.cell_nodes[8 * in->cell + k]] += o->dcoef * in->stiffness * in->w[k];
+    }
+    return cs_mg_setup(o->mg, &o->fem, A, o, o->blocks, mask) == 0;
+}
+
+/* CG on A x = b with multigrid (if use_mg, after setup_multigrid) or block Jacobi. */
+static cs_cg_result solve(const cs_world_t *w, cs_object *o, bool use_mg, cs_matvec_fn A,
+                          const uint8_t *mask, const double *b, double *x, double tol,
+                          int max_iter)
+{
+    if (use_mg)
+        return cs_pcg_ex(&o->cg, A, o, cs_mg_vcycle, o->mg, mask, b, x, tol, max_iter,
+                         cs_elastic_threads(o));
+    return cs_pcg(&o->cg, A, o, o->blocks, mask, b, x, tol, max_iter, cs_elastic_threads(o));
+}
+
 /*
  * Ground contact (seed 000 has no contact model; this is Baraff–Witkin style filtered CG).
  * A node on or below the plane at the start of a step has its normal velocity constrained
@@ -1202,9 +1282,10 @@ static int step_implicit_euler(cs_world_t *w, cs_object *o, cs_step_stats *st)
     for (size_t d = 0; d < n3; d++)
         o->v1[d] = o->mask[d] ? 0.0 : o->v[d];
     int contacts = constrain_ground(w, o);
+    const bool use_mg = setup_multigrid(w, o, step_operator, o->smask);
     double t3 = now_ms();
-    cs_cg_result r = cs_pcg(&o->cg, step_operator, o, o->blocks, o->smask, o->b, o->v1,
-                            w->def.cg_tolerance, w->def.cg_max_iterations, cs_elastic_threads(o));
+    cs_cg_result r = solve(w, o, use_mg, step_operator, o->smask, o->b, o->v1,
+                           w->def.cg_tolerance, w->def.cg_max_iterations);
     double t4 = now_ms();
     if (!all_finite(o->v1, n3))
         return CS_ERR_DIVERGED;
@@ -1741,14 +1822,16 @@ static int solve_static_object(cs_world_t *w, cs_object *o, cs_step_stats *st)
             cs_cg_result r = {0, 1, 0};
             bool geometric = cs_elastic_prepare_tangent(o, o->x) == 0;
             if (geometric) {
-                r = cs_pcg(&o->cg, tangent_operator, o, o->blocks, o->mask, res, dx, ctol,
-                           w->def.cg_max_iterations * 4, cs_elastic_threads(o));
+                const bool use_mg = setup_multigrid(w, o, tangent_operator, o->mask);
+                r = solve(w, o, use_mg, tangent_operator, o->mask, res, dx, ctol,
+                          w->def.cg_max_iterations * 4);
                 st->cg_iterations += r.iterations;
             }
             if (!geometric || !r.converged) {
                 memset(dx, 0, (size_t)n3 * sizeof(double));
-                r = cs_pcg(&o->cg, step_operator, o, o->blocks, o->mask, res, dx, ctol,
-                           w->def.cg_max_iterations * 4, cs_elastic_threads(o));
+                const bool use_mg = setup_multigrid(w, o, step_operator, o->mask);
+                r = solve(w, o, use_mg, step_operator, o->mask, res, dx, ctol,
+                          w->def.cg_max_iterations * 4);
                 st->cg_iterations += r.iterations;
             }
             if (!all_finite(dx, (size_t)n3))

@@ -129,6 +129,7 @@ typedef struct cs_object {
                               (fields and penalty not included); 0 for other integrators */
     double mass;
     cs_cg_work cg;
+    struct cs_mg *mg;      /* multigrid hierarchy (mg.h), built on first use; NULL otherwise */
     cs_input inputs[CS_MAX_INPUTS];
     int n_inputs;
     int still_steps;

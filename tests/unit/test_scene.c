@@ -95,6 +95,7 @@ TEST(scene_cantilever_fields)
     ENSURE_NEAR(s.world.ground_height, 0, 0);
     ENSURE_NEAR(s.world.cg_tolerance, 1e-6, 1e-21);
     ENSURE(s.world.cg_max_iterations == 500);
+    ENSURE(s.world.preconditioner == CS_PRECOND_AUTO);
     ENSURE(s.n_objects == 1);
     const cs_object_def *o = &s.objects[0];
     ENSURE(!strcmp(o->name, "beam"));
@@ -134,7 +135,8 @@ TEST(scene_every_field_round_trip)
         "  \"max_force\": 250, \"sleep\": { \"speed\": 0.01, \"steps\": 12 },\n"
         "  \"max_fractures\": 9,\n"
         "  \"ground\": { \"height\": -0.25, \"friction\": 0.8 },\n"
-        "  \"solver\": { \"tolerance\": 1e-8, \"max_iterations\": 77, \"threads\": 2 },\n"
+        "  \"solver\": { \"tolerance\": 1e-8, \"max_iterations\": 77, \"threads\": 2,\n"
+        "              \"preconditioner\": \"multigrid\" },\n"
         "  \"materials\": { \"a\": { \"young\": 2e5, \"poisson\": 0.45, \"density\": 900,\n"
         "                          \"damping\": [0.1, 0.02], \"strength\": 3e4 },\n"
         "                 \"b\": { \"young\": 5 } },\n"
@@ -174,6 +176,7 @@ TEST(scene_every_field_round_trip)
     ENSURE_NEAR(s.world.cg_tolerance, 1e-8, 0);
     ENSURE(s.world.cg_max_iterations == 77);
     ENSURE(s.world.threads == 2);
+    ENSURE(s.world.preconditioner == CS_PRECOND_MULTIGRID);
     ENSURE(s.n_objects == 5);
 
     const cs_object_def *o = &s.objects[0];
@@ -306,6 +309,8 @@ static const bad_case BAD[] = {
     {"{\"dtt\": 0.01, \"objects\": []}", "dtt: unknown field (did you mean 'dt'?)"},
     {OBJ("\"materail\": \"x\", " BOX), "objects[0].materail: unknown field"},
     {"{\"solver\": {\"tolerence\": 1e-6}, \"objects\": []}", "solver.tolerence: unknown field"},
+    {"{\"solver\": {\"preconditioner\": \"ilu\"}, \"objects\": []}",
+     "solver.preconditioner: unknown preconditioner 'ilu' (auto, jacobi, multigrid)"},
     {"{\"ground\": {\"h\": 1}, \"objects\": []}", "ground.h: unknown field"},
     {"{\"sleep\": {\"speeed\": 1}, \"objects\": []}", "sleep.speeed: unknown field"},
     {"{\"materials\": {\"soft\": {\"youngs\": 1}}, \"objects\": []}",

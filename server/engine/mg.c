@@ -1,0 +1,812 @@
+/*
+ * mg.c — geometric multigrid preconditioner on the cube lattice (see mg.h).
+ */
+#include "mg.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "mat3.h"
+
+#define MG_NU 1           /* smoothing sweeps before and after the coarse correction */
+#define MG_COARSE_SWEEPS 8 /* Jacobi sweeps on a coarsest level too large for Cholesky */
+#define MG_POWER_ITERS 10
+#define MG_LAMBDA_EVERY 64 /* re-estimate λmax(D⁻¹A) after this many setups */
+
+typedef struct mg_level {
+    int n_cells, n_nodes, threads;
+    const int32_t *cell_nodes, *cell_ijk, *adj_start, *adj; /* borrowed on level 0 */
+    int32_t *own_nodes, *own_ijk, *own_adj_start, *own_adj;
+    /* to the next coarser level (NULL on the coarsest) */
+    int32_t *parent;                  /* per cell */
+    int32_t *p_start, *p_node;        /* per node: prolongation row */
+    double *p_w;
+    int32_t *r_start, *r_node;        /* per coarse node: its fine nodes (Pᵀ) */
+    double *r_w;
+    /* from the next finer level (level >= 1) */
+    int32_t *ch_start, *ch;           /* children of each cell */
+    /* per solve */
+    const double *R;                  /* 9 per cell (level 0: fem's) */
+    double *own_R, *q;                /* level >= 1 */
+    double *s;                        /* per cell: stiffness multiplier */
+    double *dg;                       /* per node: diagonal part */
+    const double *inv;                /* 9 per node, inverted diagonal blocks */
+    double *own_inv;
+    const uint8_t *mask;
+    uint8_t *own_mask;
+    double *fe, *x, *b, *t;           /* scratch (level 0: t only; fe level >= 1) */
+    double lam, omega;
+} mg_level;
+
+struct cs_mg {
+    int n_levels;
+    mg_level *lv;
+    uint32_t version;
+    int fine_nodes, fine_cells;
+    const int32_t *fine_links;
+    double K[576];
+    double *dense;     /* coarsest: Cholesky factor (lower), NULL if swept */
+    int dense_n;
+    cs_matvec_fn A;
+    void *ctx;
+    int setups;
+    double key[3];
+};
+
+/* ------------------------------------------------------------------ building */
+
+static int64_t floordiv2(int32_t v)
+{
+    return v >= 0 ? v / 2 : -((-v + 1) / 2);
+}
+
+/* Parent indices are within ±2^19 (cell indices within ±2^20, cubemesh.h): 21 bits each. */
+static int64_t pack(int64_t i, int64_t j, int64_t k)
+{
+    const uint64_t o = 1u << 20, m = (1u << 21) - 1;
+    return (int64_t)((((uint64_t)(i + o) & m) << 42) | (((uint64_t)(j + o) & m) << 21) |
+                     ((uint64_t)(k + o) & m));
+}
+
+typedef struct keyed {
+    int64_t key;
+    int32_t idx;
+} keyed;
+
+static int cmp_keyed(const void *a, const void *b)
+{
+    const keyed *x = a, *y = b;
+    if (x->key != y->key)
+        return x->key < y->key ? -1 : 1;
+    return (x->idx > y->idx) - (x->idx < y->idx);
+}
+
+static int uf_find(int32_t *p, int32_t a)
+{
+    while (p[a] != a) {
+        p[a] = p[p[a]];
+        a = p[a];
+    }
+    return a;
+}
+
+static void uf_union(int32_t *p, int32_t a, int32_t b)
+{
+    a = uf_find(p, a);
+    b = uf_find(p, b);
+    if (a != b) {
+        if (a < b)
+            p[b] = a;
+        else
+            p[a] = b;
+    }
+}
+
+/* node → (cell·8 + corner), cells in increasing order */
+static int build_adj(mg_level *l)
+{
+    l->own_adj_start = calloc((size_t)l->n_nodes + 1, sizeof(int32_t));
+    l->own_adj = malloc((size_t)l->n_cells * 8 * sizeof(int32_t));
+    int32_t *fill = malloc(((size_t)l->n_nodes + 1) * sizeof(int32_t));
+    if (!l->own_adj_start || !l->own_adj || !fill) {
+        free(fill);
+        return -1;
+    }
+    for (int e = 0; e < 8 * l->n_cells; e++)
+        l->own_adj_start[l->cell_nodes[e] + 1]++;
+    for (int n = 0; n < l->n_nodes; n++)
+        l->own_adj_start[n + 1] += l->own_adj_start[n];
+    memcpy(fill, l->own_adj_start, (size_t)l->n_nodes * sizeof(int32_t));
+    for (int e = 0; e < 8 * l->n_cells; e++)
+        l->own_adj[fill[l->cell_nodes[e]]++] = e;
+    free(fill);
+    l->adj_start = l->own_adj_start;
+    l->adj = l->own_adj;
+    return 0;
+}
+
+/* Trilinear weight of coarse corner K for a fine node at half-units t (0..2 per axis). */
+static double corner_weight(const int t[3], int K)
+{
+    double w = 1;
+    for (int a = 0; a < 3; a++)
+        w *= CS_CORNER[K][a] ? t[a] * 0.5 : 1.0 - t[a] * 0.5;
+    return w;
+}
+
+/* Position of fine corner k of fine cell c inside its parent C, in half-units. */
+static void half_units(const mg_level *f, const mg_level *c, int fc, int k, int C, int t[3])
+{
+    for (int a = 0; a < 3; a++)
+        t[a] = f->cell_ijk[3 * fc + a] - 2 * c->cell_ijk[3 * C + a] + CS_CORNER[k][a];
+}
+
+/* Make level c from level f; c is zeroed. Returns 0, -1 on out of memory. */
+static int coarsen(mg_level *f, mg_level *c)
+{
+    int rc = -1;
+    const int nf = f->n_cells;
+    keyed *ks = malloc((size_t)nf * sizeof *ks);
+    int32_t *slot = NULL, *nid = NULL, *ufb = malloc((size_t)nf * sizeof(int32_t));
+    f->parent = malloc((size_t)nf * sizeof(int32_t));
+    c->own_ijk = malloc((size_t)nf * 3 * sizeof(int32_t));
+    c->ch_start = malloc(((size_t)nf + 1) * sizeof(int32_t));
+    c->ch = malloc((size_t)nf * sizeof(int32_t));
+    if (!ks || !ufb || !f->parent || !c->own_ijk || !c->ch_start || !c->ch)
+        goto out;
+    for (int i = 0; i < nf; i++) {
+        const int32_t *ijk = f->cell_ijk + 3 * i;
+        ks[i].key = pack(floordiv2(ijk[0]), floordiv2(ijk[1]), floordiv2(ijk[2]));
+        ks[i].idx = i;
+    }
+    qsort(ks, (size_t)nf, sizeof *ks, cmp_keyed);
+    /* Coarse cells: one per connected group of the children of a lattice block. */
+    int nc = 0, nch = 0;
+    for (int g0 = 0; g0 < nf;) {
+        int g1 = g0;
+        while (g1 < nf && ks[g1].key == ks[g0].key)
+            g1++;
+        const int m = g1 - g0; /* 8 at most, more where split cells share an index */
+        int32_t *uf = ufb + g0;
+        for (int a = 0; a < m; a++)
+            uf[a] = a;
+        for (int a = 0; a < m; a++)
+            for (int b = a + 1; b < m; b++) {
+                const int32_t *na = f->cell_nodes + 8 * ks[g0 + a].idx;
+                const int32_t *nb = f->cell_nodes + 8 * ks[g0 + b].idx;
+                bool share = false;
+                for (int x = 0; x < 8 && !share; x++)
+                    for (int y = 0; y < 8 && !share; y++)
+                        share = na[x] == nb[y];
+                if (share)
+                    uf_union(uf, a, b);
+            }
+        for (int a = 0; a < m; a++) {
+            if (uf_find(uf, a) != a)
+                continue;
+            const int32_t *ijk = f->cell_ijk + 3 * ks[g0 + a].idx;
+            for (int d = 0; d < 3; d++)
+                c->own_ijk[3 * nc + d] = (int32_t)floordiv2(ijk[d]);
+            c->ch_start[nc] = nch;
+            for (int b = 0; b < m; b++)
+                if (uf_find(uf, b) == a) {
+                    c->ch[nch++] = ks[g0 + b].idx;
+                    f->parent[ks[g0 + b].idx] = nc;
+                }
+            nc++;
+        }
+        g0 = g1;
+    }
+    c->ch_start[nc] = nch;
+    c->n_cells = nc;
+    c->cell_ijk = c->own_ijk;
+    /* Coarse corners: merge the slots a fine node joins at the same lattice point. */
+    slot = malloc((size_t)nc * 8 * sizeof(int32_t));
+    nid = malloc((size_t)nc * 8 * sizeof(int32_t));
+    c->own_nodes = malloc((size_t)nc * 8 * sizeof(int32_t));
+    if (!slot || !nid || !c->own_nodes)
+        goto out;
+    for (int i = 0; i < 8 * nc; i++)
+        slot[i] = i;
+    for (int n = 0; n < f->n_nodes; n++) {
+        const int a0 = f->adj_start[n], a1 = f->adj_start[n + 1];
+        if (a1 - a0 < 2)
+            continue;
+        const int fc0 = f->adj[a0] / 8, k0 = f->adj[a0] % 8, C0 = f->parent[fc0];
+        int t0[3];
+        half_units(f, c, fc0, k0, C0, t0);
+        for (int a = a0 + 1; a < a1; a++) {
+            const int fc = f->adj[a] / 8, C = f->parent[fc];
+            if (C == C0)
+                continue;
+            for (int K = 0; K < 8; K++) {
+                if (corner_weight(t0, K) == 0)
+                    continue;
+                int K2 = 0, ok = 1;
+                for (int d = 0; d < 3; d++) {
+                    const int off = c->cell_ijk[3 * C0 + d] + CS_CORNER[K][d] -
+                                    c->cell_ijk[3 * C + d];
+                    if (off < 0 || off > 1)
+                        ok = 0;
+                    else
+                        K2 |= off << d;
+                }
+                if (!ok)
+                    continue;
+                /* corner index from the offset bits (x, y, z) */
+                static const int BITS_TO_CORNER[8] = {0, 1, 3, 2, 4, 5, 7, 6};
+                uf_union(slot, 8 * C0 + K, 8 * C + BITS_TO_CORNER[K2]);
+            }
+        }
+    }
+    int nn = 0;
+    for (int i = 0; i < 8 * nc; i++)
+        nid[i] = -1;
+    for (int i = 0; i < 8 * nc; i++) {
+        const int r = uf_find(slot, i);
+        if (nid[r] < 0)
+            nid[r] = nn++;
+        c->own_nodes[i] = nid[r];
+    }
+    c->n_nodes = nn;
+    c->cell_nodes = c->own_nodes;
+    if (build_adj(c))
+        goto out;
+    /* Prolongation rows and their transpose. */
+    f->p_start = malloc(((size_t)f->n_nodes + 1) * sizeof(int32_t));
+    f->p_node = malloc((size_t)f->n_nodes * 8 * sizeof(int32_t));
+    f->p_w = malloc((size_t)f->n_nodes * 8 * sizeof(double));
+    f->r_start = calloc((size_t)nn + 1, sizeof(int32_t));
+    if (!f->p_start || !f->p_node || !f->p_w || !f->r_start)
+        goto out;
+    int np = 0;
+    for (int n = 0; n < f->n_nodes; n++) {
+        f->p_start[n] = np;
+        if (f->adj_start[n] == f->adj_start[n + 1])
+            continue; /* an unused node */
+        const int e = f->adj[f->adj_start[n]], fc = e / 8, C = f->parent[fc];
+        int t[3];
+        half_units(f, c, fc, e % 8, C, t);
+        for (int K = 0; K < 8; K++) {
+            const double w = corner_weight(t, K);
+            if (w == 0)
+                continue;
+            f->p_node[np] = c->cell_nodes[8 * C + K];
+            f->p_w[np++] = w;
+            f->r_start[c->cell_nodes[8 * C + K] + 1]++;
+        }
+    }
+    f->p_start[f->n_nodes] = np;
+    for (int J = 0; J < nn; J++)
+        f->r_start[J + 1] += f->r_start[J];
+    f->r_node = malloc((size_t)(np > 0 ? np : 1) * sizeof(int32_t));
+    f->r_w = malloc((size_t)(np > 0 ? np : 1) * sizeof(double));
+    int32_t *fill = malloc(((size_t)nn + 1) * sizeof(int32_t));
+    if (!f->r_node || !f->r_w || !fill) {
+        free(fill);
+        goto out;
+    }
+    memcpy(fill, f->r_start, (size_t)nn * sizeof(int32_t));
+    for (int n = 0; n < f->n_nodes; n++)
+        for (int a = f->p_start[n]; a < f->p_start[n + 1]; a++) {
+            const int J = f->p_node[a];
+            f->r_node[fill[J]] = n;
+            f->r_w[fill[J]++] = f->p_w[a];
+        }
+    free(fill);
+    rc = 0;
+out:
+    free(ks);
+    free(ufb);
+    free(slot);
+    free(nid);
+    return rc;
+}
+
+static int alloc_level_state(mg_level *l, int level, int threads)
+{
+    const size_t n3 = 3 * (size_t)l->n_nodes;
+    l->threads = threads > 1 && l->n_cells >= CS_FEM_PARALLEL_CELLS ? threads : 1;
+    l->s = malloc((size_t)(l->n_cells ? l->n_cells : 1) * sizeof(double));
+    l->dg = malloc((size_t)(l->n_nodes ? l->n_nodes : 1) * sizeof(double));
+    l->t = malloc((n3 ? n3 : 1) * sizeof(double));
+    if (!l->s || !l->dg || !l->t)
+        return -1;
+    if (level == 0)
+        return 0;
+    l->own_R = malloc((size_t)l->n_cells * 9 * sizeof(double));
+    l->q = malloc((size_t)l->n_cells * 4 * sizeof(double));
+    l->own_inv = malloc(n3 * 3 * sizeof(double));
+    l->own_mask = malloc(n3);
+    l->fe = malloc((size_t)l->n_cells * 24 * sizeof(double));
+    l->x = malloc(n3 * sizeof(double));
+    l->b = malloc(n3 * sizeof(double));
+    if (!l->own_R || !l->q || !l->own_inv || !l->own_mask || !l->fe || !l->x || !l->b)
+        return -1;
+    for (int c = 0; c < l->n_cells; c++) {
+        static const double I[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+        memcpy(l->own_R + 9 * c, I, sizeof I);
+        l->q[4 * c] = 1;
+        l->q[4 * c + 1] = l->q[4 * c + 2] = l->q[4 * c + 3] = 0;
+    }
+    l->R = l->own_R;
+    l->inv = l->own_inv;
+    l->mask = l->own_mask;
+    return 0;
+}
+
+static void free_level(mg_level *l)
+{
+    free(l->own_nodes);
+    free(l->own_ijk);
+    free(l->own_adj_start);
+    free(l->own_adj);
+    free(l->parent);
+    free(l->p_start);
+    free(l->p_node);
+    free(l->p_w);
+    free(l->r_start);
+    free(l->r_node);
+    free(l->r_w);
+    free(l->ch_start);
+    free(l->ch);
+    free(l->own_R);
+    free(l->q);
+    free(l->s);
+    free(l->dg);
+    free(l->own_inv);
+    free(l->own_mask);
+    free(l->fe);
+    free(l->x);
+    free(l->b);
+    free(l->t);
+}
+
+void cs_mg_free(cs_mg *mg)
+{
+    if (!mg)
+        return;
+    for (int l = 0; l < mg->n_levels; l++)
+        free_level(&mg->lv[l]);
+    free(mg->lv);
+    free(mg->dense);
+    free(mg);
+}
+
+cs_mg *cs_mg_build(const cs_cubemesh *cm, const cs_fem *fem, uint32_t version)
+{
+    cs_mg *mg = calloc(1, sizeof *mg);
+    if (!mg)
+        return NULL;
+    const int max_levels = 16;
+    mg->lv = calloc(max_levels, sizeof *mg->lv);
+    if (!mg->lv)
+        goto fail;
+    mg->version = version;
+    mg->fine_nodes = cm->n_nodes;
+    mg->fine_cells = cm->n_cells;
+    mg->fine_links = cm->cell_nodes;
+    memcpy(mg->K, fem->K, sizeof mg->K);
+    mg_level *l0 = &mg->lv[0];
+    l0->n_cells = cm->n_cells;
+    l0->n_nodes = cm->n_nodes;
+    l0->cell_nodes = cm->cell_nodes;
+    l0->cell_ijk = cm->cell_ijk;
+    l0->adj_start = fem->adj_start;
+    l0->adj = fem->adj;
+    mg->n_levels = 1;
+    if (alloc_level_state(l0, 0, fem->threads))
+        goto fail;
+    while (mg->n_levels < max_levels && mg->lv[mg->n_levels - 1].n_nodes > CS_MG_COARSEST_NODES) {
+        mg_level *f = &mg->lv[mg->n_levels - 1], *c = &mg->lv[mg->n_levels];
+        if (coarsen(f, c)) {
+            mg->n_levels++; /* so that it is freed */
+            goto fail;
+        }
+        mg->n_levels++;
+        if (alloc_level_state(c, mg->n_levels - 1, fem->threads))
+            goto fail;
+        if (c->n_nodes > 0.8 * f->n_nodes) {
+            /* coarsening stalls: drop that level, the finer one is the coarsest */
+            free_level(c);
+            memset(c, 0, sizeof *c);
+            mg->n_levels--;
+            free(f->parent);
+            free(f->p_start);
+            free(f->p_node);
+            free(f->p_w);
+            free(f->r_start);
+            free(f->r_node);
+            free(f->r_w);
+            f->parent = f->p_start = f->p_node = f->r_start = f->r_node = NULL;
+            f->p_w = f->r_w = NULL;
+            break;
+        }
+    }
+    mg_level *last = &mg->lv[mg->n_levels - 1];
+    if (mg->n_levels > 1 && last->n_nodes <= CS_MG_DENSE_NODES) {
+        mg->dense_n = 3 * last->n_nodes;
+        mg->dense = malloc((size_t)mg->dense_n * mg->dense_n * sizeof(double));
+        if (!mg->dense)
+            goto fail;
+    }
+    return mg;
+fail:
+    cs_mg_free(mg);
+    return NULL;
+}
+
+bool cs_mg_matches(const cs_mg *mg, const cs_cubemesh *cm, const cs_fem *fem, uint32_t version)
+{
+    return mg && mg->version == version && mg->fine_nodes == cm->n_nodes &&
+           mg->fine_cells == cm->n_cells && mg->fine_links == cm->cell_nodes &&
+           mg->lv[0].adj == fem->adj && mg->lv[0].adj_start == fem->adj_start;
+}
+
+int cs_mg_levels(const cs_mg *mg)
+{
+    return mg->n_levels;
+}
+
+int cs_mg_level_nodes(const cs_mg *mg, int level)
+{
+    return level >= 0 && level < mg->n_levels ? mg->lv[level].n_nodes : 0;
+}
+
+double *cs_mg_cell_scale(cs_mg *mg)
+{
+    return mg->lv[0].s;
+}
+
+double *cs_mg_node_diag(cs_mg *mg)
+{
+    return mg->lv[0].dg;
+}
+
+/* ------------------------------------------------------------------ products */
+
+/* y = Σ s R K Rᵀ x + dg x on a coarse level. */
+static void level_apply(const cs_mg *mg, mg_level *l, const double *x, double *y)
+{
+    const double *K = mg->K;
+#pragma omp parallel for num_threads(l->threads) schedule(static)
+    for (int c = 0; c < l->n_cells; c++) {
+        const int32_t *nd = l->cell_nodes + 8 * c;
+        const double *R = l->R + 9 * c;
+        double u[24], ku[24] = {0};
+        for (int k = 0; k < 8; k++) {
+            const double *d = x + 3 * nd[k];
+            for (int i = 0; i < 3; i++)
+                u[3 * k + i] = R[i] * d[0] + R[3 + i] * d[1] + R[6 + i] * d[2];
+        }
+        for (int j = 0; j < 24; j++) {
+            const double uj = u[j], *row = K + 24 * j;
+            for (int i = 0; i < 24; i++)
+                ku[i] += uj * row[i];
+        }
+        const double s = l->s[c];
+        double *out = l->fe + 24 * c;
+        for (int k = 0; k < 8; k++) {
+            const double *v = ku + 3 * k;
+            for (int i = 0; i < 3; i++)
+                out[3 * k + i] = s * (R[3 * i] * v[0] + R[3 * i + 1] * v[1] + R[3 * i + 2] * v[2]);
+        }
+    }
+#pragma omp parallel for num_threads(l->threads) schedule(static)
+    for (int n = 0; n < l->n_nodes; n++) {
+        double s0 = 0, s1 = 0, s2 = 0;
+        for (int a = l->adj_start[n]; a < l->adj_start[n + 1]; a++) {
+            const double *v = l->fe + 3 * l->adj[a];
+            s0 += v[0];
+            s1 += v[1];
+            s2 += v[2];
+        }
+        y[3 * n] = s0 + l->dg[n] * x[3 * n];
+        y[3 * n + 1] = s1 + l->dg[n] * x[3 * n + 1];
+        y[3 * n + 2] = s2 + l->dg[n] * x[3 * n + 2];
+    }
+}
+
+static void apply(const cs_mg *mg, int level, const double *x, double *y)
+{
+    if (level == 0)
+        mg->A(mg->ctx, x, y);
+    else
+        level_apply(mg, &mg->lv[level], x, y);
+}
+
+/* x (+)= ω D⁻¹ r at free dofs; zero at held ones. */
+static void jacobi(mg_level *l, const double *r, double *x, double omega, bool add)
+{
+#pragma omp parallel for num_threads(l->threads) schedule(static)
+    for (int i = 0; i < l->n_nodes; i++) {
+        const double *m = l->inv + 9 * i, *v = r + 3 * i;
+        for (int a = 0; a < 3; a++) {
+            const double s = omega * (m[3 * a] * v[0] + m[3 * a + 1] * v[1] + m[3 * a + 2] * v[2]);
+            const int d = 3 * i + a;
+            x[d] = l->mask[d] ? 0.0 : (add ? x[d] + s : s);
+        }
+    }
+}
+
+/* x += ω D⁻¹ (b − A x). */
+static void smooth(const cs_mg *mg, int level, const double *b, double *x)
+{
+    mg_level *l = &mg->lv[level];
+    apply(mg, level, x, l->t);
+    const int n3 = 3 * l->n_nodes;
+    /* masked: D⁻¹ acts on the free dofs only (Z D⁻¹ Z keeps the cycle symmetric) */
+#pragma omp parallel for num_threads(l->threads) schedule(static)
+    for (int d = 0; d < n3; d++)
+        l->t[d] = l->mask[d] ? 0.0 : b[d] - l->t[d];
+    jacobi(l, l->t, x, l->omega, true);
+}
+
+/* ------------------------------------------------------------------ setup */
+
+/* The 3×3 block (k, j) of s R K Rᵀ added to B (row stride ld). */
+static void add_rotated_block(const double *K, const double *R, double s, int k, int j,
+                              double *B, int ld)
+{
+    double Kb[9], T[9];
+    for (int a = 0; a < 3; a++)
+        for (int b = 0; b < 3; b++)
+            Kb[3 * a + b] = K[(3 * k + a) * 24 + 3 * j + b];
+    for (int a = 0; a < 3; a++)
+        for (int b = 0; b < 3; b++)
+            T[3 * a + b] = R[3 * a] * Kb[b] + R[3 * a + 1] * Kb[3 + b] + R[3 * a + 2] * Kb[6 + b];
+    for (int a = 0; a < 3; a++)
+        for (int b = 0; b < 3; b++)
+            B[a * ld + b] += s * (T[3 * a] * R[3 * b] + T[3 * a + 1] * R[3 * b + 1] +
+                                  T[3 * a + 2] * R[3 * b + 2]);
+}
+
+/* Level l (>= 1) from level l−1: rotations, stiffness multipliers, diagonal, mask, D⁻¹. */
+static void setup_coarse(cs_mg *mg, int level, bool corotational)
+{
+    mg_level *f = &mg->lv[level - 1], *c = &mg->lv[level];
+#pragma omp parallel for num_threads(c->threads) schedule(static)
+    for (int C = 0; C < c->n_cells; C++) {
+        double sum = 0, Ra[9] = {0};
+        for (int a = c->ch_start[C]; a < c->ch_start[C + 1]; a++) {
+            const int fc = c->ch[a];
+            sum += f->s[fc];
+            if (corotational)
+                for (int i = 0; i < 9; i++)
+                    Ra[i] += f->R[9 * fc + i];
+        }
+        c->s[C] = 2.0 * sum / 8.0;
+        if (corotational) {
+            cs_extract_rotation(Ra, c->q + 4 * C, 30);
+            cs_quat_to_mat(c->q + 4 * C, c->own_R + 9 * C);
+        }
+    }
+#pragma omp parallel for num_threads(c->threads) schedule(static)
+    for (int J = 0; J < c->n_nodes; J++) {
+        double d = 0, wmax = 0;
+        uint8_t held[3] = {0, 0, 0};
+        for (int a = f->r_start[J]; a < f->r_start[J + 1]; a++) {
+            d += f->r_w[a] * f->dg[f->r_node[a]];
+            if (f->r_w[a] > wmax)
+                wmax = f->r_w[a];
+        }
+        for (int a = f->r_start[J]; a < f->r_start[J + 1]; a++)
+            if (f->r_w[a] >= wmax * (1 - 1e-9))
+                for (int k = 0; k < 3; k++)
+                    held[k] |= f->mask[3 * f->r_node[a] + k];
+        c->dg[J] = d;
+        for (int k = 0; k < 3; k++)
+            c->own_mask[3 * J + k] = held[k] ? 1 : 0;
+    }
+    /* diagonal blocks */
+    memset(c->own_inv, 0, 9 * (size_t)c->n_nodes * sizeof(double));
+    for (int C = 0; C < c->n_cells; C++)
+        for (int k = 0; k < 8; k++)
+            add_rotated_block(mg->K, c->R + 9 * C, c->s[C], k, k,
+                              c->own_inv + 9 * c->cell_nodes[8 * C + k], 3);
+    for (int J = 0; J < c->n_nodes; J++)
+        for (int a = 0; a < 3; a++)
+            c->own_inv[9 * J + 4 * a] += c->dg[J];
+    cs_invert_blocks(c->own_inv, c->n_nodes);
+}
+
+/* Dense Cholesky of the coarsest operator (held dofs: identity rows). */
+static int setup_dense(cs_mg *mg)
+{
+    mg_level *l = &mg->lv[mg->n_levels - 1];
+    const int n = mg->dense_n;
+    double *M = mg->dense;
+    memset(M, 0, (size_t)n * n * sizeof(double));
+    for (int C = 0; C < l->n_cells; C++) {
+        const int32_t *nd = l->cell_nodes + 8 * C;
+        for (int k = 0; k < 8; k++)
+            for (int j = 0; j < 8; j++)
+                add_rotated_block(mg->K, l->R + 9 * C, l->s[C], k, j,
+                                  M + (size_t)3 * nd[k] * n + 3 * nd[j], n);
+    }
+    double dmax = 0;
+    for (int i = 0; i < n; i++) {
+        M[(size_t)i * n + i] += l->dg[i / 3];
+        if (M[(size_t)i * n + i] > dmax)
+            dmax = M[(size_t)i * n + i];
+    }
+    if (!(dmax > 0) || !isfinite(dmax))
+        dmax = 1;
+    for (int i = 0; i < n; i++)
+        if (l->mask[i])
+            for (int j = 0; j < n; j++)
+                M[(size_t)i * n + j] = M[(size_t)j * n + i] = i == j ? 1.0 : 0.0;
+    /* in-place lower Cholesky */
+    for (int j = 0; j < n; j++) {
+        double *Rj = M + (size_t)j * n;
+        double d = Rj[j];
+        for (int k = 0; k < j; k++)
+            d -= Rj[k] * Rj[k];
+        if (!(d > 1e-13 * dmax))
+            d = dmax; /* a (near) free mode of the coarsest level: damp it */
+        d = sqrt(d);
+        Rj[j] = d;
+        for (int i = j + 1; i < n; i++) {
+            double *Ri = M + (size_t)i * n;
+            double s = Ri[j];
+            for (int k = 0; k < j; k++)
+                s -= Ri[k] * Rj[k];
+            Ri[j] = s / d;
+        }
+    }
+    for (int i = 0; i < n * n; i++)
+        if (!isfinite(M[i]))
+            return -1;
+    return 0;
+}
+
+/* λmax(D⁻¹A) of a level by power iteration, the free dofs only. */
+static double estimate_lambda(cs_mg *mg, int level)
+{
+    mg_level *l = &mg->lv[level];
+    const int n3 = 3 * l->n_nodes;
+    double *v = malloc((size_t)n3 * sizeof(double)), *w = malloc((size_t)n3 * sizeof(double));
+    double lam = 2.0;
+    if (!v || !w)
+        goto out;
+    uint64_t s = 0x9e3779b97f4a7c15ull;
+    for (int d = 0; d < n3; d++) {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        v[d] = l->mask[d] ? 0.0 : (double)(s >> 11) / 9007199254740992.0 - 0.5;
+    }
+    for (int it = 0; it < MG_POWER_ITERS; it++) {
+        double nv = 0, nw = 0;
+        for (int d = 0; d < n3; d++)
+            nv += v[d] * v[d];
+        if (!(nv > 0))
+            break;
+        apply(mg, level, v, l->t);
+        for (int d = 0; d < n3; d++)
+            if (l->mask[d])
+                l->t[d] = 0;
+        jacobi(l, l->t, w, 1.0, false);
+        for (int d = 0; d < n3; d++)
+            nw += w[d] * w[d];
+        lam = sqrt(nw / nv);
+        const double sc = 1.0 / sqrt(nw > 0 ? nw : 1);
+        for (int d = 0; d < n3; d++)
+            v[d] = w[d] * sc;
+    }
+out:
+    free(v);
+    free(w);
+    return isfinite(lam) && lam > 0 ? lam : 2.0;
+}
+
+int cs_mg_setup(cs_mg *mg, const cs_fem *fem, cs_matvec_fn A, void *ctx, const double *inv0,
+                const uint8_t *mask0)
+{
+    mg->A = A;
+    mg->ctx = ctx;
+    mg_level *l0 = &mg->lv[0];
+    l0->R = fem->R;
+    l0->inv = inv0;
+    l0->mask = mask0;
+    for (int l = 1; l < mg->n_levels; l++)
+        setup_coarse(mg, l, fem->corotational);
+    if (mg->dense && setup_dense(mg))
+        return -1;
+    /* Smoothing weights: re-estimated when the operator's kind changes, and now and then. */
+    const double key[3] = {l0->s[0], l0->dg[0], (double)mg->n_levels};
+    if (mg->setups % MG_LAMBDA_EVERY == 0 || memcmp(key, mg->key, sizeof key) != 0) {
+        memcpy(mg->key, key, sizeof key);
+        for (int l = 0; l < mg->n_levels; l++) {
+            mg->lv[l].lam = 1.1 * estimate_lambda(mg, l);
+            mg->lv[l].omega = 4.0 / (3.0 * mg->lv[l].lam);
+        }
+    }
+    mg->setups++;
+    return 0;
+}
+
+/* ------------------------------------------------------------------ the V-cycle */
+
+static void coarsest(cs_mg *mg, const double *b, double *x)
+{
+    const int L = mg->n_levels - 1;
+    mg_level *l = &mg->lv[L];
+    if (!mg->dense) {
+        jacobi(l, b, x, l->omega, false);
+        for (int s = 1; s < MG_COARSE_SWEEPS; s++)
+            smooth(mg, L, b, x);
+        return;
+    }
+    const int n = mg->dense_n;
+    const double *M = mg->dense;
+    for (int i = 0; i < n; i++) {
+        double s = l->mask[i] ? 0.0 : b[i];
+        const double *Ri = M + (size_t)i * n;
+        for (int k = 0; k < i; k++)
+            s -= Ri[k] * x[k];
+        x[i] = s / Ri[i];
+    }
+    for (int i = n - 1; i >= 0; i--) {
+        double s = x[i];
+        for (int k = i + 1; k < n; k++)
+            s -= M[(size_t)k * n + i] * x[k];
+        x[i] = s / M[(size_t)i * n + i];
+    }
+    for (int i = 0; i < n; i++)
+        if (l->mask[i])
+            x[i] = 0;
+}
+
+static void vcycle(cs_mg *mg, int level, const double *b, double *x)
+{
+    if (level == mg->n_levels - 1) {
+        coarsest(mg, b, x);
+        return;
+    }
+    mg_level *f = &mg->lv[level], *c = &mg->lv[level + 1];
+    jacobi(f, b, x, f->omega, false);
+    for (int s = 1; s < MG_NU; s++)
+        smooth(mg, level, b, x);
+    /* residual, restricted */
+    apply(mg, level, x, f->t);
+    const int n3 = 3 * f->n_nodes;
+#pragma omp parallel for num_threads(f->threads) schedule(static)
+    for (int d = 0; d < n3; d++)
+        f->t[d] = f->mask[d] ? 0.0 : b[d] - f->t[d];
+#pragma omp parallel for num_threads(c->threads) schedule(static)
+    for (int J = 0; J < c->n_nodes; J++) {
+        double s[3] = {0, 0, 0};
+        for (int a = f->r_start[J]; a < f->r_start[J + 1]; a++) {
+            const double w = f->r_w[a], *v = f->t + 3 * f->r_node[a];
+            s[0] += w * v[0];
+            s[1] += w * v[1];
+            s[2] += w * v[2];
+        }
+        for (int k = 0; k < 3; k++)
+            c->b[3 * J + k] = c->mask[3 * J + k] ? 0.0 : s[k];
+    }
+    vcycle(mg, level + 1, c->b, c->x);
+#pragma omp parallel for num_threads(f->threads) schedule(static)
+    for (int n = 0; n < f->n_nodes; n++) {
+        double s[3] = {0, 0, 0};
+        for (int a = f->p_start[n]; a < f->p_start[n + 1]; a++) {
+            const double w = f->p_w[a], *v = c->x + 3 * f->p_node[a];
+            s[0] += w * v[0];
+            s[1] += w * v[1];
+            s[2] += w * v[2];
+        }
+        for (int k = 0; k < 3; k++)
+            if (!f->mask[3 * n + k])
+                x[3 * n + k] += s[k];
+    }
+    for (int s = 0; s < MG_NU; s++)
+        smooth(mg, level, b, x);
+}
+
+void cs_mg_vcycle(void *ctx, const double *r, double *z)
+{
+    cs_mg *mg = ctx;
+    vcycle(mg, 0, r, z);
+}

@@ -1,0 +1,70 @@
+/*
+ * mg.h — geometric multigrid on the cube lattice, used as the CG preconditioner of the FEM
+ * solves (issue 7). One V-cycle per CG iteration.
+ *
+ * Hierarchy: 2×2×2 cells of a level become one cell of the next (lattice index floor(ijk/2)).
+ * The mesh need not be a box and may be cut: the children of one lattice block that share no
+ * node (a crack runs between them) make separate coarse cells at the same index, and coarse
+ * corners are merged only where a fine node joins them. A fine node is interpolated
+ * trilinearly from the corners of the coarse cell of any cell that references it (the merge
+ * makes those rows equal), so P respects duplicated (split) nodes.
+ *
+ * Coarse operators are rediscretized, matrix-free: a coarse cell of edge 2h has the stiffness
+ * 2·K(h) (K ∝ h), times the mean of its children's stiffness factors over 8 (a partly filled
+ * block is proportionally softer); its rotation is the polar part of the sum of its children's
+ * rotations; the diagonal part of the fine operator (lumped mass, penalty springs, drag
+ * springs lumped by rows) is restricted by Pᵀ. The finest level uses the true operator and its
+ * block-Jacobi inverse. A coarse dof is held when the fine node with the largest weight on it
+ * is held there; held dofs are zero in every correction.
+ *
+ * Smoother: damped block Jacobi, ω = 4/(3λ), λ ≥ λmax(D⁻¹A) estimated by power iteration,
+ * ν sweeps before and ν after, so the V-cycle B is symmetric; it is positive definite because
+ * ω·λmax < 2 and the coarsest level is solved exactly (dense Cholesky) or, if coarsening
+ * stalls above CS_MG_DENSE_NODES nodes, by a fixed number of Jacobi sweeps (a symmetric
+ * polynomial). Products run on the object's threads with the fixed-order gathers of fem.c, so
+ * the result is independent of the thread count.
+ *
+ * Owns: every array of every coarse level and the scratch vectors. Borrows: the finest level's
+ * cell links and lattice indices (the object's cube mesh), its adjacency and rotations (fem).
+ */
+#ifndef CS_MG_H
+#define CS_MG_H
+
+#include <stdbool.h>
+#include <stdint.h>
+
+#include "cubemesh.h"
+#include "fem.h"
+#include "solver.h"
+
+#define CS_MG_COARSEST_NODES 64 /* coarsen while a level has more nodes */
+#define CS_MG_DENSE_NODES 400   /* exact solve on the coarsest level up to this many nodes */
+
+typedef struct cs_mg cs_mg;
+
+/* Build the hierarchy for the mesh of fem (cm gives the lattice indices). NULL on out of
+ * memory. `version` identifies the topology (cs_mg_matches). */
+cs_mg *cs_mg_build(const cs_cubemesh *cm, const cs_fem *fem, uint32_t version);
+void cs_mg_free(cs_mg *mg);
+/* Built for this mesh (same version, node and cell counts and cell links)? */
+bool cs_mg_matches(const cs_mg *mg, const cs_cubemesh *cm, const cs_fem *fem, uint32_t version);
+int cs_mg_levels(const cs_mg *mg);
+int cs_mg_level_nodes(const cs_mg *mg, int level);
+
+/* Per-fine-cell stiffness multipliers (K_e = scale·R K Rᵀ approximately) and per-fine-node
+ * diagonal part of the operator, filled by the caller before cs_mg_setup. */
+double *cs_mg_cell_scale(cs_mg *mg);
+double *cs_mg_node_diag(cs_mg *mg);
+
+/*
+ * Prepare a solve: A(ctx) is the fine operator, inv0 its inverted 3×3 diagonal blocks, mask0
+ * the held dofs of this solve; rotations are read from fem. Returns 0, or -1 if a non-finite
+ * value appeared.
+ */
+int cs_mg_setup(cs_mg *mg, const cs_fem *fem, cs_matvec_fn A, void *ctx, const double *inv0,
+                const uint8_t *mask0);
+
+/* z = B r, one V-cycle (a cs_precond_fn; ctx is the cs_mg). */
+void cs_mg_vcycle(void *ctx, const double *r, double *z);
+
+#endif
