@@ -316,7 +316,7 @@ static void write_pareto(table *t, FILE *f)
             for (int i = 0; i < t->n; i++) {
                 const row *x = &t->r[i];
                 if (strcmp(x->kase, cases[c]) || strcmp(x->model, cs_model_name(MODELS[m])) ||
-                    !(x->err < best))
+                    !(x->err < best * (1 - 1e-3)))
                     continue;
                 best = x->err;
                 fprintf(f, "%s,%s,%.6g,%.6g,%.6g,%s,%d,%.6g,%g\n", x->kase, x->model, x->cpu,
@@ -363,7 +363,7 @@ int main(int argc, char **argv)
 {
     int quick = 0, runs = 3, check = 0;
     const char *out = "bench/results";
-    double cap = 30;
+    double cap = 15;
     for (int i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--quick"))
             quick = 1;
@@ -376,7 +376,7 @@ int main(int argc, char **argv)
         else if (!strcmp(argv[i], "--out") && i + 1 < argc)
             out = argv[++i];
         else {
-            fprintf(stderr, "usage: bench_wp [--quick] [--check] [--runs 3] [--cap 30] [--out DIR]\n");
+            fprintf(stderr, "usage: bench_wp [--quick] [--check] [--runs 3] [--cap 15] [--out DIR]\n");
             return 2;
         }
     }
