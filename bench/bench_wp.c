@@ -17,10 +17,11 @@
  *   freq          the same beam released from rest, undeformed, with g = 0.01 m/s²: the tip
  *                 oscillates about its static deflection in (mostly) the first bending mode.
  *                 Frequency from the zero crossings of u_tip − u_static (same model and mesh).
- *                 Reference: corotational FEM at the two finest meshes (--ref, default 6 and 8
- *                 cubes through H), Verlet at 0.5 × its stability limit; the Euler–Bernoulli
- *                 ω₁ = 1.875²·√(EI/(ρAL⁴)) is printed beside it (at L/H = 10, shear and rotary
- *                 inertia lower the true ω₁ by ~1 %, so EB is not the reference below 1 %).
+ *                 Reference: the Richardson extrapolation of corotational FEM on two meshes
+ *                 (nz 3 and 4; 4 and 6 with --wide), Verlet at 0.5 × its stability limit; the
+ *                 Euler–Bernoulli ω₁ = 1.875²·√(EI/(ρAL⁴)) is printed beside it (at L/H = 10,
+ *                 shear and rotary inertia lower the true ω₁ by ~0.6 %, so EB is not the
+ *                 reference below 1 %).
  *   amp           amplitude of that oscillation: √2 × RMS of u_tip − u_static over the first
  *                 and over the third period; the beam is undamped, so the exact first-mode
  *                 amplitude is constant and the error is the fraction lost (or gained) over two
@@ -30,16 +31,17 @@
  *                 (difference to the next finest printed). Linear FEM cannot represent large
  *                 rotations and is expected to be wrong here (it overshoots and stretches).
  *
- * Sweeps: nz (cube size); for dynamics, implicit Euler at dt = 1/30..1/240 s (tolerance 1e-6)
- * and at tolerances 1e-2..1e-8 (dt = 1/60 s); central differences at 0.9 and 0.5 × their
- * limit (tolerance 1e-6); symplectic Euler and Verlet at 0.9 and 0.5 × their limit (no CG).
- * Statics: nz × tolerance (the static solver uses max(tolerance, 1e-8)).
+ * Sweeps: nz (cube size); for dynamics (nz 1..4), implicit Euler at dt = 1/30, 1/60, 1/120 s
+ * (tolerance 1e-6) and at tolerances 1e-3, 1e-4 (dt = 1/60 s); central differences,
+ * symplectic Euler and Verlet at 0.9 × their limit. Statics: nz 1, 2, 3, 4, 6 × tolerance
+ * 1e-3, 1e-4, 1e-6 (the static solver uses max(tolerance, 1e-8)). --wide adds dt = 1/240 s,
+ * tolerance 1e-8 and the explicit schemes at 0.5 × their limit.
  * Times: CPU seconds (CLOCK_PROCESS_CPUTIME_ID) and wall seconds, medians over --runs runs
  * for runs shorter than 1 s (a single run otherwise); dynamic runs are capped (--cap seconds
- * of CPU: recorded as "timeout").
+ * of CPU, default 8, 15 with --wide, 3 with --quick: recorded as "timeout").
  *
- * Usage: bench_wp [--quick] [--runs 3] [--out DIR] [--check]
- * Writes DIR/wp_static_small.csv, wp_dynamic.csv, wp_static_large.csv, wp_refs.txt and prints
+ * Usage: bench_wp [--quick | --wide] [--runs 3] [--cap S] [--out DIR] [--check]
+ * Writes DIR/wp_static.csv, wp_dynamic.csv, wp_pareto.csv, wp_refs.txt and prints
  * the fastest setting per error target as Markdown. --check exits 1 unless the harness's
  * sanity checks hold (error falls as cubes shrink; analytic references agree with the fine
  * mesh); --quick runs a reduced sweep in well under a minute.
@@ -361,12 +363,14 @@ static void print_targets(const table *t, const char *kase)
 
 int main(int argc, char **argv)
 {
-    int quick = 0, runs = 3, check = 0;
+    int quick = 0, runs = 3, check = 0, wide = 0;
     const char *out = "bench/results";
-    double cap = 15;
+    double cap = -1;
     for (int i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--quick"))
             quick = 1;
+        else if (!strcmp(argv[i], "--wide"))
+            wide = 1;
         else if (!strcmp(argv[i], "--check"))
             check = 1;
         else if (!strcmp(argv[i], "--runs") && i + 1 < argc)
@@ -376,30 +380,29 @@ int main(int argc, char **argv)
         else if (!strcmp(argv[i], "--out") && i + 1 < argc)
             out = argv[++i];
         else {
-            fprintf(stderr, "usage: bench_wp [--quick] [--check] [--runs 3] [--cap 15] [--out DIR]\n");
+            fprintf(stderr, "usage: bench_wp [--quick] [--check] [--wide] [--runs 3] [--cap S] [--out DIR]\n");
             return 2;
         }
     }
     if (runs < 1)
         runs = 1;
-    if (quick) {
+    if (cap < 0)
+        cap = quick ? 3 : wide ? 15 : 8;
+    if (quick)
         runs = 1;
-        if (cap > 3)
-            cap = 3;
-    }
     setvbuf(stdout, NULL, _IOLBF, 0);
     const int nzs_full[4] = {1, 2, 3, 4}, nzs_quick[2] = {1, 2};
     const int *nzs = quick ? nzs_quick : nzs_full, nn = quick ? 2 : 4;
     const double tols_full[4] = {1e-3, 1e-4, 1e-6, 1e-8}, tols_quick[2] = {1e-3, 1e-6};
     const double *tols = quick ? tols_quick : tols_full;
-    const int ntol = quick ? 2 : 4;
+    const int ntol = quick ? 2 : wide ? 4 : 3;
     const double dts_full[4] = {1.0 / 30, 1.0 / 60, 1.0 / 120, 1.0 / 240},
                  dts_quick[2] = {1.0 / 30, 1.0 / 60};
     const double *dts = quick ? dts_quick : dts_full;
-    const int ndt = quick ? 2 : 4;
+    const int ndt = quick ? 2 : wide ? 4 : 3;
     const double fr_full[2] = {0.9, 0.5}, fr_quick[1] = {0.9};
     const double *fracs = quick ? fr_quick : fr_full;
-    const int nfr = quick ? 1 : 2;
+    const int nfr = quick || !wide ? 1 : 2;
     const int refs[2] = {quick ? 3 : 6, quick ? 4 : 8};
     const int nzs_static_full[5] = {1, 2, 3, 4, 6};
     const int *nzs_s = quick ? nzs_quick : nzs_static_full, nns = quick ? 2 : 5;
@@ -456,7 +459,7 @@ int main(int argc, char **argv)
         refs[1], 100 * hypot(rl[1].tip[0] - lt[0], rl[1].tip[2] - lt[2]) / lref, refs[0],
         100 * hypot(rl[0].tip[0] - lt[0], rl[0].tip[2] - lt[2]) / lref);
     const double T = 2 * M_PI / w_eb, sim = 3.8 * T;
-    const int drefs[2] = {quick ? 2 : 4, quick ? 3 : 6};
+    const int drefs[2] = {quick ? 2 : wide ? 4 : 3, quick ? 3 : wide ? 6 : 4};
     for (int k = 0; k < 2; k++) {
         const double dtc = cs_elastic_critical_dt(CS_MODEL_COROTATIONAL,
                                                   &(cs_material){.young = E, .poisson = 0,
