@@ -110,9 +110,11 @@ for n in 4 8 16; do build/bin/bench_rigid --boxes $n; done | tee "$out/rigid_box
 # the cube size, dt and the CG tolerance, on a ν = 0 cantilever against Timoshenko beam theory
 # and Richardson-extrapolated fine-mesh references. Writes bench/results/wp_static.csv,
 # wp_dynamic.csv, wp_pareto.csv, wp_refs.txt, wp.md (the README tables) and wp_<case>.svg.
-# BENCH_WP_ARGS adds options (e.g. --quick, --cap 15); ~15 min in full, < 1 min with --quick.
-echo "bench_wp: work-precision sweep ($runs runs of each setting shorter than 1 s; CPU time)"
-build/bin/bench_wp --runs "$runs" --out "$out" --check ${BENCH_WP_ARGS:-} \
+# BENCH_WP_RUNS (default 3) and BENCH_WP_ARGS (e.g. --quick, --wide, --cap 15) adjust it; ~15-20 min
+# on a shared machine, < 1 min with --quick.
+wpruns=${BENCH_WP_RUNS:-3}
+echo "bench_wp: work-precision sweep ($wpruns runs of each setting shorter than 1 s; CPU time)"
+build/bin/bench_wp --runs "$wpruns" --out "$out" --check ${BENCH_WP_ARGS:-} \
   2> "$out/wp_runs.txt" | tee "$out/wp.md"
 if command -v gnuplot >/dev/null; then
   ci=0
