@@ -108,3 +108,42 @@ echo "bench_rigid: scenes/drop.json, 2 s"
 build/bin/bench_rigid scenes/drop.json 2 | tee "$out/rigid_drop.txt"
 echo "bench_rigid: boxes falling and sleeping, N = 4, 8, 16 (2·N² boxes)"
 for n in 4 8 16; do build/bin/bench_rigid --boxes $n; done | tee "$out/rigid_boxes.txt"
+
+# Work-precision (issue 6): run time against error for every model and integrator, sweeping
+# the cube size, dt and the CG tolerance, on a ν = 0 cantilever against Timoshenko beam theory
+# and Richardson-extrapolated fine-mesh references. Writes bench/results/wp_static.csv,
+# wp_dynamic.csv, wp_pareto.csv, wp_refs.txt, wp.md (the README tables) and wp_<case>.svg.
+# BENCH_WP_RUNS (default 3) and BENCH_WP_ARGS (e.g. --quick, --wide, --cap 15) adjust it; ~15-20 min
+# on a shared machine, < 1 min with --quick.
+wpruns=${BENCH_WP_RUNS:-3}
+echo "bench_wp: work-precision sweep ($wpruns runs of each setting shorter than 1 s; CPU time)"
+build/bin/bench_wp --runs "$wpruns" --out "$out" --check ${BENCH_WP_ARGS:-} \
+  2> "$out/wp_runs.txt" | tee "$out/wp.md"
+if command -v gnuplot >/dev/null; then
+  ci=0
+  for c in static_small dyn freq amp static_large; do
+    case $c in
+      static_small) title="static tip deflection, small (vs Timoshenko)";;
+      dyn) title="released cantilever: max(frequency, amplitude) error";;
+      freq) title="released cantilever: first-mode frequency error";;
+      amp) title="released cantilever: amplitude lost over 2 periods";;
+      static_large) title="large rotation (tip drop L/3) vs converged corotational";;
+    esac
+    gnuplot <<GP
+set terminal svg size 640,420
+set output "$out/wp_$c.svg"
+set datafile separator ","
+set logscale xy
+set xlabel "CPU seconds (median, 1 thread)"
+set ylabel "relative error"
+set title "$title"
+set key right top
+plot "$out/wp_pareto.csv" index $((ci*4+0)) using 3:5 with linespoints title "linear", \
+     "$out/wp_pareto.csv" index $((ci*4+1)) using 3:5 with linespoints title "corotational", \
+     "$out/wp_pareto.csv" index $((ci*4+2)) using 3:5 with linespoints title "mss", \
+     "$out/wp_pareto.csv" index $((ci*4+3)) using 3:5 with linespoints title "localframe"
+GP
+    ci=$((ci+1))
+  done
+  echo "plots: $out/wp_*.svg"
+fi

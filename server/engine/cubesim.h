@@ -61,8 +61,8 @@ int cs_model_from_name(const char *name, cs_model *out);
 const char *cs_model_name(cs_model m);
 
 typedef enum cs_integrator {
-    CS_INTEGRATOR_DEFAULT = 0,           /* the model's own: implicit Euler for FEM and mss,
-                                            central differences for localframe */
+    CS_INTEGRATOR_DEFAULT = 0,           /* implicit Euler for every model (README
+                                            "Work-precision": the evidence) */
     CS_INTEGRATOR_IMPLICIT_EULER = 1,    /* seed 000: (M + dt C + dt² K) v1 = M v + dt f, CG */
     CS_INTEGRATOR_SYMPLECTIC_EULER = 2,  /* explicit: v += dt M⁻¹f(x, v), x += dt v (seed 004) */
     CS_INTEGRATOR_VERLET = 3,            /* explicit velocity Verlet (seed 004); both explicit
