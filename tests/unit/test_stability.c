@@ -415,3 +415,91 @@ TEST(stab_explicit_limit_against_engine_estimate)
                        cs_model_name(model), cs_integrator_name(integ), lim, lo);
         }
 }
+
+/* ---------------------------------------------------------------- 2. implicit steps of any size */
+
+/*
+ * A 6×2×2 cantilever (h 0.05 m, E 100 kPa, ν 0.3, ρ 1000, undamped, gravity on) held at x = 0
+ * and started with every free node moving at 1 m/s downwards, stepped by implicit Euler at
+ * dt = 1e-4, 1e-3, 1e-2, 0.1 s (max(100, min(3000, 0.3 s/dt)) steps) for every deformable
+ * model; and a free rigid block tumbling at 2 rad/s at the same steps. Criteria: every step
+ * succeeds and stays finite; no node leaves a 1 m ball around its rest position; the total
+ * energy (kinetic + elastic + gravity: no other force works on it) never exceeds its initial
+ * value E0 (1e-9 relative) for dt ≤ 0.01 s, for the linear model and for rigid bodies at every
+ * dt, and ends below E0. Documented limit: at dt 0.1 s the corotational, localframe and mss
+ * models rise once (measured +104 %, +104 %, +48 % in the first step: its strain increment
+ * v·dt/h is 2, and one linearised solve lands where the nonlinear energy exceeds the linear
+ * one), asserted below 3 E0, then decay (final E < E0 asserted). Central differences at dt above their limit are refused with the limit in
+ * the message (asserted here for dt = 0.1 s).
+ */
+TEST(stab_implicit_any_dt)
+{
+    const double dts[4] = {1e-4, 1e-3, 1e-2, 0.1};
+    cs_material mat = cs_material_default();
+    mat.young = 1e5;
+    char err[512];
+    for (int mi = 0; mi < 5; mi++)
+        for (int di = 0; di < 4; di++) {
+            const cs_model model = mi < 4 ? MODELS[mi] : CS_MODEL_RIGID;
+            const double dt = dts[di];
+            cs_world_def wd = free_world(dt);
+            if (model != CS_MODEL_RIGID)
+                wd.gravity[2] = -9.81;
+            blk b;
+            ENSURE_MSG(make_blk(&b, &wd, model, CS_INTEGRATOR_DEFAULT == 0 && model == CS_MODEL_RIGID
+                                                      ? CS_INTEGRATOR_DEFAULT
+                                                      : CS_INTEGRATOR_IMPLICIT_EULER,
+                                mat, 6, 2, 2, 0.05, model != CS_MODEL_RIGID, err, sizeof err) == 0,
+                       "%s dt %g: %s", cs_model_name(model), dt, err);
+            cs_object *o = cs_world_find_internal(b.w, b.id);
+            if (model == CS_MODEL_RIGID)
+                spin(&b, (double[3]){0.05, 2.0, 0.05});
+            else
+                for (int i = 0; i < o->n; i++)
+                    if (!o->mask[3 * i + 2])
+                        o->v[3 * i + 2] = -1.0;
+            const double e0 = energy_of(&b);
+            const int steps = (int)fmax(100, fmin(3000, 0.3 / dt));
+            double emax = e0, dmax = 0;
+            int s = 0;
+            bool ok = true;
+            for (; s < steps && ok; s++) {
+                ok = cs_world_step(b.w) == CS_OK && all_finite(&b);
+                emax = fmax(emax, energy_of(&b));
+            }
+            const double *X, *x, *v;
+            int n;
+            cs_object_nodes(b.w, b.id, &X, &x, &v, &n);
+            for (int i = 0; i < 3 * n; i++)
+                dmax = fmax(dmax, fabs(x[i] - X[i]));
+            printf("    implicit %s dt %g: %d steps, E0 %.4g J, max (E - E0)/|E0| %.3g, final E %.4g J, "
+                   "max |x - X| %.3g m\n", cs_model_name(model), dt, s, e0, (emax - e0) / fabs(e0),
+                   energy_of(&b), dmax);
+            const double efinal = energy_of(&b);
+            free_blk(&b);
+            ENSURE_MSG(ok, "%s dt %g: step %d failed or non-finite", cs_model_name(model), dt, s);
+            ENSURE_MSG(dmax < 1.0 || model == CS_MODEL_RIGID, "%s dt %g: a node moved %g m",
+                       cs_model_name(model), dt, dmax);
+            /* the linearised step is exact for the linear model; for the nonlinear ones a step
+             * whose strain increment v dt / h is O(1) (here 2 at dt 0.1 s) lands where their
+             * energy exceeds the linear one: the documented limit is a one-off rise below 3 E0
+             * that then decays (final E < E0) */
+            const double bound = model == CS_MODEL_LINEAR || model == CS_MODEL_RIGID || dt < 0.05
+                                     ? 1e-9 : 2.0;
+            ENSURE_MSG(emax <= e0 + bound * fabs(e0), "%s dt %g: energy rose from %g to %g J",
+                       cs_model_name(model), dt, e0, emax);
+            ENSURE_MSG(efinal <= e0 * (1 + 1e-9), "%s dt %g: final energy %g J > E0 %g J",
+                       cs_model_name(model), dt, efinal, e0);
+        }
+    /* central differences above their limit: refused, the limit named */
+    for (int mi = 0; mi < 4; mi++) {
+        cs_world_def wd = free_world(0.1);
+        blk b;
+        err[0] = 0;
+        const int rc = make_blk(&b, &wd, MODELS[mi], CS_INTEGRATOR_CENTRAL_DIFFERENCE, mat, 6, 2, 2,
+                                0.05, true, err, sizeof err);
+        free_blk(&b);
+        ENSURE_MSG(rc != 0 && strstr(err, "stability limit"), "%s central_difference at 0.1 s: %s",
+                   cs_model_name(MODELS[mi]), err);
+    }
+}
