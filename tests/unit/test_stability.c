@@ -503,3 +503,131 @@ TEST(stab_implicit_any_dt)
                    cs_model_name(MODELS[mi]), err);
     }
 }
+
+/* ---------------------------------------------------------------- 6. extreme inputs */
+
+/*
+ * Criteria: every absurd input is refused with CS_ERR_INVALID and a one-line message naming
+ * the problem, and the state hash is unchanged by the refusals; the largest accepted inputs
+ * (a force just below max_force, a 1e6 s duration at a small dt, a drag of absurd stiffness)
+ * are survived: every step returns CS_OK or CS_ERR_DIVERGED (undone, inputs dropped) and the
+ * nodes stay finite.
+ */
+TEST(stab_extreme_inputs_refused_state_kept)
+{
+    char err[512];
+    /* world definitions */
+    const double bad_dt[6] = {0, -1, NAN, INFINITY, 2.0, 1e-300};
+    for (int i = 0; i < 6; i++) {
+        cs_world_def wd = cs_world_def_default();
+        wd.dt = bad_dt[i];
+        cs_world_t *w = (cs_world_t *)1;
+        err[0] = 0;
+        ENSURE_MSG(cs_world_create(&wd, &w, err, sizeof err) == CS_ERR_INVALID && !w &&
+                       strstr(err, "dt") && !strchr(err, '\n'),
+                   "dt %g: accepted or bad message '%s'", bad_dt[i], err);
+    }
+    cs_world_def wd = free_world(1.0 / 60);
+    wd.gravity[2] = -9.81;
+    blk b;
+    ENSURE(make_blk(&b, &wd, CS_MODEL_COROTATIONAL, CS_INTEGRATOR_IMPLICIT_EULER,
+                    cs_material_default(), 3, 2, 2, 0.1, true, err, sizeof err) == 0);
+    for (int s = 0; s < 5; s++)
+        ENSURE(cs_world_step(b.w) == CS_OK);
+    const uint64_t h0 = cs_object_state_hash(b.w, b.id);
+    const double p[3] = {0.25, 0.1, 0.1}, far[3] = {0.25, 0.1, 10.0};
+    const double nan3[3] = {NAN, 0, 0}, inf3[3] = {0, INFINITY, 0}, big[3] = {0, 0, 1e12};
+    struct {
+        int rc;
+        const char *want;
+    } r[32];
+    int n = 0;
+#define TRY(call, w_)                                                                          \
+    do {                                                                                       \
+        err[0] = 0;                                                                            \
+        r[n].rc = (call);                                                                      \
+        r[n].want = w_;                                                                        \
+        ENSURE_MSG(r[n].rc == CS_ERR_INVALID && strstr(err, w_) && !strchr(err, '\n'),         \
+                   "%s: rc %d, message '%s' (want '%s')", #call, r[n].rc, err, w_);            \
+        n++;                                                                                   \
+    } while (0)
+    TRY(cs_world_apply_force(b.w, b.id, p, big, 0, err, sizeof err), "max_force");
+    TRY(cs_world_apply_force(b.w, b.id, p, nan3, 0, err, sizeof err), "not finite");
+    TRY(cs_world_apply_force(b.w, b.id, p, inf3, 0, err, sizeof err), "not finite");
+    TRY(cs_world_apply_force(b.w, b.id, nan3, p, 0, err, sizeof err), "not finite");
+    TRY(cs_world_apply_force(b.w, b.id, p, p, NAN, err, sizeof err), "duration");
+    TRY(cs_world_apply_force(b.w, b.id, p, p, INFINITY, err, sizeof err), "duration");
+    TRY(cs_world_apply_force(b.w, b.id, p, p, -1, err, sizeof err), "duration");
+    TRY(cs_world_drag(b.w, b.id, p, far, 1e300, 1, err, sizeof err), "max_force");
+    TRY(cs_world_drag(b.w, b.id, p, far, INFINITY, 1, err, sizeof err), "stiffness");
+    TRY(cs_world_drag(b.w, b.id, p, far, NAN, 1, err, sizeof err), "stiffness");
+    TRY(cs_world_drag(b.w, b.id, p, far, -1, 1, err, sizeof err), "stiffness");
+    TRY(cs_world_drag(b.w, b.id, p, nan3, 10, 1, err, sizeof err), "not finite");
+    TRY(cs_world_pressure(b.w, b.id, NAN, 1, err, sizeof err), "finite");
+    TRY(cs_world_pressure(b.w, b.id, 1e300, 1, err, sizeof err), "max_force");
+    const double curve[6] = {0.25, 0.1, 0.1, NAN, 0, 0};
+    TRY(cs_world_drag_curve(b.w, b.id, curve, 2, 10, 1, err, sizeof err), "finite");
+    TRY(cs_world_fracture(b.w, b.id, nan3, (double[3]){0, 0, 1}, 0, err, sizeof err), "finite");
+    TRY(cs_world_fracture(b.w, b.id, p, (double[3]){0, 0, 0}, 0, err, sizeof err), "normal");
+    const cs_field_factors ff = {.young = 1e30, .which = CS_FIELD_YOUNG};
+    TRY(cs_world_paint(b.w, b.id, p, 0.1, &ff, NULL, err, sizeof err), "young");
+#undef TRY
+    ENSURE_MSG(cs_object_state_hash(b.w, b.id) == h0, "the refusals changed the state");
+    free_blk(&b);
+
+    /* the largest accepted inputs, implicit and explicit */
+    for (int ii = 0; ii < 3; ii++) {
+        const cs_integrator integ = ii == 0 ? CS_INTEGRATOR_IMPLICIT_EULER
+                                    : ii == 1 ? CS_INTEGRATOR_SYMPLECTIC_EULER
+                                              : CS_INTEGRATOR_CENTRAL_DIFFERENCE;
+        wd = free_world(ii ? 1e-4 : 1.0 / 60);
+        wd.gravity[2] = -9.81;
+        ENSURE_MSG(make_blk(&b, &wd, CS_MODEL_COROTATIONAL, integ, cs_material_default(), 3, 2, 2,
+                            0.1, true, err, sizeof err) == 0, "%s", err);
+        ENSURE(cs_world_apply_force(b.w, b.id, p, (double[3]){0, 1, 0}, 1e6, err, sizeof err) ==
+               CS_OK);
+        const cs_object *o = cs_world_find_internal(b.w, b.id);
+        ENSURE_MSG(o->inputs[o->n_inputs - 1].steps_left > 0,
+                   "a 1e6 s force at dt %g lasts %d steps", wd.dt, o->inputs[o->n_inputs - 1].steps_left);
+        double k = 1e9; /* 1e8 N at 0.1 m */
+        int rc = cs_world_drag(b.w, b.id, p, (double[3]){0.25, 0.1, 0.2}, k, 1, err, sizeof err);
+        if (integ == CS_INTEGRATOR_SYMPLECTIC_EULER) {
+            /* explicit: refused, the limit named; the largest accepted one must be stable */
+            ENSURE_MSG(rc == CS_ERR_INVALID && strstr(err, "explicit stability limit"), "%s", err);
+            while (rc != CS_OK && k > 1)
+                rc = cs_world_drag(b.w, b.id, p, (double[3]){0.25, 0.1, 0.2}, k *= 0.7, 1, err,
+                                   sizeof err);
+        }
+        ENSURE_MSG(rc == CS_OK, "%s", err);
+        const int release = (int)ceil(1.0 / wd.dt) + 1;
+        double e_rel = 0, e_max = 0;
+        int diverged = 0, other = 0;
+        for (int s = 0; s < release + 200; s++) {
+            if (s == 0)
+                ENSURE(cs_world_apply_force(b.w, b.id, p, (double[3]){0, 0, 0.999e9}, 0, err,
+                                            sizeof err) == CS_OK);
+            const int rcs = cs_world_step(b.w);
+            diverged += rcs == CS_ERR_DIVERGED;
+            other += rcs != CS_OK && rcs != CS_ERR_DIVERGED;
+            if (s == release)
+                e_rel = energy_of(&b);
+            if (s > release)
+                e_max = fmax(e_max, energy_of(&b));
+        }
+        const double *X, *x, *v;
+        int nn;
+        cs_object_nodes(b.w, b.id, &X, &x, &v, &nn);
+        double dmax = 0;
+        for (int i = 0; i < 3 * nn; i++)
+            dmax = fmax(dmax, fabs(x[i] - X[i]));
+        printf("    extreme accepted inputs, %s: a 0.999e9 N kick and a %.3g N/m drag for 1 s: "
+               "%d steps diverged (undone); energy after the drag %.3g J, then at most %.3g J; "
+               "max |x - X| %.3g m\n", cs_integrator_name(integ), k, diverged, e_rel, e_max, dmax);
+        const bool fin = all_finite(&b);
+        free_blk(&b);
+        ENSURE_MSG(fin && other == 0, "%s: finite %d, %d failed steps", cs_integrator_name(integ),
+                   fin, other);
+        ENSURE_MSG(e_max <= 1.01 * fabs(e_rel) + 1e-6, "%s: energy grew after the inputs ended",
+                   cs_integrator_name(integ));
+    }
+}
