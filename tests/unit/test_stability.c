@@ -374,7 +374,7 @@ static int blows_up(cs_model model, cs_integrator integ, const cs_material *mat,
 }
 
 /*
- * For every model with symplectic Euler, Verlet and central differences: bisect dt (to 0.5 %)
+ * For every model with symplectic Euler, Verlet and central differences: bisect dt (to 1 %)
  * between the engine's limit and a dt that blows up. Criteria: the engine's limit is safe
  * (the block does not blow up at it: measured ≥ engine) and not absurdly conservative
  * (measured ≤ 3 × engine). The ratios are printed (README, Stability).
@@ -399,7 +399,7 @@ SLOW_TEST(stab_explicit_limit_against_engine_estimate)
             double lo = lim, hi = 1.25 * lim;
             while (hi < 16 * lim && blows_up(model, integ, &mat, h, hi, 0.5 * lim) == 0)
                 lo = hi, hi *= 2;
-            while (hi - lo > 5e-3 * lo) {
+            while (hi - lo > 1e-2 * lo) {
                 const double mid = 0.5 * (lo + hi);
                 if (blows_up(model, integ, &mat, h, mid, 0.5 * lim))
                     hi = mid;
@@ -421,7 +421,7 @@ SLOW_TEST(stab_explicit_limit_against_engine_estimate)
 /*
  * A 6×2×2 cantilever (h 0.05 m, E 100 kPa, ν 0.3, ρ 1000, undamped, gravity on) held at x = 0
  * and started with every free node moving at 1 m/s downwards, stepped by implicit Euler at
- * dt = 1e-4, 1e-3, 1e-2, 0.1 s (max(100, min(3000, 0.3 s/dt)) steps) for every deformable
+ * dt = 1e-4, 1e-3, 1e-2, 0.1 s (max(100, min(1000, 0.3 s/dt)) steps) for every deformable
  * model; and a free rigid block tumbling at 2 rad/s at the same steps. Criteria: every step
  * succeeds and stays finite; no node leaves a 1 m ball around its rest position; the total
  * energy (kinetic + elastic + gravity: no other force works on it) never exceeds its initial
@@ -459,7 +459,7 @@ TEST(stab_implicit_any_dt)
                     if (!o->mask[3 * i + 2])
                         o->v[3 * i + 2] = -1.0;
             const double e0 = energy_of(&b);
-            const int steps = (int)fmax(100, fmin(3000, 0.3 / dt));
+            const int steps = (int)fmax(100, fmin(1000, 0.3 / dt));
             double emax = e0, dmax = 0;
             int s = 0;
             bool ok = true;
