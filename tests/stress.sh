@@ -454,7 +454,7 @@ NF=${STORM_FRACTURES:-2000}
 "$BIN/cs_stress_fracture_storm" --fractures "$NF" --meshes "$CS_ROOT/scenes/meshes" \
     >"$CS_TMP/storm.txt" 2>&1
 src=$?
-grep -E '^(PASS|FAIL|     )' "$CS_TMP/storm.txt" | while IFS= read -r l; do info "storm: $l"; done
+grep -E '^(PASS|FAIL|     )' "$CS_TMP/storm.txt" | sed 's/^ *//' | while IFS= read -r l; do info "$l"; done
 sline=$(tail -1 "$CS_TMP/storm.txt")
 if [ "$src" = 0 ] && grep -q ': ok$' <<<"$sline"; then
     pass fracture-storm "$sline"
