@@ -4,9 +4,9 @@
  *
  *   cs_stress_fracture_storm [--fractures N] [--steps S] [--seed K] [--meshes DIR]
  *
- * Storm: a world with a box given as cells (corotational), the repository's icosphere (linear),
- * torus (mss) and star (localframe), voxelized at small cubes, no gravity. N times: a random
- * live object, a random point (half of them within its nodes' bounding box, half at one of its
+ * Storm: a world with a 16×12×8 box of 12.5 mm cubes given as cells (corotational), the repository's icosphere (linear),
+ * torus (mss) and star (localframe), voxelized at small cubes, no gravity. N times: a live
+ * object picked with probability proportional to its cells, a random point (half of them within its nodes' bounding box, half at one of its
  * nodes, ±5 mm), a random unit normal, radius 0
  * (the object's own) → cs_world_fracture; every 10th fracture the world steps once (pieces
  * drift apart on a random push of at most 0.09 N). After every fracture every object's surface
@@ -218,17 +218,17 @@ int main(int argc, char **argv)
         fprintf(stderr, "world: %s\n", err);
         return 2;
     }
-    int32_t box_ijk[3 * 8 * 6 * 4];
+    int32_t box_ijk[3 * 16 * 12 * 8];
     int nb = 0;
-    for (int k = 0; k < 4; k++)
-        for (int j = 0; j < 6; j++)
-            for (int i = 0; i < 8; i++) {
+    for (int k = 0; k < 8; k++)
+        for (int j = 0; j < 12; j++)
+            for (int i = 0; i < 16; i++) {
                 box_ijk[3 * nb] = i, box_ijk[3 * nb + 1] = j, box_ijk[3 * nb + 2] = k;
                 nb++;
             }
     cs_object_def bd = cs_object_def_default();
     bd.name = "box";
-    bd.cube_size = 0.025;
+    bd.cube_size = 0.0125;
     bd.cells_ijk = box_ijk;
     bd.n_cells = nb;
     bd.material.young = 1e5;
@@ -250,8 +250,23 @@ int main(int argc, char **argv)
     printf("     storm: 4 objects, %.6g m^3 of surface volume at the start\n", volume);
     int cuts_with_faces = 0;
     for (int f = 0; f < n_fract && !fail; f++) {
+        /* an object picked with probability ∝ its cells: the big ones keep being cut */
         const int no = cs_world_object_ids(w, vw.ids, MAX_OBJ);
-        const cs_object_id id = vw.ids[(int)(urand() * no) % no];
+        int cells_total = 0;
+        for (int k = 0; k < no; k++) {
+            cs_object_info info;
+            cs_object_get_info(w, vw.ids[k], &info);
+            cells_total += info.n_cells;
+        }
+        int pick = (int)(urand() * cells_total), ko = 0;
+        for (; ko < no - 1; ko++) {
+            cs_object_info info;
+            cs_object_get_info(w, vw.ids[ko], &info);
+            if (pick < info.n_cells)
+                break;
+            pick -= info.n_cells;
+        }
+        const cs_object_id id = vw.ids[ko];
         const double *X, *x, *v;
         int n;
         cs_object_nodes(w, id, &X, &x, &v, &n);

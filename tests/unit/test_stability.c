@@ -5,11 +5,11 @@
  * here as indented lines).
  *
  *   stab_spin_*            a free tumbling block, 10 000 steps, every model × integrator
- *   stab_implicit_dt_range implicit Euler from dt 1e-4 to 0.1 s, every model
- *   stab_explicit_limit    measured explicit stability limit against the engine's refusal
- *   stab_material_range    ν 0..0.49, E 1e2..1e9: statics against beam theory, dynamics finite
- *   stab_crushed_block     a block flattened (and inverted) and released
- *   stab_extreme_inputs    1e12 N, NaN, inf, tiny/huge dt, absurd drags: refused, state kept
+ *   stab_implicit_any_dt   implicit Euler from dt 1e-4 to 0.1 s, every model (and rigid)
+ *   stab_explicit_limit_*  measured explicit stability limit against the engine's refusal
+ *   stab_material_range_*  ν 0..0.49, E 1e2..1e9: statics against beam theory, dynamics finite
+ *   stab_crushed_block_*   a block flattened, inverted or jittered, and released
+ *   stab_extreme_inputs_*  1e12 N, NaN, inf, tiny/huge dt, absurd drags: refused, state kept
  */
 #include <math.h>
 #include <stdio.h>
@@ -455,9 +455,9 @@ TEST(stab_implicit_any_dt)
             if (model != CS_MODEL_RIGID)
                 wd.gravity[2] = -9.81;
             blk b;
-            ENSURE_MSG(make_blk(&b, &wd, model, CS_INTEGRATOR_DEFAULT == 0 && model == CS_MODEL_RIGID
-                                                      ? CS_INTEGRATOR_DEFAULT
-                                                      : CS_INTEGRATOR_IMPLICIT_EULER,
+            ENSURE_MSG(make_blk(&b, &wd, model,
+                                model == CS_MODEL_RIGID ? CS_INTEGRATOR_DEFAULT
+                                                        : CS_INTEGRATOR_IMPLICIT_EULER,
                                 mat, 6, 2, 2, 0.05, model != CS_MODEL_RIGID, err, sizeof err) == 0,
                        "%s dt %g: %s", cs_model_name(model), dt, err);
             cs_object *o = cs_world_find_internal(b.w, b.id);
