@@ -189,7 +189,7 @@ typedef enum cs_preconditioner {
 int cs_preconditioner_from_name(const char *name, cs_preconditioner *out);
 
 typedef struct cs_world_def {
-    double dt;               /* time step [s], in (0, 1]; default 1/60 */
+    double dt;               /* time step [s], in [1e-6, 1]; default 1/60 */
     double gravity[3];       /* [m/s²]; default (0, 0, -9.81) */
     bool has_ground;         /* default false */
     double ground_height;    /* the plane z = ground_height, solid below; default 0 */

@@ -165,8 +165,10 @@ int cs_world_create(const cs_world_def *def, cs_world_t **out, char *err, size_t
     *out = NULL;
     if (!def)
         return cs_engine_fail(err, errlen, CS_ERR_INVALID, "world definition is NULL");
-    if (!(def->dt > 0 && def->dt <= 1.0))
-        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "dt must be in (0, 1] s, got %g", def->dt);
+    /* Below 1 µs a step is pointless and durations (seconds/dt steps) overflow int. */
+    if (!(def->dt >= CS_MIN_DT && def->dt <= 1.0))
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "dt must be in [%g, 1] s, got %g",
+                              CS_MIN_DT, def->dt);
     if (!finite3(def->gravity) || norm3(def->gravity) > 1e4)
         return cs_engine_fail(err, errlen, CS_ERR_INVALID, "gravity must be finite and below 1e4 m/s^2");
     if (!isfinite(def->ground_height))
@@ -720,6 +722,46 @@ static void nearest_material_point(const cs_object *o, const double p[3], int32_
                  (CS_CORNER[k][2] ? u[2] : 1 - u[2]);
 }
 
+
+/* Steps an input of `seconds` lasts: at least 1, at most 1e9 (1e6 s at dt 1e-6 s would be
+ * 1e12: the cast to int must not overflow, and 1e9 steps outlast any session). */
+static int duration_steps(double seconds, double dt)
+{
+    const double steps = ceil(seconds / dt - 1e-9);
+    return steps < 1 ? 1 : steps > 1e9 ? 1000000000 : (int)steps;
+}
+
+/*
+ * A drag spring is integrated explicitly by symplectic Euler and Verlet (the other integrators
+ * take it into their implicit operator). It adds k·w wᵀ on the grabbed cell's corners, whose
+ * largest frequency against the lumped masses is at most k Σ w_i²/m_i; with the elastic bound
+ * ω_el the step stays stable while (ω_el² + k Σ w_i²/m_i) dt² ≤ (ω_el dt_c)² (dt_c the
+ * object's explicit limit, damping included). A stiffer spring blew the object up to ~1e250 m
+ * without a non-finite value to report (test_stability.c): refuse it with the bound instead.
+ */
+static int check_explicit_spring(const cs_world_t *w, const cs_object *o, const cs_input *in,
+                                 char *err, size_t errlen)
+{
+    if (o->model == CS_MODEL_RIGID || (o->integrator != CS_INTEGRATOR_SYMPLECTIC_EULER &&
+                                       o->integrator != CS_INTEGRATOR_VERLET))
+        return CS_OK;
+    double s = 0;
+    const int32_t *nd = o->cm.cell_nodes + 8 * (size_t)in->cell;
+    for (int k = 0; k < 8; k++)
+        if (o->m[nd[k]] > 0)
+            s += in->w[k] * in->w[k] / o->m[nd[k]];
+    const double we = cs_elastic_max_omega(o->model, &o->mat, o->cm.h);
+    const double wc = we * cs_elastic_critical_dt(o->model, &o->mat, o->cm.h) / w->def.dt;
+    const double kmax = s > 0 ? (wc * wc - we * we) / s : INFINITY;
+    if (in->stiffness > kmax)
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID,
+                              "drag stiffness %g N/m is above the explicit stability limit %.4g N/m "
+                              "of '%s' at dt %g s (%s): lower it, lower dt or use implicit_euler",
+                              in->stiffness, kmax, o->name, w->def.dt,
+                              cs_integrator_name(o->integrator));
+    return CS_OK;
+}
+
 static int add_input(cs_world_t *w, cs_object_id id, cs_input *in, const double point[3],
                      double seconds, char *err, size_t errlen)
 {
@@ -735,8 +777,12 @@ static int add_input(cs_world_t *w, cs_object_id id, cs_input *in, const double 
         return cs_engine_fail(err, errlen, CS_ERR_INVALID, "object '%s' already has %d active inputs",
                     o->name, CS_MAX_INPUTS);
     nearest_material_point(o, point, &in->cell, in->w);
-    double steps = ceil(seconds / w->def.dt - 1e-9);
-    in->steps_left = steps < 1 ? 1 : (int)steps;
+    if (cs_input_is_spring(in)) {
+        const int rc = check_explicit_spring(w, o, in, err, errlen);
+        if (rc)
+            return rc;
+    }
+    in->steps_left = duration_steps(seconds, w->def.dt);
     o->inputs[o->n_inputs++] = *in;
     o->sleeping = false;
     o->still_steps = 0;
@@ -814,6 +860,9 @@ int cs_world_drag_curve(cs_world_t *w, cs_object_id id, const double *points, in
         return cs_engine_fail(err, errlen, CS_ERR_INVALID, "curve has zero length");
     cs_input in = {.kind = CS_INPUT_CURVE, .stiffness = stiffness};
     nearest_material_point(o, points, &in.cell, in.w);
+    int rc = check_explicit_spring(w, o, &in, err, errlen);
+    if (rc)
+        return rc;
     const int32_t *nd = o->cm.cell_nodes + 8 * in.cell;
     double grab[3] = {0, 0, 0};
     for (int k = 0; k < 8; k++)
@@ -893,9 +942,8 @@ int cs_world_pressure(cs_world_t *w, cs_object_id id, double pressure, double se
     if (o->n_inputs == CS_MAX_INPUTS)
         return cs_engine_fail(err, errlen, CS_ERR_INVALID,
                               "object '%s' already has %d active inputs", o->name, CS_MAX_INPUTS);
-    double steps = ceil(seconds / w->def.dt - 1e-9);
     cs_input in = {.kind = CS_INPUT_PRESSURE, .cell = -1, .pressure = pressure,
-                   .steps_left = steps < 1 ? 1 : (int)steps};
+                   .steps_left = duration_steps(seconds, w->def.dt)};
     o->inputs[o->n_inputs++] = in;
     o->sleeping = false;
     o->still_steps = 0;

@@ -18,6 +18,7 @@
 
 #define CS_MAX_INPUTS 1024
 #define CS_MAX_NAME 255
+#define CS_MIN_DT 1e-6 /* [s]: the smallest world dt accepted */
 
 /*
  * Inputs. FORCE: a constant force at a material point. DRAG: a spring (stiffness) from the

@@ -75,6 +75,7 @@ expect_refused daemon-unknown-object-name "no object named 'nosuch'" force --nam
 expect_refused daemon-unknown-object-id 'unknown object id 99' force --id 99 --point 0,0,0 --force 0,0,1
 expect_refused daemon-negative-duration 'negative duration' force --name block --point 0,0,0 --force 0,0,1 --duration -1
 expect_refused daemon-bad-drag 'stiffness' force --name block --kind 1 --point 0,0,0 --target 0,0,1 --stiffness -5
+expect_refused daemon-absurd-drag 'max_force' force --name block --kind 1 --point 0.05,0.05,0.1 --target 0.05,0.05,1 --stiffness 1e300
 expect_refused daemon-bad-kind 'unknown kind 7' force --name block --kind 7 --point 0,0,0
 expect_refused daemon-step-zero 'count 0 is less than 1' command step --count 0
 expect_refused daemon-unknown-command "unknown command 'explode'" command explode

@@ -29,6 +29,8 @@ mesh_scene rejected.ply >"$CS_TMP/rejected.json"
 head -c 300 /dev/urandom >"$CS_TMP/noise.stl"; printf 'solid x\nfacet normal nonsense\n' >>"$CS_TMP/noise.stl"
 mesh_scene noise.stl >"$CS_TMP/noise.json"
 sed 's/"young": 1e4/"young": "hard"/' "$CS_TMP/ok.json" >"$CS_TMP/illtyped.json"
+sed -E 's/"dt": *[0-9.e-]+/"dt": 1e-9/' "$CS_TMP/ok.json" >"$CS_TMP/tinydt.json"
+sed -E 's/"dt": *[0-9.e-]+/"dt": 5/' "$CS_TMP/ok.json" >"$CS_TMP/hugedt.json"
 
 # expect_exit2 NAME PATTERN ARGS...: exit status 2, exactly one stderr line, matching PATTERN.
 expect_exit2() {
@@ -63,6 +65,8 @@ fi
 expect_exit2 scene-missing-file 'nothere.json' --scene "$CS_TMP/nothere.json" --steps 1
 expect_exit2 scene-malformed-json 'malformed.json' --scene "$CS_TMP/malformed.json" --steps 1
 expect_exit2 scene-ill-typed-field 'young' --scene "$CS_TMP/illtyped.json" --steps 1
+expect_exit2 scene-tiny-dt 'dt must be in \[1e-06, 1\] s, got 1e-09' --scene "$CS_TMP/tinydt.json" --steps 1
+expect_exit2 scene-huge-dt 'dt: must be in \(0, 1\], got 5' --scene "$CS_TMP/hugedt.json" --steps 1
 expect_exit2 scene-missing-mesh 'missing_mesh.obj' --scene "$CS_TMP/missing.json" --steps 1
 expect_exit2 scene-mesh-assimp-rejects 'rejected.ply' --scene "$CS_TMP/rejected.json" --steps 1
 expect_exit2 scene-mesh-noise 'noise.stl' --scene "$CS_TMP/noise.json" --steps 1
