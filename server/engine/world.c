@@ -425,13 +425,25 @@ int cs_object_alloc_state(cs_object *o)
  * centred as in Eq. (19), a mode of frequency ω is stable iff ω·dt < 2, whatever the
  * damping. ω is bounded by the largest element eigenvalue (cs_lf_omega2_bound).
  */
+/* ω²max of central differences for the plain material: localframe's B-spline bound, else the
+ * element eigenvalue bound of the model's own cube (mss springs are not the FEM cube). */
+static int cd_omega2(const cs_object_def *def, double *omega2)
+{
+    const cs_material *m = &def->material;
+    if (def->model == CS_MODEL_LOCALFRAME)
+        return cs_lf_omega2_bound(def->model, m->young, m->poisson, m->density, def->cube_size,
+                                  omega2);
+    const double wm = cs_elastic_max_omega(def->model, m, def->cube_size);
+    *omega2 = wm * wm;
+    return 0;
+}
+
 static int check_central_difference(const cs_world_t *w, const cs_object_def *def, char *err,
                                     size_t errlen)
 {
     const cs_material *m = &def->material;
     double omega2;
-    if (cs_lf_omega2_bound(def->model, m->young, m->poisson, m->density, def->cube_size,
-                           &omega2) != 0)
+    if (cd_omega2(def, &omega2) != 0)
         return cs_engine_fail(err, errlen, CS_ERR_NOMEM, "out of memory");
     const double limit = 2.0 / sqrt(omega2);
     if (w->def.dt > limit)
@@ -624,9 +636,7 @@ int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *i
         const double wm = cs_elastic_max_omega(def->model, &def->material, def->cube_size);
         o->omega2_plain = wm * wm;
     } else if (integ == CS_INTEGRATOR_CENTRAL_DIFFERENCE &&
-               cs_lf_omega2_bound(def->model, def->material.young, def->material.poisson,
-                                  def->material.density, def->cube_size,
-                                  &o->omega2_plain) != 0) {
+               cd_omega2(def, &o->omega2_plain) != 0) {
         rc = cs_engine_fail(err, errlen, CS_ERR_NOMEM, "out of memory");
         goto fail;
     }

@@ -344,10 +344,14 @@ SLOW_TEST(stab_spin_tumbling_block)
 /* ---------------------------------------------------------------- 3. explicit stability limit */
 
 /* The limit the engine refuses above (world.c: cs_elastic_critical_dt for symplectic Euler
- * and Verlet, 2/sqrt(cs_lf_omega2_bound) for central differences). */
+ * and Verlet; for central differences 2/ω_max: cs_lf_omega2_bound for localframe, the
+ * model's cube eigenvalue bound cs_elastic_max_omega otherwise). */
 static double engine_limit(cs_model model, cs_integrator integ, const cs_material *mat, double h)
 {
     if (integ == CS_INTEGRATOR_CENTRAL_DIFFERENCE) {
+        /* localframe: its B-spline bound; the others: their own cube's eigenvalue bound */
+        if (model != CS_MODEL_LOCALFRAME)
+            return 2.0 / cs_elastic_max_omega(model, mat, h);
         double w2;
         if (cs_lf_omega2_bound(model, mat->young, mat->poisson, mat->density, h, &w2) != 0)
             return NAN;
