@@ -1321,6 +1321,68 @@ static void set_implicit_coefs(cs_object *o, double dt)
     o->pcoef = dt * dt;
 }
 
+/*
+ * The end of every integrator's step, after positions and velocities: inputs expire, the
+ * surface follows the nodes, and an object whose fastest node stayed slower than sleep_speed
+ * for sleep_steps steps in a row (with no input) falls asleep. Returns the ms spent skinning.
+ */
+static double finish_step(const cs_world_t *w, cs_object *o)
+{
+    const size_t n3 = (size_t)o->n * 3;
+    double vmax2 = 0;
+    for (size_t d = 0; d < n3; d += 3) {
+        double s = o->v[d] * o->v[d] + o->v[d + 1] * o->v[d + 1] + o->v[d + 2] * o->v[d + 2];
+        if (s > vmax2)
+            vmax2 = s;
+    }
+    expire_inputs(o);
+    const double t0 = now_ms();
+    cs_surface_skin(&o->surf, &o->cm, o->x);
+    const double ms = now_ms() - t0;
+    if (w->def.sleep_steps > 0 && o->n_inputs == 0 && sqrt(vmax2) < w->def.sleep_speed) {
+        if (++o->still_steps >= w->def.sleep_steps) {
+            o->sleeping = true;
+            memset(o->v, 0, n3 * sizeof(double));
+        }
+    } else {
+        o->still_steps = 0;
+    }
+    return ms;
+}
+
+static void add_solve_stats(cs_step_stats *st, cs_cg_result r)
+{
+    st->cg_iterations += r.iterations;
+    if (r.relres > st->cg_residual)
+        st->cg_residual = r.relres;
+    if (!r.converged)
+        st->converged = false;
+}
+
+/* The end of a step that solved for the new velocities v1 (implicit Euler, central
+ * differences): positions, ground projection, finish_step, and the stage times t[0..4]
+ * (inputs, rotations, right-hand side, solve) and solve statistics into st. */
+static void end_solved_step(const cs_world_t *w, cs_object *o, cs_step_stats *st,
+                            const double t[5], cs_cg_result r)
+{
+    const size_t n3 = (size_t)o->n * 3;
+    const double dt = w->def.dt;
+    memcpy(o->v, o->v1, n3 * sizeof(double));
+    for (size_t d = 0; d < n3; d++)
+        o->x[d] += dt * o->v[d];
+    ground_project(w, o);
+    o->elastic_energy_valid = false;
+    const double t5 = now_ms();
+    st->ms_skin += finish_step(w, o);
+    st->ms_inputs += t[1] - t[0];
+    st->ms_rotations += t[2] - t[1];
+    st->ms_rhs += t[3] - t[2];
+    st->ms_solve += t[4] - t[3];
+    st->ms_post += t5 - t[4];
+    add_solve_stats(st, r);
+    st->objects_stepped++;
+}
+
 /* Implicit Euler (seed 000 §2.2): one linear solve per step for the new velocities. */
 static int step_implicit_euler(cs_world_t *w, cs_object *o, cs_step_stats *st)
 {
@@ -1351,43 +1413,7 @@ static int step_implicit_euler(cs_world_t *w, cs_object *o, cs_step_stats *st)
     if (!all_finite(o->v1, n3))
         return CS_ERR_DIVERGED;
     ground_after_solve(w, o, contacts);
-    memcpy(o->v, o->v1, n3 * sizeof(double));
-    double vmax2 = 0;
-    for (size_t d = 0; d < n3; d += 3) {
-        for (int a = 0; a < 3; a++)
-            o->x[d + a] += dt * o->v[d + a];
-    }
-    ground_project(w, o);
-    o->elastic_energy_valid = false;
-    for (size_t d = 0; d < n3; d += 3) {
-        double s = o->v[d] * o->v[d] + o->v[d + 1] * o->v[d + 1] + o->v[d + 2] * o->v[d + 2];
-        if (s > vmax2)
-            vmax2 = s;
-    }
-    expire_inputs(o);
-    double t5 = now_ms();
-    cs_surface_skin(&o->surf, &o->cm, o->x);
-    double t6 = now_ms();
-    if (w->def.sleep_steps > 0 && o->n_inputs == 0 && sqrt(vmax2) < w->def.sleep_speed) {
-        if (++o->still_steps >= w->def.sleep_steps) {
-            o->sleeping = true;
-            memset(o->v, 0, n3 * sizeof(double));
-        }
-    } else {
-        o->still_steps = 0;
-    }
-    st->ms_inputs += t1 - t0;
-    st->ms_rotations += t2 - t1;
-    st->ms_rhs += t3 - t2;
-    st->ms_solve += t4 - t3;
-    st->ms_post += t5 - t4;
-    st->ms_skin += t6 - t5;
-    st->cg_iterations += r.iterations;
-    if (r.relres > st->cg_residual)
-        st->cg_residual = r.relres;
-    if (!r.converged)
-        st->converged = false;
-    st->objects_stepped++;
+    end_solved_step(w, o, st, (const double[5]){t0, t1, t2, t3, t4}, r);
     return CS_OK;
 }
 
@@ -1553,41 +1579,7 @@ static int step_central_difference(cs_world_t *w, cs_object *o, cs_step_stats *s
             v[1] *= sc;
         }
     }
-    memcpy(o->v, o->v1, n3 * sizeof(double));
-    for (size_t d = 0; d < n3; d++)
-        o->x[d] += dt * o->v[d];
-    ground_project(w, o);
-    o->elastic_energy_valid = false;
-    double vmax2 = 0;
-    for (size_t d = 0; d < n3; d += 3) {
-        double s = o->v[d] * o->v[d] + o->v[d + 1] * o->v[d + 1] + o->v[d + 2] * o->v[d + 2];
-        if (s > vmax2)
-            vmax2 = s;
-    }
-    expire_inputs(o);
-    double t5 = now_ms();
-    cs_surface_skin(&o->surf, &o->cm, o->x);
-    double t6 = now_ms();
-    if (w->def.sleep_steps > 0 && o->n_inputs == 0 && sqrt(vmax2) < w->def.sleep_speed) {
-        if (++o->still_steps >= w->def.sleep_steps) {
-            o->sleeping = true;
-            memset(o->v, 0, n3 * sizeof(double));
-        }
-    } else {
-        o->still_steps = 0;
-    }
-    st->ms_inputs += t1 - t0;
-    st->ms_rotations += t2 - t1;
-    st->ms_rhs += t3 - t2;
-    st->ms_solve += t4 - t3;
-    st->ms_post += t5 - t4;
-    st->ms_skin += t6 - t5;
-    st->cg_iterations += r.iterations;
-    if (r.relres > st->cg_residual)
-        st->cg_residual = r.relres;
-    if (!r.converged)
-        st->converged = false;
-    st->objects_stepped++;
+    end_solved_step(w, o, st, (const double[5]){t0, t1, t2, t3, t4}, r);
     return CS_OK;
 }
 
@@ -1717,26 +1709,9 @@ static int step_explicit(cs_world_t *w, cs_object *o, cs_step_stats *st, bool ve
         memcpy(o->v, o->b, n3 * sizeof(double));
         return CS_ERR_DIVERGED;
     }
-    double vmax2 = 0;
-    for (size_t d = 0; d < n3; d += 3) {
-        double s = o->v[d] * o->v[d] + o->v[d + 1] * o->v[d + 1] + o->v[d + 2] * o->v[d + 2];
-        if (s > vmax2)
-            vmax2 = s;
-    }
-    expire_inputs(o);
-    cs_surface_skin(&o->surf, &o->cm, o->x);
-    double t3 = now_ms();
-    if (w->def.sleep_steps > 0 && o->n_inputs == 0 && sqrt(vmax2) < w->def.sleep_speed) {
-        if (++o->still_steps >= w->def.sleep_steps) {
-            o->sleeping = true;
-            memset(o->v, 0, n3 * sizeof(double));
-        }
-    } else {
-        o->still_steps = 0;
-    }
+    st->ms_skin += finish_step(w, o);
     st->ms_rhs += t1 - t0;
     st->ms_solve += t2 - t1;
-    st->ms_skin += t3 - t2;
     st->objects_stepped++;
     return CS_OK;
 }
