@@ -1081,6 +1081,41 @@ static void expire_inputs(cs_object *o)
 
 /* ---------------------------------------------------------------- the implicit step */
 
+/* The drag springs (drags and curve drags not waiting for their start) of the implicit
+ * operators: y += coef·Σ k w (w·p) over each spring's cube corners. */
+static void add_spring_operator(const cs_object *o, double coef, const double *p, double *y)
+{
+    if (coef == 0)
+        return;
+    for (int i = 0; i < o->n_inputs; i++) {
+        const cs_input *in = &o->inputs[i];
+        if (!cs_input_is_spring(in) || in->delay > 0)
+            continue;
+        const int32_t *nd = o->cm.cell_nodes + 8 * in->cell;
+        double sum[3] = {0, 0, 0};
+        for (int k = 0; k < 8; k++)
+            for (int a = 0; a < 3; a++)
+                sum[a] += in->w[k] * p[3 * nd[k] + a];
+        for (int k = 0; k < 8; k++)
+            for (int a = 0; a < 3; a++)
+                y[3 * nd[k] + a] += coef * in->stiffness * in->w[k] * sum[a];
+    }
+}
+
+/* Their diagonal, added to the preconditioner's blocks: coef·k w_k² per corner. */
+static void add_spring_blocks(cs_object *o, double coef)
+{
+    for (int i = 0; coef != 0 && i < o->n_inputs; i++) {
+        const cs_input *in = &o->inputs[i];
+        if (!cs_input_is_spring(in) || in->delay > 0)
+            continue;
+        for (int k = 0; k < 8; k++)
+            for (int a = 0; a < 3; a++)
+                o->blocks[9 * o->cm.cell_nodes[8 * in->cell + k] + 4 * a] +=
+                    coef * in->stiffness * in->w[k] * in->w[k];
+    }
+}
+
 /* y = mcoef·M p + kcoef·K_R p + dcoef·Σ drags k w (w·p): the implicit Euler operator. */
 static void step_operator(void *ctx, const double *p, double *y)
 {
@@ -1104,21 +1139,7 @@ static void step_operator(void *ctx, const double *p, double *y)
                 y[3 * i + a] += o->cmcoef * o->fld.md[i] * p[3 * i + a];
     }
     add_penalty_operator(o, o->pcoef, p, y);
-    if (o->dcoef == 0)
-        return;
-    for (int i = 0; i < o->n_inputs; i++) {
-        const cs_input *in = &o->inputs[i];
-        if (!cs_input_is_spring(in) || in->delay > 0)
-            continue;
-        const int32_t *nd = o->cm.cell_nodes + 8 * in->cell;
-        double s[3] = {0, 0, 0};
-        for (int k = 0; k < 8; k++)
-            for (int a = 0; a < 3; a++)
-                s[a] += in->w[k] * p[3 * nd[k] + a];
-        for (int k = 0; k < 8; k++)
-            for (int a = 0; a < 3; a++)
-                y[3 * nd[k] + a] += o->dcoef * in->stiffness * in->w[k] * s[a];
-    }
+    add_spring_operator(o, o->dcoef, p, y);
 }
 
 /* The Newton operator of corotational statics: warped stiffness plus geometric stiffness. */
@@ -1148,15 +1169,7 @@ static void build_preconditioner(cs_object *o)
         for (size_t d = 0; d < 9 * (size_t)o->n; d++)
             o->blocks[d] += o->ckcoef * o->fld.tmp[d];
     }
-    for (int i = 0; o->dcoef != 0 && i < o->n_inputs; i++) {
-        const cs_input *in = &o->inputs[i];
-        if (!cs_input_is_spring(in) || in->delay > 0)
-            continue;
-        for (int k = 0; k < 8; k++)
-            for (int a = 0; a < 3; a++)
-                o->blocks[9 * o->cm.cell_nodes[8 * in->cell + k] + 4 * a] +=
-                    o->dcoef * in->stiffness * in->w[k] * in->w[k];
-    }
+    add_spring_blocks(o, o->dcoef);
     cs_invert_blocks(o->blocks, o->n);
 }
 
@@ -1447,21 +1460,7 @@ static void cd_operator(void *ctx, const double *p, double *y)
             cs_elastic_apply_Md(o, p, y, o->cmcoef);
     }
     add_penalty_operator(o, o->pcoef, p, y);
-    if (o->dcoef == 0)
-        return;
-    for (int i = 0; i < o->n_inputs; i++) {
-        const cs_input *in = &o->inputs[i];
-        if (in->kind != CS_INPUT_DRAG)
-            continue;
-        const int32_t *nd = o->cm.cell_nodes + 8 * in->cell;
-        double s[3] = {0, 0, 0};
-        for (int k = 0; k < 8; k++)
-            for (int a = 0; a < 3; a++)
-                s[a] += in->w[k] * p[3 * nd[k] + a];
-        for (int k = 0; k < 8; k++)
-            for (int a = 0; a < 3; a++)
-                y[3 * nd[k] + a] += o->dcoef * in->stiffness * in->w[k] * s[a];
-    }
+    add_spring_operator(o, o->dcoef, p, y);
 }
 
 static void cd_preconditioner(cs_object *o)
@@ -1485,15 +1484,7 @@ static void cd_preconditioner(cs_object *o)
         for (size_t d = 0; d < 9 * (size_t)o->n; d++)
             o->blocks[d] += o->ckcoef * o->fld.tmp[d];
     }
-    for (int i = 0; o->dcoef != 0 && i < o->n_inputs; i++) {
-        const cs_input *in = &o->inputs[i];
-        if (in->kind != CS_INPUT_DRAG)
-            continue;
-        for (int k = 0; k < 8; k++)
-            for (int a = 0; a < 3; a++)
-                o->blocks[9 * o->cm.cell_nodes[8 * in->cell + k] + 4 * a] +=
-                    o->dcoef * in->stiffness * in->w[k] * in->w[k];
-    }
+    add_spring_blocks(o, o->dcoef);
     cs_invert_blocks(o->blocks, o->n);
 }
 
