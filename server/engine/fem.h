@@ -92,6 +92,20 @@ int cs_fem_prepare_tangent(cs_fem *fem, const double *x);
 void cs_fem_apply_tangent(cs_fem *fem, const double *p, double *y);
 void cs_fem_release_tangent(cs_fem *fem);
 
+/*
+ * The element pass of a product on cells that share one cube stiffness K (as
+ * cs_cube_stiffness builds it, any edge and material): fe[24c..24c+23] = s_c R_c K R_cᵀ x on
+ * cell c's nodes, for c < n_cells (R: 9 per cell, s: 1 per cell). The modal kernel of
+ * cs_fem_apply_K; multigrid's coarse levels use it (their K(2h) = 2 K(h) is in s).
+ */
+void cs_cube_cells_product(const double K[24 * 24], int n_cells, const int32_t *cell_nodes,
+                           const double *R, const double *s, const double *x, double *fe,
+                           int threads);
+/* hλ and hμ of a cube stiffness K built by cs_cube_stiffness (K is linear in both). */
+void cs_cube_lame_h(const double K[24 * 24], double *hl, double *hm);
+/* Floating-point operations of one cs_fem_apply_K on this mesh (the kernel as implemented). */
+double cs_fem_product_flops(const cs_fem *fem);
+
 /* The 3×3 diagonal blocks of Σ R K Rᵀ (9 per node, overwritten). */
 void cs_fem_diag_blocks(cs_fem *fem, double *blocks);
 
