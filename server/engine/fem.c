@@ -272,7 +272,8 @@ static void graded_kmul(const cs_fem *fem, const double *f, const double *restri
  * Cells go through in batches of CS_MODAL_LANES, one cell per SIMD lane: every lane does the
  * same operations, so a cell's result does not depend on its lane or on the thread count.
  */
-#define LANES 4 /* the lane lists in modal_kernel are written out for 4 */
+#define LANES 4
+_Static_assert(LANES == 4, "the lane lists in modal_kernel are written out for 4 lanes");
 typedef double vd __attribute__((vector_size(8 * LANES)));
 
 /* One batch: where each lane's cell reads its nodal vectors and writes its results. A lane
