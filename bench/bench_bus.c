@@ -32,6 +32,7 @@
 
 #include <lcm/lcm.h>
 
+#include "client/client_util.h"
 #include "cubesim_delta_t.h"
 #include "cubesim_snapshot_t.h"
 #include "cubesim_status_t.h"
@@ -270,11 +271,14 @@ static int cmp_double(const void *a, const void *b)
 
 static int run_sub(const char *url, double duration, double wait, int queue)
 {
-    lcm_t *lcm = lcm_create(url);
+    char *bus_url = cs_client_url(url); /* as cubesim-log: a 4 MiB receive buffer */
+    lcm_t *lcm = bus_url ? lcm_create(bus_url) : NULL;
     if (!lcm) {
-        fprintf(stderr, "bench_bus: cannot open the LCM bus at '%s'\n", url ? url : "(default)");
+        fprintf(stderr, "bench_bus: cannot open the LCM bus at '%s'\n", bus_url ? bus_url : "(out of memory)");
+        free(bus_url);
         return 1;
     }
+    free(bus_url);
     sub s;
     memset(&s, 0, sizeof s);
     cs_surface_state_init(&s.ss);

@@ -10,7 +10,8 @@
 #
 #   bash bench/bus.sh                      # -> bench/results/bus.md
 #   BUS_VERTICES=20000 BUS_SECONDS=5 bash bench/bus.sh
-#   BUS_RECV_BUF: the clients' recv_buf_size (default 4194304; capped by net.core.rmem_max)
+#   BUS_RECV_BUF=N: the clients' recv_buf_size (default: the clients' own, 4194304 — see
+#   cs_client_url; the kernel caps it at net.core.rmem_max)
 # Exit status 0 when every client received every frame of its window complete, with no loss
 # and every hash checked equal; 1 otherwise (the table is written either way).
 set -u
@@ -21,7 +22,6 @@ cs_netns_reexec "$@"
 N=${BUS_VERTICES:-100000}
 SECS=${BUS_SECONDS:-30}
 NCLI=${BUS_CLIENTS:-2}
-RBUF=${BUS_RECV_BUF:-4194304}
 OUT=${BUS_OUT:-$CS_ROOT/bench/results/bus.md}
 BIN=$CS_IT_BIN
 
@@ -32,12 +32,12 @@ NT=$(sed -n 's/.*triangles=\([0-9]*\).*/\1/p' "$CS_TMP/mesh.out")
 # frame. Cubes of 0.25 m: a handful of cubes, so the physics is cheap and the bus is measured.
 cat >"$CS_TMP/bus.json" <<JSON
 { "dt": 0.016666666666666666, "publish_hz": 60, "publish_epsilon": 0, "status_hz": 4,
-  "keyframe_s": 2, "sleep": { "steps": 0 },
+  "keyframe_s": ${BUS_KEYFRAME:-2}, "sleep": { "steps": 0 },
   "objects": [ { "name": "sphere", "model": "corotational", "cube_size": 0.25,
                  "mesh": { "file": "sphere.obj" } } ] }
 JSON
 
-SUB_URL="$CS_LCM_URL&recv_buf_size=$RBUF"
+SUB_URL="$CS_LCM_URL${BUS_RECV_BUF:+&recv_buf_size=$BUS_RECV_BUF}"
 pids=()
 for c in $(seq 1 "$NCLI"); do
     "$BIN/bench_bus" sub --lcm "$SUB_URL" --duration "$SECS" --wait 60 >"$CS_TMP/sub$c.out" \
@@ -66,8 +66,8 @@ mkdir -p "$(dirname "$OUT")"
     echo
     echo "$(date -u '+%Y-%m-%d %H:%M UTC'), $(nproc) cores, load average $(cut -d' ' -f1-3 /proc/loadavg)."
     echo "A falling UV sphere of $NV surface vertices ($NT triangles), publish_epsilon 0 (every"
-    echo "vertex in every frame's delta), dt = 1/60 s, publish_hz 60, key frames every 2 s,"
-    echo "\`cubesimd --realtime\`; $NCLI \`bench_bus sub\` clients (recv_buf_size=$RBUF) for $SECS s"
+    echo "vertex in every frame's delta), dt = 1/60 s, publish_hz 60, key frames every ${BUS_KEYFRAME:-2} s,"
+    echo "\`cubesimd --realtime\`; $NCLI \`bench_bus sub\` clients (recv_buf_size=${BUS_RECV_BUF:-4194304}, net.core.rmem_max $(cat /proc/sys/net/core/rmem_max)) for $SECS s"
     echo "each, all in one private network namespace. Daemon CPU: ${daemon_cpu} % of one core."
     echo
     echo "| client | frames | complete | lost msgs | rate [Hz] | delta msgs/frame | bytes/frame | MB/s | latency p50 / p99 / max [ms] | CPU [% of a core] | hashes equal |"
