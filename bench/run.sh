@@ -147,3 +147,9 @@ GP
   done
   echo "plots: $out/wp_*.svg"
 fi
+
+# The bus keeps up (issue 7 part 3): a 100 000-vertex surface's deltas at 60 Hz to two clients
+# for 30 s (BUS_SECONDS, BUS_VERTICES, BUS_CLIENTS, BUS_RECV_BUF scale it), in a private network
+# namespace (needs root or unprivileged user namespaces) -> bench/results/bus.md.
+echo "== bus: 100k-vertex surface deltas at 60 Hz to 2 clients"
+bash bench/bus.sh || echo "bench/bus.sh: frames lost or incomplete (see bench/results/bus.md)"

@@ -37,6 +37,31 @@ double cs_mono_s(void)
     return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
 }
 
+char *cs_client_url(const char *url)
+{
+    if (!url || !*url)
+        url = getenv("LCM_DEFAULT_URL");
+    if (!url || !*url)
+        url = "udpm://239.255.76.67:7667?ttl=0";
+    size_t n = strlen(url);
+    if (strncmp(url, "udpm://", 7) != 0 || strstr(url, "recv_buf_size=")) {
+        char *c = malloc(n + 1);
+        if (c)
+            memcpy(c, url, n + 1);
+        return c;
+    }
+    char extra[64];
+    snprintf(extra, sizeof extra, "%crecv_buf_size=%d", strchr(url, '?') ? '&' : '?',
+             CS_CLIENT_RECV_BUF);
+    size_t m = strlen(extra);
+    char *c = malloc(n + m + 1);
+    if (!c)
+        return NULL;
+    memcpy(c, url, n);
+    memcpy(c + n, extra, m + 1);
+    return c;
+}
+
 int64_t cs_random_id(void)
 {
     uint64_t r = 0;

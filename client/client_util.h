@@ -40,6 +40,17 @@ int64_t cs_random_id(void);
  * topology, by fingerprint), decode its header into *h and return 1; else 0. */
 int cs_msg_header(const void *data, int len, cubesim_header_t *h);
 
+/*
+ * The URL a receiving client opens: `url`, else $LCM_DEFAULT_URL, else LCM's default
+ * udpm://239.255.76.67:7667?ttl=0; a udpm URL without recv_buf_size gets
+ * recv_buf_size=CS_CLIENT_RECV_BUF appended (the kernel caps it at net.core.rmem_max), so a
+ * burst of 60 KB chunks — a 100 000-vertex surface is 1.6 MB per frame — fits in the socket
+ * buffer (the kernel's default, 208 KiB, holds about 3 of them). Other URLs are kept as they
+ * are. Returns a malloc'd string, NULL when out of memory.
+ */
+#define CS_CLIENT_RECV_BUF 4194304
+char *cs_client_url(const char *url);
+
 /* Parse a finite double / an int in [lo, hi]; 0 on success, -1 otherwise. */
 int cs_parse_double(const char *s, double *out);
 int cs_parse_int(const char *s, long lo, long hi, long *out);

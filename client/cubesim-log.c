@@ -136,12 +136,15 @@ int main(int argc, char **argv)
         fprintf(stderr, "cubesim-log: %s: cannot create the log file\n", path);
         return 2;
     }
-    lcm_t *lcm = lcm_create(url);
+    char *bus_url = cs_client_url(url); /* with a 4 MiB receive buffer */
+    lcm_t *lcm = bus_url ? lcm_create(bus_url) : NULL;
     if (!lcm) {
-        fprintf(stderr, "cubesim-log: cannot open the bus %s\n", url ? url : "(LCM default)");
+        fprintf(stderr, "cubesim-log: cannot open the bus %s\n", bus_url ? bus_url : "(out of memory)");
+        free(bus_url);
         lcm_eventlog_destroy(lg.log);
         return 2;
     }
+    free(bus_url);
     lcm_subscription_t *sub = lcm_subscribe(lcm, regex, on_message, &lg);
     if (!sub) {
         fprintf(stderr, "cubesim-log: cannot subscribe to '%s'\n", regex);

@@ -73,6 +73,7 @@ struct cs_bus {
     int out_cap, out_head, out_count;
     size_t out_bytes;
     double credit, credit_time;
+    double rate;      /* bytes/s of the bucket, set by outbox_push */
 
     int32_t snapshot_id;          /* last made */
     int32_t pending_snapshot_id;  /* queued, first chunk not yet sent; 0 if none */
@@ -657,6 +658,7 @@ int cs_bus_create(const char *url, cs_dlog *log, cs_bus_t **out, char *err, size
     lcm_subscription_set_queue_capacity(b->sub_curve, CS_BUS_QUEUE_CAPACITY);
     b->credit = CS_BUS_BURST;
     b->credit_time = cs_dlog_now();
+    b->rate = CS_BUS_RATE;
     *out = b;
     return 0;
 }
@@ -857,12 +859,16 @@ static int outbox_push(cs_bus_t *b, const char *channel, void *data, int len, in
     m->snapshot_id = snap;
     b->out_count++;
     b->out_bytes += (size_t)len;
+    /* drain the whole backlog within CS_BUS_DRAIN_S, at a rate within the bounds: a frame's
+     * deltas leave evenly spread, and a backlog never waits behind a fixed slow rate */
+    double r = (double)b->out_bytes / CS_BUS_DRAIN_S;
+    b->rate = r < CS_BUS_RATE ? CS_BUS_RATE : r > CS_BUS_RATE_MAX ? CS_BUS_RATE_MAX : r;
     return 0;
 }
 
 int cs_bus_pump(cs_bus_t *b, double now, double *next_send)
 {
-    b->credit += (now - b->credit_time) * CS_BUS_RATE;
+    b->credit += (now - b->credit_time) * b->rate;
     if (b->credit > CS_BUS_BURST)
         b->credit = CS_BUS_BURST;
     b->credit_time = now;
@@ -886,7 +892,7 @@ int cs_bus_pump(cs_bus_t *b, double now, double *next_send)
         *next_send = now;
         if (b->out_count > 0) {
             double need = (double)b->out[b->out_head].len - b->credit;
-            *next_send = now + (need > 0 ? need / CS_BUS_RATE : 0);
+            *next_send = now + (need > 0 ? need / b->rate : 0);
         }
     }
     return b->out_count;

@@ -11,9 +11,11 @@
  *   they never touch the world. The daemon applies queued inputs between steps.
  * - Snapshot chunks, topology changes and deltas leave in the order they were made, through
  *   one FIFO outbox,
- *   paced by a byte bucket (CS_BUS_RATE bytes/s, bursts up to CS_BUS_BURST), so a delta is
- *   never sent ahead of the snapshot it follows and back-to-back fragments do not overflow a
- *   receiver's socket buffer. Nothing in here sleeps. A delta is therefore never ahead of
+ *   paced by a byte bucket (bursts up to CS_BUS_BURST) whose rate is set whenever messages
+ *   are queued to what drains the whole outbox in CS_BUS_DRAIN_S — within [CS_BUS_RATE,
+ *   CS_BUS_RATE_MAX] — so a frame's messages are spread evenly over less than a 60 Hz frame
+ *   period instead of leaving back to back (a receiver's socket buffer sees the lowest rate
+ *   that keeps up), and a delta is never sent ahead of the snapshot it follows. Nothing in here sleeps. A delta is therefore never ahead of
  *   the topology change it was made for.
  * - The last-sent copy of each object follows every topology change it publishes (the same
  *   common/topo.c steps a client runs), so deltas go on without a snapshot; a change the copy
@@ -46,7 +48,9 @@
 #define CS_CH_CURVE "CUBESIM_CURVE"
 
 #define CS_BUS_CHUNK_BYTES 60000       /* payload budget of one snapshot/delta message */
-#define CS_BUS_RATE 48.0e6             /* outbox pacing [bytes/s] */
+#define CS_BUS_RATE 48.0e6             /* outbox pacing: the slowest rate [bytes/s] */
+#define CS_BUS_RATE_MAX 256.0e6        /* ... and the fastest [bytes/s] */
+#define CS_BUS_DRAIN_S 0.012           /* what is queued leaves within this [s] if the rates allow */
 #define CS_BUS_BURST (128.0 * 1024.0)  /* bytes the outbox may send back to back */
 #define CS_BUS_OUTBOX_MAX (64 << 20)   /* beyond this the outbox is dropped, a snapshot queued */
 #define CS_BUS_INPUT_MAX 4096          /* queued inputs; more are refused with an error ack */
