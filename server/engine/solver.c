@@ -35,7 +35,51 @@ void cs_cg_work_free(cs_cg_work *w)
     free(w->p);
     free(w->q);
     free(w->partial);
+    free(w->hist_prev);
+    free(w->hist_end);
+    free(w->dir);
     memset(w, 0, sizeof *w);
+}
+
+int cs_cg_guess(cs_cg_work *w, const double *v, double *x)
+{
+    const size_t n = (size_t)w->n;
+    memcpy(x, v, n * sizeof(double));
+    w->dir_ready = false;
+    if (!w->hist_prev) {
+        w->hist_prev = malloc((n ? n : 1) * sizeof(double));
+        w->hist_end = malloc((n ? n : 1) * sizeof(double));
+        w->dir = malloc((n ? n : 1) * sizeof(double));
+        w->hist_valid = false;
+        if (!w->hist_prev || !w->hist_end || !w->dir) {
+            free(w->hist_prev);
+            free(w->hist_end);
+            free(w->dir);
+            w->hist_prev = w->hist_end = w->dir = NULL;
+            return -1;
+        }
+    }
+    if (w->hist_valid && memcmp(v, w->hist_end, n * sizeof(double)) == 0) {
+        for (size_t i = 0; i < n; i++)
+            w->dir[i] = v[i] - w->hist_prev[i];
+        w->dir_ready = true;
+    }
+    memcpy(w->hist_prev, v, n * sizeof(double));
+    w->hist_valid = false;
+    return w->dir_ready ? 1 : 0;
+}
+
+void cs_cg_record(cs_cg_work *w, const double *v_end)
+{
+    if (!w->hist_end)
+        return;
+    memcpy(w->hist_end, v_end, (size_t)w->n * sizeof(double));
+    w->hist_valid = true;
+}
+
+void cs_cg_forget(cs_cg_work *w)
+{
+    w->hist_valid = w->dir_ready = false;
 }
 
 void cs_invert_blocks(double *blocks, int n_nodes)
@@ -115,6 +159,8 @@ cs_cg_result cs_pcg_ex(cs_cg_work *w, cs_matvec_fn A, void *ctx, cs_precond_fn B
     const int n = w->n;
     double *r = w->r, *z = w->z, *p = w->p, *q = w->q;
     cs_cg_result res = {0, 0, 0};
+    const bool use_dir = w->dir_ready; /* armed by cs_cg_guess for this solve only */
+    w->dir_ready = false;
 
     /* ‖b‖ over the free dofs; r = b - A x. */
     for (int i = 0; i < n; i++)
@@ -134,6 +180,25 @@ cs_cg_result cs_pcg_ex(cs_cg_work *w, cs_matvec_fn A, void *ctx, cs_precond_fn B
         return res;
     }
     const double stop = tol * bnorm;
+    if (use_dir && rnorm > stop) {
+        /* warm start (cs_cg_guess): x += α d with α = dᵀr / dᵀAd, the A-norm minimiser */
+        for (int i = 0; i < n; i++)
+            p[i] = mask[i] ? 0.0 : w->dir[i];
+        A(ctx, p, q);
+        for (int i = 0; i < n; i++)
+            if (mask[i])
+                q[i] = 0.0;
+        const double pq = cs_dot(w, p, q, n, threads), pr = cs_dot(w, p, r, n, threads);
+        if (pq > 0 && isfinite(pr)) {
+            const double alpha = pr / pq;
+#pragma omp parallel for num_threads(threads) schedule(static)
+            for (int i = 0; i < n; i++) {
+                x[i] += alpha * p[i];
+                r[i] -= alpha * q[i];
+            }
+            rnorm = sqrt(cs_dot(w, r, r, n, threads));
+        }
+    }
     B(bctx, r, z);
     memcpy(p, z, (size_t)n * sizeof *p);
     double rz = cs_dot(w, r, z, n, threads);
