@@ -19,7 +19,7 @@ typedef void (*cs_matvec_fn)(void *ctx, const double *x, double *y);
 
 typedef struct cs_cg_work {
     int n;        /* degrees of freedom (3 per node) */
-    double *r, *z, *p, *q, *partial;
+    double *r, *z, *p, *q, *zo, *partial;
     /* warm-start history of a sequence of solves (cs_cg_guess); allocated on first use */
     double *hist_prev, *hist_end, *dir;
     bool hist_valid, dir_ready;
@@ -65,7 +65,9 @@ cs_cg_result cs_pcg(cs_cg_work *w, cs_matvec_fn A, void *ctx, const double *inv_
 
 /*
  * The same with any symmetric positive definite preconditioner: z = B r (z overwritten; B must
- * leave z = 0 at masked dofs and be a fixed linear map, e.g. a multigrid V-cycle, mg.h).
+ * leave z = 0 at masked dofs and be a linear map, e.g. a multigrid V-cycle, mg.h). β is
+ * Polak–Ribière's (flexible CG: equal to the usual one for an exactly symmetric B, and robust
+ * when B is symmetric only up to rounding, as the single-precision V-cycle is).
  */
 typedef void (*cs_precond_fn)(void *ctx, const double *r, double *z);
 cs_cg_result cs_pcg_ex(cs_cg_work *w, cs_matvec_fn A, void *ctx, cs_precond_fn B, void *bctx,

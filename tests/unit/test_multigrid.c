@@ -144,7 +144,8 @@ static int check_spd(cs_object *o, int *levels)
             if (mask[d] && (bx[d] != 0 || by[d] != 0))
                 bad = 1; /* held dofs must stay zero */
         }
-        if (!(fabs(xby - ybx) <= 1e-12 * scale) || !(xbx > 0)) {
+        /* the V-cycle runs in single precision: symmetric to its rounding */
+        if (!(fabs(xby - ybx) <= 1e-5 * scale) || !(xbx > 0)) {
             printf("    trial %d: xBy %.17g yBx %.17g xBx %g\n", trial, xby, ybx, xbx);
             bad = 1;
         }
