@@ -507,8 +507,9 @@ cell_product(const float *restrict K, const float *restrict R, float s, const fl
     }
 }
 
-/* y = Σ s R K Rᵀ x + dg x on any level (the finest too: rediscretized like the coarse ones). */
-static void apply(const cs_mg *mg, int level, const float *x, float *y)
+/* y = Σ s R K Rᵀ x + dg x on any level (the finest too: rediscretized like the coarse ones);
+ * with b, the residual y = b − (that) at free dofs and 0 at held ones, in the same pass. */
+static void apply_ex(const cs_mg *mg, int level, const float *x, const float *b, float *y)
 {
     const mg_level *l = &mg->lv[level];
 #pragma omp parallel for num_threads(l->threads) schedule(static)
@@ -516,17 +517,24 @@ static void apply(const cs_mg *mg, int level, const float *x, float *y)
         cell_product(mg->Kf, l->Rf + 9 * c, l->sf[c], x, l->cell_nodes + 8 * c, l->fe + 24 * c);
 #pragma omp parallel for num_threads(l->threads) schedule(static)
     for (int n = 0; n < l->n_nodes; n++) {
-        float s0 = 0, s1 = 0, s2 = 0;
+        float s[3] = {0, 0, 0};
         for (int a = l->adj_start[n]; a < l->adj_start[n + 1]; a++) {
             const float *v = l->fe + 3 * l->adj[a];
-            s0 += v[0];
-            s1 += v[1];
-            s2 += v[2];
+            s[0] += v[0];
+            s[1] += v[1];
+            s[2] += v[2];
         }
-        y[3 * n] = s0 + l->dgf[n] * x[3 * n];
-        y[3 * n + 1] = s1 + l->dgf[n] * x[3 * n + 1];
-        y[3 * n + 2] = s2 + l->dgf[n] * x[3 * n + 2];
+        for (int k = 0; k < 3; k++) {
+            const int d = 3 * n + k;
+            const float ax = s[k] + l->dgf[n] * x[d];
+            y[d] = !b ? ax : l->mask[d] ? 0.0f : b[d] - ax;
+        }
     }
+}
+
+static void apply(const cs_mg *mg, int level, const float *x, float *y)
+{
+    apply_ex(mg, level, x, NULL, y);
 }
 
 /* x (+)= ω D⁻¹ r at free dofs; zero at held ones. */
@@ -547,12 +555,8 @@ static void jacobi(const mg_level *l, const float *r, float *x, float omega, boo
 static void smooth(const cs_mg *mg, int level, const float *b, float *x)
 {
     mg_level *l = &mg->lv[level];
-    apply(mg, level, x, l->t);
-    const int n3 = 3 * l->n_nodes;
     /* masked: D⁻¹ acts on the free dofs only (Z D⁻¹ Z keeps the cycle symmetric) */
-#pragma omp parallel for num_threads(l->threads) schedule(static)
-    for (int d = 0; d < n3; d++)
-        l->t[d] = l->mask[d] ? 0.0f : b[d] - l->t[d];
+    apply_ex(mg, level, x, b, l->t);
     jacobi(l, l->t, x, l->omega, true);
 }
 
@@ -803,11 +807,7 @@ static void vcycle(cs_mg *mg, int level, const float *b, float *x)
     for (int s = 1; s < MG_NU; s++)
         smooth(mg, level, b, x);
     /* residual, restricted */
-    apply(mg, level, x, f->t);
-    const int n3 = 3 * f->n_nodes;
-#pragma omp parallel for num_threads(f->threads) schedule(static)
-    for (int d = 0; d < n3; d++)
-        f->t[d] = f->mask[d] ? 0.0f : b[d] - f->t[d];
+    apply_ex(mg, level, x, b, f->t);
 #pragma omp parallel for num_threads(c->threads) schedule(static)
     for (int J = 0; J < c->n_nodes; J++) {
         float s[3] = {0, 0, 0};

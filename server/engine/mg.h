@@ -37,7 +37,7 @@
 #include "fem.h"
 #include "solver.h"
 
-#define CS_MG_COARSEST_NODES 64 /* coarsen while a level has more nodes */
+#define CS_MG_COARSEST_NODES 32 /* coarsen while a level has more nodes */
 #define CS_MG_DENSE_NODES 400   /* exact solve on the coarsest level up to this many nodes */
 
 typedef struct cs_mg cs_mg;
