@@ -10,6 +10,12 @@
 #include "mat3.h"
 
 #define MG_NU 1           /* smoothing sweeps before and after the coarse correction */
+#ifndef MG_CHEB
+#define MG_CHEB 2         /* Chebyshev smoother degree (0: damped Jacobi, MG_NU sweeps) */
+#endif
+#ifndef MG_CHEB_RATIO
+#define MG_CHEB_RATIO 4.0
+#endif
 #define MG_COARSE_SWEEPS 8 /* Jacobi sweeps on a coarsest level too large for Cholesky */
 #define MG_POWER_ITERS 10
 #define MG_LAMBDA_EVERY 64 /* re-estimate λmax(D⁻¹A) after this many setups */
@@ -37,7 +43,7 @@ typedef struct mg_level {
     uint8_t *own_mask;
     /* the V-cycle's single-precision copies (converted in cs_mg_setup) and scratch */
     float *Rf, *sf, *dgf, *invf;      /* 9 per cell, 1 per cell, 1 per node, 9 per node */
-    float *fe, *x, *b, *t;            /* 24 per cell; 3 per node each */
+    float *fe, *x, *b, *t, *d;        /* 24 per cell; 3 per node each */
     double lam;
     float omega;
 } mg_level;
@@ -323,7 +329,8 @@ static int alloc_level_state(mg_level *l, int level, int threads)
     l->x = malloc((n3 ? n3 : 1) * sizeof(float));
     l->b = malloc((n3 ? n3 : 1) * sizeof(float));
     l->t = malloc((n3 ? n3 : 1) * sizeof(float));
-    if (!l->s || !l->dg || !l->Rf || !l->sf || !l->dgf || !l->invf || !l->fe || !l->x ||
+    l->d = malloc((n3 ? n3 : 1) * sizeof(float));
+    if (!l->d || !l->s || !l->dg || !l->Rf || !l->sf || !l->dgf || !l->invf || !l->fe || !l->x ||
         !l->b || !l->t)
         return -1;
     if (level == 0)
@@ -375,6 +382,7 @@ static void free_level(mg_level *l)
     free(l->x);
     free(l->b);
     free(l->t);
+    free(l->d);
 }
 
 void cs_mg_free(cs_mg *mg)
@@ -558,6 +566,51 @@ static void smooth(const cs_mg *mg, int level, const float *b, float *x)
     /* masked: D⁻¹ acts on the free dofs only (Z D⁻¹ Z keeps the cycle symmetric) */
     apply_ex(mg, level, x, b, l->t);
     jacobi(l, l->t, x, l->omega, true);
+}
+
+/* d = a d + c D⁻¹ t (d = c D⁻¹ t if first), x += d (x = d if zero) at free dofs, 0 at held. */
+static void cheb_update(const mg_level *l, const float *t, float *d, float *x, float a, float c,
+                        bool first, bool zero)
+{
+#pragma omp parallel for num_threads(l->threads) schedule(static)
+    for (int i = 0; i < l->n_nodes; i++) {
+        const float *m = l->invf + 9 * i, *v = t + 3 * i;
+        for (int k = 0; k < 3; k++) {
+            const int j = 3 * i + k;
+            const float z = m[3 * k] * v[0] + m[3 * k + 1] * v[1] + m[3 * k + 2] * v[2];
+            const float dj = l->mask[j] ? 0.0f : first ? c * z : a * d[j] + c * z;
+            d[j] = dj;
+            x[j] = l->mask[j] ? 0.0f : zero ? dj : x[j] + dj;
+        }
+    }
+}
+
+/*
+ * Chebyshev smoothing of degree MG_CHEB: x += p(D⁻¹A) D⁻¹ (b − A x), p the polynomial that
+ * minimises max |1 − λ p(λ)| over [λmax/MG_CHEB_RATIO, λmax] (the upper part of the spectrum,
+ * which the coarse levels do not reach); from x = 0 if zero (one product less). The same
+ * polynomial before and after the coarse correction keeps the V-cycle symmetric, and
+ * |1 − λ p(λ)| < 1 on (0, λmax] keeps it positive definite.
+ */
+static void cheb(const cs_mg *mg, int level, const float *b, float *x, bool zero)
+{
+    mg_level *l = &mg->lv[level];
+    const double lmax = l->lam, lmin = lmax / MG_CHEB_RATIO;
+    const double theta = 0.5 * (lmax + lmin), delta = 0.5 * (lmax - lmin), sigma = theta / delta;
+    double rho = 1.0 / sigma;
+    if (zero) {
+        cheb_update(l, b, l->d, x, 0.0f, (float)(1.0 / theta), true, true);
+    } else {
+        apply_ex(mg, level, x, b, l->t);
+        cheb_update(l, l->t, l->d, x, 0.0f, (float)(1.0 / theta), true, false);
+    }
+    for (int k = 1; k < MG_CHEB; k++) {
+        apply_ex(mg, level, x, b, l->t);
+        const double rn = 1.0 / (2.0 * sigma - rho);
+        cheb_update(l, l->t, l->d, x, (float)(rn * rho), (float)(2.0 * rn / delta), false,
+                    false);
+        rho = rn;
+    }
 }
 
 /* ------------------------------------------------------------------ setup */
@@ -803,9 +856,13 @@ static void vcycle(cs_mg *mg, int level, const float *b, float *x)
         return;
     }
     mg_level *f = &mg->lv[level], *c = &mg->lv[level + 1];
-    jacobi(f, b, x, f->omega, false);
-    for (int s = 1; s < MG_NU; s++)
-        smooth(mg, level, b, x);
+    if (MG_CHEB) {
+        cheb(mg, level, b, x, true);
+    } else {
+        jacobi(f, b, x, f->omega, false);
+        for (int s = 1; s < MG_NU; s++)
+            smooth(mg, level, b, x);
+    }
     /* residual, restricted */
     apply_ex(mg, level, x, b, f->t);
 #pragma omp parallel for num_threads(c->threads) schedule(static)
@@ -834,8 +891,11 @@ static void vcycle(cs_mg *mg, int level, const float *b, float *x)
             if (!f->mask[3 * n + k])
                 x[3 * n + k] += s[k];
     }
-    for (int s = 0; s < MG_NU; s++)
-        smooth(mg, level, b, x);
+    if (MG_CHEB)
+        cheb(mg, level, b, x, false);
+    else
+        for (int s = 0; s < MG_NU; s++)
+            smooth(mg, level, b, x);
 }
 
 void cs_mg_vcycle(void *ctx, const double *r, double *z)
