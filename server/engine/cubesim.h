@@ -183,7 +183,7 @@ typedef enum cs_preconditioner {
     CS_PRECOND_MULTIGRID = 2  /* a geometric multigrid V-cycle per iteration (FEM models; others
                                  keep block Jacobi) */
 } cs_preconditioner;
-#define CS_MG_AUTO_CELLS 8192
+#define CS_MG_AUTO_CELLS 2048
 
 /* Parse "auto", "jacobi", "multigrid"; returns 0 and sets *out, or -1. */
 int cs_preconditioner_from_name(const char *name, cs_preconditioner *out);

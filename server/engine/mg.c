@@ -10,6 +10,12 @@
 #include "mat3.h"
 
 #define MG_NU 1           /* smoothing sweeps before and after the coarse correction */
+#ifndef MG_CHEB
+#define MG_CHEB 2         /* Chebyshev smoother degree (0: damped Jacobi, MG_NU sweeps) */
+#endif
+#ifndef MG_CHEB_RATIO
+#define MG_CHEB_RATIO 4.0
+#endif
 #define MG_COARSE_SWEEPS 8 /* Jacobi sweeps on a coarsest level too large for Cholesky */
 #define MG_POWER_ITERS 10
 #define MG_LAMBDA_EVERY 64 /* re-estimate λmax(D⁻¹A) after this many setups */
@@ -35,8 +41,11 @@ typedef struct mg_level {
     double *own_inv;
     const uint8_t *mask;
     uint8_t *own_mask;
-    double *fe, *x, *b, *t;           /* scratch (level 0: t only; fe level >= 1) */
-    double lam, omega;
+    /* the V-cycle's single-precision copies (converted in cs_mg_setup) and scratch */
+    float *Rf, *sf, *dgf, *invf;      /* 9 per cell, 1 per cell, 1 per node, 9 per node */
+    float *fe, *x, *b, *t, *d;        /* 24 per cell; 3 per node each */
+    double lam;
+    float omega;
 } mg_level;
 
 struct cs_mg {
@@ -46,7 +55,9 @@ struct cs_mg {
     int fine_nodes, fine_cells;
     const int32_t *fine_links;
     double K[576];
+    float Kf[576];
     double *dense;     /* coarsest: Cholesky factor (lower), NULL if swept */
+    double *dense_x;   /* its right-hand side and solution in double */
     int dense_n;
     cs_matvec_fn A;
     void *ctx;
@@ -306,12 +317,21 @@ out:
 
 static int alloc_level_state(mg_level *l, int level, int threads)
 {
-    const size_t n3 = 3 * (size_t)l->n_nodes;
+    const size_t n3 = 3 * (size_t)l->n_nodes, nc = l->n_cells ? (size_t)l->n_cells : 1;
     l->threads = threads > 1 && l->n_cells >= CS_FEM_PARALLEL_CELLS ? threads : 1;
-    l->s = malloc((size_t)(l->n_cells ? l->n_cells : 1) * sizeof(double));
+    l->s = malloc(nc * sizeof(double));
     l->dg = malloc((size_t)(l->n_nodes ? l->n_nodes : 1) * sizeof(double));
-    l->t = malloc((n3 ? n3 : 1) * sizeof(double));
-    if (!l->s || !l->dg || !l->t)
+    l->Rf = malloc(nc * 9 * sizeof(float));
+    l->sf = malloc(nc * sizeof(float));
+    l->dgf = malloc((size_t)(l->n_nodes ? l->n_nodes : 1) * sizeof(float));
+    l->invf = malloc((n3 ? n3 : 1) * 3 * sizeof(float));
+    l->fe = malloc(nc * 24 * sizeof(float));
+    l->x = malloc((n3 ? n3 : 1) * sizeof(float));
+    l->b = malloc((n3 ? n3 : 1) * sizeof(float));
+    l->t = malloc((n3 ? n3 : 1) * sizeof(float));
+    l->d = malloc((n3 ? n3 : 1) * sizeof(float));
+    if (!l->d || !l->s || !l->dg || !l->Rf || !l->sf || !l->dgf || !l->invf || !l->fe || !l->x ||
+        !l->b || !l->t)
         return -1;
     if (level == 0)
         return 0;
@@ -319,10 +339,7 @@ static int alloc_level_state(mg_level *l, int level, int threads)
     l->q = malloc((size_t)l->n_cells * 4 * sizeof(double));
     l->own_inv = malloc(n3 * 3 * sizeof(double));
     l->own_mask = malloc(n3);
-    l->fe = malloc((size_t)l->n_cells * 24 * sizeof(double));
-    l->x = malloc(n3 * sizeof(double));
-    l->b = malloc(n3 * sizeof(double));
-    if (!l->own_R || !l->q || !l->own_inv || !l->own_mask || !l->fe || !l->x || !l->b)
+    if (!l->own_R || !l->q || !l->own_inv || !l->own_mask)
         return -1;
     for (int c = 0; c < l->n_cells; c++) {
         static const double I[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
@@ -357,10 +374,15 @@ static void free_level(mg_level *l)
     free(l->dg);
     free(l->own_inv);
     free(l->own_mask);
+    free(l->Rf);
+    free(l->sf);
+    free(l->dgf);
+    free(l->invf);
     free(l->fe);
     free(l->x);
     free(l->b);
     free(l->t);
+    free(l->d);
 }
 
 void cs_mg_free(cs_mg *mg)
@@ -371,6 +393,7 @@ void cs_mg_free(cs_mg *mg)
         free_level(&mg->lv[l]);
     free(mg->lv);
     free(mg->dense);
+    free(mg->dense_x);
     free(mg);
 }
 
@@ -388,6 +411,8 @@ cs_mg *cs_mg_build(const cs_cubemesh *cm, const cs_fem *fem, uint32_t version)
     mg->fine_cells = cm->n_cells;
     mg->fine_links = cm->cell_nodes;
     memcpy(mg->K, fem->K, sizeof mg->K);
+    for (int i = 0; i < 576; i++)
+        mg->Kf[i] = (float)fem->K[i];
     mg_level *l0 = &mg->lv[0];
     l0->n_cells = cm->n_cells;
     l0->n_nodes = cm->n_nodes;
@@ -428,7 +453,8 @@ cs_mg *cs_mg_build(const cs_cubemesh *cm, const cs_fem *fem, uint32_t version)
     if (mg->n_levels > 1 && last->n_nodes <= CS_MG_DENSE_NODES) {
         mg->dense_n = 3 * last->n_nodes;
         mg->dense = malloc((size_t)mg->dense_n * mg->dense_n * sizeof(double));
-        if (!mg->dense)
+        mg->dense_x = malloc((size_t)mg->dense_n * sizeof(double));
+        if (!mg->dense || !mg->dense_x)
             goto fail;
     }
     return mg;
@@ -466,58 +492,125 @@ double *cs_mg_node_diag(cs_mg *mg)
 
 /* ------------------------------------------------------------------ products */
 
-/* y = Σ s R K Rᵀ x + dg x on a coarse level. */
-static void level_apply(const cs_mg *mg, mg_level *l, const double *x, double *y)
+/* out = s R K Rᵀ u for one cell, u gathered from x at its nodes nd (single precision). */
+__attribute__((target_clones("arch=x86-64-v3", "default"))) static void
+cell_product(const float *restrict K, const float *restrict R, float s, const float *restrict x,
+             const int32_t *restrict nd, float *restrict out)
 {
-    cs_cube_cells_product(mg->K, l->n_cells, l->cell_nodes, l->R, l->s, x, l->fe, l->threads);
-#pragma omp parallel for num_threads(l->threads) schedule(static)
-    for (int n = 0; n < l->n_nodes; n++) {
-        double s0 = 0, s1 = 0, s2 = 0;
-        for (int a = l->adj_start[n]; a < l->adj_start[n + 1]; a++) {
-            const double *v = l->fe + 3 * l->adj[a];
-            s0 += v[0];
-            s1 += v[1];
-            s2 += v[2];
-        }
-        y[3 * n] = s0 + l->dg[n] * x[3 * n];
-        y[3 * n + 1] = s1 + l->dg[n] * x[3 * n + 1];
-        y[3 * n + 2] = s2 + l->dg[n] * x[3 * n + 2];
+    float u[24], ku[24] = {0};
+    for (int k = 0; k < 8; k++) {
+        const float *d = x + 3 * nd[k];
+        for (int i = 0; i < 3; i++)
+            u[3 * k + i] = R[i] * d[0] + R[3 + i] * d[1] + R[6 + i] * d[2];
+    }
+    for (int j = 0; j < 24; j++) {
+        const float uj = u[j], *row = K + 24 * j;
+        for (int i = 0; i < 24; i++)
+            ku[i] += uj * row[i];
+    }
+    for (int k = 0; k < 8; k++) {
+        const float *v = ku + 3 * k;
+        for (int i = 0; i < 3; i++)
+            out[3 * k + i] = s * (R[3 * i] * v[0] + R[3 * i + 1] * v[1] + R[3 * i + 2] * v[2]);
     }
 }
 
-static void apply(const cs_mg *mg, int level, const double *x, double *y)
+/* y = Σ s R K Rᵀ x + dg x on any level (the finest too: rediscretized like the coarse ones);
+ * with b, the residual y = b − (that) at free dofs and 0 at held ones, in the same pass. */
+static void apply_ex(const cs_mg *mg, int level, const float *x, const float *b, float *y)
 {
-    if (level == 0)
-        mg->A(mg->ctx, x, y);
-    else
-        level_apply(mg, &mg->lv[level], x, y);
+    const mg_level *l = &mg->lv[level];
+#pragma omp parallel for num_threads(l->threads) schedule(static)
+    for (int c = 0; c < l->n_cells; c++)
+        cell_product(mg->Kf, l->Rf + 9 * c, l->sf[c], x, l->cell_nodes + 8 * c, l->fe + 24 * c);
+#pragma omp parallel for num_threads(l->threads) schedule(static)
+    for (int n = 0; n < l->n_nodes; n++) {
+        float s[3] = {0, 0, 0};
+        for (int a = l->adj_start[n]; a < l->adj_start[n + 1]; a++) {
+            const float *v = l->fe + 3 * l->adj[a];
+            s[0] += v[0];
+            s[1] += v[1];
+            s[2] += v[2];
+        }
+        for (int k = 0; k < 3; k++) {
+            const int d = 3 * n + k;
+            const float ax = s[k] + l->dgf[n] * x[d];
+            y[d] = !b ? ax : l->mask[d] ? 0.0f : b[d] - ax;
+        }
+    }
+}
+
+static void apply(const cs_mg *mg, int level, const float *x, float *y)
+{
+    apply_ex(mg, level, x, NULL, y);
 }
 
 /* x (+)= ω D⁻¹ r at free dofs; zero at held ones. */
-static void jacobi(mg_level *l, const double *r, double *x, double omega, bool add)
+static void jacobi(const mg_level *l, const float *r, float *x, float omega, bool add)
 {
 #pragma omp parallel for num_threads(l->threads) schedule(static)
     for (int i = 0; i < l->n_nodes; i++) {
-        const double *m = l->inv + 9 * i, *v = r + 3 * i;
+        const float *m = l->invf + 9 * i, *v = r + 3 * i;
         for (int a = 0; a < 3; a++) {
-            const double s = omega * (m[3 * a] * v[0] + m[3 * a + 1] * v[1] + m[3 * a + 2] * v[2]);
+            const float s = omega * (m[3 * a] * v[0] + m[3 * a + 1] * v[1] + m[3 * a + 2] * v[2]);
             const int d = 3 * i + a;
-            x[d] = l->mask[d] ? 0.0 : (add ? x[d] + s : s);
+            x[d] = l->mask[d] ? 0.0f : (add ? x[d] + s : s);
         }
     }
 }
 
 /* x += ω D⁻¹ (b − A x). */
-static void smooth(const cs_mg *mg, int level, const double *b, double *x)
+static void smooth(const cs_mg *mg, int level, const float *b, float *x)
 {
     mg_level *l = &mg->lv[level];
-    apply(mg, level, x, l->t);
-    const int n3 = 3 * l->n_nodes;
     /* masked: D⁻¹ acts on the free dofs only (Z D⁻¹ Z keeps the cycle symmetric) */
-#pragma omp parallel for num_threads(l->threads) schedule(static)
-    for (int d = 0; d < n3; d++)
-        l->t[d] = l->mask[d] ? 0.0 : b[d] - l->t[d];
+    apply_ex(mg, level, x, b, l->t);
     jacobi(l, l->t, x, l->omega, true);
+}
+
+/* d = a d + c D⁻¹ t (d = c D⁻¹ t if first), x += d (x = d if zero) at free dofs, 0 at held. */
+static void cheb_update(const mg_level *l, const float *t, float *d, float *x, float a, float c,
+                        bool first, bool zero)
+{
+#pragma omp parallel for num_threads(l->threads) schedule(static)
+    for (int i = 0; i < l->n_nodes; i++) {
+        const float *m = l->invf + 9 * i, *v = t + 3 * i;
+        for (int k = 0; k < 3; k++) {
+            const int j = 3 * i + k;
+            const float z = m[3 * k] * v[0] + m[3 * k + 1] * v[1] + m[3 * k + 2] * v[2];
+            const float dj = l->mask[j] ? 0.0f : first ? c * z : a * d[j] + c * z;
+            d[j] = dj;
+            x[j] = l->mask[j] ? 0.0f : zero ? dj : x[j] + dj;
+        }
+    }
+}
+
+/*
+ * Chebyshev smoothing of degree MG_CHEB: x += p(D⁻¹A) D⁻¹ (b − A x), p the polynomial that
+ * minimises max |1 − λ p(λ)| over [λmax/MG_CHEB_RATIO, λmax] (the upper part of the spectrum,
+ * which the coarse levels do not reach); from x = 0 if zero (one product less). The same
+ * polynomial before and after the coarse correction keeps the V-cycle symmetric, and
+ * |1 − λ p(λ)| < 1 on (0, λmax] keeps it positive definite.
+ */
+static void cheb(const cs_mg *mg, int level, const float *b, float *x, bool zero)
+{
+    mg_level *l = &mg->lv[level];
+    const double lmax = l->lam, lmin = lmax / MG_CHEB_RATIO;
+    const double theta = 0.5 * (lmax + lmin), delta = 0.5 * (lmax - lmin), sigma = theta / delta;
+    double rho = 1.0 / sigma;
+    if (zero) {
+        cheb_update(l, b, l->d, x, 0.0f, (float)(1.0 / theta), true, true);
+    } else {
+        apply_ex(mg, level, x, b, l->t);
+        cheb_update(l, l->t, l->d, x, 0.0f, (float)(1.0 / theta), true, false);
+    }
+    for (int k = 1; k < MG_CHEB; k++) {
+        apply_ex(mg, level, x, b, l->t);
+        const double rn = 1.0 / (2.0 * sigma - rho);
+        cheb_update(l, l->t, l->d, x, (float)(rn * rho), (float)(2.0 * rn / delta), false,
+                    false);
+        rho = rn;
+    }
 }
 
 /* ------------------------------------------------------------------ setup */
@@ -643,7 +736,8 @@ static double estimate_lambda(cs_mg *mg, int level)
 {
     mg_level *l = &mg->lv[level];
     const int n3 = 3 * l->n_nodes;
-    double *v = malloc((size_t)n3 * sizeof(double)), *w = malloc((size_t)n3 * sizeof(double));
+    float *v = malloc((size_t)(n3 ? n3 : 1) * sizeof(float));
+    float *w = malloc((size_t)(n3 ? n3 : 1) * sizeof(float));
     double lam = 2.0;
     if (!v || !w)
         goto out;
@@ -652,30 +746,47 @@ static double estimate_lambda(cs_mg *mg, int level)
         s ^= s << 13;
         s ^= s >> 7;
         s ^= s << 17;
-        v[d] = l->mask[d] ? 0.0 : (double)(s >> 11) / 9007199254740992.0 - 0.5;
+        v[d] = l->mask[d] ? 0.0f : (float)((double)(s >> 11) / 9007199254740992.0 - 0.5);
     }
     for (int it = 0; it < MG_POWER_ITERS; it++) {
         double nv = 0, nw = 0;
         for (int d = 0; d < n3; d++)
-            nv += v[d] * v[d];
+            nv += (double)v[d] * v[d];
         if (!(nv > 0))
             break;
         apply(mg, level, v, l->t);
         for (int d = 0; d < n3; d++)
             if (l->mask[d])
                 l->t[d] = 0;
-        jacobi(l, l->t, w, 1.0, false);
+        jacobi(l, l->t, w, 1.0f, false);
         for (int d = 0; d < n3; d++)
-            nw += w[d] * w[d];
+            nw += (double)w[d] * w[d];
         lam = sqrt(nw / nv);
         const double sc = 1.0 / sqrt(nw > 0 ? nw : 1);
         for (int d = 0; d < n3; d++)
-            v[d] = w[d] * sc;
+            v[d] = (float)(w[d] * sc);
     }
 out:
     free(v);
     free(w);
     return isfinite(lam) && lam > 0 ? lam : 2.0;
+}
+
+/* The single-precision copies the V-cycle reads. */
+static void to_single(mg_level *l)
+{
+#pragma omp parallel for num_threads(l->threads) schedule(static)
+    for (int c = 0; c < l->n_cells; c++) {
+        for (int k = 0; k < 9; k++)
+            l->Rf[9 * c + k] = (float)l->R[9 * c + k];
+        l->sf[c] = (float)l->s[c];
+    }
+#pragma omp parallel for num_threads(l->threads) schedule(static)
+    for (int n = 0; n < l->n_nodes; n++) {
+        for (int k = 0; k < 9; k++)
+            l->invf[9 * n + k] = (float)l->inv[9 * n + k];
+        l->dgf[n] = (float)l->dg[n];
+    }
 }
 
 int cs_mg_setup(cs_mg *mg, const cs_fem *fem, cs_matvec_fn A, void *ctx, const double *inv0,
@@ -691,13 +802,15 @@ int cs_mg_setup(cs_mg *mg, const cs_fem *fem, cs_matvec_fn A, void *ctx, const d
         setup_coarse(mg, l, fem->corotational);
     if (mg->dense && setup_dense(mg))
         return -1;
+    for (int l = 0; l < mg->n_levels; l++)
+        to_single(&mg->lv[l]);
     /* Smoothing weights: re-estimated when the operator's kind changes, and now and then. */
     const double key[3] = {l0->s[0], l0->dg[0], (double)mg->n_levels};
     if (mg->setups % MG_LAMBDA_EVERY == 0 || memcmp(key, mg->key, sizeof key) != 0) {
         memcpy(mg->key, key, sizeof key);
         for (int l = 0; l < mg->n_levels; l++) {
             mg->lv[l].lam = 1.1 * estimate_lambda(mg, l);
-            mg->lv[l].omega = 4.0 / (3.0 * mg->lv[l].lam);
+            mg->lv[l].omega = (float)(4.0 / (3.0 * mg->lv[l].lam));
         }
     }
     mg->setups++;
@@ -706,7 +819,7 @@ int cs_mg_setup(cs_mg *mg, const cs_fem *fem, cs_matvec_fn A, void *ctx, const d
 
 /* ------------------------------------------------------------------ the V-cycle */
 
-static void coarsest(cs_mg *mg, const double *b, double *x)
+static void coarsest(cs_mg *mg, const float *b, float *x)
 {
     const int L = mg->n_levels - 1;
     mg_level *l = &mg->lv[L];
@@ -718,58 +831,58 @@ static void coarsest(cs_mg *mg, const double *b, double *x)
     }
     const int n = mg->dense_n;
     const double *M = mg->dense;
+    double *y = mg->dense_x;
     for (int i = 0; i < n; i++) {
         double s = l->mask[i] ? 0.0 : b[i];
         const double *Ri = M + (size_t)i * n;
         for (int k = 0; k < i; k++)
-            s -= Ri[k] * x[k];
-        x[i] = s / Ri[i];
+            s -= Ri[k] * y[k];
+        y[i] = s / Ri[i];
     }
     for (int i = n - 1; i >= 0; i--) {
-        double s = x[i];
+        double s = y[i];
         for (int k = i + 1; k < n; k++)
-            s -= M[(size_t)k * n + i] * x[k];
-        x[i] = s / M[(size_t)i * n + i];
+            s -= M[(size_t)k * n + i] * y[k];
+        y[i] = s / M[(size_t)i * n + i];
     }
     for (int i = 0; i < n; i++)
-        if (l->mask[i])
-            x[i] = 0;
+        x[i] = l->mask[i] ? 0.0f : (float)y[i];
 }
 
-static void vcycle(cs_mg *mg, int level, const double *b, double *x)
+static void vcycle(cs_mg *mg, int level, const float *b, float *x)
 {
     if (level == mg->n_levels - 1) {
         coarsest(mg, b, x);
         return;
     }
     mg_level *f = &mg->lv[level], *c = &mg->lv[level + 1];
-    jacobi(f, b, x, f->omega, false);
-    for (int s = 1; s < MG_NU; s++)
-        smooth(mg, level, b, x);
+    if (MG_CHEB) {
+        cheb(mg, level, b, x, true);
+    } else {
+        jacobi(f, b, x, f->omega, false);
+        for (int s = 1; s < MG_NU; s++)
+            smooth(mg, level, b, x);
+    }
     /* residual, restricted */
-    apply(mg, level, x, f->t);
-    const int n3 = 3 * f->n_nodes;
-#pragma omp parallel for num_threads(f->threads) schedule(static)
-    for (int d = 0; d < n3; d++)
-        f->t[d] = f->mask[d] ? 0.0 : b[d] - f->t[d];
+    apply_ex(mg, level, x, b, f->t);
 #pragma omp parallel for num_threads(c->threads) schedule(static)
     for (int J = 0; J < c->n_nodes; J++) {
-        double s[3] = {0, 0, 0};
+        float s[3] = {0, 0, 0};
         for (int a = f->r_start[J]; a < f->r_start[J + 1]; a++) {
-            const double w = f->r_w[a], *v = f->t + 3 * f->r_node[a];
+            const float w = (float)f->r_w[a], *v = f->t + 3 * f->r_node[a];
             s[0] += w * v[0];
             s[1] += w * v[1];
             s[2] += w * v[2];
         }
         for (int k = 0; k < 3; k++)
-            c->b[3 * J + k] = c->mask[3 * J + k] ? 0.0 : s[k];
+            c->b[3 * J + k] = c->mask[3 * J + k] ? 0.0f : s[k];
     }
     vcycle(mg, level + 1, c->b, c->x);
 #pragma omp parallel for num_threads(f->threads) schedule(static)
     for (int n = 0; n < f->n_nodes; n++) {
-        double s[3] = {0, 0, 0};
+        float s[3] = {0, 0, 0};
         for (int a = f->p_start[n]; a < f->p_start[n + 1]; a++) {
-            const double w = f->p_w[a], *v = c->x + 3 * f->p_node[a];
+            const float w = (float)f->p_w[a], *v = c->x + 3 * f->p_node[a];
             s[0] += w * v[0];
             s[1] += w * v[1];
             s[2] += w * v[2];
@@ -778,12 +891,23 @@ static void vcycle(cs_mg *mg, int level, const double *b, double *x)
             if (!f->mask[3 * n + k])
                 x[3 * n + k] += s[k];
     }
-    for (int s = 0; s < MG_NU; s++)
-        smooth(mg, level, b, x);
+    if (MG_CHEB)
+        cheb(mg, level, b, x, false);
+    else
+        for (int s = 0; s < MG_NU; s++)
+            smooth(mg, level, b, x);
 }
 
 void cs_mg_vcycle(void *ctx, const double *r, double *z)
 {
     cs_mg *mg = ctx;
-    vcycle(mg, 0, r, z);
+    mg_level *l0 = &mg->lv[0];
+    const int n3 = 3 * l0->n_nodes;
+#pragma omp parallel for num_threads(l0->threads) schedule(static)
+    for (int d = 0; d < n3; d++)
+        l0->b[d] = (float)r[d];
+    vcycle(mg, 0, l0->b, l0->x);
+#pragma omp parallel for num_threads(l0->threads) schedule(static)
+    for (int d = 0; d < n3; d++)
+        z[d] = l0->x[d];
 }

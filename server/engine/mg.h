@@ -9,20 +9,33 @@
  * trilinearly from the corners of the coarse cell of any cell that references it (the merge
  * makes those rows equal), so P respects duplicated (split) nodes.
  *
- * Coarse operators are rediscretized, matrix-free: a coarse cell of edge 2h has the stiffness
- * 2·K(h) (K ∝ h), times the mean of its children's stiffness factors over 8 (a partly filled
- * block is proportionally softer); its rotation is the polar part of the sum of its children's
- * rotations; the diagonal part of the fine operator (lumped mass, penalty springs, drag
- * springs lumped by rows) is restricted by Pᵀ. The finest level uses the true operator and its
- * block-Jacobi inverse. A coarse dof is held when the fine node with the largest weight on it
- * is held there; held dofs are zero in every correction.
+ * Operators are rediscretized, matrix-free, on every level including the finest: a cell of
+ * edge h has s·R K Rᵀ with K the element matrix of the unit cube scaled by the level (a coarse
+ * cell of edge 2h has 2·K(h), K ∝ h), s the mean of its children's stiffness factors over 8 (a
+ * partly filled block is proportionally softer; on the finest level the caller's per-cell
+ * multiplier, the mean of the cell's Gauss-point factors), R the cell's rotation (finest:
+ * fem's; coarse: the polar part of the sum of its children's), plus the diagonal part of the
+ * fine operator (lumped mass, penalty springs, drag springs lumped by rows) restricted by Pᵀ.
+ * The finest level's block-Jacobi inverse is the true operator's. The V-cycle never calls the
+ * true operator: it is a fixed map built from these, so its cost does not depend on how the
+ * element model computes its product (graded fields, damping fields). A coarse dof is held
+ * when the fine node with the largest weight on it is held there; held dofs are zero in every
+ * correction.
  *
- * Smoother: damped block Jacobi, ω = 4/(3λ), λ ≥ λmax(D⁻¹A) estimated by power iteration,
- * ν sweeps before and ν after, so the V-cycle B is symmetric; it is positive definite because
- * ω·λmax < 2 and the coarsest level is solved exactly (dense Cholesky) or, if coarsening
- * stalls above CS_MG_DENSE_NODES nodes, by a fixed number of Jacobi sweeps (a symmetric
- * polynomial). Products run on the object's threads with the fixed-order gathers of fem.c, so
- * the result is independent of the thread count.
+ * Precision: the V-cycle runs in single precision (rotations, factors, D⁻¹ and vectors are
+ * converted in cs_mg_setup; the coarsest Cholesky solve is double), which halves its memory
+ * traffic and doubles its SIMD width. CG stays in double with the true operator, so the
+ * stopping rule and the solution's accuracy are unchanged; B is symmetric only up to float
+ * rounding, which cs_pcg_ex's flexible (Polak–Ribière) β absorbs.
+ *
+ * Smoother: Chebyshev of degree 2 on D⁻¹A over [λ/4, λ], λ ≥ λmax(D⁻¹A) (1.1× a power-
+ * iteration estimate), before (from zero: one product) and after (two products) the coarse
+ * correction with the same polynomial, so the V-cycle B is symmetric; it is positive definite
+ * because the polynomial's error factor stays below 1 in modulus up to 1.25 λ, and the
+ * coarsest level is solved exactly (dense Cholesky) or, if coarsening stalls above
+ * CS_MG_DENSE_NODES nodes, by a fixed number of damped Jacobi sweeps (ω = 4/(3λ), a symmetric
+ * polynomial). Products run on the object's threads in fixed-order element and node passes,
+ * so the result is independent of the thread count.
  *
  * Owns: every array of every coarse level and the scratch vectors. Borrows: the finest level's
  * cell links and lattice indices (the object's cube mesh), its adjacency and rotations (fem).
@@ -37,7 +50,7 @@
 #include "fem.h"
 #include "solver.h"
 
-#define CS_MG_COARSEST_NODES 64 /* coarsen while a level has more nodes */
+#define CS_MG_COARSEST_NODES 32 /* coarsen while a level has more nodes */
 #define CS_MG_DENSE_NODES 400   /* exact solve on the coarsest level up to this many nodes */
 
 typedef struct cs_mg cs_mg;
@@ -57,9 +70,9 @@ double *cs_mg_cell_scale(cs_mg *mg);
 double *cs_mg_node_diag(cs_mg *mg);
 
 /*
- * Prepare a solve: A(ctx) is the fine operator, inv0 its inverted 3×3 diagonal blocks, mask0
- * the held dofs of this solve; rotations are read from fem. Returns 0, or -1 if a non-finite
- * value appeared.
+ * Prepare a solve: A(ctx) is the fine operator (kept for reference; the V-cycle uses its own
+ * rediscretization, see above), inv0 its inverted 3×3 diagonal blocks, mask0 the held dofs of
+ * this solve; rotations are read from fem. Returns 0, or -1 if a non-finite value appeared.
  */
 int cs_mg_setup(cs_mg *mg, const cs_fem *fem, cs_matvec_fn A, void *ctx, const double *inv0,
                 const uint8_t *mask0);

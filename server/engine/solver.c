@@ -20,8 +20,9 @@ int cs_cg_work_init(cs_cg_work *w, int n)
     w->z = malloc(sz);
     w->p = malloc(sz);
     w->q = malloc(sz);
-    w->partial = malloc(((size_t)n / CS_DOT_BLOCK + 1) * sizeof(double));
-    if (!w->r || !w->z || !w->p || !w->q || !w->partial) {
+    w->zo = malloc(sz);
+    w->partial = malloc(2 * ((size_t)n / CS_DOT_BLOCK + 1) * sizeof(double));
+    if (!w->r || !w->z || !w->p || !w->q || !w->zo || !w->partial) {
         cs_cg_work_free(w);
         return -1;
     }
@@ -34,8 +35,53 @@ void cs_cg_work_free(cs_cg_work *w)
     free(w->z);
     free(w->p);
     free(w->q);
+    free(w->zo);
     free(w->partial);
+    free(w->hist_prev);
+    free(w->hist_end);
+    free(w->dir);
     memset(w, 0, sizeof *w);
+}
+
+int cs_cg_guess(cs_cg_work *w, const double *v, double *x)
+{
+    const size_t n = (size_t)w->n;
+    memcpy(x, v, n * sizeof(double));
+    w->dir_ready = false;
+    if (!w->hist_prev) {
+        w->hist_prev = malloc((n ? n : 1) * sizeof(double));
+        w->hist_end = malloc((n ? n : 1) * sizeof(double));
+        w->dir = malloc((n ? n : 1) * sizeof(double));
+        w->hist_valid = false;
+        if (!w->hist_prev || !w->hist_end || !w->dir) {
+            free(w->hist_prev);
+            free(w->hist_end);
+            free(w->dir);
+            w->hist_prev = w->hist_end = w->dir = NULL;
+            return -1;
+        }
+    }
+    if (w->hist_valid && memcmp(v, w->hist_end, n * sizeof(double)) == 0) {
+        for (size_t i = 0; i < n; i++)
+            w->dir[i] = v[i] - w->hist_prev[i];
+        w->dir_ready = true;
+    }
+    memcpy(w->hist_prev, v, n * sizeof(double));
+    w->hist_valid = false;
+    return w->dir_ready ? 1 : 0;
+}
+
+void cs_cg_record(cs_cg_work *w, const double *v_end)
+{
+    if (!w->hist_end)
+        return;
+    memcpy(w->hist_end, v_end, (size_t)w->n * sizeof(double));
+    w->hist_valid = true;
+}
+
+void cs_cg_forget(cs_cg_work *w)
+{
+    w->hist_valid = w->dir_ready = false;
 }
 
 void cs_invert_blocks(double *blocks, int n_nodes)
@@ -100,21 +146,84 @@ static void jacobi_apply(void *ctx, const double *r, double *z)
     precondition(j->inv, j->mask, r, z, j->n_nodes, j->threads);
 }
 
+/* x += α p and r = r − α q at free dofs (0 at held ones), returning ‖r‖² summed in the fixed
+ * blocks of cs_dot: one pass instead of two. */
+static double update_xr(cs_cg_work *w, const uint8_t *mask, double alpha, const double *p,
+                        const double *q, double *x, double *r, int n, int threads)
+{
+    const int nb = (n + CS_DOT_BLOCK - 1) / CS_DOT_BLOCK;
+#pragma omp parallel for num_threads(threads) schedule(static) if (nb > 1)
+    for (int k = 0; k < nb; k++) {
+        const int lo = k * CS_DOT_BLOCK, hi = lo + CS_DOT_BLOCK < n ? lo + CS_DOT_BLOCK : n;
+        double s = 0;
+        for (int i = lo; i < hi; i++) {
+            x[i] += alpha * p[i];
+            const double ri = mask[i] ? 0.0 : r[i] - alpha * q[i];
+            r[i] = ri;
+            s += ri * ri;
+        }
+        w->partial[k] = s;
+    }
+    double s = 0;
+    for (int k = 0; k < nb; k++)
+        s += w->partial[k];
+    return s;
+}
+
+/* rᵀz and rᵀzo in one pass (fixed blocks). */
+static void dot2(cs_cg_work *w, const double *r, const double *z, const double *zo, int n,
+                 int threads, double *rz, double *rzo)
+{
+    const int nb = (n + CS_DOT_BLOCK - 1) / CS_DOT_BLOCK;
+    double *pa = w->partial, *pb = w->partial + nb;
+#pragma omp parallel for num_threads(threads) schedule(static) if (nb > 1)
+    for (int k = 0; k < nb; k++) {
+        const int lo = k * CS_DOT_BLOCK, hi = lo + CS_DOT_BLOCK < n ? lo + CS_DOT_BLOCK : n;
+        double a = 0, b = 0;
+        for (int i = lo; i < hi; i++) {
+            a += r[i] * z[i];
+            b += r[i] * zo[i];
+        }
+        pa[k] = a;
+        pb[k] = b;
+    }
+    double a = 0, b = 0;
+    for (int k = 0; k < nb; k++) {
+        a += pa[k];
+        b += pb[k];
+    }
+    *rz = a;
+    *rzo = b;
+}
+
+static cs_cg_result pcg(cs_cg_work *w, cs_matvec_fn A, void *ctx, cs_precond_fn B, void *bctx,
+                        const uint8_t *mask, const double *b, double *x, double tol,
+                        int max_iter, int threads, bool flexible);
+
 cs_cg_result cs_pcg(cs_cg_work *w, cs_matvec_fn A, void *ctx, const double *inv_blocks,
                     const uint8_t *mask, const double *b, double *x, double tol, int max_iter,
                     int threads)
 {
     jacobi_ctx j = {inv_blocks, mask, w->n / 3, threads};
-    return cs_pcg_ex(w, A, ctx, jacobi_apply, &j, mask, b, x, tol, max_iter, threads);
+    return pcg(w, A, ctx, jacobi_apply, &j, mask, b, x, tol, max_iter, threads, false);
 }
 
 cs_cg_result cs_pcg_ex(cs_cg_work *w, cs_matvec_fn A, void *ctx, cs_precond_fn B, void *bctx,
                        const uint8_t *mask, const double *b, double *x, double tol, int max_iter,
                        int threads)
 {
+    return pcg(w, A, ctx, B, bctx, mask, b, x, tol, max_iter, threads, true);
+}
+
+static cs_cg_result pcg(cs_cg_work *w, cs_matvec_fn A, void *ctx, cs_precond_fn B, void *bctx,
+                        const uint8_t *mask, const double *b, double *x, double tol,
+                        int max_iter, int threads, bool flexible)
+{
     const int n = w->n;
-    double *r = w->r, *z = w->z, *p = w->p, *q = w->q;
+    double *r = w->r, *z = w->z, *p = w->p, *q = w->q, *zo = w->zo;
     cs_cg_result res = {0, 0, 0};
+    const bool use_dir = w->dir_ready; /* armed by cs_cg_guess for this solve only */
+    w->dir_ready = false;
 
     /* ‖b‖ over the free dofs; r = b - A x. */
     for (int i = 0; i < n; i++)
@@ -134,31 +243,46 @@ cs_cg_result cs_pcg_ex(cs_cg_work *w, cs_matvec_fn A, void *ctx, cs_precond_fn B
         return res;
     }
     const double stop = tol * bnorm;
+    if (use_dir && rnorm > stop) {
+        /* warm start (cs_cg_guess): x += α d with α = dᵀr / dᵀAd, the A-norm minimiser */
+        for (int i = 0; i < n; i++)
+            p[i] = mask[i] ? 0.0 : w->dir[i];
+        A(ctx, p, q);
+        const double pq = cs_dot(w, p, q, n, threads), pr = cs_dot(w, p, r, n, threads);
+        if (pq > 0 && isfinite(pr))
+            rnorm = sqrt(update_xr(w, mask, pr / pq, p, q, x, r, n, threads));
+    }
     B(bctx, r, z);
     memcpy(p, z, (size_t)n * sizeof *p);
     double rz = cs_dot(w, r, z, n, threads);
     int it = 0;
+    /* p and z are zero at held dofs (B's contract), so pᵀq needs no masking of q and
+     * update_xr keeps r zero there. */
     while (rnorm > stop && it < max_iter && isfinite(rnorm)) {
         A(ctx, p, q);
-        for (int i = 0; i < n; i++)
-            if (mask[i])
-                q[i] = 0.0;
         const double pq = cs_dot(w, p, q, n, threads);
         if (!(pq > 0))
             break; /* not positive definite along p (or breakdown): stop with what we have */
-        const double alpha = rz / pq;
-#pragma omp parallel for num_threads(threads) schedule(static)
-        for (int i = 0; i < n; i++) {
-            x[i] += alpha * p[i];
-            r[i] -= alpha * q[i];
-        }
         it++;
-        rnorm = sqrt(cs_dot(w, r, r, n, threads));
+        rnorm = sqrt(update_xr(w, mask, rz / pq, p, q, x, r, n, threads));
         if (rnorm <= stop)
             break;
-        B(bctx, r, z);
-        const double rz_new = cs_dot(w, r, z, n, threads);
-        const double beta = rz_new / rz;
+        double rz_new, beta;
+        if (flexible) {
+            /* Polak–Ribière: β = rᵀ(z − z_old)/rz_old, robust to a preconditioner that is
+             * symmetric only up to rounding (the single-precision V-cycle, mg.h) */
+            double *t = zo;
+            zo = z;
+            z = t;
+            B(bctx, r, z);
+            double rzo;
+            dot2(w, r, z, zo, n, threads, &rz_new, &rzo);
+            beta = (rz_new - rzo) / rz;
+        } else {
+            B(bctx, r, z);
+            rz_new = cs_dot(w, r, z, n, threads);
+            beta = rz_new / rz;
+        }
         rz = rz_new;
 #pragma omp parallel for num_threads(threads) schedule(static)
         for (int i = 0; i < n; i++)

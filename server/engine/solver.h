@@ -12,17 +12,38 @@
 #ifndef CS_SOLVER_H
 #define CS_SOLVER_H
 
+#include <stdbool.h>
 #include <stdint.h>
 
 typedef void (*cs_matvec_fn)(void *ctx, const double *x, double *y);
 
 typedef struct cs_cg_work {
     int n;        /* degrees of freedom (3 per node) */
-    double *r, *z, *p, *q, *partial;
+    double *r, *z, *p, *q, *zo, *partial;
+    /* warm-start history of a sequence of solves (cs_cg_guess); allocated on first use */
+    double *hist_prev, *hist_end, *dir;
+    bool hist_valid, dir_ready;
 } cs_cg_work;
 
 int cs_cg_work_init(cs_cg_work *w, int n);
 void cs_cg_work_free(cs_cg_work *w);
+
+/*
+ * Warm start for a sequence of solves whose solutions change smoothly (the velocities of
+ * implicit steps). cs_cg_guess sets the initial guess x = v (the state the step starts from)
+ * and, when the previous step started from v_prev and ended exactly at v (cs_cg_record), arms
+ * the direction d = v − v_prev for the next cs_pcg / cs_pcg_ex on this work: that solve first
+ * moves x along d by the step that minimises the A-norm of the error (a Galerkin line search,
+ * one extra product; never worse than x = v, and better than the plain extrapolation 2v −
+ * v_prev, whose step length is 1). It remembers v as the next v_prev and forgets the history
+ * until cs_cg_record(v_end) is called after the step: a state changed between steps (reset,
+ * sleep, a set velocity) no longer matches and starts afresh, and a re-initialised work
+ * (fracture changes the node count) has no history. d is masked inside the solve, so held and
+ * contact dofs keep their initial value. Returns 1 if armed, 0 if not, -1 if out of memory.
+ */
+int cs_cg_guess(cs_cg_work *w, const double *v, double *x);
+void cs_cg_record(cs_cg_work *w, const double *v_end);
+void cs_cg_forget(cs_cg_work *w);
 
 /* Invert each 3×3 block in place (9 per node); a singular block becomes its diagonal inverse. */
 void cs_invert_blocks(double *blocks, int n_nodes);
@@ -44,7 +65,9 @@ cs_cg_result cs_pcg(cs_cg_work *w, cs_matvec_fn A, void *ctx, const double *inv_
 
 /*
  * The same with any symmetric positive definite preconditioner: z = B r (z overwritten; B must
- * leave z = 0 at masked dofs and be a fixed linear map, e.g. a multigrid V-cycle, mg.h).
+ * leave z = 0 at masked dofs and be a linear map, e.g. a multigrid V-cycle, mg.h). β is
+ * Polak–Ribière's (flexible CG: equal to the usual one for an exactly symmetric B, and robust
+ * when B is symmetric only up to rounding, as the single-precision V-cycle is).
  */
 typedef void (*cs_precond_fn)(void *ctx, const double *r, double *z);
 cs_cg_result cs_pcg_ex(cs_cg_work *w, cs_matvec_fn A, void *ctx, cs_precond_fn B, void *bctx,

@@ -1415,8 +1415,12 @@ static int step_implicit_euler(cs_world_t *w, cs_object *o, cs_step_stats *st)
         }
     set_implicit_coefs(o, dt);
     build_preconditioner(o);
+    /* Initial guess: v, improved inside the solve along the last step's change (cs_cg_guess);
+     * held dofs 0, ground contacts their lift (constrain_ground). */
+    cs_cg_guess(&o->cg, o->v, o->v1);
     for (size_t d = 0; d < n3; d++)
-        o->v1[d] = o->mask[d] ? 0.0 : o->v[d];
+        if (o->mask[d])
+            o->v1[d] = 0.0;
     int contacts = constrain_ground(w, o);
     const bool use_mg = setup_multigrid(w, o, step_operator, o->smask);
     double t3 = now_ms();
@@ -1427,6 +1431,8 @@ static int step_implicit_euler(cs_world_t *w, cs_object *o, cs_step_stats *st)
         return CS_ERR_DIVERGED;
     ground_after_solve(w, o, contacts);
     end_solved_step(w, o, st, (const double[5]){t0, t1, t2, t3, t4}, r);
+    if (!o->sleeping)
+        cs_cg_record(&o->cg, o->v);
     return CS_OK;
 }
 
@@ -1957,6 +1963,7 @@ void cs_world_reset(cs_world_t *w)
         o->still_steps = 0;
         memset(o->contact, 0, (size_t)o->n);
         o->elastic_energy_valid = false;
+        cs_cg_forget(&o->cg);
         cs_elastic_reset(o);
         cs_surface_skin(&o->surf, &o->cm, o->x);
         if (o->rb)
