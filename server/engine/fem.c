@@ -239,6 +239,8 @@ void cs_fem_update_rotations(cs_fem *fem, const double *x)
         return;
 #pragma omp parallel for num_threads(fem->threads) schedule(static)
     for (int c = 0; c < fem->n_cells; c++) {
+        if (fem->cell_active && !fem->cell_active[c])
+            continue;
         double F[9];
         centre_gradient(fem, x, c, F);
         cs_extract_rotation(F, fem->q + 4 * c, 30);
@@ -348,6 +350,8 @@ static void gather(cs_fem *fem, double *out, double sign)
     for (int n = 0; n < fem->n_nodes; n++) {
         double s0 = 0, s1 = 0, s2 = 0;
         for (int a = fem->adj_start[n]; a < fem->adj_start[n + 1]; a++) {
+            if (fem->cell_active && !fem->cell_active[fem->adj[a] >> 3])
+                continue;
             const double *v = fem->fe + 3 * fem->adj[a];
             s0 += v[0];
             s1 += v[1];
@@ -365,6 +369,8 @@ void cs_fem_elastic_force(cs_fem *fem, const double *x, double *f, double *energ
     double e_sum = 0;
 #pragma omp parallel for num_threads(fem->threads) schedule(static) reduction(+ : e_sum)
     for (int c = 0; c < fem->n_cells; c++) {
+        if (fem->cell_active && !fem->cell_active[c])
+            continue;
         const int32_t *nd = fem->cell_nodes + 8 * c;
         const double *R = fem->R + 9 * c;
         const double *x0 = x + 3 * nd[0];
@@ -401,6 +407,8 @@ void cs_fem_apply_Kw(cs_fem *fem, const double *kf, const double *p, double *y)
 {
 #pragma omp parallel for num_threads(fem->threads) schedule(static)
     for (int c = 0; c < fem->n_cells; c++) {
+        if (fem->cell_active && !fem->cell_active[c])
+            continue;
         const int32_t *nd = fem->cell_nodes + 8 * c;
         const double *R = fem->R + 9 * c;
         double u[24], ku[24];
@@ -430,6 +438,8 @@ void cs_fem_diag_blocks_w(cs_fem *fem, const double *kf, double *blocks)
     memset(blocks, 0, sizeof(double) * 9 * (size_t)fem->n_nodes);
     /* Serial: called once per step, 8·n_cells small products. */
     for (int c = 0; c < fem->n_cells; c++) {
+        if (fem->cell_active && !fem->cell_active[c])
+            continue;
         const int32_t *nd = fem->cell_nodes + 8 * c;
         const double *R = fem->R + 9 * c;
         bool uniform = true;
