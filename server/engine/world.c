@@ -1441,7 +1441,7 @@ static void end_solved_step(const cs_world_t *w, cs_object *o, cs_step_stats *st
  * a factor 2 of hysteresis between freezing and waking. The object as a whole still falls
  * asleep by sleep.speed and sleep.steps as before (frozen nodes have v = 0).
  */
-#define CS_ACTIVE_MAX_RESOLVES 8 /* extra solves per step for nodes their reactions woke */
+#define CS_ACTIVE_MAX_RESOLVES 4 /* extra solves per step for nodes their reactions woke */
 #ifndef CS_ACTIVE_WAKE
 #define CS_ACTIVE_WAKE 0.125     /* a reaction wakes at |r|/m >= this · active_speed */
 #endif
