@@ -200,12 +200,13 @@ typedef struct cs_world_def {
     int threads;             /* worker threads inside a step, >= 0; 0 = all cores; default 0 */
     double sleep_speed;      /* an object whose fastest node is slower than this [m/s] ... */
     int sleep_steps;         /* ... for this many steps in a row sleeps; 0 = never; default 30 */
-    /* Active regions inside awake objects (linear/corotational FEM, implicit Euler; seed 000
-     * §2.2): a node slower than active_speed [m/s] whose net force f (elastic + loads +
-     * gravity + ground) satisfies |f|·dt/m < active_speed for active_steps steps in a row is
-     * frozen (held, v = 0) and leaves the solve; cells of frozen nodes only are skipped. It
-     * wakes when held with such a force, or a node of one of its cells moves faster than
-     * active_speed, or an input acts on its cube. Default off (active_steps 0). */
+    /* Active regions inside awake objects (linear/corotational FEM, implicit Euler, not
+     * fracturing; seed 000 §2.2; world.c "active regions"): a node slower than active_speed
+     * [m/s] whose net force f (elastic + loads + gravity + ground) has |f|·dt/m <
+     * active_speed/16 for active_steps steps in a row is frozen (held, v = 0) and leaves the
+     * solve; cells of frozen nodes only are skipped. It wakes when holding it takes a force
+     * with |f|·dt/m >= active_speed/8 (the step is then solved again), a node of one of its
+     * cells moves faster than active_speed, or an input acts on its cube. Default off. */
     int active_steps;        /* 0 = off; default 0 */
     double active_speed;     /* [m/s], > 0 when on; default 5e-4 */
     double max_force;        /* |force| above this [N] is refused; default 1e9 */
