@@ -1434,7 +1434,7 @@ static void end_solved_step(const cs_world_t *w, cs_object *o, cs_step_stats *st
  *   - a node of one of its active cells moved faster than s in the step;
  *   - an input acts on its cube (a pressure: every node);
  *   - its velocity is not 0 (pushed outside the step: a rigid contact);
- *   - act_wake_all (reset, statics) or the mesh changed size: all nodes wake.
+ *   - act_wake_all (reset, statics, paint) or the mesh changed size: all nodes wake.
  * f_skip is the elastic force of the inactive cells, updated when cells change state (their
  * nodes do not move while they are inactive), so r_i is a frozen node's whole residual.
  *
@@ -1556,6 +1556,8 @@ static void active_refresh(cs_object *o)
     }
     if (off > 0)
         active_cells_force(o, 1.0);
+    if (act == nc) /* none inactive: drop what rounding left */
+        memset(o->f_skip, 0, (size_t)o->n * 3 * sizeof *o->f_skip);
     o->n_active_cells = act;
 }
 
