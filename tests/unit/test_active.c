@@ -139,17 +139,17 @@ static int step_both(blk *A, blk *F)
 }
 
 /*
- * A 20×20×4 slab (1 m wide, bottom held) at rest (no gravity), active regions against the
+ * A 16×16×4 slab (1 m wide, bottom held) at rest (no gravity), active regions against the
  * all-active run, sleep off in
  * both: every node freezes; a 0.5 s poke at a top corner wakes a region (measured: at most
- * 31 %, on average 12 % of the cells over the 60 steps) and the displacement field follows the
- * full solve within 2 % of its largest displacement throughout (measured 0.27 %); after it the
- * region freezes again; a later push at the opposite corner wakes that region (0.51 %) while
- * the first corner stays where it was.
+ * 24 %, on average 10 % of the cells over the 60 steps) and the displacement field follows the
+ * full solve within 2 % of its largest displacement throughout (measured 0.31 %); after it the
+ * region freezes again; a later push at the opposite corner wakes that region (0.50 %; at most
+ * 38 %, on average 16 % of the cells) while the first corner stays where it was.
  */
 TEST(active_poke_matches_full_solve_and_wakes_elsewhere)
 {
-    const int n = 20, nz = 4, ncell = n * n * nz;
+    const int n = 16, nz = 4, ncell = n * n * nz;
     blk A, F;
     ENSURE(make_block(&A, n, nz, 10, false, 0) == 0);
     ENSURE(make_block(&F, n, nz, 0, false, 0) == 0);
@@ -165,8 +165,8 @@ TEST(active_poke_matches_full_solve_and_wakes_elsewhere)
     ENSURE(cs_world_last_stats(F.w)->cells_stepped == ncell);
     char err[256];
     const double top = (double)nz / n;
-    const double c1[3] = {1, 1, top}, f1[3] = {-0.12, -0.06, -0.18};
-    const double c2[3] = {0, 0, top}, f2[3] = {0.09, 0.15, -0.12};
+    const double c1[3] = {1, 1, top}, f1[3] = {-0.07, -0.035, -0.105};
+    const double c2[3] = {0, 0, top}, f2[3] = {0.055, 0.09, -0.07};
     const int k1 = nearest_node(&A, c1);
     for (int poke = 0; poke < 2; poke++) {
         memcpy(a0, xa, sz);
@@ -195,14 +195,14 @@ TEST(active_poke_matches_full_solve_and_wakes_elsewhere)
         printf("    poke %d: displacement %.3g m, worst difference %.3g m (%.2f %%), active "
                "cells max %d mean %.0f of %d\n",
                poke + 1, dmax, worst, 100 * worst / dmax, act_max, act_sum / 60, ncell);
-        ENSURE(dmax > 1e-4);
+        ENSURE(dmax > 5e-5);
         ENSURE_MSG(worst < 0.02 * dmax, "difference %.3g of %.3g", worst, dmax);
         ENSURE_MSG(act_max < ncell / 2 && act_sum / 60 < 0.2 * ncell && act_sum > 0,
                    "active cells: up to %d, mean %.0f", act_max, act_sum / 60);
         if (poke == 1)
             ENSURE_MSG(first_region_frozen, "the first poke's corner moved");
         /* released: the active cells fall back to none */
-        for (int s = 0; s < 120; s++)
+        for (int s = 0; s < 90; s++)
             ENSURE(step_both(&A, &F) == CS_OK);
         st = cs_world_last_stats(A.w);
         ENSURE_MSG(st->cells_stepped == 0, "%d cells still active after the poke",
@@ -215,13 +215,13 @@ TEST(active_poke_matches_full_solve_and_wakes_elsewhere)
 }
 
 /*
- * A 12³ block settling under gravity (sleep on, the defaults): with active regions it falls
+ * An 8³ block settling under gravity (sleep on, the defaults): with active regions it falls
  * asleep no later than the all-active run (+ active_steps), and where it rests agrees with the
  * all-active run's rest within 2 % of the sag; both are compared with the static equilibrium.
  */
 TEST(active_settles_and_sleeps_as_before)
 {
-    const int n = 12;
+    const int n = 8;
     blk A, F;
     ENSURE(make_block(&A, n, n, 10, true, 30) == 0);
     ENSURE(make_block(&F, n, n, 0, true, 30) == 0);
