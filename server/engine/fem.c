@@ -248,45 +248,164 @@ void cs_fem_update_rotations(cs_fem *fem, const double *x)
     }
 }
 
-/* y = K x for one element (24-vectors): the hot kernel of every product. Compiled twice,
- * for AVX2+FMA and for baseline x86-64, and picked at load time, so the binary runs on any
- * x86-64 and uses the wider units where they exist. */
-__attribute__((target_clones("arch=x86-64-v3", "default"))) static void
-kmul(const double *restrict K, const double *restrict x, double *restrict y)
-{
-    /* K is symmetric: y = Σ_j x_j K[j,:], so the 24 sums stay in vector registers. */
-    double acc[24] = {0};
-    for (int j = 0; j < 24; j++) {
-        const double xj = x[j], *row = K + 24 * j;
-        for (int i = 0; i < 24; i++)
-            acc[i] += xj * row[i];
-    }
-    for (int i = 0; i < 24; i++)
-        y[i] = acc[i];
-}
-
 static void graded_kmul(const cs_fem *fem, const double *f, const double *restrict x,
                         double *restrict y);
 
-/* y = K_e x for cell c with the Gauss-point factors kf (8 per cell; NULL: all 1). */
-static void cell_kmul(const cs_fem *fem, const double *kf, int c, const double *restrict x,
-                      double *restrict y)
+/* ------------------------------------------------------------------ modal element product
+ *
+ * The cube's element product without its 24×24 matrix. On the reference cube ξ ∈ [-1,1]³
+ * (x = centre + h/2·ξ) a trilinear field is u_i = Σ_m a_im φ_m, φ = {1, ξ, η, ζ, ξη, ηζ, ζξ,
+ * ξηζ}, and the nodal values map to the modes by a Walsh–Hadamard transform: â_m = Σ_k
+ * φ_m(s_k) u_k = 8 a_m (s_k the corner's signs; 23 additions per component). The gradient is
+ * (2/h)(G0 + ξ Gξ + η Gη + ζ Gζ + ηζ B_ξ + ζξ B_η + ξη B_ζ) with G0[i] = (a_i1, a_i2, a_i3),
+ * Gξ[i] = (0, a_i4, a_i6), Gη[i] = (a_i4, 0, a_i5), Gζ[i] = (a_i6, a_i5, 0) and B the columns
+ * of a_i7. The monomials are orthogonal on the cube (∫1 = 8, ∫ξ² = 8/3, ∫ξ²η² = 8/9) and the
+ * energy density W(G) = ½[λ tr(G)² + μ (G:G + G:Gᵀ)] is quadratic, so with (h/2)³(2/h)²·8 = 4h
+ *   E = 4h [W(G0) + (W(Gξ) + W(Gη) + W(Gζ))/3 + (λ + 4μ)/18 · Σ_i a_i7²],
+ * which is exactly what 2×2×2 Gauss quadrature integrates (the integrand has degree ≤ 2 per
+ * variable). K u = ∂E/∂u = Hᵀ ∂E/∂â: the mode gradients ĝ = ∂E/∂â from σ(G) = λ tr(G) I +
+ * μ (G + Gᵀ) (scale h/16 for G0, h/48 for the linear modes, h/144 for a_7), then the transposed
+ * transform back to the nodes. About 400 flops per rotated cell instead of 1152 + 240.
+ *
+ * A rotation acts on components and the transform on nodes, so they commute: corotational
+ * cells rotate the 7 non-constant mode vectors instead of the 8 nodes. The rest shape
+ * −h·CS_CORNER only has the modes â_{i,1+i} = −4h (the translation mode is never used).
+ *
+ * Cells go through in batches of CS_MODAL_LANES, one cell per SIMD lane: every lane does the
+ * same operations, so a cell's result does not depend on its lane or on the thread count.
+ */
+#define LANES 4
+_Static_assert(LANES == 4, "the lane lists in modal_kernel are written out for 4 lanes");
+typedef double vd __attribute__((vector_size(8 * LANES)));
+
+/* One batch: where each lane's cell reads its nodal vectors and writes its results. A lane
+ * without a cell repeats another lane's inputs with lam = mu = 0 and writes to scratch. */
+typedef struct mlanes {
+    const double *x;          /* nodal vectors, 3 per node (global frame when rotated) */
+    const int32_t *nd[LANES]; /* the 8 nodes of each lane's cell, corner order */
+    const double *R[LANES];   /* row-major rotation per lane (rotated products only) */
+    double lam[LANES];        /* (h/16)·λ·factor per lane */
+    double mu[LANES];         /* (h/16)·μ·factor */
+    double *out[LANES];       /* 24 per lane: K u per node (global frame when rotated) */
+    double e[LANES];          /* out (with energy): ½ uᵀ K u in the local frame */
+} mlanes;
+
+/* Flops of one lane of modal_kernel: transform 69, mode gradients 50, back 69; rotations
+ * 2·105 (7 modes × 3 × 5); the energy 41 more. */
+#define MODAL_FLOPS_CORE (69.0 + 50.0 + 69.0)
+#define MODAL_FLOPS_ROT 210.0
+
+/* y = R K (Rᵀ u − rest) per lane (rot: R given; rest: subtract the rest shape of edge rest);
+ * energy: e = ½ (Rᵀu − rest)ᵀ K (Rᵀu − rest). */
+__attribute__((optimize("fp-contract=fast"), target_clones("arch=x86-64-v3", "default")))
+static void modal_kernel(mlanes *restrict b, int rot, double rest, int energy)
 {
-    if (!kf) {
-        kmul(fem->K, x, y);
-        return;
+    vd a[8][3], g[8][3], u[24], R[9];
+    for (int k = 0; k < 8; k++)
+        for (int i = 0; i < 3; i++)
+            u[3 * k + i] = (vd){b->x[3 * b->nd[0][k] + i], b->x[3 * b->nd[1][k] + i],
+                                b->x[3 * b->nd[2][k] + i], b->x[3 * b->nd[3][k] + i]};
+    if (rot)
+        for (int j = 0; j < 9; j++)
+            R[j] = (vd){b->R[0][j], b->R[1][j], b->R[2][j], b->R[3][j]};
+    /* forward transform, per component */
+    for (int i = 0; i < 3; i++) {
+        const vd s00 = u[3 * 1 + i] + u[3 * 0 + i], d00 = u[3 * 1 + i] - u[3 * 0 + i];
+        const vd s10 = u[3 * 2 + i] + u[3 * 3 + i], d10 = u[3 * 2 + i] - u[3 * 3 + i];
+        const vd s01 = u[3 * 5 + i] + u[3 * 4 + i], d01 = u[3 * 5 + i] - u[3 * 4 + i];
+        const vd s11 = u[3 * 6 + i] + u[3 * 7 + i], d11 = u[3 * 6 + i] - u[3 * 7 + i];
+        const vd ss0 = s10 + s00, sd0 = s10 - s00, ss1 = s11 + s01, sd1 = s11 - s01;
+        const vd ds0 = d10 + d00, dd0 = d10 - d00, ds1 = d11 + d01, dd1 = d11 - d01;
+        a[1][i] = ds1 + ds0;
+        a[2][i] = sd1 + sd0;
+        a[3][i] = ss1 - ss0;
+        a[4][i] = dd1 + dd0;
+        a[5][i] = sd1 - sd0;
+        a[6][i] = ds1 - ds0;
+        a[7][i] = dd1 - dd0;
     }
-    const double *f = kf + 8 * (size_t)c;
-    if (f[0] == f[1] && f[0] == f[2] && f[0] == f[3] && f[0] == f[4] && f[0] == f[5] &&
-        f[0] == f[6] && f[0] == f[7]) {
-        kmul(fem->K, x, y);
-        if (f[0] != 1.0)
-            for (int i = 0; i < 24; i++)
-                y[i] *= f[0];
-        return;
+    if (rot)
+        for (int m = 1; m < 8; m++) {
+            const vd v0 = a[m][0], v1 = a[m][1], v2 = a[m][2];
+            for (int i = 0; i < 3; i++)
+                a[m][i] = R[i] * v0 + R[3 + i] * v1 + R[6 + i] * v2;
+        }
+    if (rest != 0.0) {
+        const double r4 = 4.0 * rest;
+        a[1][0] -= r4;
+        a[2][1] -= r4;
+        a[3][2] -= r4;
     }
-    graded_kmul(fem, f, x, y);
+    /* mode gradients */
+    const vd L = {b->lam[0], b->lam[1], b->lam[2], b->lam[3]};
+    const vd M = {b->mu[0], b->mu[1], b->mu[2], b->mu[3]}, M2 = M + M;
+    const vd L1 = L * (1.0 / 3.0), M1 = M * (1.0 / 3.0), Q = (L + 4.0 * M) * (1.0 / 9.0);
+    {
+        const vd lt = L * (a[1][0] + a[2][1] + a[3][2]);
+        g[1][0] = lt + M2 * a[1][0];
+        g[2][1] = lt + M2 * a[2][1];
+        g[3][2] = lt + M2 * a[3][2];
+        const vd o01 = M * (a[2][0] + a[1][1]), o02 = M * (a[3][0] + a[1][2]),
+                 o12 = M * (a[3][1] + a[2][2]);
+        g[2][0] = g[1][1] = o01;
+        g[3][0] = g[1][2] = o02;
+        g[3][1] = g[2][2] = o12;
+    }
+    {
+        const vd tx = L1 * (a[4][1] + a[6][2]), ty = L1 * (a[4][0] + a[5][2]),
+                 tz = L1 * (a[6][0] + a[5][1]);
+        const vd w = a[4][2] + a[5][0] + a[6][1];
+        g[4][0] = ty + M * a[4][0];
+        g[4][1] = tx + M * a[4][1];
+        g[4][2] = M1 * (a[4][2] + w);
+        g[5][0] = M1 * (a[5][0] + w);
+        g[5][1] = tz + M * a[5][1];
+        g[5][2] = ty + M * a[5][2];
+        g[6][0] = tz + M * a[6][0];
+        g[6][1] = M1 * (a[6][1] + w);
+        g[6][2] = tx + M * a[6][2];
+        for (int i = 0; i < 3; i++)
+            g[7][i] = Q * a[7][i];
+    }
+    if (energy) {
+        vd e = a[1][0] * g[1][0];
+        for (int m = 1; m < 8; m++)
+            for (int i = (m == 1); i < 3; i++)
+                e += a[m][i] * g[m][i];
+        e *= 0.5;
+        for (int l = 0; l < LANES; l++)
+            b->e[l] = e[l];
+    }
+    if (rot)
+        for (int m = 1; m < 8; m++) {
+            const vd v0 = g[m][0], v1 = g[m][1], v2 = g[m][2];
+            for (int i = 0; i < 3; i++)
+                g[m][i] = R[3 * i] * v0 + R[3 * i + 1] * v1 + R[3 * i + 2] * v2;
+        }
+    /* transposed transform back to the nodes (g_0 = 0) */
+    for (int i = 0; i < 3; i++) {
+        vd y[24];
+        const vd sd1 = g[2][i] + g[5][i], sd0 = g[2][i] - g[5][i];
+        const vd ds1 = g[1][i] + g[6][i], ds0 = g[1][i] - g[6][i];
+        const vd dd1 = g[4][i] + g[7][i], dd0 = g[4][i] - g[7][i];
+        const vd ss1 = g[3][i];
+        /* ss0 = -g3: folded into the next stage */
+        const vd s10 = sd0 - ss1, s00 = -(sd0 + ss1), s11 = ss1 + sd1, s01 = ss1 - sd1;
+        const vd d10 = ds0 + dd0, d00 = ds0 - dd0, d11 = ds1 + dd1, d01 = ds1 - dd1;
+        y[3 * 0 + i] = s00 - d00;
+        y[3 * 1 + i] = s00 + d00;
+        y[3 * 3 + i] = s10 - d10;
+        y[3 * 2 + i] = s10 + d10;
+        y[3 * 4 + i] = s01 - d01;
+        y[3 * 5 + i] = s01 + d01;
+        y[3 * 7 + i] = s11 - d11;
+        y[3 * 6 + i] = s11 + d11;
+        for (int k = 0; k < 8; k++)
+            for (int l = 0; l < LANES; l++)
+                b->out[l][3 * k + i] = y[3 * k + i][l];
+    }
 }
+
 
 /* A graded cell: y_k = Σ_g f_g·detJ·σ_g ∇N_k(ξ_g), σ_g = λ tr(H) I + μ (H + Hᵀ),
  * H = Σ_k x_k ⊗ ∇N_k(ξ_g): the same sum as Σ_g f_g K_g x, without 24×24 products. */
@@ -313,34 +432,212 @@ graded_kmul(const cs_fem *fem, const double *f, const double *restrict x, double
     }
 }
 
+/* Cell c's stiffness factor if its 8 Gauss-point factors are equal (kf NULL: 1); false for a
+ * graded cell. */
+static bool uniform_factor(const double *kf, int c, double *f)
+{
+    if (!kf) {
+        *f = 1.0;
+        return true;
+    }
+    const double *g = kf + 8 * (size_t)c;
+    *f = g[0];
+    return g[0] == g[1] && g[0] == g[2] && g[0] == g[3] && g[0] == g[4] && g[0] == g[5] &&
+           g[0] == g[6] && g[0] == g[7];
+}
+
+/* A graded cell point by point: out = R K_e (Rᵀ (x − x_0) − rest·corner) (R NULL: identity)
+ * and, if e, ½ uᵀ K_e u. With rest = 0 x is a displacement-like vector: no x_0 shift. */
+static void graded_cell(const cs_fem *fem, const double *f, const int32_t *nd, const double *R,
+                        const double *x, double rest, double *out, double *e)
+{
+    static const double I[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+    if (!R)
+        R = I;
+    const double *x0 = x + 3 * nd[0];
+    double u[24], ku[24];
+    for (int k = 0; k < 8; k++) {
+        const double *p = x + 3 * nd[k];
+        double d[3] = {p[0], p[1], p[2]};
+        if (rest != 0.0)
+            for (int i = 0; i < 3; i++)
+                d[i] -= x0[i];
+        for (int i = 0; i < 3; i++)
+            u[3 * k + i] = R[i] * d[0] + R[3 + i] * d[1] + R[6 + i] * d[2] -
+                           rest * CS_CORNER[k][i];
+    }
+    graded_kmul(fem, f, u, ku);
+    double en = 0;
+    for (int k = 0; k < 8; k++) {
+        const double *l = ku + 3 * k;
+        for (int i = 0; out && i < 3; i++)
+            out[3 * k + i] = R[3 * i] * l[0] + R[3 * i + 1] * l[1] + R[3 * i + 2] * l[2];
+        en += u[3 * k] * l[0] + u[3 * k + 1] * l[1] + u[3 * k + 2] * l[2];
+    }
+    if (e)
+        *e = 0.5 * en;
+}
+
+/*
+ * One batch of cells [c0, c0 + LANES) ∩ [0, n_cells): fe[24c..] = R_c K_c (R_cᵀ x − rest)
+ * (Rb: the rotations of the batch's cells, 9 each from c0, NULL: none; fe NULL: not stored)
+ * and, if e, the energies per lane (0 past the end). Uniform cells go through the modal
+ * kernel together, graded ones point by point.
+ */
+static void batch_product(const cs_fem *fem, const double *kf, int c0, const double *Rb,
+                          const double *x, double rest, double *fe, double e[LANES])
+{
+    const double c16 = fem->h / 16.0;
+    double sink[24];
+    mlanes B;
+    int graded = 0, first = -1;
+    B.x = x;
+    for (int l = 0; l < LANES; l++) {
+        const int c = c0 + l;
+        double f;
+        if (e)
+            e[l] = 0;
+        if (c < fem->n_cells && uniform_factor(kf, c, &f)) {
+            B.nd[l] = fem->cell_nodes + 8 * (size_t)c;
+            B.R[l] = Rb ? Rb + 9 * l : NULL;
+            B.lam[l] = c16 * fem->lambda * f;
+            B.mu[l] = c16 * fem->mu * f;
+            B.out[l] = fe ? fe + 24 * (size_t)c : sink;
+            if (first < 0)
+                first = l;
+        } else {
+            B.nd[l] = NULL;
+            if (c < fem->n_cells)
+                graded |= 1 << l;
+        }
+    }
+    if (first >= 0) {
+        for (int l = 0; l < LANES; l++)
+            if (!B.nd[l]) {
+                B.nd[l] = B.nd[first];
+                B.R[l] = B.R[first];
+                B.lam[l] = B.mu[l] = 0;
+                B.out[l] = sink;
+            }
+        modal_kernel(&B, Rb != NULL, rest, e != NULL);
+    }
+    for (int l = 0; l < LANES && c0 + l < fem->n_cells; l++) {
+        const int c = c0 + l;
+        if (graded & (1 << l))
+            graded_cell(fem, kf + 8 * (size_t)c, fem->cell_nodes + 8 * (size_t)c,
+                        Rb ? Rb + 9 * l : NULL, x, rest, fe ? fe + 24 * (size_t)c : NULL,
+                        e ? e + l : NULL);
+        else if (e)
+            e[l] = B.e[l];
+    }
+}
+
+static int n_batches(int n_cells)
+{
+    return (n_cells + LANES - 1) / LANES;
+}
+
+/* ku = K_c u for local 24-vectors of the batch's cells from c0 (us, kus: 24 per lane). */
+static void batch_local(const cs_fem *fem, const double *kf, int c0, const double *us,
+                        double *kus)
+{
+    /* node k of lane l sits at us + 24 l + 3 k */
+    static const int32_t at[LANES][8] = {{0, 1, 2, 3, 4, 5, 6, 7},
+                                         {8, 9, 10, 11, 12, 13, 14, 15},
+                                         {16, 17, 18, 19, 20, 21, 22, 23},
+                                         {24, 25, 26, 27, 28, 29, 30, 31}};
+    const double c16 = fem->h / 16.0;
+    double sink[24];
+    mlanes B;
+    int graded = 0, live = 0;
+    B.x = us;
+    for (int l = 0; l < LANES; l++) {
+        const int c = c0 + l;
+        double f;
+        B.nd[l] = at[l];
+        B.R[l] = NULL;
+        B.out[l] = kus + 24 * l;
+        if (c < fem->n_cells && uniform_factor(kf, c, &f)) {
+            B.lam[l] = c16 * fem->lambda * f;
+            B.mu[l] = c16 * fem->mu * f;
+            live++;
+        } else {
+            /* graded or past the end: computed below, or not at all */
+            B.nd[l] = at[0];
+            B.lam[l] = B.mu[l] = 0;
+            B.out[l] = sink;
+            if (c < fem->n_cells)
+                graded |= 1 << l;
+        }
+    }
+    if (live)
+        modal_kernel(&B, 0, 0.0, 0);
+    for (int l = 0; l < LANES && c0 + l < fem->n_cells; l++)
+        if (graded & (1 << l))
+            graded_kmul(fem, kf + 8 * (size_t)(c0 + l), us + 24 * l, kus + 24 * l);
+}
+
+void cs_cube_lame_h(const double K[24 * 24], double *hl, double *hm)
+{
+    /* K_00 = h(λ + 4μ)/9 and K_01 = h(λ + μ)/12 (corner 0, x and y) */
+    *hl = 16.0 * K[1] - 3.0 * K[0];
+    *hm = 3.0 * K[0] - 4.0 * K[1];
+}
+
+void cs_cube_cells_product(const double K[24 * 24], int n_cells, const int32_t *cell_nodes,
+                           const double *R, const double *s, const double *x, double *fe,
+                           int threads)
+{
+    double hl, hm;
+    cs_cube_lame_h(K, &hl, &hm);
+    const int nb = n_batches(n_cells);
+#pragma omp parallel for num_threads(threads) schedule(static)
+    for (int b = 0; b < nb; b++) {
+        double sink[24];
+        mlanes B;
+        B.x = x;
+        for (int l = 0; l < LANES; l++) {
+            const int c = b * LANES + l, cc = c < n_cells ? c : b * LANES;
+            const double sc = c < n_cells ? s[c] / 16.0 : 0.0;
+            B.nd[l] = cell_nodes + 8 * (size_t)cc;
+            B.R[l] = R + 9 * (size_t)cc;
+            B.lam[l] = hl * sc;
+            B.mu[l] = hm * sc;
+            B.out[l] = c < n_cells ? fe + 24 * (size_t)c : sink;
+        }
+        modal_kernel(&B, 1, 0.0, 0);
+    }
+}
+
 double cs_fem_energy(const cs_fem *fem, const double *x)
 {
     double e_sum = 0;
-    for (int c = 0; c < fem->n_cells; c++) {
-        const int32_t *nd = fem->cell_nodes + 8 * c;
-        double R[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
-        if (fem->corotational) {
+    for (int c0 = 0; c0 < fem->n_cells; c0 += LANES) {
+        double Rb[9 * LANES], e[LANES];
+        for (int l = 0; fem->corotational && l < LANES && c0 + l < fem->n_cells; l++) {
             double F[9], q[4];
-            centre_gradient(fem, x, c, F);
-            memcpy(q, fem->q + 4 * c, sizeof q);
+            centre_gradient(fem, x, c0 + l, F);
+            memcpy(q, fem->q + 4 * (size_t)(c0 + l), sizeof q);
             cs_extract_rotation(F, q, 30);
-            cs_quat_to_mat(q, R);
+            cs_quat_to_mat(q, Rb + 9 * l);
         }
-        const double *x0 = x + 3 * nd[0];
-        double u[24], ku[24], e = 0;
-        for (int k = 0; k < 8; k++) {
-            const double *p = x + 3 * nd[k];
-            const double d[3] = {p[0] - x0[0], p[1] - x0[1], p[2] - x0[2]};
-            for (int i = 0; i < 3; i++)
-                u[3 * k + i] = R[i] * d[0] + R[3 + i] * d[1] + R[6 + i] * d[2] -
-                               fem->h * CS_CORNER[k][i];
-        }
-        cell_kmul(fem, fem->kf, c, u, ku);
-        for (int i = 0; i < 24; i++)
-            e += u[i] * ku[i];
-        e_sum += 0.5 * e;
+        batch_product(fem, fem->kf, c0, fem->corotational ? Rb : NULL, x, fem->h, NULL, e);
+        for (int l = 0; l < LANES; l++)
+            e_sum += e[l];
     }
     return e_sum;
+}
+
+/* Whether the batch of cells from c0 holds an active one (cell_active; NULL: all are). The
+ * other cells of a batch are computed too: harmless, the node pass ignores inactive cells. */
+static bool batch_active(const cs_fem *fem, int c0)
+{
+    if (!fem->cell_active)
+        return true;
+    for (int l = 0; l < LANES && c0 + l < fem->n_cells; l++)
+        if (fem->cell_active[c0 + l])
+            return true;
+    return false;
 }
 
 /* Node pass: out[n] = sign · Σ fe over the node's (cell, corner) slots, in a fixed order. */
@@ -365,33 +662,18 @@ static void gather(cs_fem *fem, double *out, double sign)
 
 void cs_fem_elastic_force(cs_fem *fem, const double *x, double *f, double *energy)
 {
-    const double h = fem->h;
     double e_sum = 0;
+    const int nb = n_batches(fem->n_cells);
 #pragma omp parallel for num_threads(fem->threads) schedule(static) reduction(+ : e_sum)
-    for (int c = 0; c < fem->n_cells; c++) {
-        if (fem->cell_active && !fem->cell_active[c])
+    for (int b = 0; b < nb; b++) {
+        const int c0 = b * LANES;
+        if (!batch_active(fem, c0))
             continue;
-        const int32_t *nd = fem->cell_nodes + 8 * c;
-        const double *R = fem->R + 9 * c;
-        const double *x0 = x + 3 * nd[0];
-        double u[24], ku[24];
-        for (int k = 0; k < 8; k++) {
-            const double *p = x + 3 * nd[k];
-            const double d[3] = {p[0] - x0[0], p[1] - x0[1], p[2] - x0[2]};
-            for (int i = 0; i < 3; i++)
-                u[3 * k + i] = R[i] * d[0] + R[3 + i] * d[1] + R[6 + i] * d[2] -
-                               h * CS_CORNER[k][i];
-        }
-        cell_kmul(fem, fem->kf, c, u, ku);
-        double *out = fem->fe + 24 * c;
-        double e = 0;
-        for (int k = 0; k < 8; k++) {
-            const double *l = ku + 3 * k;
-            for (int i = 0; i < 3; i++)
-                out[3 * k + i] = R[3 * i] * l[0] + R[3 * i + 1] * l[1] + R[3 * i + 2] * l[2];
-            e += u[3 * k] * l[0] + u[3 * k + 1] * l[1] + u[3 * k + 2] * l[2];
-        }
-        e_sum += 0.5 * e;
+        double e[LANES];
+        batch_product(fem, fem->kf, c0, fem->corotational ? fem->R + 9 * (size_t)c0 : NULL, x,
+                      fem->h, fem->fe, e);
+        for (int l = 0; l < LANES; l++)
+            e_sum += e[l];
     }
     gather(fem, f, -1.0);
     if (energy)
@@ -405,27 +687,33 @@ void cs_fem_apply_K(cs_fem *fem, const double *p, double *y)
 
 void cs_fem_apply_Kw(cs_fem *fem, const double *kf, const double *p, double *y)
 {
+    const int nb = n_batches(fem->n_cells);
 #pragma omp parallel for num_threads(fem->threads) schedule(static)
-    for (int c = 0; c < fem->n_cells; c++) {
-        if (fem->cell_active && !fem->cell_active[c])
+    for (int b = 0; b < nb; b++) {
+        const int c0 = b * LANES;
+        if (!batch_active(fem, c0))
             continue;
-        const int32_t *nd = fem->cell_nodes + 8 * c;
-        const double *R = fem->R + 9 * c;
-        double u[24], ku[24];
-        for (int k = 0; k < 8; k++) {
-            const double *d = p + 3 * nd[k];
-            for (int i = 0; i < 3; i++)
-                u[3 * k + i] = R[i] * d[0] + R[3 + i] * d[1] + R[6 + i] * d[2];
-        }
-        cell_kmul(fem, kf, c, u, ku);
-        double *out = fem->fe + 24 * c;
-        for (int k = 0; k < 8; k++) {
-            const double *l = ku + 3 * k;
-            for (int i = 0; i < 3; i++)
-                out[3 * k + i] = R[3 * i] * l[0] + R[3 * i + 1] * l[1] + R[3 * i + 2] * l[2];
-        }
+        batch_product(fem, kf, c0, fem->corotational ? fem->R + 9 * (size_t)c0 : NULL, p, 0.0,
+                      fem->fe, NULL);
     }
     gather(fem, y, 1.0);
+}
+
+double cs_fem_product_flops(const cs_fem *fem)
+{
+    /* Useful operations, a multiply-add counted as two: uniform cells the modal kernel
+     * (MODAL_FLOPS_*), graded cells graded_kmul (8 Gauss points × (144 gradient + 40 stress +
+     * 144 forces)) and their 2 × 8 × 15 rotations; then the node pass (3 additions per
+     * (node, cell) link and 3 products by the sign per node). Lanes without a cell are not
+     * counted. */
+    const double graded = 8.0 * (144.0 + 40.0 + 144.0) + 240.0;
+    const double uniform = MODAL_FLOPS_CORE + (fem->corotational ? MODAL_FLOPS_ROT : 0.0);
+    double flops = 0;
+    for (int c = 0; c < fem->n_cells; c++) {
+        double f;
+        flops += uniform_factor(fem->kf, c, &f) ? uniform : graded;
+    }
+    return flops + 3.0 * 8.0 * fem->n_cells + 3.0 * fem->n_nodes;
 }
 
 void cs_fem_diag_blocks(cs_fem *fem, double *blocks)
@@ -489,12 +777,19 @@ int cs_fem_prepare_tangent(cs_fem *fem, const double *x)
             return -1;
     }
     const double h = fem->h, inv4h = 1.0 / (4.0 * h);
+    const int nb = n_batches(fem->n_cells);
 #pragma omp parallel for num_threads(fem->threads) schedule(static)
-    for (int c = 0; c < fem->n_cells; c++) {
+    for (int bt = 0; bt < nb; bt++) {
+      const int c0 = bt * LANES;
+      double us[24 * LANES], kus[24 * LANES];
+      for (int l = 0; l < LANES; l++) {
+        const int c = c0 + l;
+        if (c >= fem->n_cells)
+            break;
         const int32_t *nd = fem->cell_nodes + 8 * c;
         const double *R = fem->R + 9 * c;
-        double *G = fem->tg + 33 * c, *ku = G + 9;
-        double F[9] = {0}, S[9], u[24];
+        double *G = fem->tg + 33 * c;
+        double F[9] = {0}, S[9], *u = us + 24 * l;
         const double *x0 = x + 3 * nd[0];
         for (int k = 0; k < 8; k++) {
             const double *p = x + 3 * nd[k];
@@ -506,7 +801,6 @@ int cs_fem_prepare_tangent(cs_fem *fem, const double *x)
                                h * CS_CORNER[k][i];
             }
         }
-        cell_kmul(fem, fem->kf, c, u, ku);
         /* S = Rᵀ F, then A = tr(S)·I − S (symmetrized), G = A⁻¹ */
         for (int i = 0; i < 3; i++)
             for (int j = 0; j < 3; j++)
@@ -524,6 +818,10 @@ int cs_fem_prepare_tangent(cs_fem *fem, const double *x)
                 G[i] = cf[i] / det;
         else
             memset(G, 0, 9 * sizeof *G);
+      }
+      batch_local(fem, fem->kf, c0, us, kus);
+      for (int l = 0; l < LANES && c0 + l < fem->n_cells; l++)
+          memcpy(fem->tg + 33 * (size_t)(c0 + l) + 9, kus + 24 * l, 24 * sizeof *kus);
     }
     return 0;
 }
@@ -537,12 +835,18 @@ void cs_fem_release_tangent(cs_fem *fem)
 void cs_fem_apply_tangent(cs_fem *fem, const double *p, double *y)
 {
     const double inv4h = 1.0 / (4.0 * fem->h);
+    const int nb = n_batches(fem->n_cells);
 #pragma omp parallel for num_threads(fem->threads) schedule(static)
-    for (int c = 0; c < fem->n_cells; c++) {
+    for (int bt = 0; bt < nb; bt++) {
+      const int c0 = bt * LANES;
+      double qs[24 * LANES], kqs[24 * LANES], as[LANES][3], bs[LANES][3];
+      for (int l = 0; l < LANES && c0 + l < fem->n_cells; l++) {
+        const int c = c0 + l;
         const int32_t *nd = fem->cell_nodes + 8 * c;
         const double *R = fem->R + 9 * c;
-        const double *G = fem->tg + 33 * c, *ku = G + 9;
-        double q[24], kq[24], a[3] = {0, 0, 0}, b[3] = {0, 0, 0};
+        const double *ku = fem->tg + 33 * c + 9;
+        double *q = qs + 24 * l, *a = as[l], *b = bs[l];
+        a[0] = a[1] = a[2] = b[0] = b[1] = b[2] = 0;
         for (int k = 0; k < 8; k++) {
             const double *d = p + 3 * nd[k];
             double *qk = q + 3 * k, t[3];
@@ -555,7 +859,13 @@ void cs_fem_apply_tangent(cs_fem *fem, const double *p, double *y)
             for (int i = 0; i < 3; i++)
                 b[i] += t[i];
         }
-        cell_kmul(fem, fem->kf, c, q, kq);
+      }
+      batch_local(fem, fem->kf, c0, qs, kqs);
+      for (int l = 0; l < LANES && c0 + l < fem->n_cells; l++) {
+        const int c = c0 + l;
+        const double *R = fem->R + 9 * c;
+        const double *G = fem->tg + 33 * c, *ku = G + 9, *kq = kqs + 24 * l;
+        const double *a = as[l], *b = bs[l];
         double w1[3], w2[3];
         for (int i = 0; i < 3; i++) {
             w1[i] = G[3 * i] * a[0] + G[3 * i + 1] * a[1] + G[3 * i + 2] * a[2];
@@ -563,14 +873,15 @@ void cs_fem_apply_tangent(cs_fem *fem, const double *p, double *y)
         }
         double *out = fem->fe + 24 * c;
         for (int k = 0; k < 8; k++) {
-            double g1[3], g2[3], l[3];
+            double g1[3], g2[3], l3[3];
             cross3(w1, ku + 3 * k, g1);
             cross3(w2, SGN[k], g2);
             for (int i = 0; i < 3; i++)
-                l[i] = kq[3 * k + i] + 0.5 * (g1[i] + inv4h * g2[i]);
+                l3[i] = kq[3 * k + i] + 0.5 * (g1[i] + inv4h * g2[i]);
             for (int i = 0; i < 3; i++)
-                out[3 * k + i] = R[3 * i] * l[0] + R[3 * i + 1] * l[1] + R[3 * i + 2] * l[2];
+                out[3 * k + i] = R[3 * i] * l3[0] + R[3 * i + 1] * l3[1] + R[3 * i + 2] * l3[2];
         }
+      }
     }
     gather(fem, y, 1.0);
 }

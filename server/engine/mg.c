@@ -469,30 +469,7 @@ double *cs_mg_node_diag(cs_mg *mg)
 /* y = Σ s R K Rᵀ x + dg x on a coarse level. */
 static void level_apply(const cs_mg *mg, mg_level *l, const double *x, double *y)
 {
-    const double *K = mg->K;
-#pragma omp parallel for num_threads(l->threads) schedule(static)
-    for (int c = 0; c < l->n_cells; c++) {
-        const int32_t *nd = l->cell_nodes + 8 * c;
-        const double *R = l->R + 9 * c;
-        double u[24], ku[24] = {0};
-        for (int k = 0; k < 8; k++) {
-            const double *d = x + 3 * nd[k];
-            for (int i = 0; i < 3; i++)
-                u[3 * k + i] = R[i] * d[0] + R[3 + i] * d[1] + R[6 + i] * d[2];
-        }
-        for (int j = 0; j < 24; j++) {
-            const double uj = u[j], *row = K + 24 * j;
-            for (int i = 0; i < 24; i++)
-                ku[i] += uj * row[i];
-        }
-        const double s = l->s[c];
-        double *out = l->fe + 24 * c;
-        for (int k = 0; k < 8; k++) {
-            const double *v = ku + 3 * k;
-            for (int i = 0; i < 3; i++)
-                out[3 * k + i] = s * (R[3 * i] * v[0] + R[3 * i + 1] * v[1] + R[3 * i + 2] * v[2]);
-        }
-    }
+    cs_cube_cells_product(mg->K, l->n_cells, l->cell_nodes, l->R, l->s, x, l->fe, l->threads);
 #pragma omp parallel for num_threads(l->threads) schedule(static)
     for (int n = 0; n < l->n_nodes; n++) {
         double s0 = 0, s1 = 0, s2 = 0;

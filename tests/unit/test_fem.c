@@ -372,3 +372,231 @@ TEST(fem_products_independent_of_thread_count)
     cs_fem_free(&f2);
     cs_cubemesh_free(&cm);
 }
+
+/* ------------------------------------------------------------------ the modal element kernel */
+
+static double urand(unsigned *seed)
+{
+    return rand_r(seed) / (double)RAND_MAX - 0.5;
+}
+
+/* y = Σ_c R_c K_c R_cᵀ p with the dense 24×24 matrices: K_c = f K (uniform factors) or
+ * Σ_g kf_g K_g (graded), R_c = fem->R. */
+static void dense_apply(const cs_fem *fem, const double *kf, const double *p, double *y)
+{
+    memset(y, 0, sizeof(double) * 3 * fem->n_nodes);
+    for (int c = 0; c < fem->n_cells; c++) {
+        const int32_t *nd = fem->cell_nodes + 8 * c;
+        const double *R = fem->R + 9 * c;
+        double Ke[576], u[24], ku[24];
+        for (int i = 0; i < 576; i++) {
+            if (!kf) {
+                Ke[i] = fem->K[i];
+                continue;
+            }
+            Ke[i] = 0;
+            for (int g = 0; g < 8; g++)
+                Ke[i] += kf[8 * c + g] * fem->Kg[576 * g + i];
+        }
+        for (int k = 0; k < 8; k++)
+            for (int i = 0; i < 3; i++) {
+                const double *d = p + 3 * nd[k];
+                u[3 * k + i] = R[i] * d[0] + R[3 + i] * d[1] + R[6 + i] * d[2];
+            }
+        for (int i = 0; i < 24; i++) {
+            ku[i] = 0;
+            for (int j = 0; j < 24; j++)
+                ku[i] += Ke[24 * i + j] * u[j];
+        }
+        for (int k = 0; k < 8; k++)
+            for (int i = 0; i < 3; i++)
+                y[3 * nd[k] + i] += R[3 * i] * ku[3 * k] + R[3 * i + 1] * ku[3 * k + 1] +
+                                    R[3 * i + 2] * ku[3 * k + 2];
+    }
+}
+
+static double max_abs(const double *v, int n)
+{
+    double m = 0;
+    for (int i = 0; i < n; i++)
+        m = fmax(m, fabs(v[i]));
+    return m;
+}
+
+/* The modal (Walsh–Hadamard) product equals the dense K product to roundoff, for several
+ * edges and materials, linear and rotated, plain, with equal factors per cell and graded. */
+TEST(fem_modal_product_matches_dense_K)
+{
+    const double hs[3] = {0.1, 1.0, 0.0137}, Es[3] = {1e6, 3.5e4, 2e9},
+                 nus[3] = {0.3, 0.0, 0.49};
+    unsigned seed = 11;
+    for (int t = 0; t < 3; t++)
+        for (int corot = 0; corot < 2; corot++)
+            for (int field = 0; field < 3; field++) {
+                cs_cubemesh cm;
+                ENSURE(build_block(&cm, 3, 3, 1 + t, hs[t]) == 0); /* 9, 18, 27 cells */
+                cs_fem fem;
+                ENSURE(cs_fem_init(&fem, &cm, Es[t], nus[t], corot, 1) == 0);
+                const int n = cm.n_nodes;
+                double *x = malloc(sizeof(double) * 3 * n), *p = malloc(sizeof(double) * 3 * n),
+                       *a = malloc(sizeof(double) * 3 * n), *b = malloc(sizeof(double) * 3 * n),
+                       *kf = malloc(sizeof(double) * 8 * cm.n_cells);
+                for (int i = 0; i < 3 * n; i++) {
+                    x[i] = cm.node_rest[i] + 0.3 * hs[t] * urand(&seed);
+                    p[i] = urand(&seed);
+                }
+                for (int c = 0; c < cm.n_cells; c++)
+                    for (int g = 0; g < 8; g++)
+                        /* field 1: equal per cell; field 2: every third cell graded */
+                        kf[8 * c + g] = field == 1 || c % 3 ? 0.5 + c % 4 : 0.2 + 0.3 * g;
+                fem.kf = field ? kf : NULL;
+                cs_fem_update_rotations(&fem, x);
+                cs_fem_apply_K(&fem, p, a);
+                dense_apply(&fem, fem.kf, p, b);
+                const double m = max_abs(b, 3 * n);
+                for (int i = 0; i < 3 * n; i++)
+                    ENSURE_MSG(fabs(a[i] - b[i]) <= 1e-13 * m,
+                               "h %g corot %d field %d dof %d: %.17g vs %.17g", hs[t], corot,
+                               field, i, a[i], b[i]);
+                if (field == 0) {
+                    const double per = corot ? 398.0 : 188.0;
+                    ENSURE_NEAR(cs_fem_product_flops(&fem),
+                                cm.n_cells * (per + 24.0) + 3.0 * n, 1e-9);
+                }
+                free(x);
+                free(p);
+                free(a);
+                free(b);
+                free(kf);
+                cs_fem_free(&fem);
+                cs_cubemesh_free(&cm);
+            }
+}
+
+/* Forces and energies agree: the linear model's force is minus the gradient of its energy
+ * (central differences), with and without graded factors; the energy returned with the force
+ * equals cs_fem_energy, also for rotated cells; and the tangent's warped part (no stress) is
+ * the dense R K Rᵀ. */
+TEST(fem_modal_force_energy_consistent)
+{
+    unsigned seed = 5;
+    for (int field = 0; field < 2; field++)
+        for (int corot = 0; corot < 2; corot++) {
+            cs_cubemesh cm;
+            ENSURE(build_block(&cm, 3, 2, 2, 0.2) == 0); /* 12 cells: 3 full batches */
+            cs_fem fem;
+            ENSURE(cs_fem_init(&fem, &cm, 1e5, 0.35, corot, 1) == 0);
+            const int n = cm.n_nodes;
+            double *x = malloc(sizeof(double) * 3 * n), *f = malloc(sizeof(double) * 3 * n),
+                   *kf = malloc(sizeof(double) * 8 * cm.n_cells);
+            for (int i = 0; i < 3 * n; i++)
+                x[i] = cm.node_rest[i] + 0.02 * urand(&seed);
+            for (int c = 0; c < cm.n_cells; c++)
+                for (int g = 0; g < 8; g++)
+                    kf[8 * c + g] = c % 2 ? 2.0 : 1.0 + 0.1 * g;
+            fem.kf = field ? kf : NULL;
+            cs_fem_update_rotations(&fem, x);
+            double e;
+            cs_fem_elastic_force(&fem, x, f, &e);
+            ENSURE(e > 0);
+            /* rotated: cs_fem_energy re-extracts R (converged to ~1e-9) */
+            ENSURE_NEAR(e, cs_fem_energy(&fem, x), (corot ? 1e-9 : 1e-13) * e);
+            if (!corot) {
+                const double fm = max_abs(f, 3 * n), d = 1e-6;
+                for (int i = 0; i < 3 * n; i++) {
+                    const double xi = x[i];
+                    x[i] = xi + d;
+                    const double ep = cs_fem_energy(&fem, x);
+                    x[i] = xi - d;
+                    const double em = cs_fem_energy(&fem, x);
+                    x[i] = xi;
+                    ENSURE_NEAR(f[i], -(ep - em) / (2 * d), 1e-6 * fm);
+                }
+            } else {
+                /* at rest shape, rotated: no stress, so the tangent is R K Rᵀ */
+                double R[9], *p = malloc(sizeof(double) * 3 * n),
+                             *a = malloc(sizeof(double) * 3 * n),
+                             *b = malloc(sizeof(double) * 3 * n);
+                rot_axis_angle((double[3]){1, 2, -0.5}, 0.7, R);
+                affine(R, (double[3]){0.1, 0, 0.3}, cm.node_rest, x, n);
+                for (int i = 0; i < 3 * n; i++)
+                    p[i] = urand(&seed);
+                cs_fem_update_rotations(&fem, x);
+                ENSURE(cs_fem_prepare_tangent(&fem, x) == 0);
+                cs_fem_apply_tangent(&fem, p, a);
+                cs_fem_release_tangent(&fem);
+                dense_apply(&fem, fem.kf, p, b);
+                const double m = max_abs(b, 3 * n);
+                for (int i = 0; i < 3 * n; i++)
+                    ENSURE_NEAR(a[i], b[i], 1e-9 * m);
+                free(p);
+                free(a);
+                free(b);
+            }
+            free(x);
+            free(f);
+            free(kf);
+            cs_fem_free(&fem);
+            cs_cubemesh_free(&cm);
+        }
+}
+
+/* Multigrid's coarse-level kernel: cs_cube_lame_h recovers hλ, hμ from K, and
+ * cs_cube_cells_product equals s R K Rᵀ with the dense K(2h) = 2 K(h). */
+TEST(fem_cells_product_matches_dense)
+{
+    cs_cubemesh cm;
+    ENSURE(build_block(&cm, 3, 2, 1, 0.4) == 0); /* 6 cells: a partial batch */
+    cs_fem fem;
+    ENSURE(cs_fem_init(&fem, &cm, 2e5, 0.25, true, 1) == 0);
+    double hl, hm;
+    cs_cube_lame_h(fem.K, &hl, &hm);
+    ENSURE_NEAR(hl, 0.4 * fem.lambda, 1e-13 * fem.lambda);
+    ENSURE_NEAR(hm, 0.4 * fem.mu, 1e-13 * fem.mu);
+    const int n = cm.n_nodes;
+    unsigned seed = 7;
+    double *x = malloc(sizeof(double) * 3 * n), *p = malloc(sizeof(double) * 3 * n),
+           *b = malloc(sizeof(double) * 3 * n), *fe = malloc(sizeof(double) * 24 * cm.n_cells),
+           *s = malloc(sizeof(double) * cm.n_cells), K2[576];
+    for (int i = 0; i < 3 * n; i++) {
+        x[i] = cm.node_rest[i] + 0.1 * urand(&seed);
+        p[i] = urand(&seed);
+    }
+    cs_fem_update_rotations(&fem, x);
+    for (int c = 0; c < cm.n_cells; c++)
+        s[c] = 1.0 + c;
+    cs_cube_stiffness(2e5, 0.25, 0.8, K2);
+    cs_cube_cells_product(fem.K, cm.n_cells, cm.cell_nodes, fem.R, s, p, fe, 1);
+    for (int c = 0; c < cm.n_cells; c++) {
+        /* the dense product of this one cell with K(2h) = 2 K(h): s_c/2 · R K(2h) Rᵀ p */
+        const int32_t *nd = cm.cell_nodes + 8 * c;
+        const double *R = fem.R + 9 * c;
+        double u[24], ku[24];
+        for (int k = 0; k < 8; k++)
+            for (int i = 0; i < 3; i++) {
+                const double *d = p + 3 * nd[k];
+                u[3 * k + i] = R[i] * d[0] + R[3 + i] * d[1] + R[6 + i] * d[2];
+            }
+        for (int i = 0; i < 24; i++) {
+            ku[i] = 0;
+            for (int j = 0; j < 24; j++)
+                ku[i] += 0.5 * s[c] * K2[24 * i + j] * u[j];
+        }
+        double m = 0;
+        for (int i = 0; i < 24; i++)
+            m = fmax(m, fabs(ku[i]));
+        for (int k = 0; k < 8; k++)
+            for (int i = 0; i < 3; i++)
+                ENSURE_NEAR(fe[24 * c + 3 * k + i],
+                            R[3 * i] * ku[3 * k] + R[3 * i + 1] * ku[3 * k + 1] +
+                                R[3 * i + 2] * ku[3 * k + 2],
+                            1e-13 * m);
+    }
+    free(x);
+    free(p);
+    free(b);
+    free(fe);
+    free(s);
+    cs_fem_free(&fem);
+    cs_cubemesh_free(&cm);
+}
