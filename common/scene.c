@@ -461,6 +461,16 @@ static int parse_world(sc_ctx *c, const cJSON *root, cs_scene *s)
             get_int(c, o, "sleep", "steps", &w->sleep_steps, 0, INT32_MAX))
             return -1;
     }
+    /* active regions inside awake objects (cubesim.h active_steps, active_speed) */
+    if (get_object(c, root, "", "active", &o, 0))
+        return -1;
+    if (o) {
+        static const char *const keys[] = {"steps", "speed", NULL};
+        if (check_keys(c, o, "active", keys) ||
+            get_int(c, o, "active", "steps", &w->active_steps, 0, INT32_MAX) ||
+            get_number(c, o, "active", "speed", &w->active_speed, POSITIVE, 0))
+            return -1;
+    }
     return 0;
 }
 
@@ -1062,7 +1072,7 @@ int cs_scene_parse(const char *json, const char *base_dir, cs_scene *out, char *
                                        "ground",     "solver",    "materials",
                                        "objects",    "keyframe_s", "status_hz",
                                        "publish_epsilon", "sleep", "max_force",
-                                       "max_fractures", NULL};
+                                       "max_fractures", "active", NULL};
     if (err && errlen)
         err[0] = '\0';
     if (!out)

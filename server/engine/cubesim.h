@@ -200,6 +200,15 @@ typedef struct cs_world_def {
     int threads;             /* worker threads inside a step, >= 0; 0 = all cores; default 0 */
     double sleep_speed;      /* an object whose fastest node is slower than this [m/s] ... */
     int sleep_steps;         /* ... for this many steps in a row sleeps; 0 = never; default 30 */
+    /* Active regions inside awake objects (linear/corotational FEM, implicit Euler, not
+     * fracturing; seed 000 §2.2; world.c "active regions"): a node slower than active_speed
+     * [m/s] whose net force f (elastic + loads + gravity + ground) has |f|·dt/m <
+     * active_speed/16 for active_steps steps in a row is frozen (held, v = 0) and leaves the
+     * solve; cells of frozen nodes only are skipped. It wakes when holding it takes a force
+     * with |f|·dt/m >= active_speed/8 (the step is then solved again), a node of one of its
+     * cells moves faster than active_speed, or an input acts on its cube. Default off. */
+    int active_steps;        /* 0 = off; default 0 */
+    double active_speed;     /* [m/s], > 0 when on; default 5e-4 */
     double max_force;        /* |force| above this [N] is refused; default 1e9 */
     int max_fractures;       /* fracture events per object per step, >= 1; default 4 */
     uint64_t seed;           /* of the random corner offsets of closing surfaces; default 1 */
@@ -331,6 +340,9 @@ typedef struct cs_step_stats {
     int cg_iterations;      /* total over objects (sum of Newton iterations for static) */
     double cg_residual;     /* largest final relative residual over objects */
     int objects_stepped;    /* objects awake and not fully fixed */
+    int cells_stepped;      /* cells of the stepped objects that went through the element
+                               passes (inactive cells of active regions not counted) */
+    int cells_awake;        /* every cell of the stepped objects */
     bool converged;
 } cs_step_stats;
 const cs_step_stats *cs_world_last_stats(const cs_world_t *w);

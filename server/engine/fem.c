@@ -239,6 +239,8 @@ void cs_fem_update_rotations(cs_fem *fem, const double *x)
         return;
 #pragma omp parallel for num_threads(fem->threads) schedule(static)
     for (int c = 0; c < fem->n_cells; c++) {
+        if (fem->cell_active && !fem->cell_active[c])
+            continue;
         double F[9];
         centre_gradient(fem, x, c, F);
         cs_extract_rotation(F, fem->q + 4 * c, 30);
@@ -626,6 +628,18 @@ double cs_fem_energy(const cs_fem *fem, const double *x)
     return e_sum;
 }
 
+/* Whether the batch of cells from c0 holds an active one (cell_active; NULL: all are). The
+ * other cells of a batch are computed too: harmless, the node pass ignores inactive cells. */
+static bool batch_active(const cs_fem *fem, int c0)
+{
+    if (!fem->cell_active)
+        return true;
+    for (int l = 0; l < LANES && c0 + l < fem->n_cells; l++)
+        if (fem->cell_active[c0 + l])
+            return true;
+    return false;
+}
+
 /* Node pass: out[n] = sign · Σ fe over the node's (cell, corner) slots, in a fixed order. */
 static void gather(cs_fem *fem, double *out, double sign)
 {
@@ -633,6 +647,8 @@ static void gather(cs_fem *fem, double *out, double sign)
     for (int n = 0; n < fem->n_nodes; n++) {
         double s0 = 0, s1 = 0, s2 = 0;
         for (int a = fem->adj_start[n]; a < fem->adj_start[n + 1]; a++) {
+            if (fem->cell_active && !fem->cell_active[fem->adj[a] >> 3])
+                continue;
             const double *v = fem->fe + 3 * fem->adj[a];
             s0 += v[0];
             s1 += v[1];
@@ -651,6 +667,8 @@ void cs_fem_elastic_force(cs_fem *fem, const double *x, double *f, double *energ
 #pragma omp parallel for num_threads(fem->threads) schedule(static) reduction(+ : e_sum)
     for (int b = 0; b < nb; b++) {
         const int c0 = b * LANES;
+        if (!batch_active(fem, c0))
+            continue;
         double e[LANES];
         batch_product(fem, fem->kf, c0, fem->corotational ? fem->R + 9 * (size_t)c0 : NULL, x,
                       fem->h, fem->fe, e);
@@ -673,6 +691,8 @@ void cs_fem_apply_Kw(cs_fem *fem, const double *kf, const double *p, double *y)
 #pragma omp parallel for num_threads(fem->threads) schedule(static)
     for (int b = 0; b < nb; b++) {
         const int c0 = b * LANES;
+        if (!batch_active(fem, c0))
+            continue;
         batch_product(fem, kf, c0, fem->corotational ? fem->R + 9 * (size_t)c0 : NULL, p, 0.0,
                       fem->fe, NULL);
     }
@@ -706,6 +726,8 @@ void cs_fem_diag_blocks_w(cs_fem *fem, const double *kf, double *blocks)
     memset(blocks, 0, sizeof(double) * 9 * (size_t)fem->n_nodes);
     /* Serial: called once per step, 8·n_cells small products. */
     for (int c = 0; c < fem->n_cells; c++) {
+        if (fem->cell_active && !fem->cell_active[c])
+            continue;
         const int32_t *nd = fem->cell_nodes + 8 * c;
         const double *R = fem->R + 9 * c;
         bool uniform = true;

@@ -48,6 +48,11 @@ typedef struct cs_fem {
     double gq[8][8][3]; /* ∂N_k/∂x at Gauss point g: graded products as Σ_g B_gᵀ C B_g */
     double lambda, mu, detj;
     const double *kf;   /* 8 per cell: stiffness factor per Gauss point; NULL = all 1. Borrowed */
+    /* Per cell: 0 = skipped by update_rotations, elastic_force, apply_K(w) and diag_blocks(_w)
+     * (an inactive cell of an active region: its R, slot and blocks are left alone and the node
+     * pass ignores it; elastic_force's energy then covers only what was computed); NULL = every
+     * cell. Borrowed (world.c sets it only during a step). */
+    const uint8_t *cell_active;
     double *R;          /* 9 per cell, row-major; identity for the linear model */
     double *q;          /* 4 per cell (w,x,y,z): warm start of the rotation extraction */
     double *fe;         /* 24 per cell: scratch of the element pass */

@@ -332,6 +332,7 @@ int cs_world_paint(cs_world_t *w, cs_object_id id, const double centre[3], doubl
     if (count > 0) {
         o->sleeping = false;
         o->still_steps = 0;
+        o->act_wake_all = true; /* frozen nodes (active regions) no longer balance */
     }
     if (touched)
         *touched = count;

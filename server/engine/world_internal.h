@@ -135,6 +135,19 @@ typedef struct cs_object {
     int n_inputs;
     int still_steps;
     bool sleeping;
+    /* Active regions (world.c "active regions", seed 000 §2.2): NULL/0 until first used.
+     * A frozen node is held where it is with v = 0 outside the solve; a cell whose 8 nodes are
+     * frozen is inactive and skipped by the element passes (fem.cell_active during a step). */
+    uint8_t *frozen;        /* per node */
+    uint8_t *cell_active;   /* per cell: some node not frozen */
+    uint8_t *cell_flip;     /* per cell: scratch, cells changing state */
+    int32_t *calm;          /* per node: steps in a row it met the freezing criterion */
+    double *f_skip;         /* 3 per node: elastic force of the inactive cells (constant while
+                               they are: their nodes do not move) */
+    int act_nodes, act_cells;  /* sizes the arrays were made for */
+    int n_frozen, n_active_cells;
+    bool act_wake_all;      /* set by anything that changes the object outside a step (paint,
+                               reset, statics): every node wakes before the next step */
     uint32_t topology_version;
     /* elastic energy of the current positions, valid until they change (status messages
      * ask for it several times a second; recomputing means a rotation per element) */
