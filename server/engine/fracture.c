@@ -2546,6 +2546,7 @@ static int ensure_positive_volume(cs_world_t *w, cs_object *o, bool record)
     const double h = o->cm.h;
     if (o->surf.n_triangles > 0 && rest_volume(o) > 1e-9 * h * h * h)
         return 0;
+    const double v_old = o->surf.n_triangles > 0 ? rest_volume(o) : 0;
     double *v = NULL;
     int32_t *t = NULL;
     int nv = 0, nt = 0, rc = -1;
@@ -2553,6 +2554,22 @@ static int ensure_positive_volume(cs_world_t *w, cs_object *o, bool record)
     cs_surface ns;
     if (cs_surface_of_cells(&o->cm, 1, &v, &nv, &t, &nt, err, sizeof err) != 0)
         return -1;
+    /* A single cube whose surface came out flat or inside-out held a sliver of the surface,
+     * not a cube of material: its whole boundary would add up to h^3 to the pieces' volume
+     * (measured: 13-15 % of a star cut down to single cubes, 2 % of a torus). It gets the
+     * cube shrunk about its centre to the magnitude of the volume it had, at least 1e-3 h^3
+     * so that no triangle is degenerate: the pieces' volume changes by
+     * max(|v_old|, 1e-3 h^3) - v_old instead of h^3 - v_old. */
+    if (o->cm.n_cells == 1 && nv > 0) {
+        const double target = fmax(fabs(v_old), 1e-3 * h * h * h);
+        const double sc = target < h * h * h ? cbrt(target / (h * h * h)) : 1.0;
+        double mid[3];
+        for (int k = 0; k < 3; k++)
+            mid[k] = o->cm.origin[k] + h * (o->cm.cell_ijk[k] + 0.5);
+        for (int i = 0; i < nv; i++)
+            for (int k = 0; k < 3; k++)
+                v[3 * (size_t)i + k] = mid[k] + sc * (v[3 * (size_t)i + k] - mid[k]);
+    }
     if (cs_surface_bind(&ns, &o->cm, v, nv, t, nt, err, sizeof err) != 0) {
         free(v);
         free(t);
