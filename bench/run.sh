@@ -119,6 +119,7 @@ wpruns=${BENCH_WP_RUNS:-3}
 echo "bench_wp: work-precision sweep ($wpruns runs of each setting shorter than 1 s; CPU time)"
 build/bin/bench_wp --runs "$wpruns" --out "$out" --check ${BENCH_WP_ARGS:-} \
   2> "$out/wp_runs.txt" | tee "$out/wp.md"
+build/bin/bench_tol --runs "$wpruns" --csv "$out/tol.csv" 2> "$out/tol_runs.txt" | tee "$out/tol.md" # the CG tolerance beyond bending: contact, momentum, drags, fracture, drops (README "Defaults (issue 6 part 3)")
 if command -v gnuplot >/dev/null; then
   ci=0
   for c in static_small dyn freq amp static_large; do

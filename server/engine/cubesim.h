@@ -194,7 +194,7 @@ typedef struct cs_world_def {
     bool has_ground;         /* default false */
     double ground_height;    /* the plane z = ground_height, solid below; default 0 */
     double ground_friction;  /* Coulomb coefficient at the ground, >= 0; default 0.5 */
-    double cg_tolerance;     /* relative residual ‖r‖/‖b‖ of every solve, in (0, 1); 1e-6 */
+    double cg_tolerance;     /* relative residual ‖r‖/‖b‖ of every solve, in (0, 1); 1e-4 (README "Defaults (issue 6 part 3)": the evidence) */
     int cg_max_iterations;   /* >= 1; default 500 */
     cs_preconditioner preconditioner; /* default CS_PRECOND_AUTO */
     int threads;             /* worker threads inside a step, >= 0; 0 = all cores; default 0 */

@@ -152,7 +152,7 @@ cs_object_def cs_object_def_default(void)
 cs_world_def cs_world_def_default(void)
 {
     return (cs_world_def){.dt = 1.0 / 60.0, .gravity = {0, 0, -9.81}, .has_ground = false,
-                          .ground_height = 0.0, .ground_friction = 0.5, .cg_tolerance = 1e-6,
+                          .ground_height = 0.0, .ground_friction = 0.5, .cg_tolerance = 1e-4,
                           .cg_max_iterations = 500, .threads = 0, .sleep_speed = 5e-4,
                           .sleep_steps = 30, .active_steps = 0, .active_speed = 5e-4,
                           .max_force = 1e9, .max_fractures = 4,

@@ -365,6 +365,7 @@ static cs_world_t *bar_world(double strength, bool fracture, double F, cs_object
 {
     cs_world_def wd = cs_world_def_default();
     wd.gravity[2] = 0;
+    wd.cg_tolerance = 1e-6; /* the stresses are checked to 1e-6 of F/A (the default is 1e-4) */
     cs_world_t *w = NULL;
     if (cs_world_create(&wd, &w, NULL, 0) != CS_OK)
         return NULL;
