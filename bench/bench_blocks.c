@@ -515,7 +515,7 @@ int main(int argc, char **argv)
         printf("| cubes | precond | threads | steps/s | ms/step | CPU ms/step | CG it/step | rotations | "
                "rhs+precond | CG solve | post | skin |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     static const char *const PCN[] = {"auto", "jacobi", "multigrid"};
-    double prev_ms[3][8] = {{0}}, prev_cells = 0;
+    double prev_ms[3][8] = {{0}}, prev_cpu[3][8] = {{0}}, prev_cells = 0;
     int nshapes = mode == MODE_BOX ? 1 : ns;
     for (int si = 0; si < nshapes; si++) {
         shape sh;
@@ -558,11 +558,14 @@ int main(int argc, char **argv)
                         m.cpu_ms_step, m.iters, m.ms_rot, m.ms_rhs, m.ms_solve, m.ms_post,
                         m.ms_skin, sh.nx, sh.ny, sh.nz, sh.young);
             if (si > 0 && prev_ms[pi][ti] > 0)
-                fprintf(stderr, "  %s, %d thread(s): cost grows as cubes^%.2f from %ld to %ld cubes\n",
+                fprintf(stderr, "  %s, %d thread(s): cost grows as cubes^%.2f from %ld to %ld cubes "
+                                "(CPU time: cubes^%.2f)\n",
                         PCN[pcs[pi]], threads[ti],
                         log(m.ms_step / prev_ms[pi][ti]) / log(cells / prev_cells),
-                        (long)prev_cells, cells);
+                        (long)prev_cells, cells,
+                        log(m.cpu_ms_step / prev_cpu[pi][ti]) / log(cells / prev_cells));
             prev_ms[pi][ti] = m.ms_step;
+            prev_cpu[pi][ti] = m.cpu_ms_step;
         }
         prev_cells = (double)cells;
     }
