@@ -557,6 +557,8 @@ int main(int argc, char **argv)
                         cells, PCN[pcs[pi]], threads[ti], nruns, m.steps_per_s, m.ms_step,
                         m.cpu_ms_step, m.iters, m.ms_rot, m.ms_rhs, m.ms_solve, m.ms_post,
                         m.ms_skin, sh.nx, sh.ny, sh.nz, sh.young);
+            if (f)
+                fflush(f); /* rows survive an interrupted run */
             if (si > 0 && prev_ms[pi][ti] > 0)
                 fprintf(stderr, "  %s, %d thread(s): cost grows as cubes^%.2f from %ld to %ld cubes "
                                 "(CPU time: cubes^%.2f)\n",
