@@ -12,8 +12,19 @@
  * stiffness rising linearly to 5× along x (every cube graded: 8 products with the per-Gauss-
  * point matrices); "none" (default) the plain material.
  *
- * Usage: bench_blocks [--sizes 8,16,32,48] [--runs 5] [--threads 1,2] [--csv FILE]
- *                     [--field none|cubes|gradient]
+ * --box NXxNYxNZ: a cantilever instead (h = --h, default 0.04 m; E = --young, default 1e5 Pa;
+ * its end face x = 0 held), e.g. the 75×15×15 beam. --static NXxNYxNZ: the time and iterations
+ * of cs_world_solve_static on such a cantilever (default E = 1e7 Pa). --peak: the machine's
+ * FMA throughput (16 independent AVX2 / AVX-512 chains per thread, OpenMP threads), and with
+ * --kernel N the GFLOP/s of cs_fem_apply_K on an N³ corotational block (flops from
+ * cs_fem_product_flops) as a fraction of that peak, in the same run. Sizes of 200 000 cubes
+ * or more get --big-steps steps × --big-runs runs (default 3 × 3).
+ *
+ * Usage: bench_blocks [--sizes 8,16,32,48] [--runs 5] [--threads 1,2] [--csv FILE [--append]]
+ *                     [--field none|cubes|gradient] [--precond jacobi,multigrid,auto]
+ *        bench_blocks --box 75x15x15 [--h 0.04] [--young 1e5] [--steps S] ...
+ *        bench_blocks --peak [--kernel 32 --calls 40]
+ *        bench_blocks --static 32x8x8 [--h 0.04] [--young 1e7]
  */
 #include <math.h>
 #include <stdio.h>
@@ -21,8 +32,13 @@
 #include <string.h>
 #include <time.h>
 
+#include <immintrin.h>
+#include <omp.h>
+
 #include "bench_util.h"
+#include "cubemesh.h"
 #include "cubesim.h"
+#include "fem.h"
 
 typedef struct result {
     double steps_per_s, ms_step, cpu_ms_step, iters, ms_rot, ms_rhs, ms_solve, ms_post, ms_skin;
@@ -37,8 +53,16 @@ static double cpu_s(void)
     return ts.tv_sec + 1e-9 * ts.tv_nsec;
 }
 
-static int run_once(int n, int threads, int steps, field_kind field, cs_preconditioner pc,
-                    result *r)
+/* The scene of one measurement: an nx × ny × nz box of cubes of edge h, one face held (the
+ * bottom z = 0 for the n³ blocks, the end x = 0 for the cantilevers). */
+typedef struct shape {
+    int nx, ny, nz;
+    double h, young;
+    char held; /* 'z' or 'x' */
+} shape;
+
+static cs_world_t *make_world(const shape *sh, int threads, field_kind field,
+                              cs_preconditioner pc, cs_object_id *idp)
 {
     char err[256];
     cs_world_def wd = cs_world_def_default();
@@ -48,13 +72,13 @@ static int run_once(int n, int threads, int steps, field_kind field, cs_precondi
     cs_world_t *w;
     if (cs_world_create(&wd, &w, err, sizeof err) != CS_OK) {
         fprintf(stderr, "bench_blocks: %s\n", err);
-        return -1;
+        return NULL;
     }
-    int nc = n * n * n, c = 0;
+    int nc = sh->nx * sh->ny * sh->nz, c = 0;
     int32_t *ijk = malloc(sizeof(int32_t) * 3 * (size_t)nc);
-    for (int k = 0; k < n; k++)
-        for (int j = 0; j < n; j++)
-            for (int i = 0; i < n; i++) {
+    for (int k = 0; k < sh->nz; k++)
+        for (int j = 0; j < sh->ny; j++)
+            for (int i = 0; i < sh->nx; i++) {
                 ijk[3 * c] = i;
                 ijk[3 * c + 1] = j;
                 ijk[3 * c + 2] = k;
@@ -63,12 +87,14 @@ static int run_once(int n, int threads, int steps, field_kind field, cs_precondi
     cs_object_def d = cs_object_def_default();
     d.name = "block";
     d.model = CS_MODEL_COROTATIONAL;
-    d.material.young = 1e5;
+    d.material.young = sh->young;
     d.material.density = 1000;
-    d.cube_size = 1.0 / n;
+    d.cube_size = sh->h;
     d.cells_ijk = ijk;
     d.n_cells = nc;
-    cs_aabb fix = {{-1, -1, -1e-6}, {2, 2, 1e-6}};
+    double big = 2.0 + sh->h * (sh->nx + sh->ny + sh->nz);
+    cs_aabb fix = sh->held == 'x' ? (cs_aabb){{-1e-6, -1, -1}, {1e-6, big, big}}
+                                  : (cs_aabb){{-1, -1, -1e-6}, {big, big, 1e-6}};
     d.fixed = &fix;
     d.n_fixed = 1;
     cs_field_region reg = {.factors = {.young = field == FIELD_CUBES ? 3.0 : 5.0,
@@ -89,8 +115,20 @@ static int run_once(int n, int threads, int steps, field_kind field, cs_precondi
         fprintf(stderr, "bench_blocks: %s\n", err);
         free(ijk);
         cs_world_destroy(w);
-        return -1;
+        return NULL;
     }
+    free(ijk);
+    if (idp)
+        *idp = id;
+    return w;
+}
+
+static int run_once(const shape *sh, int threads, int steps, field_kind field,
+                    cs_preconditioner pc, result *r)
+{
+    cs_world_t *w = make_world(sh, threads, field, pc, NULL);
+    if (!w)
+        return -1;
     cs_world_step(w); /* warm-up: first touch of every page */
     memset(r, 0, sizeof *r);
     double t0 = now_s(), c0 = cpu_s();
@@ -114,15 +152,215 @@ static int run_once(int n, int threads, int steps, field_kind field, cs_precondi
     r->ms_solve /= steps;
     r->ms_post /= steps;
     r->ms_skin /= steps;
-    free(ijk);
     cs_world_destroy(w);
     return 0;
+}
+
+/* Median of one result field over runs. */
+static result median_result(result *rs, int runs)
+{
+    result m;
+    double v[100];
+    double *fields[] = {&m.steps_per_s, &m.ms_step, &m.cpu_ms_step, &m.iters, &m.ms_rot,
+                        &m.ms_rhs, &m.ms_solve, &m.ms_post, &m.ms_skin};
+    for (int k = 0; k < 9; k++) {
+        for (int r = 0; r < runs; r++)
+            v[r] = *(double *)((char *)&rs[r] + ((char *)fields[k] - (char *)&m));
+        *fields[k] = median(v, runs);
+    }
+    return m;
+}
+
+/* ------------------------------------------------------------------ peak: FMA throughput */
+
+/* Independent chains acc = acc·b + c, enough of them to cover the FMA latency on every FMA
+ * pipe (16 × 512-bit or 16 × 256-bit registers). Returns the flops done (2 per lane per FMA). */
+#define PEAK_CHAINS 16
+__attribute__((target("avx512f"))) static double fma_avx512(long iters, double *sink)
+{
+    __m512d acc[PEAK_CHAINS];
+    for (int k = 0; k < PEAK_CHAINS; k++)
+        acc[k] = _mm512_set1_pd(1.0 + 1e-3 * k);
+    const __m512d b = _mm512_set1_pd(0.999999999), c = _mm512_set1_pd(1e-9);
+    for (long i = 0; i < iters; i++)
+        for (int k = 0; k < PEAK_CHAINS; k++)
+            acc[k] = _mm512_fmadd_pd(acc[k], b, c);
+    __m512d s = acc[0];
+    for (int k = 1; k < PEAK_CHAINS; k++)
+        s = _mm512_add_pd(s, acc[k]);
+    *sink += _mm512_reduce_add_pd(s);
+    return 2.0 * 8 * PEAK_CHAINS * (double)iters;
+}
+
+__attribute__((target("avx2,fma"))) static double fma_avx2(long iters, double *sink)
+{
+    __m256d acc[PEAK_CHAINS];
+    for (int k = 0; k < PEAK_CHAINS; k++)
+        acc[k] = _mm256_set1_pd(1.0 + 1e-3 * k);
+    const __m256d b = _mm256_set1_pd(0.999999999), c = _mm256_set1_pd(1e-9);
+    for (long i = 0; i < iters; i++)
+        for (int k = 0; k < PEAK_CHAINS; k++)
+            acc[k] = _mm256_fmadd_pd(acc[k], b, c);
+    __m256d s = acc[0];
+    for (int k = 1; k < PEAK_CHAINS; k++)
+        s = _mm256_add_pd(s, acc[k]);
+    double l[4];
+    _mm256_storeu_pd(l, s);
+    *sink += l[0] + l[1] + l[2] + l[3];
+    return 2.0 * 4 * PEAK_CHAINS * (double)iters;
+}
+
+/* GFLOP/s of `threads` threads each running the chains (best of `runs`, wall clock; the CPU-time
+ * rate, flops per CPU second × threads, in *cpu_gflops). isa: 512 or 256. */
+static double peak_gflops(int isa, int threads, int runs, double *cpu_gflops)
+{
+    const long iters = 20000000; /* ~0.15 s per thread at a few GHz */
+    double best = 0, best_cpu = 0;
+    for (int r = 0; r < runs; r++) {
+        double flops = 0, sink = 0, t0 = now_s(), c0 = cpu_s();
+#pragma omp parallel num_threads(threads) reduction(+ : flops, sink)
+        flops += isa == 512 ? fma_avx512(iters, &sink) : fma_avx2(iters, &sink);
+        double el = now_s() - t0, cpu = cpu_s() - c0;
+        if (sink == 42.0) /* never: keeps the chains alive */
+            fprintf(stderr, "#");
+        if (flops / el > best)
+            best = flops / el;
+        if (cpu > 0 && flops / cpu * threads > best_cpu)
+            best_cpu = flops / cpu * threads;
+    }
+    *cpu_gflops = 1e-9 * best_cpu;
+    return 1e-9 * best;
+}
+
+/* ------------------------------------------------------------------ the element product */
+
+/* GFLOP/s of cs_fem_apply_K on an n³ corotational block (rotations from a bent shape), median
+ * over runs of `calls` products each; the CPU-time rate in *cpu_gflops. */
+static int kernel_gflops(int n, int threads, int calls, int runs, double *gflops,
+                         double *cpu_gflops, double *flops_per_call, double *ms_call)
+{
+    char err[256];
+    int nc = n * n * n, c = 0;
+    int32_t *ijk = malloc(sizeof(int32_t) * 3 * (size_t)nc);
+    for (int k = 0; k < n; k++)
+        for (int j = 0; j < n; j++)
+            for (int i = 0; i < n; i++) {
+                ijk[3 * c] = i;
+                ijk[3 * c + 1] = j;
+                ijk[3 * c + 2] = k;
+                c++;
+            }
+    cs_cubemesh cm;
+    const double origin[3] = {0, 0, 0};
+    if (cs_cubemesh_build(&cm, 1.0 / n, origin, ijk, nc, err, sizeof err) != 0) {
+        fprintf(stderr, "bench_blocks: %s\n", err);
+        free(ijk);
+        return -1;
+    }
+    free(ijk);
+    cs_fem fem;
+    if (cs_fem_init(&fem, &cm, 1e5, 0.3, true, threads) != 0) {
+        fprintf(stderr, "bench_blocks: cs_fem_init failed\n");
+        cs_cubemesh_free(&cm);
+        return -1;
+    }
+    size_t nn = 3 * (size_t)cm.n_nodes;
+    double *x = malloc(sizeof(double) * nn), *p = malloc(sizeof(double) * nn),
+           *y = malloc(sizeof(double) * nn);
+    for (int a = 0; a < cm.n_nodes; a++) { /* bent about y: every element rotated differently */
+        const double *X = cm.node_rest + 3 * a;
+        double th = 0.5 * X[2];
+        x[3 * a] = X[0] * cos(th) + X[2] * sin(th);
+        x[3 * a + 1] = X[1];
+        x[3 * a + 2] = -X[0] * sin(th) + X[2] * cos(th);
+    }
+    for (size_t k = 0; k < nn; k++)
+        p[k] = sin(0.37 * (double)k);
+    cs_fem_update_rotations(&fem, x);
+    double fl = cs_fem_product_flops(&fem);
+    cs_fem_apply_K(&fem, p, y); /* warm-up */
+    double g[100], gc[100], ms[100];
+    for (int r = 0; r < runs; r++) {
+        double t0 = now_s(), c0 = cpu_s();
+        for (int k = 0; k < calls; k++)
+            cs_fem_apply_K(&fem, p, y);
+        double el = now_s() - t0, cpu = cpu_s() - c0;
+        g[r] = 1e-9 * fl * calls / el;
+        gc[r] = cpu > 0 ? 1e-9 * fl * calls / cpu * fem.threads : NAN;
+        ms[r] = 1e3 * el / calls;
+    }
+    *gflops = median(g, runs);
+    *cpu_gflops = median(gc, runs);
+    *ms_call = median(ms, runs);
+    *flops_per_call = fl;
+    free(x);
+    free(p);
+    free(y);
+    cs_fem_free(&fem);
+    cs_cubemesh_free(&cm);
+    return 0;
+}
+
+/* ------------------------------------------------------------------ static cantilever */
+
+static int static_once(const shape *sh, int threads, double *ms, double *cpu_ms, int *newton,
+                       double *tip, bool *converged)
+{
+    cs_object_id id;
+    cs_world_t *w = make_world(sh, threads, FIELD_NONE, CS_PRECOND_AUTO, &id);
+    if (!w)
+        return -1;
+    double t0 = now_s(), c0 = cpu_s();
+    int st = cs_world_solve_static(w);
+    *ms = 1e3 * (now_s() - t0);
+    *cpu_ms = 1e3 * (cpu_s() - c0);
+    const cs_step_stats *s = cs_world_last_stats(w);
+    *newton = s->cg_iterations;
+    *converged = st == CS_OK && s->converged;
+    /* the largest downward displacement: the tip's sag */
+    const double *rest, *pos, *vel;
+    int n;
+    *tip = NAN;
+    if (cs_object_nodes(w, id, &rest, &pos, &vel, &n) == CS_OK) {
+        double sag = 0;
+        for (int a = 0; a < n; a++)
+            if (rest[3 * a + 2] - pos[3 * a + 2] > sag)
+                sag = rest[3 * a + 2] - pos[3 * a + 2];
+        *tip = sag;
+    }
+    cs_world_destroy(w);
+    return 0;
+}
+
+static int parse_box(const char *s, shape *sh)
+{
+    return sscanf(s, "%dx%dx%d", &sh->nx, &sh->ny, &sh->nz) == 3 && sh->nx > 0 && sh->ny > 0 &&
+                   sh->nz > 0 && (long)sh->nx * sh->ny * sh->nz <= 4000000
+               ? 0
+               : -1;
+}
+
+static void usage(void)
+{
+    fprintf(stderr,
+            "usage: bench_blocks [--sizes 8,16,32,48] [--runs 5] [--threads 1,2] [--csv FILE]\n"
+            "         [--field none|cubes|gradient] [--precond jacobi,multigrid,auto]\n"
+            "         [--big-runs 3] [--big-steps 3]     (sizes of 200 000 cubes or more)\n"
+            "       bench_blocks --box 75x15x15 [--h 0.04] [--young 1e5] [--steps 30] [--runs 5]\n"
+            "         [--threads 1,2] [--precond auto] [--csv FILE] [--append]\n"
+            "       bench_blocks --peak [--kernel 32] [--calls 40] [--runs 5] [--threads 1,2]\n"
+            "       bench_blocks --static 32x8x8 [--h 0.04] [--young 1e7] [--runs 3] [--threads 1,2]\n");
 }
 
 int main(int argc, char **argv)
 {
     int sizes[16] = {8, 16, 32, 48}, ns = 4, threads[8] = {1, 2}, nt = 2, runs = 5;
+    int big_runs = 3, big_steps = 3, fixed_steps = 0, kernel_n = 0, calls = 40;
     const char *csv = NULL;
+    bool append = false, peak = false;
+    enum { MODE_BLOCKS, MODE_BOX, MODE_PEAK, MODE_STATIC } mode = MODE_BLOCKS;
+    shape box = {0, 0, 0, 0.04, 0, 'x'};
+    double young = NAN;
     field_kind field = FIELD_NONE;
     cs_preconditioner pcs[3] = {CS_PRECOND_JACOBI};
     int npc = 1;
@@ -133,8 +371,30 @@ int main(int argc, char **argv)
             nt = parse_list(argv[++i], threads, 8);
         else if (!strcmp(argv[i], "--runs") && i + 1 < argc)
             runs = atoi(argv[++i]);
+        else if (!strcmp(argv[i], "--big-runs") && i + 1 < argc)
+            big_runs = atoi(argv[++i]);
+        else if (!strcmp(argv[i], "--big-steps") && i + 1 < argc)
+            big_steps = atoi(argv[++i]);
+        else if (!strcmp(argv[i], "--steps") && i + 1 < argc)
+            fixed_steps = atoi(argv[++i]);
         else if (!strcmp(argv[i], "--csv") && i + 1 < argc)
             csv = argv[++i];
+        else if (!strcmp(argv[i], "--append"))
+            append = true;
+        else if (!strcmp(argv[i], "--box") && i + 1 < argc && parse_box(argv[i + 1], &box) == 0)
+            mode = MODE_BOX, i++;
+        else if (!strcmp(argv[i], "--static") && i + 1 < argc && parse_box(argv[i + 1], &box) == 0)
+            mode = MODE_STATIC, i++;
+        else if (!strcmp(argv[i], "--h") && i + 1 < argc)
+            box.h = atof(argv[++i]);
+        else if (!strcmp(argv[i], "--young") && i + 1 < argc)
+            young = atof(argv[++i]);
+        else if (!strcmp(argv[i], "--peak"))
+            peak = true, mode = MODE_PEAK;
+        else if (!strcmp(argv[i], "--kernel") && i + 1 < argc)
+            kernel_n = atoi(argv[++i]), mode = MODE_PEAK;
+        else if (!strcmp(argv[i], "--calls") && i + 1 < argc)
+            calls = atoi(argv[++i]);
         else if (!strcmp(argv[i], "--field") && i + 1 < argc && !strcmp(argv[i + 1], "none"))
             field = FIELD_NONE, i++;
         else if (!strcmp(argv[i], "--field") && i + 1 < argc && !strcmp(argv[i + 1], "cubes"))
@@ -154,61 +414,160 @@ int main(int argc, char **argv)
             if (npc == 0)
                 return 2;
         } else {
-            fprintf(stderr, "usage: bench_blocks [--sizes 8,16,32,48] [--runs 5] "
-                            "[--threads 1,2] [--csv FILE] [--field none|cubes|gradient] "
-                            "[--precond jacobi,multigrid,auto]\n");
+            usage();
             return 2;
         }
     }
     if (runs < 1 || runs > 100)
         runs = 5;
-    FILE *f = csv ? fopen(csv, "w") : NULL;
+    if (big_runs < 1 || big_runs > 100)
+        big_runs = 3;
+    if (big_steps < 1)
+        big_steps = 3;
+    if (calls < 1)
+        calls = 40;
+    if (!(box.h > 0) || !(isnan(young) || young > 0)) {
+        usage();
+        return 2;
+    }
+    for (int ti = 0; ti < nt; ti++)
+        if (threads[ti] < 1 || threads[ti] > 256) {
+            usage();
+            return 2;
+        }
+
+    if (mode == MODE_PEAK) {
+        /* The machine's FMA peak, then the element product against it, in one run. */
+        bool has512 = __builtin_cpu_supports("avx512f"), has256 = __builtin_cpu_supports("fma");
+        double pk[8] = {0};
+        printf("| FMA chains | threads | GFLOP/s (wall, best of %d) | GFLOP/s (CPU time) |\n"
+               "|---|---|---|---|\n", runs);
+        for (int isa = 256; isa <= 512; isa += 256) {
+            if ((isa == 512 && !has512) || (isa == 256 && !has256))
+                continue;
+            for (int ti = 0; ti < nt; ti++) {
+                double gc, g = peak_gflops(isa, threads[ti], runs, &gc);
+                printf("| %s | %d | %.1f | %.1f |\n", isa == 512 ? "AVX-512" : "AVX2", threads[ti],
+                       g, gc);
+                fflush(stdout);
+                if (gc > pk[ti])
+                    pk[ti] = gc; /* the CPU-time rate: what the cores can do when they run */
+            }
+        }
+        (void)peak;
+        if (kernel_n > 0) {
+            printf("\n| product | threads | flops/call | ms/call | GFLOP/s (wall) | GFLOP/s (CPU time) | "
+                   "fraction of peak |\n|---|---|---|---|---|---|---|\n");
+            double g1 = 0;
+            for (int ti = 0; ti < nt; ti++) {
+                double g, gc, fl, ms;
+                if (kernel_gflops(kernel_n, threads[ti], calls, runs, &g, &gc, &fl, &ms) != 0)
+                    return 1;
+                printf("| cs_fem_apply_K, %d³ corotational | %d | %.3g | %.2f | %.2f | %.2f | %.1f %% |\n",
+                       kernel_n, threads[ti], fl, ms, g, gc, pk[ti] > 0 ? 100.0 * gc / pk[ti] : NAN);
+                fflush(stdout);
+                if (ti == 0)
+                    g1 = g;
+                else if (g1 > 0)
+                    fprintf(stderr, "  product %d³: %d threads against 1: %.2fx (wall)\n",
+                            kernel_n, threads[ti], g / g1);
+            }
+        }
+        return 0;
+    }
+
+    if (mode == MODE_STATIC) {
+        box.held = 'x';
+        box.young = isnan(young) ? 1e7 : young;
+        printf("| static cantilever | E [Pa] | threads | ms (median of %d) | CPU ms | iterations | "
+               "tip sag [m] | converged |\n|---|---|---|---|---|---|---|---|\n", runs);
+        double ms1 = 0;
+        for (int ti = 0; ti < nt; ti++) {
+            double ms[100], cms[100], tip = NAN;
+            int newton = 0;
+            bool conv = false;
+            for (int r = 0; r < runs; r++)
+                if (static_once(&box, threads[ti], &ms[r], &cms[r], &newton, &tip, &conv) != 0)
+                    return 1;
+            double m = median(ms, runs), mc = median(cms, runs);
+            printf("| %d×%d×%d, h = %g m | %g | %d | %.1f | %.1f | %d | %.4f | %s |\n", box.nx,
+                   box.ny, box.nz, box.h, box.young, threads[ti], m, mc, newton, tip,
+                   conv ? "yes" : "no");
+            fflush(stdout);
+            if (ti == 0)
+                ms1 = m;
+            else
+                fprintf(stderr, "  static %d×%d×%d: %d threads against 1: %.2fx (wall)\n", box.nx,
+                        box.ny, box.nz, threads[ti], ms1 / m);
+        }
+        return 0;
+    }
+
+    FILE *f = csv ? fopen(csv, append ? "a" : "w") : NULL;
     if (csv && !f) {
         fprintf(stderr, "bench_blocks: cannot write %s\n", csv);
         return 2;
     }
-    if (f)
+    if (f && !append)
         fprintf(f, "cubes,precond,threads,runs,steps_per_s,ms_per_step,cpu_ms_per_step,cg_iters_per_step,ms_rotations,"
-                   "ms_rhs,ms_solve,ms_post,ms_skin\n");
-    printf("| cubes | precond | threads | steps/s | ms/step | CPU ms/step | CG it/step | rotations | "
-           "rhs+precond | CG solve | post | skin |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+                   "ms_rhs,ms_solve,ms_post,ms_skin,shape,young\n");
+    if (!append)
+        printf("| cubes | precond | threads | steps/s | ms/step | CPU ms/step | CG it/step | rotations | "
+               "rhs+precond | CG solve | post | skin |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     static const char *const PCN[] = {"auto", "jacobi", "multigrid"};
-    double prev_ms[3][8] = {{0}}, prev_cells = 0;
-    for (int si = 0; si < ns; si++) {
-        int n = sizes[si];
-        long cells = (long)n * n * n;
-        /* About two seconds of stepping per run at most, at least 3 steps. */
-        int steps = cells <= 5000 ? 60 : cells <= 40000 ? 12 : 4;
+    double prev_ms[3][8] = {{0}}, prev_cpu[3][8] = {{0}}, prev_cells = 0;
+    int nshapes = mode == MODE_BOX ? 1 : ns;
+    for (int si = 0; si < nshapes; si++) {
+        shape sh;
+        if (mode == MODE_BOX) {
+            sh = box;
+            sh.held = 'x';
+            sh.young = isnan(young) ? 1e5 : young;
+        } else {
+            int n = sizes[si];
+            sh = (shape){n, n, n, 1.0 / n, isnan(young) ? 1e5 : young, 'z'};
+        }
+        long cells = (long)sh.nx * sh.ny * sh.nz;
+        char label[96];
+        if (mode == MODE_BOX)
+            snprintf(label, sizeof label, "%d×%d×%d = %ld (E = %g)", sh.nx, sh.ny, sh.nz, cells,
+                     sh.young);
+        else
+            snprintf(label, sizeof label, "%d³ = %ld", sh.nx, cells);
+        /* About two seconds of stepping per run at most, at least 3 steps; the largest sizes
+         * few steps and few runs. */
+        int steps = cells <= 5000 ? 60 : cells <= 40000 ? 12 : cells < 200000 ? 4 : big_steps;
+        int nruns = cells < 200000 ? runs : big_runs < runs ? big_runs : runs;
+        if (fixed_steps > 0)
+            steps = fixed_steps;
         for (int pi = 0; pi < npc; pi++)
         for (int ti = 0; ti < nt; ti++) {
             result rs[100];
-            double v[100];
-            for (int r = 0; r < runs; r++)
-                if (run_once(n, threads[ti], steps, field, pcs[pi], &rs[r]) != 0)
+            for (int r = 0; r < nruns; r++)
+                if (run_once(&sh, threads[ti], steps, field, pcs[pi], &rs[r]) != 0)
                     return 1;
-            result m;
-            double *fields[] = {&m.steps_per_s, &m.ms_step, &m.cpu_ms_step, &m.iters, &m.ms_rot,
-                                &m.ms_rhs, &m.ms_solve, &m.ms_post, &m.ms_skin};
-            for (int k = 0; k < 9; k++) {
-                for (int r = 0; r < runs; r++)
-                    v[r] = *(double *)((char *)&rs[r] + ((char *)fields[k] - (char *)&m));
-                *fields[k] = median(v, runs);
-            }
-            printf("| %d³ = %ld | %s | %d | %.2f | %.2f | %.2f | %.1f | %.2f | %.2f | %.2f | %.2f | "
+            result m = median_result(rs, nruns);
+            printf("| %s | %s | %d | %.2f | %.2f | %.2f | %.1f | %.2f | %.2f | %.2f | %.2f | "
                    "%.2f |\n",
-                   n, cells, PCN[pcs[pi]], threads[ti], m.steps_per_s, m.ms_step, m.cpu_ms_step,
+                   label, PCN[pcs[pi]], threads[ti], m.steps_per_s, m.ms_step, m.cpu_ms_step,
                    m.iters, m.ms_rot, m.ms_rhs, m.ms_solve, m.ms_post, m.ms_skin);
             fflush(stdout);
             if (f)
-                fprintf(f, "%ld,%s,%d,%d,%.4f,%.4f,%.4f,%.2f,%.4f,%.4f,%.4f,%.4f,%.4f\n", cells,
-                        PCN[pcs[pi]], threads[ti], runs, m.steps_per_s, m.ms_step, m.cpu_ms_step,
-                        m.iters, m.ms_rot, m.ms_rhs, m.ms_solve, m.ms_post, m.ms_skin);
+                fprintf(f, "%ld,%s,%d,%d,%.4f,%.4f,%.4f,%.2f,%.4f,%.4f,%.4f,%.4f,%.4f,%dx%dx%d,%g\n",
+                        cells, PCN[pcs[pi]], threads[ti], nruns, m.steps_per_s, m.ms_step,
+                        m.cpu_ms_step, m.iters, m.ms_rot, m.ms_rhs, m.ms_solve, m.ms_post,
+                        m.ms_skin, sh.nx, sh.ny, sh.nz, sh.young);
+            if (f)
+                fflush(f); /* rows survive an interrupted run */
             if (si > 0 && prev_ms[pi][ti] > 0)
-                fprintf(stderr, "  %s, %d thread(s): cost grows as cubes^%.2f from %ld to %ld cubes\n",
+                fprintf(stderr, "  %s, %d thread(s): cost grows as cubes^%.2f from %ld to %ld cubes "
+                                "(CPU time: cubes^%.2f)\n",
                         PCN[pcs[pi]], threads[ti],
                         log(m.ms_step / prev_ms[pi][ti]) / log(cells / prev_cells),
-                        (long)prev_cells, cells);
+                        (long)prev_cells, cells,
+                        log(m.cpu_ms_step / prev_cpu[pi][ti]) / log(cells / prev_cells));
             prev_ms[pi][ti] = m.ms_step;
+            prev_cpu[pi][ti] = m.cpu_ms_step;
         }
         prev_cells = (double)cells;
     }

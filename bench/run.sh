@@ -2,22 +2,57 @@
 # make bench: speed of the corotational implicit step against size, 1 and 2 threads, the
 # cost of a fracture event against surface triangles (bench_fracture), localframe against
 # corotational FEM, seed 004's mss studies (bench_mss) and the rigid drop demo (bench_rigid).
-# Writes bench/results/blocks.csv, blocks.md (the README table) and blocks.svg (log-log plot).
-# BENCH_SIZES / BENCH_RUNS override the defaults (8,16,32,48 and 5 runs; medians are reported).
+# Writes bench/results/blocks.csv, blocks.md (the README table) and blocks.svg (log-log plot), then
+# the issue 7 figures: the 75×15×15 beam (beam.csv, beam.md), the targets table (targets.md),
+# the machine's FMA peak and the element product's share of it (peak.md), the 32×8×8 static
+# solve (static.md) and the two-thread speed-ups (blocks.speedup.txt).
+# BENCH_SIZES / BENCH_RUNS override the defaults (8,16,32,48,64 and 5 runs; medians are
+# reported; 64³ gets BENCH_BIG_STEPS steps × BENCH_BIG_RUNS runs, default 3 × 3).
+# BENCH_SKIP_64=1 leaves out 64³ (the longest part: ~2 min idle); BENCH_ONLY_BLOCKS=1 stops
+# after the blocks part (skips fracture, localframe, mss, rigid and the work-precision sweep).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=bench/results
 mkdir -p "$out"
-sizes=${BENCH_SIZES:-8,16,32,48}
+if [ "${BENCH_SKIP_64:-0}" = 1 ]; then sizes=${BENCH_SIZES:-8,16,32,48}; else sizes=${BENCH_SIZES:-8,16,32,48,64}; fi
 runs=${BENCH_RUNS:-5}
-echo "bench_blocks: sizes $sizes, $runs runs each, block Jacobi and multigrid, threads 1 and 2 ($(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | xargs))"
-build/bin/bench_blocks --sizes "$sizes" --runs "$runs" --threads 1,2 --precond jacobi,multigrid \
+big="--big-runs ${BENCH_BIG_RUNS:-3} --big-steps ${BENCH_BIG_STEPS:-3}"
+echo "machine: $(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | xargs), load $(cut -d' ' -f1-3 /proc/loadavg)" | tee "$out/machine.txt"
+echo "bench_blocks: peak FMA rate and the element product on 32³, threads 1 and 2"
+build/bin/bench_blocks --peak --kernel 32 --runs "$runs" --threads 1,2 \
+  2> "$out/peak.speedup.txt" | tee "$out/peak.md"
+echo "bench_blocks: sizes $sizes, $runs runs each, block Jacobi and multigrid, threads 1 and 2"
+build/bin/bench_blocks --sizes "$sizes" --runs "$runs" $big --threads 1,2 --precond jacobi,multigrid \
   --csv "$out/blocks.csv" \
   2> "$out/blocks.growth.txt" | tee "$out/blocks.md"
 cat "$out/blocks.growth.txt"
-# Two-thread speed-up per size and preconditioner (columns: cubes,precond,threads,runs,steps_per_s,ms_per_step,...).
-awk -F, 'NR>1 { ms[$1","$2","$3]=$6; c[$1","$2]=1 } END { for (k in c) if (ms[k",2"] > 0) { split(k, a, ","); printf "  speed-up with 2 threads at %d cubes (%s): %.2fx\n", a[1], a[2], ms[k",1"]/ms[k",2"] } }' \
-  "$out/blocks.csv" | sort -t' ' -k6 -n | tee "$out/blocks.speedup.txt"
+# The 75×15×15 cantilever (h = 0.04 m: a 3 m × 0.6 m × 0.6 m beam, end x = 0 held), preconditioner
+# auto, at the scene default E = 1e5 Pa (a jelly: it folds down) and at E = 1e8 Pa (a stiff
+# beam: its static tip sag is about 1 % of its length).
+echo "bench_blocks: 75×15×15 cantilever, E = 1e5 and 1e8 Pa, auto, threads 1 and 2"
+build/bin/bench_blocks --box 75x15x15 --h 0.04 --young 1e5 --precond auto --runs "$runs" --threads 1,2 \
+  --csv "$out/beam.csv" 2>/dev/null | tee "$out/beam.md"
+build/bin/bench_blocks --box 75x15x15 --h 0.04 --young 1e8 --precond auto --runs "$runs" --threads 1,2 \
+  --csv "$out/beam.csv" --append 2>/dev/null | tee -a "$out/beam.md"
+# Targets (issue 7): >= 100 steps/s for the beam, >= 11 steps/s for 64³ (auto = multigrid there).
+{
+  # "from CPU time" = 1000 / CPU ms per step × threads: the rate had the threads had their cores.
+  echo "| scene | threads | steps/s (wall) | steps/s from CPU time | target | ratio (wall) | ratio (CPU) |"
+  echo "|---|---|---|---|---|---|---|"
+  awk -F, 'NR>1 { split($14, d, "x"); c = 1000 / $7 * $3; printf "| %s×%s×%s beam, E = %s Pa | %d | %.2f | %.2f | 100 | %.2f | %.2f |\n", d[1], d[2], d[3], $15, $3, $5, c, $5/100, c/100 }' "$out/beam.csv"
+  awk -F, 'NR>1 && $1==262144 && $2=="multigrid" { c = 1000 / $7 * $3; printf "| 64³ block (auto = multigrid) | %d | %.2f | %.2f | 11 | %.3f | %.3f |\n", $3, $5, c, $5/11, c/11 }' "$out/blocks.csv"
+} | tee "$out/targets.md"
+echo "bench_blocks: static solve of a 32×8×8 cantilever (h = 0.04 m, E = 1e7 Pa)"
+build/bin/bench_blocks --static 32x8x8 --h 0.04 --young 1e7 --runs 3 --threads 1,2 \
+  2> "$out/static.speedup.txt" | tee "$out/static.md"
+# Two-thread speed-up per size, preconditioner and material (columns: cubes,precond,threads,runs,
+# steps_per_s,ms_per_step,...,shape,young); the product's and the static solve's below.
+{
+  cat "$out/blocks.csv" "$out/beam.csv" | awk -F, '$1 != "cubes" { k=$14" ("$2", E = "$15")"; ms[k","$3]=$6; c[k]=$1 }
+    END { for (k in c) if (ms[k",2"] > 0) printf "  speed-up with 2 threads at %d cubes, %s: %.2fx\n", c[k], k, ms[k",1"]/ms[k",2"] }' | sort -t' ' -k6 -n
+  cat "$out/peak.speedup.txt"
+  cat "$out/static.speedup.txt"
+} | tee "$out/blocks.speedup.txt"
 if command -v gnuplot >/dev/null; then
   gnuplot <<GP
 set terminal svg size 640,420
@@ -36,6 +71,8 @@ plot "< awk -F, 'NR>1 && \$2==\"jacobi\" && \$3==1' $out/blocks.csv" using 1:6 w
 GP
   echo "plot: $out/blocks.svg"
 fi
+
+[ "${BENCH_ONLY_BLOCKS:-0}" = 1 ] && exit 0
 
 # Fracture: the cost of one fracture event against surface triangles at a fixed cube count.
 # Writes bench/results/fracture.csv, fracture.md, fracture.growth.txt and fracture.svg.
