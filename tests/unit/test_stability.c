@@ -741,7 +741,7 @@ TEST(stab_material_range_statics)
 
 /*
  * Dynamics over the same range: a 4×2×2 cantilever (h 0.05) held at x = 0 under gravity,
- * implicit Euler at dt 1/60 s with the default solver settings (tolerance 1e-6, 500
+ * implicit Euler at dt 1/60 s with the default solver settings (tolerance 1e-4 since issue 6, 500
  * iterations), 120 steps, every model, E ∈ {1e2, 1e5, 1e9} Pa, ν ∈ {0, 0.49}. Criteria: every
  * step returns CS_OK (or CS_ERR_NOT_CONVERGED, counted and printed: the state stays finite);
  * nodes finite; the total energy (kinetic + elastic + gravity) never exceeds its start by more
