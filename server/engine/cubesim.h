@@ -383,8 +383,10 @@ typedef struct cs_event {
     int fallback_loops;   /* FRACTURE: boundary loops the §3.2 polygons left open, closed by
                              a fan around a new vertex instead (0 when §3.2 closed all) */
     int rebuilt_pieces;   /* FRACTURE: pieces whose surface enclosed no positive volume after
-                             that (closing patches rejected around them) and were given the
-                             boundary of their cubes instead; 0 normally */
+                             that (closing patches rejected around them) and were rebuilt: a
+                             single cube as its cube shrunk about its centre to the volume its
+                             surface had (at least 1e-3 h³), a larger piece as the boundary of
+                             its cubes; 0 normally */
     int dropped_pieces;   /* FRACTURE: pieces of cubes holding no surface triangle (voxels
                              that only grazed the surface: no material) that were discarded */
 } cs_event;
