@@ -23,6 +23,7 @@
 #include <time.h>
 
 #include "cubesim.h"
+#include "lattice.h"
 
 static double cpu_s(void)
 {
@@ -52,16 +53,7 @@ static int make(run *r, int n, int threads, int active_steps, double speed)
         return -1;
     }
     const int nc = n * n * n;
-    int32_t *ijk = malloc(sizeof(int32_t) * 3 * (size_t)nc);
-    int c = 0;
-    for (int k = 0; k < n; k++)
-        for (int j = 0; j < n; j++)
-            for (int i = 0; i < n; i++) {
-                ijk[3 * c] = i;
-                ijk[3 * c + 1] = j;
-                ijk[3 * c + 2] = k;
-                c++;
-            }
+    int32_t *ijk = cs_box_cells(n, n, n);
     cs_object_def d = cs_object_def_default();
     d.name = "block";
     d.cube_size = 1.0 / n;

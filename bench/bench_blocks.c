@@ -38,6 +38,7 @@
 #include "bench_util.h"
 #include "cubemesh.h"
 #include "cubesim.h"
+#include "lattice.h"
 #include "fem.h"
 
 typedef struct result {
@@ -77,16 +78,8 @@ static cs_world_t *make_world(const shape *sh, int threads, field_kind field,
         fprintf(stderr, "bench_blocks: %s\n", err);
         return NULL;
     }
-    int nc = sh->nx * sh->ny * sh->nz, c = 0;
-    int32_t *ijk = malloc(sizeof(int32_t) * 3 * (size_t)nc);
-    for (int k = 0; k < sh->nz; k++)
-        for (int j = 0; j < sh->ny; j++)
-            for (int i = 0; i < sh->nx; i++) {
-                ijk[3 * c] = i;
-                ijk[3 * c + 1] = j;
-                ijk[3 * c + 2] = k;
-                c++;
-            }
+    int nc = sh->nx * sh->ny * sh->nz;
+    int32_t *ijk = cs_box_cells(sh->nx, sh->ny, sh->nz);
     cs_object_def d = cs_object_def_default();
     d.name = "block";
     d.model = CS_MODEL_COROTATIONAL;
@@ -243,16 +236,8 @@ static int kernel_gflops(int n, int threads, int calls, int runs, double *gflops
                          double *cpu_gflops, double *flops_per_call, double *ms_call)
 {
     char err[256];
-    int nc = n * n * n, c = 0;
-    int32_t *ijk = malloc(sizeof(int32_t) * 3 * (size_t)nc);
-    for (int k = 0; k < n; k++)
-        for (int j = 0; j < n; j++)
-            for (int i = 0; i < n; i++) {
-                ijk[3 * c] = i;
-                ijk[3 * c + 1] = j;
-                ijk[3 * c + 2] = k;
-                c++;
-            }
+    int nc = n * n * n;
+    int32_t *ijk = cs_box_cells(n, n, n);
     cs_cubemesh cm;
     const double origin[3] = {0, 0, 0};
     if (cs_cubemesh_build(&cm, 1.0 / n, origin, ijk, nc, err, sizeof err) != 0) {

@@ -44,6 +44,7 @@
 
 #include "bench_util.h"
 #include "cubesim.h"
+#include "lattice.h"
 
 #define NTOL 6
 #define STEPS 600
@@ -87,15 +88,7 @@ typedef struct blk {
 static cs_object_id add_block(cs_world_t *w, cs_model m, const blk *b)
 {
     const int n = b->nx * b->ny * b->nz;
-    int32_t *ijk = malloc(sizeof *ijk * 3 * (size_t)n);
-    int c = 0;
-    for (int k = 0; k < b->nz; k++)
-        for (int j = 0; j < b->ny; j++)
-            for (int i = 0; i < b->nx; i++, c++) {
-                ijk[3 * c] = i;
-                ijk[3 * c + 1] = j;
-                ijk[3 * c + 2] = k;
-            }
+    int32_t *ijk = cs_box_cells(b->nx, b->ny, b->nz);
     cs_object_def d = cs_object_def_default();
     d.name = "block";
     d.model = m;
@@ -478,14 +471,7 @@ static void explicit_limit_check(void)
             cs_world_create(&wd, &w, err, sizeof err);
             const int nx = 10 * nz, n = nx * nz * nz;
             const double h = 0.1 / nz;
-            int32_t *ijk = malloc(sizeof *ijk * 3 * (size_t)n);
-            for (int c = 0, k = 0; k < nz; k++)
-                for (int j = 0; j < nz; j++)
-                    for (int i = 0; i < nx; i++, c++) {
-                        ijk[3 * c] = i;
-                        ijk[3 * c + 1] = j;
-                        ijk[3 * c + 2] = k;
-                    }
+            int32_t *ijk = cs_box_cells(nx, nz, nz);
             cs_object_def d = cs_object_def_default();
             d.name = "beam";
             d.model = CS_MODEL_MSS;

@@ -11,6 +11,7 @@
 
 #include "check.h"
 #include "cubesim.h"
+#include "lattice.h"
 #include "scene.h"
 
 typedef struct blk {
@@ -34,17 +35,9 @@ static int make_block(blk *b, int n, int nz, int active_steps, bool gravity, int
         wd.gravity[2] = 0;
     if (cs_world_create(&wd, &b->w, err, sizeof err) != CS_OK)
         return -1;
-    int nc = n * n * nz, c = 0;
+    int nc = n * n * nz;
     b->n = n;
-    b->ijk = malloc(sizeof(int32_t) * 3 * (size_t)nc);
-    for (int k = 0; k < nz; k++)
-        for (int j = 0; j < n; j++)
-            for (int i = 0; i < n; i++) {
-                b->ijk[3 * c] = i;
-                b->ijk[3 * c + 1] = j;
-                b->ijk[3 * c + 2] = k;
-                c++;
-            }
+    b->ijk = cs_box_cells(n, n, nz);
     cs_object_def d = cs_object_def_default();
     d.name = "block";
     d.cube_size = 1.0 / n;

@@ -11,6 +11,7 @@
 
 #include "check.h"
 #include "cubesim.h"
+#include "lattice.h"
 
 static cs_world_t *make_world(double tol, double g)
 {
@@ -32,16 +33,9 @@ static int add_box(cs_world_t *w, int nx, int ny, int nz, double h, double z0, d
                    double strength, bool held, cs_object_id *id)
 {
     const int n = nx * ny * nz;
-    int32_t *ijk = malloc(sizeof *ijk * 3 * (size_t)n);
+    int32_t *ijk = cs_box_cells(nx, ny, nz);
     if (!ijk)
         return CS_ERR_NOMEM;
-    for (int c = 0, k = 0; k < nz; k++)
-        for (int j = 0; j < ny; j++)
-            for (int i = 0; i < nx; i++, c++) {
-                ijk[3 * c] = i;
-                ijk[3 * c + 1] = j;
-                ijk[3 * c + 2] = k;
-            }
     cs_object_def d = cs_object_def_default();
     d.name = "box";
     d.model = CS_MODEL_COROTATIONAL;
