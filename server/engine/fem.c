@@ -81,55 +81,149 @@ void cs_quat_to_mat(const double q[4], double R[9])
     R[8] = 1 - 2 * (x * x + y * y);
 }
 
-void cs_extract_rotation(const double A[9], double q[4], int max_iter)
+/* ------------------------------------------------------------------ rotation extraction
+ *
+ * Müller et al. (2016): the rotation R(q) of A is where ω = Σ_c r_c × a_c (r_c, a_c the
+ * columns of R and A) vanishes, i.e. where M = A Rᵀ is symmetric; their iteration rotates q by
+ * ω / |tr M| (left-multiplied: world frame) until it does. Near the solution that step is 2/3
+ * of the way (M ≈ I: ω = 2θ, tr M = 3), so the error shrinks only 3× per iteration and a
+ * warm-started cell took 12–15 iterations to stop at |ω| < 1e-9. Linearizing ω(R) instead: a
+ * world-frame turn by θ changes M to M(I − [θ]×), and ω by −H θ with H = tr(M)·I − sym(M), so
+ * θ = H⁻¹ ω is Newton's step (the Hessian of tr(RᵀA) on the rotations; it is positive definite
+ * exactly near its maximum, where the polar rotation lies). We take the Newton step while H is
+ * clearly positive definite and the step is small (< 0.3 rad), Müller's step otherwise: far
+ * from the solution (big rotations from a stale warm start, flat or inverted cells with a
+ * singular H) the iteration is Müller's, robust as before, and near it the error squares at
+ * each step. Stopping: before a step, at |ω| < 1e-12 (converged); after a Müller step of
+ * |ω| < 1e-9 (as before); after a Newton step of |ω| < 1e-6 (the error left is of order
+ * |ω|², far below what the old rule left, about |ω|/2 = 5e-10). On the 32³ block sagging
+ * under gravity a step's extraction now takes 2 iterations per cell (15 before), and the
+ * rotations are within 1e-12 of the polar rotation (5e-10 before).
+ *
+ * The same code runs for 1 cell (cs_extract_rotation) or ROT_LANES cells side by side
+ * (cs_fem_update_rotations), one per SIMD lane: every lane does the same operations on its own
+ * data, and a lane that has stopped keeps its q, so a cell's rotation does not depend on its
+ * lane, its batch or the thread count, and the energy's extraction (cs_fem_energy, one cell
+ * at a time) gives bit for bit the rotations of the step.
+ */
+#define ROT_LANES 4
+typedef double rv __attribute__((vector_size(8 * ROT_LANES)));
+typedef long long rm __attribute__((vector_size(8 * ROT_LANES))); /* lane masks: 0 or -1 */
+
+#define ROT_NEWTON_MAX2 0.09  /* Newton steps up to 0.3 rad (the first-order update's range) */
+#define ROT_NEWTON_STOP2 1e-12 /* stop after a Newton step below 1e-6 */
+#define ROT_MULLER_STOP2 1e-18 /* stop after a Müller step below 1e-9 */
+#define ROT_DONE2 1e-24        /* converged: no step below 1e-12 */
+
+/* per lane: m ? a : b (a macro: functions passing 32-byte vectors trip -Wpsabi) */
+#define rsel(m, a, b) ((rv)(((rm)(a) & (m)) | ((rm)(b) & ~(m))))
+
+static inline bool rany(rm m)
 {
-    for (int it = 0; it < max_iter; it++) {
-        double R[9], om[3] = {0, 0, 0}, den = 0;
-        cs_quat_to_mat(q, R);
-        for (int c = 0; c < 3; c++) {
-            const double r[3] = {R[c], R[3 + c], R[6 + c]};
-            const double a[3] = {A[c], A[3 + c], A[6 + c]};
-            om[0] += r[1] * a[2] - r[2] * a[1];
-            om[1] += r[2] * a[0] - r[0] * a[2];
-            om[2] += r[0] * a[1] - r[1] * a[0];
-            den += r[0] * a[0] + r[1] * a[1] + r[2] * a[2];
-        }
-        const double s = 1.0 / (fabs(den) + 1e-9);
-        om[0] *= s;
-        om[1] *= s;
-        om[2] *= s;
-        const double wn = sqrt(om[0] * om[0] + om[1] * om[1] + om[2] * om[2]);
-        if (wn < 1e-12)
-            break;
-        /* The update quaternion exp(ω/2). For small steps (the warm-started case) the
-         * first-order [1, ω/2], normalized below, avoids sin/cos; it rotates by
-         * 2·atan(|ω|/2) instead of |ω|, which changes how fast the iteration converges, not
-         * where: it stops where ω = 0. */
-        double d[4];
-        if (wn < 0.3) {
-            d[0] = 1.0;
-            d[1] = 0.5 * om[0];
-            d[2] = 0.5 * om[1];
-            d[3] = 0.5 * om[2];
-        } else {
-            const double half = 0.5 * wn, sh = sin(half) / wn;
-            d[0] = cos(half);
-            d[1] = om[0] * sh;
-            d[2] = om[1] * sh;
-            d[3] = om[2] * sh;
-        }
-        const double n[4] = {
-            d[0] * q[0] - d[1] * q[1] - d[2] * q[2] - d[3] * q[3],
-            d[0] * q[1] + d[1] * q[0] + d[2] * q[3] - d[3] * q[2],
-            d[0] * q[2] - d[1] * q[3] + d[2] * q[0] + d[3] * q[1],
-            d[0] * q[3] + d[1] * q[2] - d[2] * q[1] + d[3] * q[0],
-        };
-        const double nn = 1.0 / sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2] + n[3] * n[3]);
-        for (int i = 0; i < 4; i++)
-            q[i] = n[i] * nn;
-        if (wn < 1e-9)
-            break;
+    for (int l = 0; l < ROT_LANES; l++)
+        if (m[l])
+            return true;
+    return false;
+}
+
+/* R = R(q) for unit quaternions q = (w, x, y, z), row-major, per lane. */
+static inline __attribute__((always_inline)) void rot_quat_mat(const rv q[4], rv R[9])
+{
+    const rv w = q[0], x = q[1], y = q[2], z = q[3];
+    R[0] = 1 - 2 * (y * y + z * z);
+    R[1] = 2 * (x * y - w * z);
+    R[2] = 2 * (x * z + w * y);
+    R[3] = 2 * (x * y + w * z);
+    R[4] = 1 - 2 * (x * x + z * z);
+    R[5] = 2 * (y * z - w * x);
+    R[6] = 2 * (x * z - w * y);
+    R[7] = 2 * (y * z + w * x);
+    R[8] = 1 - 2 * (x * x + y * y);
+}
+
+/*
+ * The extraction for the lanes in `live` (others untouched): A[j] is entry j of each lane's
+ * matrix, q its warm start, updated. At most max_iter steps per lane.
+ */
+static inline __attribute__((always_inline)) void rot_extract(const rv A[9], rv q[4], rm live,
+                                                               int max_iter)
+{
+    rm run = live;
+    for (int it = 0; it < max_iter && rany(run); it++) {
+        rv R[9], M[9];
+        rot_quat_mat(q, R);
+        for (int i = 0; i < 3; i++)
+            for (int j = 0; j < 3; j++)
+                M[3 * i + j] = A[3 * i] * R[3 * j] + A[3 * i + 1] * R[3 * j + 1] +
+                               A[3 * i + 2] * R[3 * j + 2];
+        const rv g0 = M[7] - M[5], g1 = M[2] - M[6], g2 = M[3] - M[1];
+        const rv tr = M[0] + M[4] + M[8];
+        /* Newton: H = tr·I − sym(M), θ = H⁻¹ ω by the adjugate */
+        const rv h00 = M[4] + M[8], h11 = M[0] + M[8], h22 = M[0] + M[4];
+        const rv h01 = -0.5 * (M[1] + M[3]), h02 = -0.5 * (M[2] + M[6]),
+                 h12 = -0.5 * (M[5] + M[7]);
+        const rv c00 = h11 * h22 - h12 * h12, c11 = h00 * h22 - h02 * h02,
+                 c22 = h00 * h11 - h01 * h01;
+        const rv c01 = h02 * h12 - h01 * h22, c02 = h01 * h12 - h02 * h11,
+                 c12 = h01 * h02 - h00 * h12;
+        const rv det = h00 * c00 + h01 * c01 + h02 * c02, sc = h00 + h11 + h22;
+        /* clearly positive definite: leading minors > 0, det above 1e-6 of its scale */
+        const rm pd = (rm)(h00 > 0) & (rm)(c22 > 0) & (rm)(det > 1e-6 * sc * sc * sc);
+        const rv idet = 1.0 / rsel(pd, det, (rv){0} + 1.0);
+        const rv n0 = (c00 * g0 + c01 * g1 + c02 * g2) * idet,
+                 n1 = (c01 * g0 + c11 * g1 + c12 * g2) * idet,
+                 n2 = (c02 * g0 + c12 * g1 + c22 * g2) * idet;
+        const rv nn2 = n0 * n0 + n1 * n1 + n2 * n2;
+        const rm newton = pd & (rm)(nn2 < ROT_NEWTON_MAX2);
+        /* Müller: ω / (|tr M| + 1e-9) */
+        const rv ms = 1.0 / (rsel((rm)(tr < 0), -tr, tr) + 1e-9);
+        const rv o0 = rsel(newton, n0, g0 * ms), o1 = rsel(newton, n1, g1 * ms),
+                 o2 = rsel(newton, n2, g2 * ms);
+        const rv wn2 = o0 * o0 + o1 * o1 + o2 * o2;
+        run &= (rm)(wn2 >= ROT_DONE2);
+        /* The update quaternion exp(ω/2): first order [1, ω/2] below 0.3 rad (normalized
+         * below; it rotates by 2·atan(|ω|/2) instead of |ω|, which changes how fast the
+         * iteration converges, not where), sin and cos above (Müller steps only). */
+        rv d0 = (rv){0} + 1.0, d1 = 0.5 * o0, d2 = 0.5 * o1, d3 = 0.5 * o2;
+        const rm big = run & (rm)(wn2 >= ROT_NEWTON_MAX2);
+        if (rany(big))
+            for (int l = 0; l < ROT_LANES; l++) {
+                if (!big[l])
+                    continue;
+                const double wn = sqrt(wn2[l]), half = 0.5 * wn, sh = sin(half) / wn;
+                d0[l] = cos(half);
+                d1[l] = o0[l] * sh;
+                d2[l] = o1[l] * sh;
+                d3[l] = o2[l] * sh;
+            }
+        const rv p0 = d0 * q[0] - d1 * q[1] - d2 * q[2] - d3 * q[3],
+                 p1 = d0 * q[1] + d1 * q[0] + d2 * q[3] - d3 * q[2],
+                 p2 = d0 * q[2] - d1 * q[3] + d2 * q[0] + d3 * q[1],
+                 p3 = d0 * q[3] + d1 * q[2] - d2 * q[1] + d3 * q[0];
+        rv pn = p0 * p0 + p1 * p1 + p2 * p2 + p3 * p3;
+        for (int l = 0; l < ROT_LANES; l++)
+            pn[l] = 1.0 / sqrt(run[l] ? pn[l] : 1.0);
+        q[0] = rsel(run, p0 * pn, q[0]);
+        q[1] = rsel(run, p1 * pn, q[1]);
+        q[2] = rsel(run, p2 * pn, q[2]);
+        q[3] = rsel(run, p3 * pn, q[3]);
+        run &= (newton & (rm)(wn2 >= ROT_NEWTON_STOP2)) |
+               (~newton & (rm)(wn2 >= ROT_MULLER_STOP2));
     }
+}
+
+__attribute__((optimize("no-math-errno"), target_clones("arch=x86-64-v4", "arch=x86-64-v3",
+                                                          "default"))) void
+cs_extract_rotation(const double A[9], double q[4], int max_iter)
+{
+    rv Av[9], qv[4];
+    for (int j = 0; j < 9; j++)
+        Av[j] = (rv){0} + A[j];
+    for (int j = 0; j < 4; j++)
+        qv[j] = (rv){0} + q[j];
+    rot_extract(Av, qv, (rm){-1}, max_iter);
+    for (int j = 0; j < 4; j++)
+        q[j] = qv[j][0];
 }
 
 int cs_fem_relink(cs_fem *fem, const cs_cubemesh *cm)
@@ -233,19 +327,65 @@ static void centre_gradient(const cs_fem *fem, const double *x, int c, double F[
         F[i] /= 4.0 * fem->h;
 }
 
+/* Cells [c0, c0 + ROT_LANES) ∩ [0, n_cells), active ones only: F at the centre (the same sums
+ * as centre_gradient), the extraction warm-started from q, R = R(q). */
+__attribute__((optimize("no-math-errno"), target_clones("arch=x86-64-v4", "arch=x86-64-v3",
+                                                          "default"))) static void
+rotations_batch(cs_fem *fem, const double *x, int c0)
+{
+    rv A[9], q[4];
+    rm live = {0};
+    int first = -1;
+    for (int l = 0; l < ROT_LANES; l++) {
+        const int c = c0 + l;
+        if (c < fem->n_cells && (!fem->cell_active || fem->cell_active[c])) {
+            live[l] = -1;
+            if (first < 0)
+                first = l;
+        }
+    }
+    if (first < 0)
+        return;
+    const int32_t *nd[ROT_LANES];
+    for (int l = 0; l < ROT_LANES; l++)
+        nd[l] = fem->cell_nodes + 8 * (size_t)(c0 + (live[l] ? l : first));
+    for (int j = 0; j < 9; j++)
+        A[j] = (rv){0};
+    for (int k = 0; k < 8; k++)
+        for (int i = 0; i < 3; i++) {
+            rv p;
+            for (int l = 0; l < ROT_LANES; l++)
+                p[l] = x[3 * (size_t)nd[l][k] + i];
+            for (int j = 0; j < 3; j++)
+                A[3 * i + j] += p * SGN[k][j];
+        }
+    for (int j = 0; j < 9; j++)
+        A[j] /= 4.0 * fem->h;
+    for (int j = 0; j < 4; j++)
+        for (int l = 0; l < ROT_LANES; l++)
+            q[j][l] = fem->q[4 * (size_t)(c0 + (live[l] ? l : first)) + j];
+    rot_extract(A, q, live, 30);
+    rv R[9];
+    rot_quat_mat(q, R);
+    for (int l = 0; l < ROT_LANES; l++) {
+        if (!live[l])
+            continue;
+        double *qc = fem->q + 4 * (size_t)(c0 + l), *Rc = fem->R + 9 * (size_t)(c0 + l);
+        for (int j = 0; j < 4; j++)
+            qc[j] = q[j][l];
+        for (int j = 0; j < 9; j++)
+            Rc[j] = R[j][l];
+    }
+}
+
 void cs_fem_update_rotations(cs_fem *fem, const double *x)
 {
     if (!fem->corotational)
         return;
+    const int nb = (fem->n_cells + ROT_LANES - 1) / ROT_LANES;
 #pragma omp parallel for num_threads(fem->threads) schedule(static)
-    for (int c = 0; c < fem->n_cells; c++) {
-        if (fem->cell_active && !fem->cell_active[c])
-            continue;
-        double F[9];
-        centre_gradient(fem, x, c, F);
-        cs_extract_rotation(F, fem->q + 4 * c, 30);
-        cs_quat_to_mat(fem->q + 4 * c, fem->R + 9 * c);
-    }
+    for (int b = 0; b < nb; b++)
+        rotations_batch(fem, x, b * ROT_LANES);
 }
 
 static void graded_kmul(const cs_fem *fem, const double *f, const double *restrict x,

@@ -122,8 +122,9 @@ double cs_fem_product_flops(const cs_fem *fem);
 void cs_fem_diag_blocks(cs_fem *fem, double *blocks);
 
 /* Rotational part of a 3×3 matrix A (row-major) by the iterative method of Müller et al.
- * (2016), warm-started from unit quaternion q (w,x,y,z), which is updated. Robust for
- * inverted and degenerate A. */
+ * (2016), warm-started from unit quaternion q (w,x,y,z), which is updated; near the solution
+ * its steps are Newton's (quadratic convergence, fem.c). Robust for inverted and degenerate A.
+ * Gives bit for bit what cs_fem_update_rotations computes for the same A and warm start. */
 void cs_extract_rotation(const double A[9], double q[4], int max_iter);
 void cs_quat_to_mat(const double q[4], double R[9]);
 
