@@ -84,23 +84,26 @@ void cs_cg_forget(cs_cg_work *w)
     w->hist_valid = w->dir_ready = false;
 }
 
+void cs_invert_block(double m[9])
+{
+    double c[9];
+    const double det = cs_mat3_adjugate(m, c);
+    double scale = fabs(m[0]) + fabs(m[4]) + fabs(m[8]);
+    if (fabs(det) > 1e-12 * scale * scale * scale && det != 0) {
+        for (int k = 0; k < 9; k++)
+            m[k] = c[k] / det;
+    } else {
+        double d[3] = {m[0], m[4], m[8]};
+        memset(m, 0, 9 * sizeof(double));
+        for (int k = 0; k < 3; k++)
+            m[4 * k] = d[k] != 0 ? 1.0 / d[k] : 1.0;
+    }
+}
+
 void cs_invert_blocks(double *blocks, int n_nodes)
 {
-    for (int i = 0; i < n_nodes; i++) {
-        double *m = blocks + 9 * i;
-        double c[9];
-        const double det = cs_mat3_adjugate(m, c);
-        double scale = fabs(m[0]) + fabs(m[4]) + fabs(m[8]);
-        if (fabs(det) > 1e-12 * scale * scale * scale && det != 0) {
-            for (int k = 0; k < 9; k++)
-                m[k] = c[k] / det;
-        } else {
-            double d[3] = {m[0], m[4], m[8]};
-            memset(m, 0, 9 * sizeof(double));
-            for (int k = 0; k < 3; k++)
-                m[4 * k] = d[k] != 0 ? 1.0 / d[k] : 1.0;
-        }
-    }
+    for (int i = 0; i < n_nodes; i++)
+        cs_invert_block(blocks + 9 * (size_t)i);
 }
 
 double cs_dot(cs_cg_work *w, const double *a, const double *b, int n, int threads)

@@ -47,6 +47,9 @@ void cs_cg_forget(cs_cg_work *w);
 
 /* Invert each 3×3 block in place (9 per node); a singular block becomes its diagonal inverse. */
 void cs_invert_blocks(double *blocks, int n_nodes);
+/* One such block (what cs_invert_blocks does to each): for callers that fill and invert blocks
+ * in one pass. */
+void cs_invert_block(double m[9]);
 
 typedef struct cs_cg_result {
     int iterations;

@@ -1160,27 +1160,39 @@ static void tangent_operator(void *ctx, const double *p, double *y)
     add_penalty_operator(o, o->pcoef, p, y);
 }
 
-/* Block-Jacobi preconditioner of the current operator, inverted. */
+/* Block-Jacobi preconditioner of the current operator, inverted. One parallel pass over the
+ * nodes scales the elastic blocks, adds the diagonal terms and inverts (drag springs, which
+ * touch a few nodes, are added before the inversion in a pass of their own). */
 static void build_preconditioner(cs_object *o)
 {
     cs_elastic_diag_blocks(o, o->blocks);
+    const bool damp = o->fld.has_damping && o->ckcoef != 0;
+    if (damp) /* + dt·β diag(K_d) */
+        cs_elastic_diag_blocks_d(o, o->fld.tmp);
+    bool springs = false;
+    for (int i = 0; o->dcoef != 0 && i < o->n_inputs; i++)
+        springs = springs || (cs_input_is_spring(&o->inputs[i]) && o->inputs[i].delay <= 0);
+#pragma omp parallel for num_threads(cs_elastic_threads(o)) schedule(static)
     for (int i = 0; i < o->n; i++) {
-        double *B = o->blocks + 9 * i;
+        double *B = o->blocks + 9 * (size_t)i;
         for (int k = 0; k < 9; k++)
             B[k] *= o->kcoef;
         for (int a = 0; a < 3; a++)
             B[4 * a] += o->mcoef * o->m[i] +
                         (o->fld.has_damping ? o->cmcoef * o->fld.md[i] : 0.0) +
                         (o->pin[i] ? o->pcoef * o->penalty : 0.0);
+        if (damp)
+            for (int k = 0; k < 9; k++)
+                B[k] += o->ckcoef * o->fld.tmp[9 * (size_t)i + k];
+        if (!springs)
+            cs_invert_block(B);
     }
-    if (o->fld.has_damping && o->ckcoef != 0) {
-        /* + dt·β diag(K_d) */
-        cs_elastic_diag_blocks_d(o, o->fld.tmp);
-        for (size_t d = 0; d < 9 * (size_t)o->n; d++)
-            o->blocks[d] += o->ckcoef * o->fld.tmp[d];
+    if (springs) {
+        add_spring_blocks(o, o->dcoef);
+#pragma omp parallel for num_threads(cs_elastic_threads(o)) schedule(static)
+        for (int i = 0; i < o->n; i++)
+            cs_invert_block(o->blocks + 9 * (size_t)i);
     }
-    add_spring_blocks(o, o->dcoef);
-    cs_invert_blocks(o->blocks, o->n);
 }
 
 /* Whether this object's solves use the multigrid preconditioner (cs_preconditioner). */
@@ -1213,6 +1225,7 @@ static bool setup_multigrid(const cs_world_t *w, cs_object *o, cs_matvec_fn A,
     }
     double *s = cs_mg_cell_scale(o->mg), *dg = cs_mg_node_diag(o->mg);
     const double *kf = o->fem.kf, *kd = o->fld.has_damping ? o->fld.kd : NULL;
+#pragma omp parallel for num_threads(cs_elastic_threads(o)) schedule(static)
     for (int c = 0; c < o->cm.n_cells; c++) {
         double a = 0, d = 0;
         for (int g = 0; g < 8; g++) {
@@ -1221,6 +1234,7 @@ static bool setup_multigrid(const cs_world_t *w, cs_object *o, cs_matvec_fn A,
         }
         s[c] = o->kcoef * a / 8 + (kd ? o->ckcoef * d / 8 : 0.0);
     }
+#pragma omp parallel for num_threads(cs_elastic_threads(o)) schedule(static)
     for (int i = 0; i < o->n; i++)
         dg[i] = o->mcoef * o->m[i] + (o->fld.has_damping ? o->cmcoef * o->fld.md[i] : 0.0) +
                 (o->pin[i] ? o->pcoef * o->penalty : 0.0);
@@ -1707,6 +1721,7 @@ static int step_implicit_euler(cs_world_t *w, cs_object *o, cs_step_stats *st)
     double t2 = now_ms();
     /* b = M v + dt (f + f_el(x)); the solve is for v1 (implicit Euler, Rayleigh damping). */
     cs_elastic_force(o, o->x, o->b, NULL);
+#pragma omp parallel for num_threads(cs_elastic_threads(o)) schedule(static)
     for (int i = 0; i < o->n; i++)
         for (int a = 0; a < 3; a++) {
             size_t d = 3 * (size_t)i + a;
