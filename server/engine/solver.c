@@ -61,12 +61,16 @@ int cs_cg_guess(cs_cg_work *w, const double *v, double *x)
             return -1;
         }
     }
-    if (w->hist_valid && memcmp(v, w->hist_end, n * sizeof(double)) == 0) {
-        for (size_t i = 0; i < n; i++)
-            w->dir[i] = v[i] - w->hist_prev[i];
-        w->dir_ready = true;
+    /* One pass: d = v − v_prev (used only if v is bit for bit where the last step ended) and
+     * v_prev = v. */
+    bool same = w->hist_valid;
+    for (size_t i = 0; i < n; i++) {
+        const double vi = v[i];
+        same = same && memcmp(&vi, &w->hist_end[i], sizeof vi) == 0;
+        w->dir[i] = vi - w->hist_prev[i];
+        w->hist_prev[i] = vi;
     }
-    memcpy(w->hist_prev, v, n * sizeof(double));
+    w->dir_ready = same;
     w->hist_valid = false;
     return w->dir_ready ? 1 : 0;
 }
@@ -173,6 +177,27 @@ static double update_xr(cs_cg_work *w, const uint8_t *mask, double alpha, const 
     return s;
 }
 
+/* Σ b_i² over the free dofs (fixed blocks, as cs_dot). */
+static double masked_norm2(cs_cg_work *w, const uint8_t *mask, const double *b, int n,
+                           int threads)
+{
+    const int nb = (n + CS_DOT_BLOCK - 1) / CS_DOT_BLOCK;
+#pragma omp parallel for num_threads(threads) schedule(static) if (nb > 1)
+    for (int k = 0; k < nb; k++) {
+        const int lo = k * CS_DOT_BLOCK, hi = lo + CS_DOT_BLOCK < n ? lo + CS_DOT_BLOCK : n;
+        double s = 0;
+        for (int i = lo; i < hi; i++) {
+            const double bi = mask[i] ? 0.0 : b[i];
+            s += bi * bi;
+        }
+        w->partial[k] = s;
+    }
+    double s = 0;
+    for (int k = 0; k < nb; k++)
+        s += w->partial[k];
+    return s;
+}
+
 /* rᵀz and rᵀzo in one pass (fixed blocks). */
 static void dot2(cs_cg_work *w, const double *r, const double *z, const double *zo, int n,
                  int threads, double *rz, double *rzo)
@@ -229,9 +254,7 @@ static cs_cg_result pcg(cs_cg_work *w, cs_matvec_fn A, void *ctx, cs_precond_fn 
     w->dir_ready = false;
 
     /* ‖b‖ over the free dofs; r = b - A x. */
-    for (int i = 0; i < n; i++)
-        z[i] = mask[i] ? 0.0 : b[i];
-    const double bnorm = sqrt(cs_dot(w, z, z, n, threads));
+    const double bnorm = sqrt(masked_norm2(w, mask, b, n, threads));
     A(ctx, x, q);
 #pragma omp parallel for num_threads(threads) schedule(static)
     for (int i = 0; i < n; i++)
@@ -248,6 +271,7 @@ static cs_cg_result pcg(cs_cg_work *w, cs_matvec_fn A, void *ctx, cs_precond_fn 
     const double stop = tol * bnorm;
     if (use_dir && rnorm > stop) {
         /* warm start (cs_cg_guess): x += α d with α = dᵀr / dᵀAd, the A-norm minimiser */
+#pragma omp parallel for num_threads(threads) schedule(static)
         for (int i = 0; i < n; i++)
             p[i] = mask[i] ? 0.0 : w->dir[i];
         A(ctx, p, q);
