@@ -886,34 +886,55 @@ void cs_fem_diag_blocks(cs_fem *fem, double *blocks)
  * instead of two 3×3 products (54 multiply-adds). Graded cells (8 different Gauss-point factors)
  * sum the corner blocks of the per-point matrices and rotate them as before.
  *
- * A node pass (each node sums over its cells in the node→cell list's order, increasing cells,
- * as the serial cell loop did): no two threads write one block, and the sums do not depend on
- * the thread count.
+ * A node pass (each node sums over its cells in the node→cell list's order, increasing cells;
+ * uniform cells into the 6 entries of a symmetric block, graded ones into a full block added
+ * at the end): no two threads write one block, and the sums do not depend on the thread
+ * count. Each cell's factor is looked up once (into the scratch fe) instead of per corner.
  */
 void cs_fem_diag_blocks_w(cs_fem *fem, const double *kf, double *blocks)
 {
     const double alpha = fem->K[0], beta = fem->K[1], ab = alpha - beta;
     static const double I[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+    /* Each cell's factor (NaN: graded) into the element pass's scratch, read once per cell
+     * here instead of 8 times (once per corner) below. */
+    double *fc = fem->fe;
+    if (kf) {
+#pragma omp parallel for num_threads(fem->threads) schedule(static)
+        for (int c = 0; c < fem->n_cells; c++) {
+            double f;
+            fc[c] = uniform_factor(kf, c, &f) ? f : NAN;
+        }
+    }
+    const int32_t *restrict as = fem->adj_start, *restrict adj = fem->adj;
+    const uint8_t *act = fem->cell_active;
+    const double *Rs = fem->corotational ? fem->R : NULL;
 #pragma omp parallel for num_threads(fem->threads) schedule(static)
     for (int n = 0; n < fem->n_nodes; n++) {
-        double B[9] = {0};
-        for (int a = fem->adj_start[n]; a < fem->adj_start[n + 1]; a++) {
-            const int c = fem->adj[a] >> 3, k = fem->adj[a] & 7;
-            if (fem->cell_active && !fem->cell_active[c])
+        /* the symmetric part of the uniform cells' sum in 6 entries, graded cells in G */
+        double b00 = 0, b01 = 0, b02 = 0, b11 = 0, b12 = 0, b22 = 0, G[9] = {0};
+        bool graded = false;
+        for (int a = as[n]; a < as[n + 1]; a++) {
+            const int c = adj[a] >> 3, k = adj[a] & 7;
+            if (act && !act[c])
                 continue;
-            const double *R = fem->corotational ? fem->R + 9 * (size_t)c : I;
-            double f;
-            if (uniform_factor(kf, c, &f)) {
-                double v[3];
-                for (int i = 0; i < 3; i++)
-                    v[i] = R[3 * i] * SGN[k][0] + R[3 * i + 1] * SGN[k][1] +
-                           R[3 * i + 2] * SGN[k][2];
+            const double *R = Rs ? Rs + 9 * (size_t)c : I;
+            const double f = kf ? fc[c] : 1.0;
+            if (!isnan(f)) {
+                const double s0 = SGN[k][0], s1 = SGN[k][1], s2 = SGN[k][2];
+                const double v0 = R[0] * s0 + R[1] * s1 + R[2] * s2;
+                const double v1 = R[3] * s0 + R[4] * s1 + R[5] * s2;
+                const double v2 = R[6] * s0 + R[7] * s1 + R[8] * s2;
                 const double fb = f * beta, fd = f * ab;
-                for (int i = 0; i < 3; i++)
-                    for (int j = 0; j < 3; j++)
-                        B[3 * i + j] += fb * v[i] * v[j] + (i == j ? fd : 0.0);
+                const double t0 = fb * v0, t1 = fb * v1, t2 = fb * v2;
+                b00 += t0 * v0 + fd;
+                b01 += t0 * v1;
+                b02 += t0 * v2;
+                b11 += t1 * v1 + fd;
+                b12 += t1 * v2;
+                b22 += t2 * v2 + fd;
                 continue;
             }
+            graded = true;
             double Kk[9], T[9];
             const int at = (3 * k) * 24 + 3 * k;
             for (int i = 0; i < 3; i++)
@@ -930,10 +951,19 @@ void cs_fem_diag_blocks_w(cs_fem *fem, const double *kf, double *blocks)
                                    R[3 * i + 2] * Kk[6 + j];
             for (int i = 0; i < 3; i++)
                 for (int j = 0; j < 3; j++)
-                    B[3 * i + j] += T[3 * i] * R[3 * j] + T[3 * i + 1] * R[3 * j + 1] +
+                    G[3 * i + j] += T[3 * i] * R[3 * j] + T[3 * i + 1] * R[3 * j + 1] +
                                     T[3 * i + 2] * R[3 * j + 2];
         }
-        memcpy(blocks + 9 * (size_t)n, B, sizeof B);
+        double *B = blocks + 9 * (size_t)n;
+        B[0] = b00;
+        B[1] = B[3] = b01;
+        B[2] = B[6] = b02;
+        B[4] = b11;
+        B[5] = B[7] = b12;
+        B[8] = b22;
+        if (graded)
+            for (int i = 0; i < 9; i++)
+                B[i] += G[i];
     }
 }
 

@@ -94,8 +94,9 @@ void cs_invert_block(double m[9])
     const double det = cs_mat3_adjugate(m, c);
     double scale = fabs(m[0]) + fabs(m[4]) + fabs(m[8]);
     if (fabs(det) > 1e-12 * scale * scale * scale && det != 0) {
+        const double id = 1.0 / det;
         for (int k = 0; k < 9; k++)
-            m[k] = c[k] / det;
+            m[k] = c[k] * id;
     } else {
         double d[3] = {m[0], m[4], m[8]};
         memset(m, 0, 9 * sizeof(double));
