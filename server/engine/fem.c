@@ -166,8 +166,11 @@ static inline __attribute__((always_inline)) void rot_extract(const rv A[9], rv 
                  c22 = h00 * h11 - h01 * h01;
         const rv c01 = h02 * h12 - h01 * h22, c02 = h01 * h12 - h02 * h11,
                  c12 = h01 * h02 - h00 * h12;
-        const rv det = h00 * c00 + h01 * c01 + h02 * c02, sc = h00 + h11 + h22;
-        /* clearly positive definite: leading minors > 0, det above 1e-6 of its scale */
+        const rv det = h00 * c00 + h01 * c01 + h02 * c02;
+        const rv sc = rsel((rm)(h00 < 0), -h00, h00) + rsel((rm)(h11 < 0), -h11, h11) +
+                      rsel((rm)(h22 < 0), -h22, h22);
+        /* clearly positive definite: leading minors > 0, det above 1e-6 of its scale (the
+         * scale is positive: far from the solution tr M can be negative) */
         const rm pd = (rm)(h00 > 0) & (rm)(c22 > 0) & (rm)(det > 1e-6 * sc * sc * sc);
         const rv idet = 1.0 / rsel(pd, det, (rv){0} + 1.0);
         const rv n0 = (c00 * g0 + c01 * g1 + c02 * g2) * idet,
