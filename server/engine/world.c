@@ -204,6 +204,7 @@ int cs_world_create(const cs_world_def *def, cs_world_t **out, char *err, size_t
     if (w->threads < 1)
         w->threads = 1;
     w->next_id = 1;
+    w->broadphase_min_bodies = CS_BROADPHASE_BODIES;
     *out = w;
     return CS_OK;
 }
