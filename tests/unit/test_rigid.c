@@ -15,22 +15,15 @@
 #include "scene.h"
 #include "watertight.h"
 #include "world_internal.h"
+#include "lattice.h"
 
 /* A box of nx×ny×nz cubes of edge h with its lower corner at `at`. */
 static cs_object_id add_box(cs_world_t *w, const char *name, int nx, int ny, int nz, double h,
                             const double at[3], cs_material mat, bool fracture, cs_model model,
                             const cs_aabb *fixed, char *err)
 {
-    int n = nx * ny * nz, c = 0;
-    int32_t *ijk = malloc(sizeof(int32_t) * 3 * (size_t)n);
-    for (int k = 0; k < nz; k++)
-        for (int j = 0; j < ny; j++)
-            for (int i = 0; i < nx; i++) {
-                ijk[3 * c] = i;
-                ijk[3 * c + 1] = j;
-                ijk[3 * c + 2] = k;
-                c++;
-            }
+    int n = nx * ny * nz;
+    int32_t *ijk = cs_box_cells(nx, ny, nz);
     cs_object_def d = cs_object_def_default();
     d.name = name;
     d.model = model;

@@ -22,6 +22,7 @@
 #include "localframe.h"
 #include "rigid.h"
 #include "world_internal.h"
+#include "lattice.h"
 
 /* ---------------------------------------------------------------- helpers */
 
@@ -52,18 +53,9 @@ static int make_blk(blk *b, const cs_world_def *wd, cs_model model, cs_integrato
     if (cs_world_create(wd, &b->w, err, errlen) != CS_OK)
         return -1;
     const int n = nx * ny * nz;
-    b->ijk = malloc(sizeof(int32_t) * 3 * (size_t)n);
+    b->ijk = cs_box_cells(nx, ny, nz);
     if (!b->ijk)
         return -1;
-    int c = 0;
-    for (int k = 0; k < nz; k++)
-        for (int j = 0; j < ny; j++)
-            for (int i = 0; i < nx; i++) {
-                b->ijk[3 * c] = i;
-                b->ijk[3 * c + 1] = j;
-                b->ijk[3 * c + 2] = k;
-                c++;
-            }
     cs_object_def d = cs_object_def_default();
     d.name = "blk";
     d.model = model;
