@@ -14,20 +14,39 @@
  *      sharing an edge are separated when their cells shared a node before and share none now;
  *      around each vertex the triangles are grouped by the edges that still join them, and
  *      every group beyond the first gets its own copy of the vertex, skinned to a cell of its
- *      own side;
+ *      own side. With partial closing (below) also where the cells share fewer nodes than
+ *      before (a face or edge between them opened partially), except along a mesh edge that
+ *      lies where they are still held (between two still-shared corners), and a corner vertex
+ *      splits with its node: one per node copy;
  *   4. closing surface (§3.2, closing.c): per face that this event opened fully (its four nodes
  *      separated), the region of f inside the surface as triangles between surface vertices
  *      and corner vertices (a random offset per lattice point that never crosses the surface;
  *      a mesh vertex lying on the lattice point is used instead), t for c1 and its reverse t'
- *      for c2;
+ *      for c2. Partial closing — in the cut path (cs_world_cut_face) on an object whose mesh
+ *      lies in lattice planes (objects given as cells, voxel models, pieces without mesh
+ *      triangles) — closes a face when it first opens at all (a corner node separated): a
+ *      corner still shared by c1 and c2 gets one corner vertex used by t and t' (the pair is
+ *      glued along it: a wedge-shaped cavity, closed, of volume 0 at rest), a separated one a
+ *      vertex per node copy; when the face later opens further its pair exists already and its
+ *      corner vertices split with their nodes. Elsewhere (meshes crossing faces, stress
+ *      cracks) a face opened only partially waits, as before: there the mesh's slit across it
+ *      does not end where the glued pair does (it ends wherever the triangles around the hinge
+ *      still join), which was measured to leave more loops, not fewer;
  *   5. repair: the §3.2 rules for assigning surface vertices to nodes are heuristics and can
  *      leave the closing triangles not matching the fracture line exactly (seed 000 does not
- *      claim otherwise). A face's pair t, t' that would make an edge used twice in one
- *      direction, or that is degenerate, is dropped; where boundary loops pass a vertex twice
- *      the vertex is split so that every loop is simple; every loop left is closed by one
- *      triangle or a fan around a new vertex placed by the loop alone (the two sides of a
- *      crack close twin loops identically, so their volumes cancel). The surface is then
- *      closed and consistently oriented by construction; the event reports the fans;
+ *      claim otherwise). With partial closing, glued pairs of two faces hinged on one lattice
+ *      edge would give it four triangles: one end gets a vertex per cavity (split_glued), and
+ *      such second vertices go back into their node's vertex once the hinge opens
+ *      (merge_cavity_corners, only where no edge is then used twice one way). A face's pair
+ *      t, t' that would make an edge used twice in one direction, or that is degenerate, is
+ *      dropped; where boundary loops pass a vertex twice the vertex is split so that every
+ *      loop is simple; every loop left is closed by one triangle or a fan around a new vertex
+ *      placed by the loop alone (the two sides of a crack close twin loops identically, so
+ *      their volumes cancel). The surface is then closed and consistently oriented by
+ *      construction; the event reports the fans. Where a face opens partially without partial
+ *      closing, its rim is left to such fans, and when the face opens fully one of its pairs
+ *      can meet a fan of the earlier opening and be dropped: the two sides' loops then differ
+ *      and their fans do not cancel (the volume errors of test_fracture_meshes' cut runs);
  *   6. pieces (§2.4): cells are grouped by shared nodes (face connectivity after step 2); the
  *      largest group stays the object, every other one becomes a new object with its own cube
  *      mesh, surface, state (positions, velocities, inputs) and id.
@@ -847,7 +866,9 @@ static bool seg_tri(const double p[3], const double q[3], const double *a, const
 /* A vertex of the mesh's own triangles lying exactly on node's lattice point (meshes made of
  * cube faces have them), or -1: the closing surface must end on it, not beside it. Where the
  * mesh was split there, the copy used by a triangle of a cell attached to `cell` (sharing a
- * node with it) is preferred; cell < 0 takes any. */
+ * node with it) is preferred; cell < 0 takes any. With `exact` (partially opened faces: the
+ * cells of both sides may still share nodes), the copy used by a triangle of a cell that holds
+ * this very node copy is preferred, and *exact says whether one was found. */
 static int corner_at(const cs_cubemesh *cm, int32_t c, const double p[3]);
 
 static int32_t surface_vertex_at(const surf_edit *e, int32_t node, int32_t cell, bool *exact)
@@ -1644,14 +1665,15 @@ static int close_faces(cs_world_t *w, cs_object *o, surf_edit *e, const int32_t 
         }
         for (int k = 0; k < cand.n; k++) {
             int32_t ct = s->tri_cell[cand.a[k]];
-            /* on c1's side: attached to c1 and not to c2 (after the split); where that
-             * does not decide, the plane's label */
+            /* on c1's side: c1 itself, or attached to c1 and not to c2 (after the split);
+             * where that does not decide, the side of f the cell lies on if f is still held
+             * at a corner (both sides' cells share nodes there), else the plane's label */
             bool s1 = cells_share_node(&o->cm, ct, f->c1), s2 = cells_share_node(&o->cm, ct, f->c2);
             if (ct == f->c1 || ct == f->c2)
                 side[k] = ct == f->c1;
             else if (s1 != s2)
                 side[k] = s1;
-            else if (partial) { /* held at some corners: the side of f the cell lies on */
+            else if (partial) {
                 const int32_t lt = o->cm.cell_ijk[3 * (size_t)ct + f->axis],
                               l1 = o->cm.cell_ijk[3 * (size_t)f->c1 + f->axis];
                 side[k] = f->c1_below ? lt <= l1 : lt >= l1;
@@ -2187,8 +2209,6 @@ static bool any_rewired(const surf_edit *e)
     return false;
 }
 
-/* Accept closing patches greedily (a patch group is dropped if it is degenerate or would use a
- * directed edge twice), then close what is left open. Commits the edit. */
 /*
  * Glued pairs that meet along one edge. A partially opened face's t and t' are glued along
  * the edges between its still-shared corners; where two such faces share a lattice edge with
@@ -2386,6 +2406,8 @@ static int split_glued(surf_edit *e, const region *rg, patch_list *pl)
     return rc;
 }
 
+/* Accept closing patches greedily (a patch group is dropped if it is degenerate or would use a
+ * directed edge twice), then close what is left open. Commits the edit. */
 static int repair_and_commit(cs_world_t *w, cs_object *o, surf_edit *e, patch_list *pl,
                              int *fans, int *closing, bool record)
 {
@@ -3193,14 +3215,6 @@ static int mark_cavity_corners(const cs_object *o, int32_t *corner_of)
     return 0;
 }
 
-/*
- * Second corner vertices are a state of the moment: two cavities hinged on one edge. Where the
- * cells around them changed (an affected cell holds one of its triangles), each goes back into
- * the vertex its node copy names (before the event), so that the surface split below sees one
- * vertex per node copy again; split_glued splits it anew where cavities still meet at an edge.
- * Every triangle of such a vertex is merged or none (the surface stays closed), in s->tris and
- * tris0 alike (the state the event starts from), and flagged rewired.
- */
 /* Vertex x of a triangle of cell ct as the surface split will leave it: a corner vertex (of a
  * node: corner_of) with the node copy ct holds now, another vertex as it is. */
 static int64_t split_ident(const cs_object *o, const int32_t *corner_of, int32_t x, int32_t ct)
@@ -3213,6 +3227,17 @@ static int64_t split_ident(const cs_object *o, const int32_t *corner_of, int32_t
     return ((int64_t)x << 32) | (uint32_t)(k >= 0 ? o->cm.cell_nodes[8 * (size_t)ct + k] : -1);
 }
 
+/*
+ * Second corner vertices are a state of the moment: two cavities hinged on one edge. Where the
+ * cells around them changed (an affected cell holds one of its triangles), each goes back into
+ * the vertex its node copy names (before the event), so that the surface split below sees one
+ * vertex per node copy again; split_glued splits it anew where cavities still meet at an edge.
+ * Every triangle of such a vertex is merged or none (the surface stays closed), in s->tris and
+ * tris0 alike (the state the event starts from), and flagged rewired. A vertex is merged only where no edge at
+ * the merged vertex is then used twice in one direction, counted as the surface split will
+ * leave it; where that does not hold it stays (the repair closes what is left between the
+ * two vertices with fans; see fracture_shuffled_box_cuts_keep_closing_pairs).
+ */
 static void merge_cavity_corners(cs_object *o, surf_edit *e, const int32_t *cn0, int32_t *tris0,
                                  const uint8_t *affected, const int32_t *corner_of)
 {
