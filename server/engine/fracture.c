@@ -1235,6 +1235,17 @@ static int corner_at(const cs_cubemesh *cm, int32_t c, const double p[3])
 
 /* ---------------------------------------------------------------- step 3: surface (§3.1) */
 
+/* Do cells a and b share a node in the links `cn` (8 per cell)? */
+static bool cells_share_node_in(const int32_t *cn, int32_t a, int32_t b)
+{
+    const int32_t *na = cn + 8 * (size_t)a, *nb = cn + 8 * (size_t)b;
+    for (int i = 0; i < 8; i++)
+        for (int j = 0; j < 8; j++)
+            if (na[i] == nb[j])
+                return true;
+    return false;
+}
+
 /* How many of a's eight node slots hold a node that b holds too. */
 static int shared_nodes(const int32_t *a, const int32_t *b)
 {
@@ -1291,14 +1302,15 @@ static bool tri_cut(const cs_object *o, const int32_t *cn0, int32_t ct, int32_t 
 {
     if (ct == cu)
         return false;
+    if (!partial) /* shared a node before, none now */
+        return cells_share_node_in(cn0, ct, cu) && !cells_share_node(&o->cm, ct, cu);
     const int before = shared_nodes(cn0 + 8 * (size_t)ct, cn0 + 8 * (size_t)cu);
     if (before == 0)
         return false;
     const int32_t *cn = o->cm.cell_nodes;
     const int now = shared_nodes(cn + 8 * (size_t)ct, cn + 8 * (size_t)cu);
-    if (now == 0 || !partial)
-        return now == 0;
-    return now < before && !(held_point(&o->cm, ct, cu, p) && held_point(&o->cm, ct, cu, q));
+    return now == 0 ||
+           (now < before && !(held_point(&o->cm, ct, cu, p) && held_point(&o->cm, ct, cu, q)));
 }
 
 static double dist2_cell(const cs_cubemesh *cm, int32_t c, const double p[3])
@@ -3270,7 +3282,7 @@ static void merge_cavity_corners(cs_object *o, surf_edit *e, const int32_t *cn0,
             /* and only if no edge at the merged vertex is then used twice in one direction,
              * counted as the surface split will leave it: a corner vertex taken per node copy
              * of each triangle's cell (split_surface), other vertices as they are */
-            int64_t ein[64], eout[64];
+            int64_t ein[2 * 96], eout[2 * 96];
             int ni = 0, no = 0;
             for (int j = 0; j < e->nt0 && ok; j++) {
                 const int32_t *q = tris0 + 3 * (size_t)j;
@@ -3285,7 +3297,7 @@ static void merge_cavity_corners(cs_object *o, surf_edit *e, const int32_t *cn0,
                         ok = eout[2 * x] != self || eout[2 * x + 1] != nx;
                     for (int x = 0; x < ni && ok; x++)
                         ok = ein[2 * x] != self || ein[2 * x + 1] != pv;
-                    ok = ok && no < 32 && ni < 32;
+                    ok = ok && no < 96 && ni < 96;
                     if (ok) {
                         eout[2 * no] = self;
                         eout[2 * no++ + 1] = nx;
