@@ -387,6 +387,63 @@ TEST(fracture_exhaustive_box_cuts_down_to_single_cubes)
     free(cells);
 }
 
+/* The closing of the fracture event of the last call: triangles added and fan loops. */
+static int last_event(const cs_world_t *w, int *closing, int *fans)
+{
+    int n = 0;
+    const cs_event *ev = cs_world_events(w, &n);
+    for (int i = n - 1; i >= 0; i--)
+        if (ev[i].kind == CS_EVENT_FRACTURE) {
+            *closing = ev[i].closing_triangles;
+            *fans = ev[i].fallback_loops;
+            return 0;
+        }
+    return -1;
+}
+
+/*
+ * A face that opens partially is closed when it opens (seed 000 §3.2 generalised: fracture.c
+ * step 4). A 2×2×1 box, cubes A (0,0), B (1,0), C (0,1), D (1,1): cutting A|B separates the
+ * two nodes of its edge on the box's side y = 0 (only A and B hold them) and keeps the two
+ * at y = h (C and D still join A to B there). A|B gets its pair at once, glued along the
+ * shared edge: 2 triangles per side, no fan, the volume unchanged, one object. Cutting C|D
+ * then opens A|B fully too, and only C|D's pair is made (A|B's exists): 4 triangles again.
+ */
+TEST(fracture_partially_opened_face_closed_when_it_opens)
+{
+    cs_object_id id;
+    int32_t *cells = NULL;
+    cs_world_t *w = box_world(2, 2, 1, 0.05, &id, &cells);
+    ENSURE(w);
+    const double v0 = object_volume(w, id);
+    mirror *m = calloc(1, sizeof *m);
+    mirror_init(m, w);
+    char why[256] = "";
+    const int32_t ab[3] = {0, 0, 0}, cd[3] = {0, 1, 0};
+    int closing = -1, fans = -1;
+    ENSURE_MSG(cs_world_cut_face(w, id, ab, 0, why, sizeof why) == CS_OK, "%s", why);
+    ENSURE_MSG(mirror_apply(m, w, why, sizeof why) == 0 && mirror_matches(m, w, why, sizeof why),
+               "%s", why);
+    ENSURE(last_event(w, &closing, &fans) == 0);
+    ENSURE_MSG(closing == 4 && fans == 0, "A|B: %d closing triangles, %d fan loops", closing,
+               fans);
+    cs_object_id ids[8];
+    ENSURE(cs_world_object_ids(w, ids, 8) == 1);
+    ENSURE_MSG(world_pieces_ok(w, v0, VOLUME_TOL, why, sizeof why), "after A|B: %s", why);
+    ENSURE_MSG(cs_world_cut_face(w, id, cd, 0, why, sizeof why) == CS_OK, "%s", why);
+    ENSURE_MSG(mirror_apply(m, w, why, sizeof why) == 0 && mirror_matches(m, w, why, sizeof why),
+               "%s", why);
+    ENSURE(last_event(w, &closing, &fans) == 0);
+    ENSURE_MSG(closing == 4 && fans == 0, "C|D: %d closing triangles, %d fan loops", closing,
+               fans);
+    ENSURE(cs_world_object_ids(w, ids, 8) == 2);
+    ENSURE_MSG(world_pieces_ok(w, v0, VOLUME_TOL, why, sizeof why), "after C|D: %s", why);
+    mirror_free(m);
+    free(m);
+    free(cells);
+    cs_world_destroy(w);
+}
+
 /*
  * Many shuffled orders on boxes of 18 to 36 cubes. Measured over these 40 orders: every
  * surface closed and consistent after every cut; 28 orders need no fan at all, 37 keep the
