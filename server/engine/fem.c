@@ -290,17 +290,17 @@ typedef struct mlanes {
     double e[LANES];          /* out (with energy): ½ uᵀ K u in the local frame */
 } mlanes;
 
-/* Flops of one lane of modal_kernel: transform 69, mode gradients 50, back 69; rotations
- * 2·105 (7 modes × 3 × 5); the energy 41 more. */
-#define MODAL_FLOPS_CORE (69.0 + 50.0 + 69.0)
-#define MODAL_FLOPS_ROT 210.0
+#define MODAL_NAME modal_core
+#define MODAL_V vd
+#define MODAL_S double
+#include "modal_core.h" /* MODAL_FLOPS_CORE, MODAL_FLOPS_ROT */
 
 /* y = R K (Rᵀ u − rest) per lane (rot: R given; rest: subtract the rest shape of edge rest);
  * energy: e = ½ (Rᵀu − rest)ᵀ K (Rᵀu − rest). */
 __attribute__((optimize("fp-contract=fast"), target_clones("arch=x86-64-v3", "default")))
 static void modal_kernel(mlanes *restrict b, int rot, double rest, int energy)
 {
-    vd a[8][3], g[8][3], u[24], R[9];
+    vd u[24], R[9], y[24], e;
     for (int k = 0; k < 8; k++)
         for (int i = 0; i < 3; i++)
             u[3 * k + i] = (vd){b->x[3 * b->nd[0][k] + i], b->x[3 * b->nd[1][k] + i],
@@ -308,104 +308,16 @@ static void modal_kernel(mlanes *restrict b, int rot, double rest, int energy)
     if (rot)
         for (int j = 0; j < 9; j++)
             R[j] = (vd){b->R[0][j], b->R[1][j], b->R[2][j], b->R[3][j]};
-    /* forward transform, per component */
-    for (int i = 0; i < 3; i++) {
-        const vd s00 = u[3 * 1 + i] + u[3 * 0 + i], d00 = u[3 * 1 + i] - u[3 * 0 + i];
-        const vd s10 = u[3 * 2 + i] + u[3 * 3 + i], d10 = u[3 * 2 + i] - u[3 * 3 + i];
-        const vd s01 = u[3 * 5 + i] + u[3 * 4 + i], d01 = u[3 * 5 + i] - u[3 * 4 + i];
-        const vd s11 = u[3 * 6 + i] + u[3 * 7 + i], d11 = u[3 * 6 + i] - u[3 * 7 + i];
-        const vd ss0 = s10 + s00, sd0 = s10 - s00, ss1 = s11 + s01, sd1 = s11 - s01;
-        const vd ds0 = d10 + d00, dd0 = d10 - d00, ds1 = d11 + d01, dd1 = d11 - d01;
-        a[1][i] = ds1 + ds0;
-        a[2][i] = sd1 + sd0;
-        a[3][i] = ss1 - ss0;
-        a[4][i] = dd1 + dd0;
-        a[5][i] = sd1 - sd0;
-        a[6][i] = ds1 - ds0;
-        a[7][i] = dd1 - dd0;
-    }
-    if (rot)
-        for (int m = 1; m < 8; m++) {
-            const vd v0 = a[m][0], v1 = a[m][1], v2 = a[m][2];
-            for (int i = 0; i < 3; i++)
-                a[m][i] = R[i] * v0 + R[3 + i] * v1 + R[6 + i] * v2;
-        }
-    if (rest != 0.0) {
-        const double r4 = 4.0 * rest;
-        a[1][0] -= r4;
-        a[2][1] -= r4;
-        a[3][2] -= r4;
-    }
-    /* mode gradients */
     const vd L = {b->lam[0], b->lam[1], b->lam[2], b->lam[3]};
-    const vd M = {b->mu[0], b->mu[1], b->mu[2], b->mu[3]}, M2 = M + M;
-    const vd L1 = L * (1.0 / 3.0), M1 = M * (1.0 / 3.0), Q = (L + 4.0 * M) * (1.0 / 9.0);
-    {
-        const vd lt = L * (a[1][0] + a[2][1] + a[3][2]);
-        g[1][0] = lt + M2 * a[1][0];
-        g[2][1] = lt + M2 * a[2][1];
-        g[3][2] = lt + M2 * a[3][2];
-        const vd o01 = M * (a[2][0] + a[1][1]), o02 = M * (a[3][0] + a[1][2]),
-                 o12 = M * (a[3][1] + a[2][2]);
-        g[2][0] = g[1][1] = o01;
-        g[3][0] = g[1][2] = o02;
-        g[3][1] = g[2][2] = o12;
-    }
-    {
-        const vd tx = L1 * (a[4][1] + a[6][2]), ty = L1 * (a[4][0] + a[5][2]),
-                 tz = L1 * (a[6][0] + a[5][1]);
-        const vd w = a[4][2] + a[5][0] + a[6][1];
-        g[4][0] = ty + M * a[4][0];
-        g[4][1] = tx + M * a[4][1];
-        g[4][2] = M1 * (a[4][2] + w);
-        g[5][0] = M1 * (a[5][0] + w);
-        g[5][1] = tz + M * a[5][1];
-        g[5][2] = ty + M * a[5][2];
-        g[6][0] = tz + M * a[6][0];
-        g[6][1] = M1 * (a[6][1] + w);
-        g[6][2] = tx + M * a[6][2];
-        for (int i = 0; i < 3; i++)
-            g[7][i] = Q * a[7][i];
-    }
-    if (energy) {
-        vd e = a[1][0] * g[1][0];
-        for (int m = 1; m < 8; m++)
-            for (int i = (m == 1); i < 3; i++)
-                e += a[m][i] * g[m][i];
-        e *= 0.5;
+    const vd M = {b->mu[0], b->mu[1], b->mu[2], b->mu[3]};
+    modal_core(u, rot ? R : NULL, rest, &L, &M, energy ? &e : NULL, y);
+    if (energy)
         for (int l = 0; l < LANES; l++)
             b->e[l] = e[l];
-    }
-    if (rot)
-        for (int m = 1; m < 8; m++) {
-            const vd v0 = g[m][0], v1 = g[m][1], v2 = g[m][2];
-            for (int i = 0; i < 3; i++)
-                g[m][i] = R[3 * i] * v0 + R[3 * i + 1] * v1 + R[3 * i + 2] * v2;
-        }
-    /* transposed transform back to the nodes (g_0 = 0) */
-    for (int i = 0; i < 3; i++) {
-        vd y[24];
-        const vd sd1 = g[2][i] + g[5][i], sd0 = g[2][i] - g[5][i];
-        const vd ds1 = g[1][i] + g[6][i], ds0 = g[1][i] - g[6][i];
-        const vd dd1 = g[4][i] + g[7][i], dd0 = g[4][i] - g[7][i];
-        const vd ss1 = g[3][i];
-        /* ss0 = -g3: folded into the next stage */
-        const vd s10 = sd0 - ss1, s00 = -(sd0 + ss1), s11 = ss1 + sd1, s01 = ss1 - sd1;
-        const vd d10 = ds0 + dd0, d00 = ds0 - dd0, d11 = ds1 + dd1, d01 = ds1 - dd1;
-        y[3 * 0 + i] = s00 - d00;
-        y[3 * 1 + i] = s00 + d00;
-        y[3 * 3 + i] = s10 - d10;
-        y[3 * 2 + i] = s10 + d10;
-        y[3 * 4 + i] = s01 - d01;
-        y[3 * 5 + i] = s01 + d01;
-        y[3 * 7 + i] = s11 - d11;
-        y[3 * 6 + i] = s11 + d11;
-        for (int k = 0; k < 8; k++)
-            for (int l = 0; l < LANES; l++)
-                b->out[l][3 * k + i] = y[3 * k + i][l];
-    }
+    for (int k = 0; k < 24; k++)
+        for (int l = 0; l < LANES; l++)
+            b->out[l][k] = y[k][l];
 }
-
 
 /* A graded cell: y_k = Σ_g f_g·detJ·σ_g ∇N_k(ξ_g), σ_g = λ tr(H) I + μ (H + Hᵀ),
  * H = Σ_k x_k ⊗ ∇N_k(ξ_g): the same sum as Σ_g f_g K_g x, without 24×24 products. */

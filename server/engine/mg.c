@@ -7,6 +7,9 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include <immintrin.h>
+#include <omp.h>
+
 #include "mat3.h"
 
 #define MG_NU 1           /* smoothing sweeps before and after the coarse correction */
@@ -18,6 +21,12 @@
 #endif
 #define MG_COARSE_SWEEPS 8 /* Jacobi sweeps on a coarsest level too large for Cholesky */
 #define MG_POWER_ITERS 10
+#define MG_LANES 16        /* cells per batch of the element pass (one float SIMD lane each) */
+typedef float vf __attribute__((vector_size(4 * MG_LANES)));
+#define MODAL_NAME modal_core_f
+#define MODAL_V vf
+#define MODAL_S float
+#include "modal_core.h"
 #define MG_LAMBDA_EVERY 64 /* re-estimate λmax(D⁻¹A) after this many setups */
 
 typedef struct mg_level {
@@ -42,8 +51,16 @@ typedef struct mg_level {
     const uint8_t *mask;
     uint8_t *own_mask;
     /* the V-cycle's single-precision copies (converted in cs_mg_setup) and scratch */
-    float *Rf, *sf, *dgf, *invf;      /* 9 per cell, 1 per cell, 1 per node, 9 per node */
-    float *fe, *x, *b, *t, *d;        /* 24 per cell; 3 per node each */
+    float *dgf, *invf;                /* 1 per node, 9 per node */
+    float *x, *b, *t, *d;             /* 3 per node each */
+    /* the element pass, in batches of MG_LANES cells (cell c: batch c / MG_LANES, lane
+     * c % MG_LANES; lanes past the last cell repeat the batch's first cell with L = M = 0) */
+    int n_batches;
+    int32_t *bidx;                    /* per batch 8 × MG_LANES: 3·node of corner k per lane */
+    float *bR;                        /* per batch 9 × MG_LANES: R_c (cs_mg_setup) */
+    float *bL, *bM;                   /* per batch MG_LANES: s_c·hλ/16, s_c·hμ/16 (cs_mg_setup) */
+    float *fe;                        /* per batch 24 × MG_LANES: the cells' products */
+    int32_t *fadj;                    /* per adj link: its corner's x component in fe */
     double lam;
     float omega;
 } mg_level;
@@ -55,7 +72,8 @@ struct cs_mg {
     int fine_nodes, fine_cells;
     const int32_t *fine_links;
     double K[576];
-    float Kf[576];
+    double hl, hm;     /* hλ, hμ of K (cs_cube_lame_h) */
+    bool avx512;       /* the element pass gathers with AVX-512 */
     double *dense;     /* coarsest: Cholesky factor (lower), NULL if swept */
     double *dense_x;   /* its right-hand side and solution in double */
     int dense_n;
@@ -321,18 +339,34 @@ static int alloc_level_state(mg_level *l, int level, int threads)
     l->threads = threads > 1 && l->n_cells >= CS_FEM_PARALLEL_CELLS ? threads : 1;
     l->s = malloc(nc * sizeof(double));
     l->dg = malloc((size_t)(l->n_nodes ? l->n_nodes : 1) * sizeof(double));
-    l->Rf = malloc(nc * 9 * sizeof(float));
-    l->sf = malloc(nc * sizeof(float));
     l->dgf = malloc((size_t)(l->n_nodes ? l->n_nodes : 1) * sizeof(float));
     l->invf = malloc((n3 ? n3 : 1) * 3 * sizeof(float));
-    l->fe = malloc(nc * 24 * sizeof(float));
+    const size_t nb = (nc + MG_LANES - 1) / MG_LANES, vb = MG_LANES * sizeof(float);
+    l->n_batches = (l->n_cells + MG_LANES - 1) / MG_LANES;
+    l->bidx = aligned_alloc(64, nb * 8 * vb);
+    l->bR = aligned_alloc(64, nb * 9 * vb);
+    l->bL = aligned_alloc(64, nb * vb);
+    l->bM = aligned_alloc(64, nb * vb);
+    l->fe = aligned_alloc(64, nb * 24 * vb);
+    l->fadj = malloc(nc * 8 * sizeof(int32_t));
     l->x = malloc((n3 ? n3 : 1) * sizeof(float));
     l->b = malloc((n3 ? n3 : 1) * sizeof(float));
     l->t = malloc((n3 ? n3 : 1) * sizeof(float));
     l->d = malloc((n3 ? n3 : 1) * sizeof(float));
-    if (!l->d || !l->s || !l->dg || !l->Rf || !l->sf || !l->dgf || !l->invf || !l->fe || !l->x ||
-        !l->b || !l->t)
+    if (!l->d || !l->s || !l->dg || !l->dgf || !l->invf || !l->fe || !l->x || !l->b || !l->t ||
+        !l->bidx || !l->bR || !l->bL || !l->bM || !l->fadj)
         return -1;
+    for (int b = 0; b < l->n_batches; b++)
+        for (int p = 0; p < MG_LANES; p++) {
+            const int c = b * MG_LANES + p < l->n_cells ? b * MG_LANES + p : b * MG_LANES;
+            for (int k = 0; k < 8; k++)
+                l->bidx[(8 * b + k) * MG_LANES + p] = 3 * l->cell_nodes[8 * c + k];
+        }
+    for (int n = 0; n < l->n_nodes; n++)
+        for (int a = l->adj_start[n]; a < l->adj_start[n + 1]; a++) {
+            const int c = l->adj[a] / 8, k = l->adj[a] % 8;
+            l->fadj[a] = (24 * (c / MG_LANES) + 3 * k) * MG_LANES + c % MG_LANES;
+        }
     if (level == 0)
         return 0;
     l->own_R = malloc((size_t)l->n_cells * 9 * sizeof(double));
@@ -374,8 +408,11 @@ static void free_level(mg_level *l)
     free(l->dg);
     free(l->own_inv);
     free(l->own_mask);
-    free(l->Rf);
-    free(l->sf);
+    free(l->bidx);
+    free(l->bR);
+    free(l->bL);
+    free(l->bM);
+    free(l->fadj);
     free(l->dgf);
     free(l->invf);
     free(l->fe);
@@ -411,8 +448,8 @@ cs_mg *cs_mg_build(const cs_cubemesh *cm, const cs_fem *fem, uint32_t version)
     mg->fine_cells = cm->n_cells;
     mg->fine_links = cm->cell_nodes;
     memcpy(mg->K, fem->K, sizeof mg->K);
-    for (int i = 0; i < 576; i++)
-        mg->Kf[i] = (float)fem->K[i];
+    cs_cube_lame_h(fem->K, &mg->hl, &mg->hm);
+    mg->avx512 = __builtin_cpu_supports("avx512f");
     mg_level *l0 = &mg->lv[0];
     l0->n_cells = cm->n_cells;
     l0->n_nodes = cm->n_nodes;
@@ -492,26 +529,51 @@ double *cs_mg_node_diag(cs_mg *mg)
 
 /* ------------------------------------------------------------------ products */
 
-/* out = s R K Rᵀ u for one cell, u gathered from x at its nodes nd (single precision). */
-__attribute__((target_clones("arch=x86-64-v3", "default"))) static void
-cell_product(const float *restrict K, const float *restrict R, float s, const float *restrict x,
-             const int32_t *restrict nd, float *restrict out)
+/* The element pass of batch b: fe = s R K Rᵀ x per lane, by the modal kernel (fem.c) in
+ * single precision. The inputs are gathered per lane, with AVX-512 gathers where the CPU has
+ * them (the same values: the arithmetic that follows is the same code). */
+static inline __attribute__((always_inline)) void batch_rest(const mg_level *l, int b,
+                                                             const vf u[24])
 {
-    float u[24], ku[24] = {0};
-    for (int k = 0; k < 8; k++) {
-        const float *d = x + 3 * nd[k];
-        for (int i = 0; i < 3; i++)
-            u[3 * k + i] = R[i] * d[0] + R[3 + i] * d[1] + R[6 + i] * d[2];
+    vf R[9], y[24], L, M;
+    const float *Rb = l->bR + 9 * MG_LANES * (size_t)b;
+    for (int j = 0; j < 9; j++)
+        memcpy(&R[j], Rb + MG_LANES * j, sizeof(vf));
+    memcpy(&L, l->bL + MG_LANES * (size_t)b, sizeof L);
+    memcpy(&M, l->bM + MG_LANES * (size_t)b, sizeof M);
+    modal_core_f(u, R, 0.0f, &L, &M, NULL, y);
+    float *out = l->fe + 24 * MG_LANES * (size_t)b;
+    for (int k = 0; k < 24; k++)
+        memcpy(out + MG_LANES * k, &y[k], sizeof(vf));
+}
+
+__attribute__((optimize("fp-contract=fast"), target_clones("arch=x86-64-v3", "default")))
+static void batches_generic(const mg_level *l, const float *restrict x, int b0, int b1)
+{
+    for (int b = b0; b < b1; b++) {
+        const int32_t *ix = l->bidx + 8 * MG_LANES * (size_t)b;
+        vf u[24];
+        for (int k = 0; k < 8; k++)
+            for (int i = 0; i < 3; i++)
+                for (int p = 0; p < MG_LANES; p++)
+                    u[3 * k + i][p] = x[ix[MG_LANES * k + p] + i];
+        batch_rest(l, b, u);
     }
-    for (int j = 0; j < 24; j++) {
-        const float uj = u[j], *row = K + 24 * j;
-        for (int i = 0; i < 24; i++)
-            ku[i] += uj * row[i];
-    }
-    for (int k = 0; k < 8; k++) {
-        const float *v = ku + 3 * k;
-        for (int i = 0; i < 3; i++)
-            out[3 * k + i] = s * (R[3 * i] * v[0] + R[3 * i + 1] * v[1] + R[3 * i + 2] * v[2]);
+}
+
+__attribute__((optimize("fp-contract=fast"), target("arch=x86-64-v4")))
+static void batches_avx512(const mg_level *l, const float *restrict x, int b0, int b1)
+{
+    _Static_assert(MG_LANES == 16, "one 512-bit gather per component");
+    for (int b = b0; b < b1; b++) {
+        const int32_t *ix = l->bidx + 8 * MG_LANES * (size_t)b;
+        vf u[24];
+        for (int k = 0; k < 8; k++) {
+            const __m512i id = _mm512_load_si512((const void *)(ix + MG_LANES * k));
+            for (int i = 0; i < 3; i++)
+                u[3 * k + i] = (vf)_mm512_i32gather_ps(id, x + i, 4);
+        }
+        batch_rest(l, b, u);
     }
 }
 
@@ -520,17 +582,26 @@ cell_product(const float *restrict K, const float *restrict R, float s, const fl
 static void apply_ex(const cs_mg *mg, int level, const float *x, const float *b, float *y)
 {
     const mg_level *l = &mg->lv[level];
-#pragma omp parallel for num_threads(l->threads) schedule(static)
-    for (int c = 0; c < l->n_cells; c++)
-        cell_product(mg->Kf, l->Rf + 9 * c, l->sf[c], x, l->cell_nodes + 8 * c, l->fe + 24 * c);
+    const bool avx512 = mg->avx512;
+#pragma omp parallel num_threads(l->threads)
+    {
+        /* contiguous ranges of batches per thread, as schedule(static) would give */
+        const int nt = omp_get_num_threads(), t = omp_get_thread_num();
+        const int b0 = (int)((int64_t)l->n_batches * t / nt);
+        const int b1 = (int)((int64_t)l->n_batches * (t + 1) / nt);
+        if (avx512)
+            batches_avx512(l, x, b0, b1);
+        else
+            batches_generic(l, x, b0, b1);
+    }
 #pragma omp parallel for num_threads(l->threads) schedule(static)
     for (int n = 0; n < l->n_nodes; n++) {
         float s[3] = {0, 0, 0};
         for (int a = l->adj_start[n]; a < l->adj_start[n + 1]; a++) {
-            const float *v = l->fe + 3 * l->adj[a];
+            const float *v = l->fe + l->fadj[a];
             s[0] += v[0];
-            s[1] += v[1];
-            s[2] += v[2];
+            s[1] += v[MG_LANES];
+            s[2] += v[2 * MG_LANES];
         }
         for (int k = 0; k < 3; k++) {
             const int d = 3 * n + k;
@@ -773,14 +844,18 @@ out:
 }
 
 /* The single-precision copies the V-cycle reads. */
-static void to_single(mg_level *l)
+static void to_single(mg_level *l, double hl, double hm)
 {
 #pragma omp parallel for num_threads(l->threads) schedule(static)
-    for (int c = 0; c < l->n_cells; c++) {
-        for (int k = 0; k < 9; k++)
-            l->Rf[9 * c + k] = (float)l->R[9 * c + k];
-        l->sf[c] = (float)l->s[c];
-    }
+    for (int b = 0; b < l->n_batches; b++)
+        for (int p = 0; p < MG_LANES; p++) {
+            const int c = b * MG_LANES + p;
+            const bool live = c < l->n_cells;
+            for (int k = 0; k < 9; k++)
+                l->bR[(9 * b + k) * MG_LANES + p] = live ? (float)l->R[9 * c + k] : k % 4 == 0;
+            l->bL[b * MG_LANES + p] = live ? (float)(l->s[c] * hl / 16.0) : 0.0f;
+            l->bM[b * MG_LANES + p] = live ? (float)(l->s[c] * hm / 16.0) : 0.0f;
+        }
 #pragma omp parallel for num_threads(l->threads) schedule(static)
     for (int n = 0; n < l->n_nodes; n++) {
         for (int k = 0; k < 9; k++)
@@ -803,7 +878,7 @@ int cs_mg_setup(cs_mg *mg, const cs_fem *fem, cs_matvec_fn A, void *ctx, const d
     if (mg->dense && setup_dense(mg))
         return -1;
     for (int l = 0; l < mg->n_levels; l++)
-        to_single(&mg->lv[l]);
+        to_single(&mg->lv[l], mg->hl, mg->hm);
     /* Smoothing weights: re-estimated when the operator's kind changes, and now and then. */
     const double key[3] = {l0->s[0], l0->dg[0], (double)mg->n_levels};
     if (mg->setups % MG_LAMBDA_EVERY == 0 || memcmp(key, mg->key, sizeof key) != 0) {
