@@ -21,6 +21,7 @@
 #endif
 #define MG_COARSE_SWEEPS 8 /* Jacobi sweeps on a coarsest level too large for Cholesky */
 #define MG_POWER_ITERS 10
+#define MG_CHUNK 64        /* batches per chunk of apply_ex (1024 cells, 96 KiB of fe) */
 #define MG_LANES 16        /* cells per batch of the element pass (one float SIMD lane each) */
 typedef float vf __attribute__((vector_size(4 * MG_LANES)));
 #define MODAL_NAME modal_core_f
@@ -61,6 +62,11 @@ typedef struct mg_level {
     float *bL, *bM;                   /* per batch MG_LANES: s_c·hλ/16, s_c·hμ/16 (cs_mg_setup) */
     float *fe;                        /* per batch 24 × MG_LANES: the cells' products */
     int32_t *fadj;                    /* per adj link: its corner's x component in fe */
+    /* the node pass follows the element pass chunk by chunk (apply_ex): the nodes ordered by
+     * the batch of their last cell (nodes without cells: batch 0), then by index */
+    int32_t *norder;                  /* n_nodes */
+    int32_t *nminb;                   /* per position in norder: the batch of its first cell */
+    int32_t *nfirst;                  /* n_batches + 1: first position whose last batch >= b */
     double lam;
     float omega;
 } mg_level;
@@ -349,13 +355,37 @@ static int alloc_level_state(mg_level *l, int level, int threads)
     l->bM = aligned_alloc(64, nb * vb);
     l->fe = aligned_alloc(64, nb * 24 * vb);
     l->fadj = malloc(nc * 8 * sizeof(int32_t));
+    l->norder = malloc((size_t)(l->n_nodes ? l->n_nodes : 1) * sizeof(int32_t));
+    l->nminb = malloc((size_t)(l->n_nodes ? l->n_nodes : 1) * sizeof(int32_t));
+    l->nfirst = calloc(nb + 2, sizeof(int32_t));
     l->x = malloc((n3 ? n3 : 1) * sizeof(float));
     l->b = malloc((n3 ? n3 : 1) * sizeof(float));
     l->t = malloc((n3 ? n3 : 1) * sizeof(float));
     l->d = malloc((n3 ? n3 : 1) * sizeof(float));
     if (!l->d || !l->s || !l->dg || !l->dgf || !l->invf || !l->fe || !l->x || !l->b || !l->t ||
-        !l->bidx || !l->bR || !l->bL || !l->bM || !l->fadj)
+        !l->bidx || !l->bR || !l->bL || !l->bM || !l->fadj || !l->norder || !l->nminb ||
+        !l->nfirst)
         return -1;
+    /* counting sort of the nodes by the batch of their last cell (adj: cells increasing) */
+    for (int n = 0; n < l->n_nodes; n++) {
+        const int a0 = l->adj_start[n], a1 = l->adj_start[n + 1];
+        l->nfirst[(a1 > a0 ? l->adj[a1 - 1] / 8 / MG_LANES : 0) + 1]++;
+    }
+    for (int b = 0; b <= l->n_batches; b++)
+        l->nfirst[b + 1] += l->nfirst[b];
+    {
+        int32_t *fill = malloc(((size_t)l->n_batches + 1) * sizeof(int32_t));
+        if (!fill)
+            return -1;
+        memcpy(fill, l->nfirst, ((size_t)l->n_batches + 1) * sizeof(int32_t));
+        for (int n = 0; n < l->n_nodes; n++) {
+            const int a0 = l->adj_start[n], a1 = l->adj_start[n + 1];
+            const int q = fill[a1 > a0 ? l->adj[a1 - 1] / 8 / MG_LANES : 0]++;
+            l->norder[q] = n;
+            l->nminb[q] = a1 > a0 ? l->adj[a0] / 8 / MG_LANES : 0;
+        }
+        free(fill);
+    }
     for (int b = 0; b < l->n_batches; b++)
         for (int p = 0; p < MG_LANES; p++) {
             const int c = b * MG_LANES + p < l->n_cells ? b * MG_LANES + p : b * MG_LANES;
@@ -413,6 +443,9 @@ static void free_level(mg_level *l)
     free(l->bL);
     free(l->bM);
     free(l->fadj);
+    free(l->norder);
+    free(l->nminb);
+    free(l->nfirst);
     free(l->dgf);
     free(l->invf);
     free(l->fe);
@@ -577,43 +610,75 @@ static void batches_avx512(const mg_level *l, const float *restrict x, int b0, i
     }
 }
 
+/* Node n's row of y (see apply_ex): its cells' products summed in the adj order. */
+static inline __attribute__((always_inline)) void node_out(const mg_level *l, int n,
+                                                           const float *x, const float *b,
+                                                           float *y)
+{
+    float s[3] = {0, 0, 0};
+    for (int a = l->adj_start[n]; a < l->adj_start[n + 1]; a++) {
+        const float *v = l->fe + l->fadj[a];
+        s[0] += v[0];
+        s[1] += v[MG_LANES];
+        s[2] += v[2 * MG_LANES];
+    }
+    for (int k = 0; k < 3; k++) {
+        const int d = 3 * n + k;
+        const float ax = s[k] + l->dgf[n] * x[d];
+        y[d] = !b ? ax : l->mask[d] ? 0.0f : b[d] - ax;
+    }
+}
+
 /* y = Σ s R K Rᵀ x + dg x on any level (the finest too: rediscretized like the coarse ones);
  * with b, the residual y = b − (that) at free dofs and 0 at held ones, in the same pass. */
-static void apply_ex(const cs_mg *mg, int level, const float *x, const float *b, float *y)
+static void apply_path(const cs_mg *mg, int level, bool avx512, const float *x, const float *b,
+                       float *y)
 {
     const mg_level *l = &mg->lv[level];
-    const bool avx512 = mg->avx512;
+    if (l->n_batches == 0) {
+        for (int n = 0; n < l->n_nodes; n++)
+            node_out(l, n, x, b, y);
+        return;
+    }
 #pragma omp parallel num_threads(l->threads)
     {
-        /* contiguous ranges of batches per thread, as schedule(static) would give */
+        /* Each thread: a contiguous range of batches, chunk by chunk, each chunk's element pass
+         * followed by the node pass of the nodes whose cells are all done and all its own (fe
+         * still in cache); after the barrier the nodes it shares with lower threads. */
         const int nt = omp_get_num_threads(), t = omp_get_thread_num();
         const int b0 = (int)((int64_t)l->n_batches * t / nt);
         const int b1 = (int)((int64_t)l->n_batches * (t + 1) / nt);
-        if (avx512)
-            batches_avx512(l, x, b0, b1);
-        else
-            batches_generic(l, x, b0, b1);
-    }
-#pragma omp parallel for num_threads(l->threads) schedule(static)
-    for (int n = 0; n < l->n_nodes; n++) {
-        float s[3] = {0, 0, 0};
-        for (int a = l->adj_start[n]; a < l->adj_start[n + 1]; a++) {
-            const float *v = l->fe + l->fadj[a];
-            s[0] += v[0];
-            s[1] += v[MG_LANES];
-            s[2] += v[2 * MG_LANES];
+        for (int j0 = b0; j0 < b1; j0 += MG_CHUNK) {
+            const int j1 = j0 + MG_CHUNK < b1 ? j0 + MG_CHUNK : b1;
+            if (avx512)
+                batches_avx512(l, x, j0, j1);
+            else
+                batches_generic(l, x, j0, j1);
+            for (int q = l->nfirst[j0]; q < l->nfirst[j1]; q++)
+                if (l->nminb[q] >= b0)
+                    node_out(l, l->norder[q], x, b, y);
         }
-        for (int k = 0; k < 3; k++) {
-            const int d = 3 * n + k;
-            const float ax = s[k] + l->dgf[n] * x[d];
-            y[d] = !b ? ax : l->mask[d] ? 0.0f : b[d] - ax;
-        }
+#pragma omp barrier
+        for (int q = l->nfirst[b0]; q < l->nfirst[b1]; q++)
+            if (l->nminb[q] < b0)
+                node_out(l, l->norder[q], x, b, y);
     }
+}
+
+static void apply_ex(const cs_mg *mg, int level, const float *x, const float *b, float *y)
+{
+    apply_path(mg, level, mg->avx512, x, b, y);
 }
 
 static void apply(const cs_mg *mg, int level, const float *x, float *y)
 {
     apply_ex(mg, level, x, NULL, y);
+}
+
+void cs_mg_apply_level(const cs_mg *mg, int level, bool portable, const float *x, float *y)
+{
+    if (level >= 0 && level < mg->n_levels)
+        apply_path(mg, level, mg->avx512 && !portable, x, NULL, y);
 }
 
 /* x (+)= ω D⁻¹ r at free dofs; zero at held ones. */

@@ -80,4 +80,10 @@ int cs_mg_setup(cs_mg *mg, const cs_fem *fem, cs_matvec_fn A, void *ctx, const d
 /* z = B r, one V-cycle (a cs_precond_fn; ctx is the cs_mg). */
 void cs_mg_vcycle(void *ctx, const double *r, double *z);
 
+/* y = A x with level `level`'s operator in the V-cycle's single precision (level 0: Σ_c s_c
+ * R_c K R_cᵀ x + dg x over the finest cells, as cs_mg_setup left them), x and y 3 per node of
+ * the level; portable: with the gathers of CPUs without AVX-512 even where it is present. For
+ * tests: the V-cycle's own products. */
+void cs_mg_apply_level(const cs_mg *mg, int level, bool portable, const float *x, float *y);
+
 #endif
