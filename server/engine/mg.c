@@ -482,7 +482,7 @@ cs_mg *cs_mg_build(const cs_cubemesh *cm, const cs_fem *fem, uint32_t version)
     mg->fine_links = cm->cell_nodes;
     memcpy(mg->K, fem->K, sizeof mg->K);
     cs_cube_lame_h(fem->K, &mg->hl, &mg->hm);
-    mg->avx512 = __builtin_cpu_supports("avx512f");
+    mg->avx512 = __builtin_cpu_supports("x86-64-v4");
     mg_level *l0 = &mg->lv[0];
     l0->n_cells = cm->n_cells;
     l0->n_nodes = cm->n_nodes;
