@@ -23,7 +23,8 @@
 #define MG_POWER_ITERS 10
 #define MG_CHUNK 64        /* batches per chunk of apply_ex (1024 cells, 96 KiB of fe) */
 #define MG_LANES 16        /* cells per batch of the element pass (one float SIMD lane each) */
-typedef float vf __attribute__((vector_size(4 * MG_LANES)));
+#define VF_LANES 8         /* lanes per vector of the element pass's arithmetic */
+typedef float vf __attribute__((vector_size(4 * VF_LANES)));
 #define MODAL_NAME modal_core_f
 #define MODAL_V vf
 #define MODAL_S float
@@ -562,52 +563,67 @@ double *cs_mg_node_diag(cs_mg *mg)
 
 /* ------------------------------------------------------------------ products */
 
-/* The element pass of batch b: fe = s R K Rᵀ x per lane, by the modal kernel (fem.c) in
- * single precision. The inputs are gathered per lane, with AVX-512 gathers where the CPU has
- * them (the same values: the arithmetic that follows is the same code). */
-static inline __attribute__((always_inline)) void batch_rest(const mg_level *l, int b,
-                                                             const vf u[24])
+/* The element pass of half h (lanes 8h..8h+7) of batch b: fe = s R K Rᵀ x per lane, by the
+ * modal kernel (fem.c, modal_core.h) in single precision, 8 lanes in 256-bit vectors (512-bit
+ * vectors of 16 lanes with gathers measured slower on this Zen 4, which splits them in two). */
+static inline __attribute__((always_inline)) void half_rest(const mg_level *l, int b, int h,
+                                                            const vf u[24])
 {
     vf R[9], y[24], L, M;
-    const float *Rb = l->bR + 9 * MG_LANES * (size_t)b;
+    const size_t o = (size_t)b * MG_LANES + VF_LANES * h;
     for (int j = 0; j < 9; j++)
-        memcpy(&R[j], Rb + MG_LANES * j, sizeof(vf));
-    memcpy(&L, l->bL + MG_LANES * (size_t)b, sizeof L);
-    memcpy(&M, l->bM + MG_LANES * (size_t)b, sizeof M);
+        memcpy(&R[j], l->bR + 9 * MG_LANES * (size_t)b + MG_LANES * j + VF_LANES * h, sizeof(vf));
+    memcpy(&L, l->bL + o, sizeof L);
+    memcpy(&M, l->bM + o, sizeof M);
     modal_core_f(u, R, 0.0f, &L, &M, NULL, y);
-    float *out = l->fe + 24 * MG_LANES * (size_t)b;
+    float *out = l->fe + 24 * MG_LANES * (size_t)b + VF_LANES * h;
     for (int k = 0; k < 24; k++)
         memcpy(out + MG_LANES * k, &y[k], sizeof(vf));
 }
 
+/* Inputs lane by lane. */
 __attribute__((optimize("fp-contract=fast"), target_clones("arch=x86-64-v3", "default")))
 static void batches_generic(const mg_level *l, const float *restrict x, int b0, int b1)
 {
-    for (int b = b0; b < b1; b++) {
-        const int32_t *ix = l->bidx + 8 * MG_LANES * (size_t)b;
-        vf u[24];
-        for (int k = 0; k < 8; k++)
-            for (int i = 0; i < 3; i++)
-                for (int p = 0; p < MG_LANES; p++)
-                    u[3 * k + i][p] = x[ix[MG_LANES * k + p] + i];
-        batch_rest(l, b, u);
-    }
+    for (int b = b0; b < b1; b++)
+        for (int h = 0; h < MG_LANES / VF_LANES; h++) {
+            const int32_t *ix = l->bidx + 8 * MG_LANES * (size_t)b + VF_LANES * h;
+            vf u[24];
+            for (int k = 0; k < 8; k++)
+                for (int i = 0; i < 3; i++)
+                    for (int p = 0; p < VF_LANES; p++)
+                        u[3 * k + i][p] = x[ix[MG_LANES * k + p] + i];
+            half_rest(l, b, h, u);
+        }
 }
 
+/* Inputs with AVX-512VL: each corner's nodal 3-vectors by masked loads, transposed into x, y, z
+ * across the lanes in registers (the same values as batches_generic). */
 __attribute__((optimize("fp-contract=fast"), target("arch=x86-64-v4")))
 static void batches_avx512(const mg_level *l, const float *restrict x, int b0, int b1)
 {
-    _Static_assert(MG_LANES == 16, "one 512-bit gather per component");
-    for (int b = b0; b < b1; b++) {
-        const int32_t *ix = l->bidx + 8 * MG_LANES * (size_t)b;
-        vf u[24];
-        for (int k = 0; k < 8; k++) {
-            const __m512i id = _mm512_load_si512((const void *)(ix + MG_LANES * k));
-            for (int i = 0; i < 3; i++)
-                u[3 * k + i] = (vf)_mm512_i32gather_ps(id, x + i, 4);
+    _Static_assert(VF_LANES == 8, "two 4-lane groups per 256-bit vector");
+    for (int b = b0; b < b1; b++)
+        for (int h = 0; h < MG_LANES / VF_LANES; h++) {
+            const int32_t *ix = l->bidx + 8 * MG_LANES * (size_t)b + VF_LANES * h;
+            vf u[24];
+            for (int k = 0; k < 8; k++) {
+                const int32_t *q = ix + MG_LANES * k;
+                __m256 r[4]; /* (x, y, z, 0) of lanes j | j + 4 */
+                for (int j = 0; j < 4; j++)
+                    r[j] = _mm256_insertf128_ps(
+                        _mm256_castps128_ps256(_mm_maskz_loadu_ps(7, x + q[j])),
+                        _mm_maskz_loadu_ps(7, x + q[j + 4]), 1);
+                const __m256 t0 = _mm256_unpacklo_ps(r[0], r[1]); /* x0 x1 y0 y1 | 4 5 */
+                const __m256 t1 = _mm256_unpackhi_ps(r[0], r[1]); /* z0 z1 0 0 | 4 5 */
+                const __m256 t2 = _mm256_unpacklo_ps(r[2], r[3]);
+                const __m256 t3 = _mm256_unpackhi_ps(r[2], r[3]);
+                u[3 * k] = (vf)_mm256_shuffle_ps(t0, t2, _MM_SHUFFLE(1, 0, 1, 0));
+                u[3 * k + 1] = (vf)_mm256_shuffle_ps(t0, t2, _MM_SHUFFLE(3, 2, 3, 2));
+                u[3 * k + 2] = (vf)_mm256_shuffle_ps(t1, t3, _MM_SHUFFLE(1, 0, 1, 0));
+            }
+            half_rest(l, b, h, u);
         }
-        batch_rest(l, b, u);
-    }
 }
 
 /* Node n's row of y (see apply_ex): its cells' products summed in the adj order. */
