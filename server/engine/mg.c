@@ -626,10 +626,20 @@ static void batches_avx512(const mg_level *l, const float *restrict x, int b0, i
         }
 }
 
-/* Node n's row of y (see apply_ex): its cells' products summed in the adj order. */
+/* A Chebyshev step fused into a residual's node pass: d = a d + c D⁻¹ r (d = c D⁻¹ r if
+ * first), x += d at free dofs, 0 at held ones (cheb_update's arithmetic, node by node). */
+typedef struct cheb_step {
+    float *d, *x;
+    float a, c;
+    bool first;
+} cheb_step;
+
+/* Node n's row of y (see apply_path): its cells' products summed in the adj order; with cs,
+ * instead of storing it, the Chebyshev step on node n (its cells are all done: no later cell
+ * of this pass reads its x). */
 static inline __attribute__((always_inline)) void node_out(const mg_level *l, int n,
                                                            const float *x, const float *b,
-                                                           float *y)
+                                                           float *y, const cheb_step *cs)
 {
     float s[3] = {0, 0, 0};
     for (int a = l->adj_start[n]; a < l->adj_start[n + 1]; a++) {
@@ -638,22 +648,37 @@ static inline __attribute__((always_inline)) void node_out(const mg_level *l, in
         s[1] += v[MG_LANES];
         s[2] += v[2 * MG_LANES];
     }
+    float r[3];
     for (int k = 0; k < 3; k++) {
         const int d = 3 * n + k;
         const float ax = s[k] + l->dgf[n] * x[d];
-        y[d] = !b ? ax : l->mask[d] ? 0.0f : b[d] - ax;
+        r[k] = !b ? ax : l->mask[d] ? 0.0f : b[d] - ax;
+    }
+    if (!cs) {
+        for (int k = 0; k < 3; k++)
+            y[3 * n + k] = r[k];
+        return;
+    }
+    const float *m = l->invf + 9 * n;
+    for (int k = 0; k < 3; k++) {
+        const int j = 3 * n + k;
+        const float z = m[3 * k] * r[0] + m[3 * k + 1] * r[1] + m[3 * k + 2] * r[2];
+        const float dj = l->mask[j] ? 0.0f : cs->first ? cs->c * z : cs->a * cs->d[j] + cs->c * z;
+        cs->d[j] = dj;
+        cs->x[j] = l->mask[j] ? 0.0f : cs->x[j] + dj;
     }
 }
 
 /* y = Σ s R K Rᵀ x + dg x on any level (the finest too: rediscretized like the coarse ones);
- * with b, the residual y = b − (that) at free dofs and 0 at held ones, in the same pass. */
+ * with b, the residual y = b − (that) at free dofs and 0 at held ones, in the same pass; with
+ * cs (and b), the Chebyshev step on that residual instead of y (cs->x is x). */
 static void apply_path(const cs_mg *mg, int level, bool avx512, const float *x, const float *b,
-                       float *y)
+                       float *y, const cheb_step *cs)
 {
     const mg_level *l = &mg->lv[level];
     if (l->n_batches == 0) {
         for (int n = 0; n < l->n_nodes; n++)
-            node_out(l, n, x, b, y);
+            node_out(l, n, x, b, y, cs);
         return;
     }
 #pragma omp parallel num_threads(l->threads)
@@ -672,18 +697,18 @@ static void apply_path(const cs_mg *mg, int level, bool avx512, const float *x, 
                 batches_generic(l, x, j0, j1);
             for (int q = l->nfirst[j0]; q < l->nfirst[j1]; q++)
                 if (l->nminb[q] >= b0)
-                    node_out(l, l->norder[q], x, b, y);
+                    node_out(l, l->norder[q], x, b, y, cs);
         }
 #pragma omp barrier
         for (int q = l->nfirst[b0]; q < l->nfirst[b1]; q++)
             if (l->nminb[q] < b0)
-                node_out(l, l->norder[q], x, b, y);
+                node_out(l, l->norder[q], x, b, y, cs);
     }
 }
 
 static void apply_ex(const cs_mg *mg, int level, const float *x, const float *b, float *y)
 {
-    apply_path(mg, level, mg->avx512, x, b, y);
+    apply_path(mg, level, mg->avx512, x, b, y, NULL);
 }
 
 static void apply(const cs_mg *mg, int level, const float *x, float *y)
@@ -694,7 +719,7 @@ static void apply(const cs_mg *mg, int level, const float *x, float *y)
 void cs_mg_apply_level(const cs_mg *mg, int level, bool portable, const float *x, float *y)
 {
     if (level >= 0 && level < mg->n_levels)
-        apply_path(mg, level, mg->avx512 && !portable, x, NULL, y);
+        apply_path(mg, level, mg->avx512 && !portable, x, NULL, y, NULL);
 }
 
 /* x (+)= ω D⁻¹ r at free dofs; zero at held ones. */
@@ -753,14 +778,14 @@ static void cheb(const cs_mg *mg, int level, const float *b, float *x, bool zero
     if (zero) {
         cheb_update(l, b, l->d, x, 0.0f, (float)(1.0 / theta), true, true);
     } else {
-        apply_ex(mg, level, x, b, l->t);
-        cheb_update(l, l->t, l->d, x, 0.0f, (float)(1.0 / theta), true, false);
+        /* apply_ex into l->t, then cheb_update: fused */
+        const cheb_step cs = {l->d, x, 0.0f, (float)(1.0 / theta), true};
+        apply_path(mg, level, mg->avx512, x, b, NULL, &cs);
     }
     for (int k = 1; k < MG_CHEB; k++) {
-        apply_ex(mg, level, x, b, l->t);
         const double rn = 1.0 / (2.0 * sigma - rho);
-        cheb_update(l, l->t, l->d, x, (float)(rn * rho), (float)(2.0 * rn / delta), false,
-                    false);
+        const cheb_step cs = {l->d, x, (float)(rn * rho), (float)(2.0 * rn / delta), false};
+        apply_path(mg, level, mg->avx512, x, b, NULL, &cs);
         rho = rn;
     }
 }
