@@ -18,12 +18,14 @@
  * FMA throughput (16 independent AVX2 / AVX-512 chains per thread, OpenMP threads), and with
  * --kernel N the GFLOP/s of cs_fem_apply_K on an N³ corotational block (flops from
  * cs_fem_product_flops) as a fraction of that peak, in the same run. Sizes of 200 000 cubes
- * or more get --big-steps steps × --big-runs runs (default 3 × 3).
+ * or more get --big-steps steps × --big-runs runs (default 3 × 3). --vcycle N: the time of one
+ * multigrid V-cycle (cs_mg_vcycle) on the implicit step's operator of an N³ block.
  *
  * Usage: bench_blocks [--sizes 8,16,32,48] [--runs 5] [--threads 1,2] [--csv FILE [--append]]
  *                     [--field none|cubes|gradient] [--precond jacobi,multigrid,auto]
  *        bench_blocks --box 75x15x15 [--h 0.04] [--young 1e5] [--steps S] ...
  *        bench_blocks --peak [--kernel 32 --calls 40]
+ *        bench_blocks --vcycle 48 [--calls 40]
  *        bench_blocks --static 32x8x8 [--h 0.04] [--young 1e7]
  */
 #include <math.h>
@@ -40,6 +42,8 @@
 #include "cubesim.h"
 #include "lattice.h"
 #include "fem.h"
+#include "mg.h"
+#include "solver.h"
 
 typedef struct result {
     double steps_per_s, ms_step, cpu_ms_step, iters, ms_rot, ms_rhs, ms_solve, ms_post, ms_skin;
@@ -289,6 +293,105 @@ static int kernel_gflops(int n, int threads, int calls, int runs, double *gflops
     return 0;
 }
 
+/* ------------------------------------------------------------------ the V-cycle */
+
+/* The fine operator of vcycle_ms: K dt² + m (the implicit step's, uniform lumped mass). */
+typedef struct vc_op {
+    cs_fem *fem;
+    double kc, m;
+} vc_op;
+
+static void vc_apply(void *ctx, const double *p, double *y)
+{
+    vc_op *c = ctx;
+    cs_fem_apply_K(c->fem, p, y);
+    for (int d = 0; d < 3 * c->fem->n_nodes; d++)
+        y[d] = c->kc * y[d] + c->m * p[d];
+}
+
+/* Milliseconds (wall and CPU, medians over runs of `calls`) of one multigrid V-cycle
+ * (cs_mg_vcycle) on the implicit step's operator of an n³ corotational block (bent as in
+ * kernel_gflops, bottom face held, E = 1e5 Pa, ρ = 1000 kg/m³, dt = 1/60 s). */
+static int vcycle_ms(int n, int threads, int calls, int runs, double *ms, double *cpu_ms,
+                     int *levels)
+{
+    char err[256];
+    int nc = n * n * n, rc = -1;
+    int32_t *ijk = cs_box_cells(n, n, n);
+    cs_cubemesh cm;
+    const double origin[3] = {0, 0, 0};
+    if (cs_cubemesh_build(&cm, 1.0 / n, origin, ijk, nc, err, sizeof err) != 0) {
+        fprintf(stderr, "bench_blocks: %s\n", err);
+        free(ijk);
+        return -1;
+    }
+    free(ijk);
+    cs_fem fem;
+    if (cs_fem_init(&fem, &cm, 1e5, 0.3, true, threads) != 0) {
+        cs_cubemesh_free(&cm);
+        return -1;
+    }
+    const int nn = cm.n_nodes;
+    const double dt = 1.0 / 60, h = 1.0 / n;
+    vc_op op = {&fem, dt * dt, 1000.0 * h * h * h};
+    double *x = malloc(sizeof(double) * 3 * nn), *r = malloc(sizeof(double) * 3 * nn),
+           *z = malloc(sizeof(double) * 3 * nn), *inv = malloc(sizeof(double) * 9 * nn);
+    uint8_t *mask = malloc(3 * (size_t)nn);
+    cs_mg *mg = cs_mg_build(&cm, &fem, 1);
+    if (!x || !r || !z || !inv || !mask || !mg)
+        goto out;
+    for (int a = 0; a < nn; a++) {
+        const double *X = cm.node_rest + 3 * a;
+        double th = 0.5 * X[2];
+        x[3 * a] = X[0] * cos(th) + X[2] * sin(th);
+        x[3 * a + 1] = X[1];
+        x[3 * a + 2] = -X[0] * sin(th) + X[2] * cos(th);
+        for (int k = 0; k < 3; k++) {
+            mask[3 * a + k] = X[2] < 1e-9;
+            r[3 * a + k] = mask[3 * a + k] ? 0.0 : sin(0.37 * (3 * a + k));
+        }
+    }
+    cs_fem_update_rotations(&fem, x);
+    cs_fem_diag_blocks(&fem, inv);
+    for (int a = 0; a < nn; a++) {
+        for (int k = 0; k < 9; k++)
+            inv[9 * a + k] *= op.kc;
+        for (int k = 0; k < 3; k++)
+            inv[9 * a + 4 * k] += op.m;
+    }
+    cs_invert_blocks(inv, nn);
+    double *s = cs_mg_cell_scale(mg), *dg = cs_mg_node_diag(mg);
+    for (int c = 0; c < nc; c++)
+        s[c] = op.kc;
+    for (int a = 0; a < nn; a++)
+        dg[a] = op.m;
+    if (cs_mg_setup(mg, &fem, vc_apply, &op, inv, mask) != 0)
+        goto out;
+    *levels = cs_mg_levels(mg);
+    cs_mg_vcycle(mg, r, z); /* warm-up */
+    double w[100], c[100];
+    for (int k = 0; k < runs; k++) {
+        double t0 = now_s(), c0 = cpu_s();
+        for (int i = 0; i < calls; i++)
+            cs_mg_vcycle(mg, r, z);
+        w[k] = 1e3 * (now_s() - t0) / calls;
+        c[k] = 1e3 * (cpu_s() - c0) / calls;
+    }
+    *ms = median(w, runs);
+    *cpu_ms = median(c, runs);
+    rc = 0;
+out:
+    cs_mg_free(mg);
+    free(x);
+    free(r);
+    free(z);
+    free(inv);
+    free(mask);
+    cs_fem_free(&fem);
+    cs_cubemesh_free(&cm);
+    return rc;
+}
+
 /* ------------------------------------------------------------------ static cantilever */
 
 static int static_once(const shape *sh, int threads, double *ms, double *cpu_ms, int *newton,
@@ -337,13 +440,14 @@ static void usage(void)
             "       bench_blocks --box 75x15x15 [--h 0.04] [--young 1e5] [--steps 30] [--runs 5]\n"
             "         [--threads 1,2] [--precond auto] [--csv FILE] [--append]\n"
             "       bench_blocks --peak [--kernel 32] [--calls 40] [--runs 5] [--threads 1,2]\n"
+            "       bench_blocks --vcycle 48 [--calls 40] [--runs 5] [--threads 1,2]\n"
             "       bench_blocks --static 32x8x8 [--h 0.04] [--young 1e7] [--runs 3] [--threads 1,2]\n");
 }
 
 int main(int argc, char **argv)
 {
     int sizes[16] = {8, 16, 32, 48}, ns = 4, threads[8] = {1, 2}, nt = 2, runs = 5;
-    int big_runs = 3, big_steps = 3, fixed_steps = 0, kernel_n = 0, calls = 40;
+    int big_runs = 3, big_steps = 3, fixed_steps = 0, kernel_n = 0, calls = 40, vcycle_n = 0;
     const char *csv = NULL;
     bool append = false, peak = false;
     enum { MODE_BLOCKS, MODE_BOX, MODE_PEAK, MODE_STATIC } mode = MODE_BLOCKS;
@@ -381,6 +485,8 @@ int main(int argc, char **argv)
             peak = true, mode = MODE_PEAK;
         else if (!strcmp(argv[i], "--kernel") && i + 1 < argc)
             kernel_n = atoi(argv[++i]), mode = MODE_PEAK;
+        else if (!strcmp(argv[i], "--vcycle") && i + 1 < argc)
+            vcycle_n = atoi(argv[++i]), mode = MODE_PEAK;
         else if (!strcmp(argv[i], "--calls") && i + 1 < argc)
             calls = atoi(argv[++i]);
         else if (!strcmp(argv[i], "--field") && i + 1 < argc && !strcmp(argv[i + 1], "none"))
@@ -424,6 +530,19 @@ int main(int argc, char **argv)
             return 2;
         }
 
+    if (mode == MODE_PEAK && vcycle_n > 0 && !peak && kernel_n == 0) {
+        printf("| V-cycle | threads | levels | ms/call | CPU ms/call |\n|---|---|---|---|---|\n");
+        for (int ti = 0; ti < nt; ti++) {
+            double ms, cms;
+            int lv = 0;
+            if (vcycle_ms(vcycle_n, threads[ti], calls, runs, &ms, &cms, &lv) != 0)
+                return 1;
+            printf("| cs_mg_vcycle, %d³ corotational | %d | %d | %.2f | %.2f |\n", vcycle_n,
+                   threads[ti], lv, ms, cms);
+            fflush(stdout);
+        }
+        return 0;
+    }
     if (mode == MODE_PEAK) {
         /* The machine's FMA peak, then the element product against it, in one run. */
         bool has512 = __builtin_cpu_supports("avx512f"), has256 = __builtin_cpu_supports("fma");

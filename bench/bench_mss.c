@@ -29,6 +29,7 @@
 
 #include "bench_util.h"
 #include "cubesim.h"
+#include "lattice.h"
 
 typedef struct solved {
     int nx, ny, nz;      /* lattice extent in cubes */
@@ -150,17 +151,8 @@ static double max_error(solved *coarse, solved *ref)
 
 static int32_t *box_cells(int nx, int ny, int nz, int *n)
 {
-    int32_t *ijk = malloc(sizeof(int32_t) * 3 * (size_t)nx * ny * nz);
-    int c = 0;
-    for (int k = 0; k < nz; k++)
-        for (int j = 0; j < ny; j++)
-            for (int i = 0; i < nx; i++) {
-                ijk[3 * c] = i;
-                ijk[3 * c + 1] = j;
-                ijk[3 * c + 2] = k;
-                c++;
-            }
-    *n = c;
+    int32_t *ijk = cs_box_cells(nx, ny, nz);
+    *n = nx * ny * nz;
     return ijk;
 }
 

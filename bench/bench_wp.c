@@ -55,6 +55,7 @@
 #include "cubesim.h"
 #include "elastic.h"
 #include "localframe.h"
+#include "lattice.h"
 
 static const double L = 1.0, H = 0.1, E = 1e6, RHO = 1000, G_SMALL = 0.01, G_LARGE = 2.5;
 
@@ -89,16 +90,7 @@ static cs_world_t *beam(cs_model model, cs_integrator integ, int nz, double dt, 
         return NULL;
     const int nx = 10 * nz, n = nx * nz * nz;
     const double h = H / nz;
-    int32_t *ijk = malloc(sizeof(int32_t) * 3 * (size_t)n);
-    int c = 0;
-    for (int k = 0; k < nz; k++)
-        for (int j = 0; j < nz; j++)
-            for (int i = 0; i < nx; i++) {
-                ijk[3 * c] = i;
-                ijk[3 * c + 1] = j;
-                ijk[3 * c + 2] = k;
-                c++;
-            }
+    int32_t *ijk = cs_box_cells(nx, nz, nz);
     cs_object_def d = cs_object_def_default();
     d.name = "beam";
     d.model = model;

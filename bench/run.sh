@@ -145,6 +145,8 @@ echo "bench_rigid: scenes/drop.json, 2 s"
 build/bin/bench_rigid scenes/drop.json 2 | tee "$out/rigid_drop.txt"
 echo "bench_rigid: boxes falling and sleeping, N = 4, 8, 16 (2·N² boxes)"
 for n in 4 8 16; do build/bin/bench_rigid --boxes $n; done | tee "$out/rigid_boxes.txt"
+echo "bench_rigid: boxes on a held deformable slab, grid broad phase against the plain loop, N = 2, 4, 8"
+for n in 2 4 8; do build/bin/bench_rigid --slab $n; done | tee "$out/rigid_slab.txt"
 
 # Work-precision (issue 6): run time against error for every model and integrator, sweeping
 # the cube size, dt and the CG tolerance, on a ν = 0 cantilever against Timoshenko beam theory

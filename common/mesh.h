@@ -25,6 +25,9 @@ void cs_mesh_free(cs_mesh *m);
  * node transforms applied, triangulated, identical vertices welded (by exact position after
  * import), degenerate triangles dropped. Returns 0, or -1 with a one-line message naming the
  * file and the problem (missing, unreadable, rejected by assimp, no triangles, non-finite).
+ * The import runs in a forked child under a memory cap (the caller's mapped size plus half
+ * the machine's RAM) and a 120 s limit: a file that makes assimp allocate without bound,
+ * crash or hang is refused like any other bad file, and the caller's state is untouched.
  */
 int cs_mesh_load(const char *path, cs_mesh *out, char *err, size_t errlen);
 

@@ -7,6 +7,8 @@
  * positions across meshes (sort, O(n log n): STL shares none), drop points, lines, triangles with
  * a repeated index or exactly zero area, and vertices no triangle uses. Every coordinate is
  * checked with isfinite. Assimp stores float32 (ai_real), so that is the precision of any file.
+ * All of that runs in a forked child under a memory cap and a time limit (see "the guarded
+ * import" below); the parent only reads the result from a pipe.
  *
  * Export: a scene built by hand (one aiMesh and one child node per piece, one empty material),
  * handed to aiExportScene and freed here — it was never assimp's, so aiReleaseImport must not
@@ -25,7 +27,13 @@
 #include <stdlib.h>
 #include <string.h>
 #include <strings.h>
+#include <poll.h>
+#include <signal.h>
+#include <sys/resource.h>
 #include <sys/stat.h>
+#include <sys/wait.h>
+#include <time.h>
+#include <unistd.h>
 
 void cs_mesh_free(cs_mesh *m)
 {
@@ -127,7 +135,8 @@ static int weld_and_clean(cs_mesh *m)
     return 0;
 }
 
-int cs_mesh_load(const char *path, cs_mesh *out, char *err, size_t errlen)
+/* The import itself (in the child process of cs_mesh_load). */
+static int load_direct(const char *path, cs_mesh *out, char *err, size_t errlen)
 {
     memset(out, 0, sizeof *out);
     struct stat st;
@@ -236,6 +245,172 @@ int cs_mesh_load(const char *path, cs_mesh *out, char *err, size_t errlen)
         return -1;
     }
     return 0;
+}
+
+/* ---------------------------------------------------------------- the guarded import */
+
+/* Importers are large parsers of untrusted files: a crafted header can make one allocate
+ * terabytes (assimp's own test file invalid/OutOfMemory.off claims 353 535 235 358 vertices)
+ * or crash. cs_mesh_load therefore runs the import in a child process under a memory cap and
+ * a time limit and takes the result through a pipe; whatever the child does, the caller gets
+ * a mesh or a one-line error. */
+#define IMPORT_SECONDS 120
+
+static int write_all(int fd, const void *buf, size_t n)
+{
+    const char *p = buf;
+    while (n > 0) {
+        ssize_t w = write(fd, p, n);
+        if (w < 0 && errno == EINTR)
+            continue;
+        if (w <= 0)
+            return -1;
+        p += w;
+        n -= (size_t)w;
+    }
+    return 0;
+}
+
+/* Read n bytes before the deadline (CLOCK_MONOTONIC seconds); 0, or -1 (EOF, error), -2 (late). */
+static int read_all(int fd, void *buf, size_t n, double deadline)
+{
+    char *p = buf;
+    while (n > 0) {
+        struct timespec ts;
+        clock_gettime(CLOCK_MONOTONIC, &ts);
+        double left = deadline - (ts.tv_sec + 1e-9 * ts.tv_nsec);
+        if (left <= 0)
+            return -2;
+        struct pollfd pf = {fd, POLLIN, 0};
+        int r = poll(&pf, 1, (int)(left * 1000) + 1);
+        if (r < 0 && errno == EINTR)
+            continue;
+        if (r < 0)
+            return -1;
+        if (r == 0)
+            continue;
+        ssize_t got = read(fd, p, n);
+        if (got < 0 && errno == EINTR)
+            continue;
+        if (got <= 0)
+            return -1;
+        p += got;
+        n -= (size_t)got;
+    }
+    return 0;
+}
+
+/* The child: cap the address space at what the process has mapped now plus half the machine's
+ * RAM (what it has now counts: under AddressSanitizer that is terabytes of reserved shadow),
+ * import, send {status, nv, nt, v, t} or {status, message}. */
+static void import_child(const char *path, int fd)
+{
+    long page = sysconf(_SC_PAGESIZE), phys = sysconf(_SC_PHYS_PAGES);
+    unsigned long now_pages = 0;
+    FILE *f = fopen("/proc/self/statm", "r");
+    if (f) {
+        if (fscanf(f, "%lu", &now_pages) != 1)
+            now_pages = 0;
+        fclose(f);
+    }
+    if (page > 0 && phys > 0) {
+        rlim_t cap = (rlim_t)now_pages * (rlim_t)page + (rlim_t)phys * (rlim_t)page / 2;
+        struct rlimit rl = {cap, cap};
+        setrlimit(RLIMIT_AS, &rl);
+    }
+    char err[1024] = "";
+    cs_mesh m;
+    int32_t hdr[3] = {0, 0, 0};
+    if (load_direct(path, &m, err, sizeof err) != 0) {
+        hdr[0] = -1;
+        hdr[1] = (int32_t)strlen(err);
+        if (write_all(fd, hdr, sizeof hdr) == 0)
+            (void)write_all(fd, err, (size_t)hdr[1]);
+        return;
+    }
+    hdr[1] = m.nv;
+    hdr[2] = m.nt;
+    if (write_all(fd, hdr, sizeof hdr) == 0 &&
+        write_all(fd, m.v, (size_t)m.nv * 3 * sizeof *m.v) == 0)
+        (void)write_all(fd, m.t, (size_t)m.nt * 3 * sizeof *m.t);
+    cs_mesh_free(&m);
+}
+
+int cs_mesh_load(const char *path, cs_mesh *out, char *err, size_t errlen)
+{
+    memset(out, 0, sizeof *out);
+    int fds[2];
+    if (pipe(fds) != 0) {
+        snprintf(err, errlen, "mesh '%s': cannot start the importer: %s", path, strerror(errno));
+        return -1;
+    }
+    fflush(NULL);
+    pid_t pid = fork();
+    if (pid < 0) {
+        close(fds[0]);
+        close(fds[1]);
+        snprintf(err, errlen, "mesh '%s': cannot start the importer: %s", path, strerror(errno));
+        return -1;
+    }
+    if (pid == 0) {
+        close(fds[0]);
+        signal(SIGPIPE, SIG_DFL);
+        alarm(IMPORT_SECONDS + 5);
+        import_child(path, fds[1]);
+        close(fds[1]);
+        _exit(0);
+    }
+    close(fds[1]);
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    const double deadline = ts.tv_sec + 1e-9 * ts.tv_nsec + IMPORT_SECONDS;
+    int32_t hdr[3];
+    int rc = read_all(fds[0], hdr, sizeof hdr, deadline);
+    if (rc == 0 && hdr[0] != 0) {
+        char msg[1024];
+        int n = hdr[1] >= 0 && hdr[1] < (int32_t)sizeof msg ? hdr[1] : 0;
+        rc = read_all(fds[0], msg, (size_t)n, deadline);
+        msg[rc == 0 ? n : 0] = '\0';
+        snprintf(err, errlen, "%s", rc == 0 && n ? msg : "mesh: the importer failed");
+        rc = 1; /* reported */
+    } else if (rc == 0) {
+        if (hdr[1] < 0 || hdr[2] <= 0 || hdr[1] > INT32_MAX / 3 || hdr[2] > INT32_MAX / 3)
+            rc = -1;
+        else {
+            out->v = malloc((size_t)hdr[1] * 3 * sizeof *out->v + 1);
+            out->t = malloc((size_t)hdr[2] * 3 * sizeof *out->t);
+            if (!out->v || !out->t) {
+                cs_mesh_free(out);
+                snprintf(err, errlen, "mesh '%s': out of memory", path);
+                rc = 1;
+            } else {
+                out->nv = hdr[1];
+                out->nt = hdr[2];
+                rc = read_all(fds[0], out->v, (size_t)out->nv * 3 * sizeof *out->v, deadline);
+                if (rc == 0)
+                    rc = read_all(fds[0], out->t, (size_t)out->nt * 3 * sizeof *out->t,
+                                  deadline);
+            }
+        }
+    }
+    close(fds[0]);
+    if (rc == -2)
+        kill(pid, SIGKILL);
+    int status = 0;
+    while (waitpid(pid, &status, 0) < 0 && errno == EINTR)
+        ;
+    if (rc == 0)
+        return 0;
+    cs_mesh_free(out);
+    if (rc == -2)
+        snprintf(err, errlen, "mesh '%s': the importer took longer than %d s and was stopped",
+                 path, IMPORT_SECONDS);
+    else if (rc == -1 && WIFSIGNALED(status))
+        snprintf(err, errlen, "mesh '%s': the importer died (%s) reading this file", path,
+                 strsignal(WTERMSIG(status)));
+    else if (rc == -1)
+        snprintf(err, errlen, "mesh '%s': the importer ended without a result", path);
+    return -1;
 }
 
 void cs_mesh_transform(cs_mesh *m, double scale, const double rotation_deg[3],

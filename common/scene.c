@@ -667,7 +667,19 @@ static int parse_mesh(sc_ctx *c, const cJSON *mesh, const char *path, const char
         }
 
     cs_watertight_report rep;
-    if (cs_watertight_check(m.v, m.nv, m.t, m.nt, &rep, msg, sizeof msg) != 1) {
+    int closed = cs_watertight_check(m.v, m.nv, m.t, m.nt, &rep, msg, sizeof msg);
+    if (closed != 1 && !rep.boundary_edges && !rep.nonmanifold_edges && !rep.misoriented_edges &&
+        !rep.degenerate_triangles && rep.volume < 0) {
+        /* closed and consistently oriented, but wound clockwise seen from outside (as some
+         * formats import, e.g. DirectX .x): the orientation is unambiguous, so turn it out */
+        for (int i = 0; i < m.nt; i++) {
+            int32_t tmp = m.t[3 * i + 1];
+            m.t[3 * i + 1] = m.t[3 * i + 2];
+            m.t[3 * i + 2] = tmp;
+        }
+        closed = cs_watertight_check(m.v, m.nv, m.t, m.nt, &rep, msg, sizeof msg);
+    }
+    if (closed != 1) {
         cs_mesh_free(&m);
         return fail(c, "", "objects[%d] '%s': mesh '%s' is refused: %s", index, show(name, b1),
                     show(fname, b2), msg);

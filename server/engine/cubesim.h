@@ -291,7 +291,10 @@ int cs_world_step(cs_world_t *w);
  */
 int cs_world_solve_static(cs_world_t *w);
 /* Every object back to its rest shape, at rest; time and inputs cleared. Painted material
- * fields are kept (they are the material, not the state). */
+ * fields are kept (they are the material, not the state), and so is fracture: an object that
+ * broke stays broken and its pieces stay objects, each back at its own rest shape (the engine
+ * keeps no copy of the unbroken definitions; the daemon's `reset` rebuilds the world from its
+ * scene when anything fractured or was painted). */
 void cs_world_reset(cs_world_t *w);
 
 double cs_world_time(const cs_world_t *w);

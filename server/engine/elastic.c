@@ -214,6 +214,16 @@ const double *cs_elastic_mass_rows(const cs_object *o)
 
 int cs_elastic_prepare_tangent(cs_object *o, const double *x)
 {
+    /* mss: the full spring Jacobian (transverse term included) is its Newton operator, and it
+     * is what cs_mss_apply_K gives while `geometric` is set, from here to the release (every
+     * update in between, trial points included, keeps the term); no separate tangent. */
+    if (o->model == CS_MODEL_MSS) {
+        if (!o->mss.geometric) {
+            o->mss.geometric = true;
+            cs_mss_update(&o->mss, x);
+        }
+        return -1;
+    }
     /* localframe: the warped stiffness R K Rᵀ is its Newton operator (K is never rebuilt). */
     if (o->model != CS_MODEL_COROTATIONAL)
         return -1;
@@ -227,6 +237,8 @@ void cs_elastic_apply_tangent(cs_object *o, const double *p, double *y)
 
 void cs_elastic_release_tangent(cs_object *o)
 {
+    if (o->model == CS_MODEL_MSS)
+        o->mss.geometric = false; /* the next update (every step begins with one) drops it */
     cs_fem_release_tangent(&o->fem);
 }
 

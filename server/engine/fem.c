@@ -12,6 +12,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include <immintrin.h>
+
 #include "cubesim.h"
 #include "mat3.h"
 
@@ -414,141 +416,122 @@ static void graded_kmul(const cs_fem *fem, const double *f, const double *restri
  * cells rotate the 7 non-constant mode vectors instead of the 8 nodes. The rest shape
  * −h·CS_CORNER only has the modes â_{i,1+i} = −4h (the translation mode is never used).
  *
- * Cells go through in batches of CS_MODAL_LANES, one cell per SIMD lane: every lane does the
- * same operations, so a cell's result does not depend on its lane or on the thread count.
+ * Cells go through in batches of LANES (8), computed as two halves of 4, one cell per SIMD
+ * lane (256-bit vectors): every lane does the same operations, so a cell's result does not
+ * depend on its lane or on the thread count. The arithmetic is modal_core.h's (shared with
+ * multigrid's single-precision V-cycle). Measured on the 2-core Zen 4 (AVX-512), ns per cube
+ * of a whole cs_fem_apply_K (node pass included) on a 12³ block in cache, 1 thread, best of
+ * 30 × 30 calls (CPU time, loaded machine): 35.2 with 4 lanes per call and element by element
+ * loads (wave 3), 32 with 8 lanes in 512-bit vectors and gathers (Zen 4 splits 512-bit
+ * operations in two and its gathers are slow), 29.4 with the batch in two 256-bit halves and
+ * the corner indices laid out per batch (ix below), 25.0 with AVX-512VL's masked loads and
+ * stores of the nodal 3-vectors transposed in registers (modal_kernel_avx512).
  */
-#define LANES 4
-_Static_assert(LANES == 4, "the lane lists in modal_kernel are written out for 4 lanes");
-typedef double vd __attribute__((vector_size(8 * LANES)));
+#define LANES 8
 
 /* One batch: where each lane's cell reads its nodal vectors and writes its results. A lane
  * without a cell repeats another lane's inputs with lam = mu = 0 and writes to scratch. */
 typedef struct mlanes {
     const double *x;          /* nodal vectors, 3 per node (global frame when rotated) */
-    const int32_t *nd[LANES]; /* the 8 nodes of each lane's cell, corner order */
-    const double *R[LANES];   /* row-major rotation per lane (rotated products only) */
+    int32_t ix[8][LANES];     /* x + ix[k][l]: corner k of lane l's cell */
+    const double *R;          /* row-major rotations (rotated products only): lane l's at */
+    int32_t rix[LANES];       /* R + rix[l] */
     double lam[LANES];        /* (h/16)·λ·factor per lane */
     double mu[LANES];         /* (h/16)·μ·factor */
     double *out[LANES];       /* 24 per lane: K u per node (global frame when rotated) */
     double e[LANES];          /* out (with energy): ½ uᵀ K u in the local frame */
 } mlanes;
 
-/* Flops of one lane of modal_kernel: transform 69, mode gradients 50, back 69; rotations
- * 2·105 (7 modes × 3 × 5); the energy 41 more. */
-#define MODAL_FLOPS_CORE (69.0 + 50.0 + 69.0)
-#define MODAL_FLOPS_ROT 210.0
+typedef double vd4 __attribute__((vector_size(32)));
+#define MODAL_NAME modal_core4
+#define MODAL_V vd4
+#define MODAL_S double
+#include "modal_core.h" /* MODAL_FLOPS_CORE, MODAL_FLOPS_ROT */
 
 /* y = R K (Rᵀ u − rest) per lane (rot: R given; rest: subtract the rest shape of edge rest);
  * energy: e = ½ (Rᵀu − rest)ᵀ K (Rᵀu − rest). */
 __attribute__((optimize("fp-contract=fast"), target_clones("arch=x86-64-v3", "default")))
-static void modal_kernel(mlanes *restrict b, int rot, double rest, int energy)
+static void modal_kernel_any(mlanes *restrict b, int rot, double rest, int energy)
 {
-    vd a[8][3], g[8][3], u[24], R[9];
-    for (int k = 0; k < 8; k++)
-        for (int i = 0; i < 3; i++)
-            u[3 * k + i] = (vd){b->x[3 * b->nd[0][k] + i], b->x[3 * b->nd[1][k] + i],
-                                b->x[3 * b->nd[2][k] + i], b->x[3 * b->nd[3][k] + i]};
-    if (rot)
-        for (int j = 0; j < 9; j++)
-            R[j] = (vd){b->R[0][j], b->R[1][j], b->R[2][j], b->R[3][j]};
-    /* forward transform, per component */
-    for (int i = 0; i < 3; i++) {
-        const vd s00 = u[3 * 1 + i] + u[3 * 0 + i], d00 = u[3 * 1 + i] - u[3 * 0 + i];
-        const vd s10 = u[3 * 2 + i] + u[3 * 3 + i], d10 = u[3 * 2 + i] - u[3 * 3 + i];
-        const vd s01 = u[3 * 5 + i] + u[3 * 4 + i], d01 = u[3 * 5 + i] - u[3 * 4 + i];
-        const vd s11 = u[3 * 6 + i] + u[3 * 7 + i], d11 = u[3 * 6 + i] - u[3 * 7 + i];
-        const vd ss0 = s10 + s00, sd0 = s10 - s00, ss1 = s11 + s01, sd1 = s11 - s01;
-        const vd ds0 = d10 + d00, dd0 = d10 - d00, ds1 = d11 + d01, dd1 = d11 - d01;
-        a[1][i] = ds1 + ds0;
-        a[2][i] = sd1 + sd0;
-        a[3][i] = ss1 - ss0;
-        a[4][i] = dd1 + dd0;
-        a[5][i] = sd1 - sd0;
-        a[6][i] = ds1 - ds0;
-        a[7][i] = dd1 - dd0;
-    }
-    if (rot)
-        for (int m = 1; m < 8; m++) {
-            const vd v0 = a[m][0], v1 = a[m][1], v2 = a[m][2];
+    for (int h = 0; h < LANES; h += 4) {
+        vd4 u[24], R[9], y[24], e, L, M;
+        const double *x = b->x;
+        for (int k = 0; k < 8; k++) {
+            const int32_t *ix = b->ix[k] + h;
             for (int i = 0; i < 3; i++)
-                a[m][i] = R[i] * v0 + R[3 + i] * v1 + R[6 + i] * v2;
+                u[3 * k + i] = (vd4){x[ix[0] + i], x[ix[1] + i], x[ix[2] + i], x[ix[3] + i]};
         }
-    if (rest != 0.0) {
-        const double r4 = 4.0 * rest;
-        a[1][0] -= r4;
-        a[2][1] -= r4;
-        a[3][2] -= r4;
-    }
-    /* mode gradients */
-    const vd L = {b->lam[0], b->lam[1], b->lam[2], b->lam[3]};
-    const vd M = {b->mu[0], b->mu[1], b->mu[2], b->mu[3]}, M2 = M + M;
-    const vd L1 = L * (1.0 / 3.0), M1 = M * (1.0 / 3.0), Q = (L + 4.0 * M) * (1.0 / 9.0);
-    {
-        const vd lt = L * (a[1][0] + a[2][1] + a[3][2]);
-        g[1][0] = lt + M2 * a[1][0];
-        g[2][1] = lt + M2 * a[2][1];
-        g[3][2] = lt + M2 * a[3][2];
-        const vd o01 = M * (a[2][0] + a[1][1]), o02 = M * (a[3][0] + a[1][2]),
-                 o12 = M * (a[3][1] + a[2][2]);
-        g[2][0] = g[1][1] = o01;
-        g[3][0] = g[1][2] = o02;
-        g[3][1] = g[2][2] = o12;
-    }
-    {
-        const vd tx = L1 * (a[4][1] + a[6][2]), ty = L1 * (a[4][0] + a[5][2]),
-                 tz = L1 * (a[6][0] + a[5][1]);
-        const vd w = a[4][2] + a[5][0] + a[6][1];
-        g[4][0] = ty + M * a[4][0];
-        g[4][1] = tx + M * a[4][1];
-        g[4][2] = M1 * (a[4][2] + w);
-        g[5][0] = M1 * (a[5][0] + w);
-        g[5][1] = tz + M * a[5][1];
-        g[5][2] = ty + M * a[5][2];
-        g[6][0] = tz + M * a[6][0];
-        g[6][1] = M1 * (a[6][1] + w);
-        g[6][2] = tx + M * a[6][2];
-        for (int i = 0; i < 3; i++)
-            g[7][i] = Q * a[7][i];
-    }
-    if (energy) {
-        vd e = a[1][0] * g[1][0];
-        for (int m = 1; m < 8; m++)
-            for (int i = (m == 1); i < 3; i++)
-                e += a[m][i] * g[m][i];
-        e *= 0.5;
-        for (int l = 0; l < LANES; l++)
-            b->e[l] = e[l];
-    }
-    if (rot)
-        for (int m = 1; m < 8; m++) {
-            const vd v0 = g[m][0], v1 = g[m][1], v2 = g[m][2];
-            for (int i = 0; i < 3; i++)
-                g[m][i] = R[3 * i] * v0 + R[3 * i + 1] * v1 + R[3 * i + 2] * v2;
+        if (rot) {
+            const int32_t *rix = b->rix + h;
+            for (int j = 0; j < 9; j++)
+                R[j] = (vd4){b->R[rix[0] + j], b->R[rix[1] + j], b->R[rix[2] + j],
+                             b->R[rix[3] + j]};
         }
-    /* transposed transform back to the nodes (g_0 = 0) */
-    for (int i = 0; i < 3; i++) {
-        vd y[24];
-        const vd sd1 = g[2][i] + g[5][i], sd0 = g[2][i] - g[5][i];
-        const vd ds1 = g[1][i] + g[6][i], ds0 = g[1][i] - g[6][i];
-        const vd dd1 = g[4][i] + g[7][i], dd0 = g[4][i] - g[7][i];
-        const vd ss1 = g[3][i];
-        /* ss0 = -g3: folded into the next stage */
-        const vd s10 = sd0 - ss1, s00 = -(sd0 + ss1), s11 = ss1 + sd1, s01 = ss1 - sd1;
-        const vd d10 = ds0 + dd0, d00 = ds0 - dd0, d11 = ds1 + dd1, d01 = ds1 - dd1;
-        y[3 * 0 + i] = s00 - d00;
-        y[3 * 1 + i] = s00 + d00;
-        y[3 * 3 + i] = s10 - d10;
-        y[3 * 2 + i] = s10 + d10;
-        y[3 * 4 + i] = s01 - d01;
-        y[3 * 5 + i] = s01 + d01;
-        y[3 * 7 + i] = s11 - d11;
-        y[3 * 6 + i] = s11 + d11;
-        for (int k = 0; k < 8; k++)
-            for (int l = 0; l < LANES; l++)
-                b->out[l][3 * k + i] = y[3 * k + i][l];
+        memcpy(&L, b->lam + h, sizeof L);
+        memcpy(&M, b->mu + h, sizeof M);
+        modal_core4(u, rot ? R : NULL, rest, &L, &M, energy ? &e : NULL, y);
+        if (energy)
+            memcpy(b->e + h, &e, sizeof e);
+        for (int k = 0; k < 24; k++)
+            for (int l = 0; l < 4; l++)
+                b->out[h + l][k] = y[k][l];
     }
 }
 
+/* The same with AVX-512VL: each corner's 4 nodal vectors by masked 3-double loads transposed
+ * into x, y, z across the lanes, and back the same way into masked 3-double stores (fewer
+ * instructions than element by element; 256-bit vectors with 32 registers: 512-bit vectors of
+ * 8 lanes measured slower on this Zen 4, which splits them in two). */
+__attribute__((optimize("fp-contract=fast"), target("arch=x86-64-v4")))
+static void modal_kernel_avx512(mlanes *restrict b, int rot, double rest, int energy)
+{
+    for (int h = 0; h < LANES; h += 4) {
+        vd4 u[24], R[9], y[24], e, L, M;
+        const double *x = b->x;
+        for (int k = 0; k < 8; k++) {
+            const int32_t *ix = b->ix[k] + h;
+            const __m256d r0 = _mm256_maskz_loadu_pd(7, x + ix[0]);
+            const __m256d r1 = _mm256_maskz_loadu_pd(7, x + ix[1]);
+            const __m256d r2 = _mm256_maskz_loadu_pd(7, x + ix[2]);
+            const __m256d r3 = _mm256_maskz_loadu_pd(7, x + ix[3]);
+            const __m256d t0 = _mm256_unpacklo_pd(r0, r1), t1 = _mm256_unpackhi_pd(r0, r1);
+            const __m256d t2 = _mm256_unpacklo_pd(r2, r3), t3 = _mm256_unpackhi_pd(r2, r3);
+            u[3 * k] = (vd4)_mm256_permute2f128_pd(t0, t2, 0x20);
+            u[3 * k + 1] = (vd4)_mm256_permute2f128_pd(t1, t3, 0x20);
+            u[3 * k + 2] = (vd4)_mm256_permute2f128_pd(t0, t2, 0x31);
+        }
+        if (rot) {
+            const int32_t *rix = b->rix + h;
+            for (int j = 0; j < 9; j++)
+                R[j] = (vd4){b->R[rix[0] + j], b->R[rix[1] + j], b->R[rix[2] + j],
+                             b->R[rix[3] + j]};
+        }
+        memcpy(&L, b->lam + h, sizeof L);
+        memcpy(&M, b->mu + h, sizeof M);
+        modal_core4(u, rot ? R : NULL, rest, &L, &M, energy ? &e : NULL, y);
+        if (energy)
+            memcpy(b->e + h, &e, sizeof e);
+        for (int k = 0; k < 8; k++) {
+            const __m256d X = (__m256d)y[3 * k], Y = (__m256d)y[3 * k + 1],
+                          Z = (__m256d)y[3 * k + 2];
+            /* (x_l, y_l, z_l, ·) per lane */
+            const __m256d a0 = _mm256_unpacklo_pd(X, Y), a1 = _mm256_unpackhi_pd(X, Y);
+            const __m256d z0 = _mm256_unpacklo_pd(Z, Z), z1 = _mm256_unpackhi_pd(Z, Z);
+            _mm256_mask_storeu_pd(b->out[h] + 3 * k, 7, _mm256_permute2f128_pd(a0, z0, 0x20));
+            _mm256_mask_storeu_pd(b->out[h + 1] + 3 * k, 7, _mm256_permute2f128_pd(a1, z1, 0x20));
+            _mm256_mask_storeu_pd(b->out[h + 2] + 3 * k, 7, _mm256_permute2f128_pd(a0, z0, 0x31));
+            _mm256_mask_storeu_pd(b->out[h + 3] + 3 * k, 7, _mm256_permute2f128_pd(a1, z1, 0x31));
+        }
+    }
+}
+
+static void modal_kernel(mlanes *restrict b, int rot, double rest, int energy)
+{
+    if (__builtin_cpu_supports("x86-64-v4"))
+        modal_kernel_avx512(b, rot, rest, energy);
+    else
+        modal_kernel_any(b, rot, rest, energy);
+}
 
 /* A graded cell: y_k = Σ_g f_g·detJ·σ_g ∇N_k(ξ_g), σ_g = λ tr(H) I + μ (H + Hᵀ),
  * H = Σ_k x_k ⊗ ∇N_k(ξ_g): the same sum as Σ_g f_g K_g x, without 24×24 products. */
@@ -634,31 +617,35 @@ static void batch_product(const cs_fem *fem, const double *kf, int c0, const dou
     double sink[24];
     mlanes B;
     int graded = 0, first = -1;
+    int live = 0;
     B.x = x;
+    B.R = Rb;
     for (int l = 0; l < LANES; l++) {
         const int c = c0 + l;
         double f;
         if (e)
             e[l] = 0;
         if (c < fem->n_cells && uniform_factor(kf, c, &f)) {
-            B.nd[l] = fem->cell_nodes + 8 * (size_t)c;
-            B.R[l] = Rb ? Rb + 9 * l : NULL;
+            const int32_t *nd = fem->cell_nodes + 8 * (size_t)c;
+            for (int k = 0; k < 8; k++)
+                B.ix[k][l] = 3 * nd[k];
+            B.rix[l] = 9 * l;
             B.lam[l] = c16 * fem->lambda * f;
             B.mu[l] = c16 * fem->mu * f;
             B.out[l] = fe ? fe + 24 * (size_t)c : sink;
             if (first < 0)
                 first = l;
-        } else {
-            B.nd[l] = NULL;
-            if (c < fem->n_cells)
-                graded |= 1 << l;
+            live |= 1 << l;
+        } else if (c < fem->n_cells) {
+            graded |= 1 << l;
         }
     }
     if (first >= 0) {
         for (int l = 0; l < LANES; l++)
-            if (!B.nd[l]) {
-                B.nd[l] = B.nd[first];
-                B.R[l] = B.R[first];
+            if (!(live & (1 << l))) {
+                for (int k = 0; k < 8; k++)
+                    B.ix[k][l] = B.ix[k][first];
+                B.rix[l] = B.rix[first];
                 B.lam[l] = B.mu[l] = 0;
                 B.out[l] = sink;
             }
@@ -685,20 +672,18 @@ static void batch_local(const cs_fem *fem, const double *kf, int c0, const doubl
                         double *kus)
 {
     /* node k of lane l sits at us + 24 l + 3 k */
-    static const int32_t at[LANES][8] = {{0, 1, 2, 3, 4, 5, 6, 7},
-                                         {8, 9, 10, 11, 12, 13, 14, 15},
-                                         {16, 17, 18, 19, 20, 21, 22, 23},
-                                         {24, 25, 26, 27, 28, 29, 30, 31}};
     const double c16 = fem->h / 16.0;
     double sink[24];
     mlanes B;
     int graded = 0, live = 0;
     B.x = us;
+    B.R = NULL;
     for (int l = 0; l < LANES; l++) {
         const int c = c0 + l;
         double f;
-        B.nd[l] = at[l];
-        B.R[l] = NULL;
+        for (int k = 0; k < 8; k++)
+            B.ix[k][l] = 24 * l + 3 * k;
+        B.rix[l] = 0;
         B.out[l] = kus + 24 * l;
         if (c < fem->n_cells && uniform_factor(kf, c, &f)) {
             B.lam[l] = c16 * fem->lambda * f;
@@ -706,7 +691,8 @@ static void batch_local(const cs_fem *fem, const double *kf, int c0, const doubl
             live++;
         } else {
             /* graded or past the end: computed below, or not at all */
-            B.nd[l] = at[0];
+            for (int k = 0; k < 8; k++)
+                B.ix[k][l] = 3 * k;
             B.lam[l] = B.mu[l] = 0;
             B.out[l] = sink;
             if (c < fem->n_cells)
@@ -739,11 +725,13 @@ void cs_cube_cells_product(const double K[24 * 24], int n_cells, const int32_t *
         double sink[24];
         mlanes B;
         B.x = x;
+        B.R = R + 9 * (size_t)b * LANES;
         for (int l = 0; l < LANES; l++) {
             const int c = b * LANES + l, cc = c < n_cells ? c : b * LANES;
             const double sc = c < n_cells ? s[c] / 16.0 : 0.0;
-            B.nd[l] = cell_nodes + 8 * (size_t)cc;
-            B.R[l] = R + 9 * (size_t)cc;
+            for (int k = 0; k < 8; k++)
+                B.ix[k][l] = 3 * cell_nodes[8 * (size_t)cc + k];
+            B.rix[l] = 9 * (cc - b * LANES);
             B.lam[l] = hl * sc;
             B.mu[l] = hm * sc;
             B.out[l] = c < n_cells ? fe + 24 * (size_t)c : sink;

@@ -14,8 +14,9 @@
  * block: 42–49 ns per cube and product against 37 with the gather.) The element product does
  * not use K: it is modal (fem.c), a Walsh–Hadamard transform of the nodal values to the 7
  * deformation modes of the trilinear field, their stresses, and back (188 flops, 398 with the
- * rotations, instead of 1152 + 240), for 4 cells at once, one per SIMD lane. K stays for the
- * diagonal blocks and multigrid's set-up.
+ * rotations, instead of 1152 + 240), 8 cells per batch, one per SIMD lane (two 256-bit
+ * halves; its arithmetic, modal_core.h, is shared with multigrid's single-precision V-cycle).
+ * K stays for the diagonal blocks and multigrid's set-up.
  *
  * Material fields (world_internal.h, seed 001 §3.3): with kf set (8 factors per cell, one per
  * Gauss point), cell c's stiffness is K_e = Σ_g kf[8c+g]·K_g, K_g the shared unit matrix of
@@ -108,7 +109,8 @@ void cs_fem_release_tangent(cs_fem *fem);
  * The element pass of a product on cells that share one cube stiffness K (as
  * cs_cube_stiffness builds it, any edge and material): fe[24c..24c+23] = s_c R_c K R_cᵀ x on
  * cell c's nodes, for c < n_cells (R: 9 per cell, s: 1 per cell). The modal kernel of
- * cs_fem_apply_K; multigrid's coarse levels use it (their K(2h) = 2 K(h) is in s).
+ * cs_fem_apply_K in double (multigrid's V-cycle runs its single-precision twin in mg.c, with
+ * a coarse level's K(2h) = 2 K(h) in s).
  */
 void cs_cube_cells_product(const double K[24 * 24], int n_cells, const int32_t *cell_nodes,
                            const double *R, const double *s, const double *x, double *fe,

@@ -14,20 +14,39 @@
  *      sharing an edge are separated when their cells shared a node before and share none now;
  *      around each vertex the triangles are grouped by the edges that still join them, and
  *      every group beyond the first gets its own copy of the vertex, skinned to a cell of its
- *      own side;
+ *      own side. With partial closing (below) also where the cells share fewer nodes than
+ *      before (a face or edge between them opened partially), except along a mesh edge that
+ *      lies where they are still held (between two still-shared corners), and a corner vertex
+ *      splits with its node: one per node copy;
  *   4. closing surface (§3.2, closing.c): per face that this event opened fully (its four nodes
  *      separated), the region of f inside the surface as triangles between surface vertices
  *      and corner vertices (a random offset per lattice point that never crosses the surface;
  *      a mesh vertex lying on the lattice point is used instead), t for c1 and its reverse t'
- *      for c2;
+ *      for c2. Partial closing — in the cut path (cs_world_cut_face) on an object whose mesh
+ *      lies in lattice planes (objects given as cells, voxel models, pieces without mesh
+ *      triangles) — closes a face when it first opens at all (a corner node separated): a
+ *      corner still shared by c1 and c2 gets one corner vertex used by t and t' (the pair is
+ *      glued along it: a wedge-shaped cavity, closed, of volume 0 at rest), a separated one a
+ *      vertex per node copy; when the face later opens further its pair exists already and its
+ *      corner vertices split with their nodes. Elsewhere (meshes crossing faces, stress
+ *      cracks) a face opened only partially waits, as before: there the mesh's slit across it
+ *      does not end where the glued pair does (it ends wherever the triangles around the hinge
+ *      still join), which was measured to leave more loops, not fewer;
  *   5. repair: the §3.2 rules for assigning surface vertices to nodes are heuristics and can
  *      leave the closing triangles not matching the fracture line exactly (seed 000 does not
- *      claim otherwise). A face's pair t, t' that would make an edge used twice in one
- *      direction, or that is degenerate, is dropped; where boundary loops pass a vertex twice
- *      the vertex is split so that every loop is simple; every loop left is closed by one
- *      triangle or a fan around a new vertex placed by the loop alone (the two sides of a
- *      crack close twin loops identically, so their volumes cancel). The surface is then
- *      closed and consistently oriented by construction; the event reports the fans;
+ *      claim otherwise). With partial closing, glued pairs of two faces hinged on one lattice
+ *      edge would give it four triangles: one end gets a vertex per cavity (split_glued), and
+ *      such second vertices go back into their node's vertex once the hinge opens
+ *      (merge_cavity_corners, only where no edge is then used twice one way). A face's pair
+ *      t, t' that would make an edge used twice in one direction, or that is degenerate, is
+ *      dropped; where boundary loops pass a vertex twice the vertex is split so that every
+ *      loop is simple; every loop left is closed by one triangle or a fan around a new vertex
+ *      placed by the loop alone (the two sides of a crack close twin loops identically, so
+ *      their volumes cancel). The surface is then closed and consistently oriented by
+ *      construction; the event reports the fans. Where a face opens partially without partial
+ *      closing, its rim is left to such fans, and when the face opens fully one of its pairs
+ *      can meet a fan of the earlier opening and be dropped: the two sides' loops then differ
+ *      and their fans do not cancel (the volume errors of test_fracture_meshes' cut runs);
  *   6. pieces (§2.4): cells are grouped by shared nodes (face connectivity after step 2); the
  *      largest group stays the object, every other one becomes a new object with its own cube
  *      mesh, surface, state (positions, velocities, inputs) and id.
@@ -528,6 +547,9 @@ static void tri_edges_add(edge_map *m, const int32_t *t, int32_t d)
  */
 typedef struct surf_edit {
     cs_object *o;
+    /* this event closes partially opened faces too (fracture_event: the cut path on an object
+     * whose mesh lies in lattice planes) */
+    bool partial;
     int nv0, nt0;     /* counts before the event */
     dvec rest, pos;   /* appended vertices: 3 each */
     ivec vcell;       /* appended vertices: bound cell */
@@ -844,14 +866,18 @@ static bool seg_tri(const double p[3], const double q[3], const double *a, const
 /* A vertex of the mesh's own triangles lying exactly on node's lattice point (meshes made of
  * cube faces have them), or -1: the closing surface must end on it, not beside it. Where the
  * mesh was split there, the copy used by a triangle of a cell attached to `cell` (sharing a
- * node with it) is preferred; cell < 0 takes any. */
-static int32_t surface_vertex_at(const surf_edit *e, int32_t node, int32_t cell)
+ * node with it) is preferred; cell < 0 takes any. With `exact` (partially opened faces: the
+ * cells of both sides may still share nodes), the copy used by a triangle of a cell that holds
+ * this very node copy is preferred, and *exact says whether one was found. */
+static int corner_at(const cs_cubemesh *cm, int32_t c, const double p[3]);
+
+static int32_t surface_vertex_at(const surf_edit *e, int32_t node, int32_t cell, bool *exact)
 {
     const cs_object *o = e->o;
     const cs_cubemesh *cm = &o->cm;
     const cs_surface *s = &o->surf;
     const double *p = cm->node_rest + 3 * (size_t)node, tol = 1e-9 * cm->h;
-    int32_t li[3], any = -1;
+    int32_t li[3], any = -1, near = -1;
     for (int k = 0; k < 3; k++)
         li[k] = (int32_t)llround((p[k] - cm->origin[k]) / cm->h);
     for (int dz = -1; dz <= 0; dz++)
@@ -870,21 +896,34 @@ static int32_t surface_vertex_at(const surf_edit *e, int32_t node, int32_t cell)
                         if (fabs(q[0] - p[0]) > tol || fabs(q[1] - p[1]) > tol ||
                             fabs(q[2] - p[2]) > tol)
                             continue;
-                        if (cell < 0 || cells_share_node(cm, s->tri_cell[t], cell))
+                        if (cell < 0)
                             return v;
+                        /* the copy on node's side: held by a triangle of a cell that has this
+                         * copy of the node (where a face opened partially, the cells of both
+                         * sides still share nodes) */
+                        const int32_t tc = s->tri_cell[t];
+                        const int kc = corner_at(cm, tc, p);
+                        if (exact && kc >= 0 && cm->cell_nodes[8 * (size_t)tc + kc] == node) {
+                            *exact = true;
+                            return v;
+                        }
+                        if (!exact && cells_share_node(cm, tc, cell))
+                            return v;
+                        if (near < 0 && cells_share_node(cm, tc, cell))
+                            near = v;
                         if (any < 0)
                             any = v;
                     }
                 }
             }
-    return any;
+    return near >= 0 ? near : any;
 }
 
 static void corner_position(const cs_world_t *w, const surf_edit *e, int32_t node,
                             double out[3], int32_t *from)
 {
     const cs_object *o = e->o;
-    int32_t sv = surface_vertex_at(e, node, -1);
+    int32_t sv = surface_vertex_at(e, node, -1, NULL);
     if (from)
         *from = -1;
     if (sv >= 0) {
@@ -972,11 +1011,18 @@ static int32_t corner_vertex(cs_world_t *w, surf_edit *e, const families *fam, i
     cs_object *o = e->o;
     /* a mesh vertex on the lattice point is looked up each time (never cached: the surface
      * split moves its copies between sides) */
-    int32_t sv = surface_vertex_at(e, node, cell);
-    /* a corner vertex this event split goes through its family too: the node's own entry
-     * names one copy, the cell's side decides which */
-    if (sv < 0 && o->corner_vertex[node] >= 0)
+    bool exact = false;
+    int32_t sv = surface_vertex_at(e, node, cell, e->partial ? &exact : NULL);
+    if (exact)
+        return sv;
+    /* a corner vertex made for a node: with partial pairs each node copy names its own
+     * (split_surface) and the node given is the cell's own copy; otherwise the node's own
+     * entry names one copy and the cell's side decides which, through its family */
+    if (sv < 0 && o->corner_vertex[node] >= 0) {
+        if (e->partial)
+            return o->corner_vertex[node];
         sv = o->corner_vertex[node];
+    }
     if (sv >= 0) {
         /* a family's first member is the original vertex */
         const int32_t f = family_of(fam, e->nv0, sv);
@@ -1189,22 +1235,82 @@ static int corner_at(const cs_cubemesh *cm, int32_t c, const double p[3])
 
 /* ---------------------------------------------------------------- step 3: surface (§3.1) */
 
-/* Are triangles t and u (sharing an edge) separated by this event? Their cells shared a node
- * before and share none now: the node split separated them (the surface opens exactly where
- * the cube mesh did). */
-static bool tri_cut(const cs_object *o, const int32_t *cn0, int32_t ct, int32_t cu)
+/* Do cells a and b share a node in the links `cn` (8 per cell)? */
+static bool cells_share_node_in(const int32_t *cn, int32_t a, int32_t b)
+{
+    const int32_t *na = cn + 8 * (size_t)a, *nb = cn + 8 * (size_t)b;
+    for (int i = 0; i < 8; i++)
+        for (int j = 0; j < 8; j++)
+            if (na[i] == nb[j])
+                return true;
+    return false;
+}
+
+/* How many of a's eight node slots hold a node that b holds too. */
+static int shared_nodes(const int32_t *a, const int32_t *b)
+{
+    int n = 0;
+    for (int i = 0; i < 8; i++)
+        for (int j = 0; j < 8; j++)
+            if (a[i] == b[j]) {
+                n++;
+                break;
+            }
+    return n;
+}
+
+/* Is rest point p held between cells a and b: on their common face, edge or corner, where
+ * every node of a with weight at p (the corners of the smallest part of a's boundary holding
+ * p) is b's too? There the two cells' trilinear maps agree, so the surface stays whole. */
+static bool held_point(const cs_cubemesh *cm, int32_t a, int32_t b, const double *p)
+{
+    const int32_t *ia = cm->cell_ijk + 3 * (size_t)a, *ib = cm->cell_ijk + 3 * (size_t)b;
+    const double tol = 1e-9 * cm->h;
+    int fix[3]; /* -1 free, else the corner offset (0/1) p lies on */
+    for (int k = 0; k < 3; k++) {
+        const double lo = cm->origin[k] + cm->h * (ia[k] > ib[k] ? ia[k] : ib[k]);
+        const double hi = cm->origin[k] + cm->h * ((ia[k] < ib[k] ? ia[k] : ib[k]) + 1);
+        if (p[k] < lo - tol || p[k] > hi + tol)
+            return false; /* off the common part */
+        const double x = (p[k] - cm->origin[k]) / cm->h - ia[k];
+        fix[k] = fabs(x) <= 1e-9 ? 0 : fabs(x - 1) <= 1e-9 ? 1 : -1;
+    }
+    const int32_t *na = cm->cell_nodes + 8 * (size_t)a, *nb = cm->cell_nodes + 8 * (size_t)b;
+    for (int c = 0; c < 8; c++) {
+        if ((fix[0] >= 0 && CS_CORNER[c][0] != fix[0]) ||
+            (fix[1] >= 0 && CS_CORNER[c][1] != fix[1]) ||
+            (fix[2] >= 0 && CS_CORNER[c][2] != fix[2]))
+            continue;
+        bool shared = false;
+        for (int j = 0; j < 8 && !shared; j++)
+            shared = na[c] == nb[j];
+        if (!shared)
+            return false;
+    }
+    return true;
+}
+
+/* Are triangles t and u, in cells ct and cu, separated by this event along their common edge
+ * (rest points p, q)? Their cells shared a node before and share fewer now: a node they shared
+ * was split between them, so the cube mesh came apart between them there, fully (they share
+ * none now) or partially (a face or edge still held at its other nodes: the surface separates
+ * across it, and the closing pair of each face that opened, glued along its still-shared
+ * corners, closes the slit) — except along an edge that lies where the cells are still held
+ * (a mesh edge on the line between two still-shared corners). */
+static bool tri_cut(const cs_object *o, const int32_t *cn0, int32_t ct, int32_t cu,
+                    const double *p, const double *q, bool partial)
 {
     if (ct == cu)
         return false;
-    const int32_t *a = cn0 + 8 * (size_t)ct, *b = cn0 + 8 * (size_t)cu;
-    bool before = false;
-    for (int i = 0; i < 8 && !before; i++)
-        for (int j = 0; j < 8; j++)
-            if (a[i] == b[j]) {
-                before = true;
-                break;
-            }
-    return before && !cells_share_node(&o->cm, ct, cu);
+    if (!partial) /* shared a node before, none now */
+        return cells_share_node_in(cn0, ct, cu) && !cells_share_node(&o->cm, ct, cu);
+    const int before = shared_nodes(cn0 + 8 * (size_t)ct, cn0 + 8 * (size_t)cu);
+    if (before == 0)
+        return false;
+    const int32_t *cn = o->cm.cell_nodes;
+    const int now = shared_nodes(cn + 8 * (size_t)ct, cn + 8 * (size_t)cu);
+    return now == 0 ||
+           (now < before && !(held_point(&o->cm, ct, cu, p) && held_point(&o->cm, ct, cu, q)));
 }
 
 static double dist2_cell(const cs_cubemesh *cm, int32_t c, const double p[3])
@@ -1267,29 +1373,23 @@ static int split_surface(cs_object *o, surf_edit *e, const int32_t *cn0, const i
             int32_t pbuf[64], *parent = m <= 64 ? pbuf : malloc((size_t)m * sizeof *parent);
             if (!parent)
                 goto out;
-            for (int a = 0; a < m; a++)
-                parent[a] = a;
-            for (int a = 0; a < m; a++)
-                for (int b = a + 1; b < m; b++) {
-                    const int32_t *ta = tris0 + 3 * (size_t)T[a], *tb = tris0 + 3 * (size_t)T[b];
-                    bool adjacent = false;
-                    for (int i = 0; i < 3 && !adjacent; i++)
-                        for (int j = 0; j < 3; j++)
-                            if (ta[i] != v && ta[i] == tb[j]) {
-                                adjacent = true;
-                                break;
-                            }
-                    if (adjacent && !tri_cut(o, cn0, s->tri_cell[T[a]], s->tri_cell[T[b]]))
-                        uf_union(parent, a, b);
-                }
-            /* A corner vertex (§3.2) made for a node, used only by closing triangles, splits
-             * like any surface vertex: where the triangles' cells stop sharing a node (the
-             * surface opens exactly where the cube mesh came apart). Splitting it per node copy
-             * instead opened slits at a crack's rim, where the node is split but the cells
-             * still share another node (a partially opened face): fans closed those, and the
-             * fans came apart wrongly in later events. Each copy of the node then names the
-             * vertex copy of its cells' group (tn: the node copy of each triangle's cell). */
-            int32_t cnode = corner_of[v], tn_buf[64], *tn = NULL;
+            /* A corner vertex (§3.2) made for a node, used only by closing triangles. Where
+             * partially opened faces get their closing pairs (e->partial), it splits with its
+             * node: one vertex per node copy (tn: the node copy of each triangle's cell);
+             * every face that opened at all has its pair, glued at the corners its cells still
+             * share, so around a lattice edge the pairs of the opened faces meet over the
+             * corner vertices of the node copies between them (a partially opened face's t and
+             * t' share the vertex of a shared corner and part at a separated one). Otherwise
+             * it splits like any surface vertex: where the triangles' cells stop sharing a
+             * node; splitting it per node copy there opened slits at a crack's rim (the node
+             * split, the cells still sharing another node: a partially opened face without a
+             * pair). Either way each copy of the node then names the vertex copy of its
+             * cells' group. */
+            /* corner_of: the node, or -2 - node for a second vertex of the node (a cavity of
+             * its own, split_glued): grouped the same way, but the node keeps naming its own */
+            const bool named = corner_of[v] >= 0;
+            int32_t cnode = named ? corner_of[v] : corner_of[v] <= -2 ? -2 - corner_of[v] : -1;
+            int32_t tn_buf[64], *tn = NULL;
             for (int a = 0; cnode >= 0 && a < m; a++)
                 if (o->tri_kind[T[a]] == 0)
                     cnode = -1;
@@ -1304,6 +1404,28 @@ static int split_surface(cs_object *o, surf_edit *e, const int32_t *cn0, const i
                     tn[a] = k >= 0 ? o->cm.cell_nodes[8 * (size_t)ct + k] : cnode;
                 }
             }
+            for (int a = 0; a < m; a++)
+                parent[a] = a;
+            for (int a = 0; a < m; a++)
+                for (int b = a + 1; b < m; b++) {
+                    if (cnode >= 0 && e->partial) {
+                        if (tn[a] == tn[b])
+                            uf_union(parent, a, b);
+                        continue;
+                    }
+                    const int32_t *ta = tris0 + 3 * (size_t)T[a], *tb = tris0 + 3 * (size_t)T[b];
+                    int32_t other = -1;
+                    for (int i = 0; i < 3 && other < 0; i++)
+                        for (int j = 0; j < 3; j++)
+                            if (ta[i] != v && ta[i] == tb[j]) {
+                                other = ta[i];
+                                break;
+                            }
+                    if (other >= 0 && !tri_cut(o, cn0, s->tri_cell[T[a]], s->tri_cell[T[b]],
+                                               s->rest + 3 * (size_t)v,
+                                               s->rest + 3 * (size_t)other, e->partial))
+                        uf_union(parent, a, b);
+                }
             /* groups in order of their root; the group whose cells hold the vertex's binding
              * keeps the vertex */
             int n_groups = 0, keep = -1;
@@ -1342,7 +1464,7 @@ static int split_surface(cs_object *o, surf_edit *e, const int32_t *cn0, const i
             if (ivec_push(&fam->fstart, fam->mcopy.n))
                 goto out_p;
             fam->of_old.a[v] = famid;
-            if (cnode >= 0)
+            if (cnode >= 0 && named)
                 o->corner_vertex[cnode] = -1; /* set again below for the node copy keeping v */
             for (int gi = 0; gi < n_groups; gi++) {
                 /* keep first so that the family's first member is v */
@@ -1398,7 +1520,7 @@ static int split_surface(cs_object *o, surf_edit *e, const int32_t *cn0, const i
                 if (ivec_push(&fam->mcopy, copy))
                     goto out_p;
                 for (int a = 0; cnode >= 0 && a < m; a++)
-                    if (uf_find(parent, a) == roots[g])
+                    if (uf_find(parent, a) == roots[g] && (named || o->corner_vertex[tn[a]] < 0))
                         o->corner_vertex[tn[a]] = copy;
             }
             if (parent != pbuf)
@@ -1522,6 +1644,7 @@ static int close_faces(cs_world_t *w, cs_object *o, surf_edit *e, const int32_t 
         int32_t n1[4], n2[4];
         double centre[3];
         face_setup(o, f, &cf, n1, n2, centre);
+        const bool partial = n1[0] == n2[0] || n1[1] == n2[1] || n1[2] == n2[2] || n1[3] == n2[3];
         for (int k = 0; k < 4; k++) {
             cf.corner_vertex[k] = e->nv0 + k;
             corner_position(w, e, n1[k], xr + 3 * ((size_t)e->nv0 + k), NULL);
@@ -1554,10 +1677,21 @@ static int close_faces(cs_world_t *w, cs_object *o, surf_edit *e, const int32_t 
         }
         for (int k = 0; k < cand.n; k++) {
             int32_t ct = s->tri_cell[cand.a[k]];
-            /* on c1's side: attached to c1 and not to c2 (after the split); where that
-             * does not decide, the plane's label */
+            /* on c1's side: c1 itself, or attached to c1 and not to c2 (after the split);
+             * where that does not decide, the side of f the cell lies on if f is still held
+             * at a corner (both sides' cells share nodes there), else the plane's label */
             bool s1 = cells_share_node(&o->cm, ct, f->c1), s2 = cells_share_node(&o->cm, ct, f->c2);
-            side[k] = s1 != s2 ? s1 : label[ct] == label[f->c1] && label[ct] != 0;
+            if (ct == f->c1 || ct == f->c2)
+                side[k] = ct == f->c1;
+            else if (s1 != s2)
+                side[k] = s1;
+            else if (partial) {
+                const int32_t lt = o->cm.cell_ijk[3 * (size_t)ct + f->axis],
+                              l1 = o->cm.cell_ijk[3 * (size_t)f->c1 + f->axis];
+                side[k] = f->c1_below ? lt <= l1 : lt >= l1;
+            }
+            else
+                side[k] = label[ct] == label[f->c1] && label[ct] != 0;
         }
         /* a cell no mesh triangle meets lies inside the surface (seed 000 §2.1) */
         bool inside = true;
@@ -1613,6 +1747,10 @@ static int close_faces(cs_world_t *w, cs_object *o, surf_edit *e, const int32_t 
                 ok = ok && m[sd][0] != m[sd][1] && m[sd][1] != m[sd][2] && m[sd][0] != m[sd][2];
             }
             if (!ok)
+                continue;
+            /* t and t' over the same three vertices (a part of a partially opened face held at
+             * every corner of it): they cancel, and would only give its edges two more uses */
+            if (m[0][0] == m[1][0] && m[0][1] == m[1][1] && m[0][2] == m[1][2])
                 continue;
             /* t for c1 as given (normal along n_f); t' for c2 reversed */
             if (ivec_push3(&pl->tri, m[0][0], m[0][1], m[0][2]) || ivec_push(&pl->cell, f->c1) ||
@@ -2083,9 +2221,206 @@ static bool any_rewired(const surf_edit *e)
     return false;
 }
 
+/*
+ * Glued pairs that meet along one edge. A partially opened face's t and t' are glued along
+ * the edges between its still-shared corners; where two such faces share a lattice edge with
+ * both ends still shared (two wedge-shaped cavities hinged on one line), that edge would
+ * carry four triangles. Each cavity is closed on its own, so the triangles are paired per
+ * cavity (a closing triangle with the reversed closing triangle over the same points: its t'
+ * partner) and one end of the edge is split: the triangles around it are grouped through
+ * the edges at it (an edge of two triangles joins them, an edge of more joins the pairs), and
+ * every group beyond the first gets its own copy of the vertex (the copies coincide: the
+ * same rest point, bound to cells that share its node). Done only if every group then uses
+ * each edge at most twice in opposite directions; otherwise the greedy acceptance below
+ * drops what does not fit, as before.
+ */
+typedef struct star_tri {
+    int idx;   /* region triangle (< nt0: original) or patch triangle (pl index + nt0) */
+    int32_t *q;
+    int32_t cell;
+    bool closing;
+} star_tri;
+
+static const double *third_rest(const surf_edit *e, const int32_t *q, int32_t a, int32_t b)
+{
+    for (int k = 0; k < 3; k++)
+        if (q[k] != a && q[k] != b)
+            return sv_rest(e, q[k]);
+    return NULL;
+}
+
+/* Is triangle x (holding directed edge a->b) the glued partner of y (holding b->a)? */
+static bool glued_partner(const surf_edit *e, const star_tri *x, const star_tri *y, int32_t a,
+                          int32_t b)
+{
+    if (!x->closing || !y->closing || x->cell == y->cell)
+        return false;
+    const double *p = third_rest(e, x->q, a, b), *r = third_rest(e, y->q, a, b);
+    return p && r && p[0] == r[0] && p[1] == r[1] && p[2] == r[2];
+}
+
+static bool has_dir(const int32_t *q, int32_t a, int32_t b)
+{
+    for (int k = 0; k < 3; k++)
+        if (q[k] == a && q[(k + 1) % 3] == b)
+            return true;
+    return false;
+}
+
+static bool holds(const int32_t *q, int32_t v)
+{
+    return q[0] == v || q[1] == v || q[2] == v;
+}
+
+/* Split vertex v's star into its cavity groups (see above). Returns 1 if split, 0 if not,
+ * -1 on allocation failure. */
+static int split_star(surf_edit *e, const region *rg, patch_list *pl, int32_t v)
+{
+    cs_object *o = e->o;
+    const int n0 = rg->list ? rg->n_list : e->nt0;
+    star_tri *st = NULL;
+    int n = 0, cap = 0, rc = -1;
+    int32_t *parent = NULL;
+    for (int i = 0; i < n0 + pl->cell.n; i++) {
+        const int t = i < n0 ? (rg->list ? rg->list[i] : i) : e->nt0 + (i - n0);
+        int32_t *q = t < e->nt0 ? o->surf.tris + 3 * (size_t)t
+                                : pl->tri.a + 3 * (size_t)(t - e->nt0);
+        if (!holds(q, v))
+            continue;
+        if (vec_room(&st, &cap, n, sizeof *st))
+            goto out;
+        st[n++] = (star_tri){t, q, t < e->nt0 ? o->surf.tri_cell[t] : pl->cell.a[t - e->nt0],
+                             t >= e->nt0 || o->tri_kind[t] != 0};
+    }
+    parent = malloc((size_t)(n ? n : 1) * sizeof *parent);
+    if (!parent)
+        goto out;
+    for (int i = 0; i < n; i++)
+        parent[i] = i;
+    /* through each edge (v, w) */
+    for (int i = 0; i < n; i++)
+        for (int k = 0; k < 3; k++) {
+            const int32_t wv = st[i].q[k];
+            if (wv == v)
+                continue;
+            int at = 0;
+            for (int j = 0; j < n; j++)
+                at += holds(st[j].q, wv);
+            for (int j = i + 1; j < n; j++) {
+                if (!holds(st[j].q, wv))
+                    continue;
+                if (at == 2) {
+                    uf_union(parent, i, j);
+                } else {
+                    const bool iv = has_dir(st[i].q, v, wv), jv = has_dir(st[j].q, v, wv);
+                    /* a cavity's two walls: a glued pair */
+                    if (iv != jv && (iv ? glued_partner(e, &st[i], &st[j], v, wv)
+                                        : glued_partner(e, &st[j], &st[i], wv, v)))
+                        uf_union(parent, i, j);
+                }
+            }
+        }
+    /* valid only if every group uses each edge at v at most once per direction */
+    int groups = 0;
+    for (int i = 0; i < n; i++)
+        if (uf_find(parent, i) == i)
+            groups++;
+    rc = 0;
+    if (groups < 2)
+        goto out;
+    for (int i = 0; i < n; i++)
+        for (int k = 0; k < 3; k++) {
+            const int32_t wv = st[i].q[k];
+            if (wv == v)
+                continue;
+            int fw = 0, bw = 0;
+            for (int j = 0; j < n; j++)
+                if (uf_find(parent, j) == uf_find(parent, i) && holds(st[j].q, wv)) {
+                    fw += has_dir(st[j].q, v, wv);
+                    bw += has_dir(st[j].q, wv, v);
+                }
+            if (fw > 1 || bw > 1)
+                goto out;
+        }
+    /* the group of the first triangle keeps v */
+    const int keep = uf_find(parent, 0);
+    for (int i = 0; i < n; i++) {
+        const int r = uf_find(parent, i);
+        if (r == keep || r != i)
+            continue;
+        const int32_t c = sv_append_copy(e, v, st[i].cell);
+        if (c < 0) {
+            rc = -1;
+            goto out;
+        }
+        for (int j = 0; j < n; j++) {
+            if (uf_find(parent, j) != r)
+                continue;
+            for (int k = 0; k < 3; k++)
+                if (st[j].q[k] == v)
+                    st[j].q[k] = c;
+            if (st[j].idx < e->nt0)
+                e->rewired[st[j].idx] = 1;
+        }
+    }
+    rc = 1;
+out:
+    free(st);
+    free(parent);
+    return rc;
+}
+
+static int split_glued(surf_edit *e, const region *rg, patch_list *pl)
+{
+    const cs_surface *s = &e->o->surf;
+    const int n0 = rg->list ? rg->n_list : e->nt0;
+    edge_map em;
+    if (pl->cell.n == 0)
+        return 0;
+    if (edge_map_init(&em, (size_t)3 * (n0 + pl->cell.n) + 64))
+        return -1;
+    for (int i = 0; i < n0; i++)
+        tri_edges_add(&em, s->tris + 3 * (size_t)(rg->list ? rg->list[i] : i), 1);
+    for (int i = 0; i < pl->cell.n; i++)
+        tri_edges_add(&em, pl->tri.a + 3 * (size_t)i, 1);
+    int rc = 0;
+    for (int i = 0; i < n0 + pl->cell.n && rc == 0; i++) {
+        const int t = i < n0 ? (rg->list ? rg->list[i] : i) : -1;
+        if (t >= 0 && !e->rewired[t])
+            continue;
+        const int32_t *q = t >= 0 ? s->tris + 3 * (size_t)t : pl->tri.a + 3 * (size_t)(i - n0);
+        for (int k = 0; k < 3 && rc == 0; k++) {
+            const int32_t a = q[k], b = q[(k + 1) % 3];
+            if (edge_get(&em, a, b) + edge_get(&em, b, a) <= 2)
+                continue;
+            /* split an end; the edge map follows by recounting (splits are rare) */
+            int r = split_star(e, rg, pl, a);
+            if (r == 0)
+                r = split_star(e, rg, pl, b);
+            if (r < 0) {
+                rc = -1;
+                break;
+            }
+            if (r > 0) {
+                edge_map_free(&em);
+                if (edge_map_init(&em, (size_t)3 * (n0 + pl->cell.n) + 64)) {
+                    rc = -1;
+                    break;
+                }
+                for (int j = 0; j < n0; j++)
+                    tri_edges_add(&em, s->tris + 3 * (size_t)(rg->list ? rg->list[j] : j), 1);
+                for (int j = 0; j < pl->cell.n; j++)
+                    tri_edges_add(&em, pl->tri.a + 3 * (size_t)j, 1);
+            }
+        }
+    }
+    edge_map_free(&em);
+    return rc;
+}
+
 /* Accept closing patches greedily (a patch group is dropped if it is degenerate or would use a
  * directed edge twice), then close what is left open. Commits the edit. */
-static int repair_and_commit(cs_world_t *w, cs_object *o, surf_edit *e, const patch_list *pl,
+static int repair_and_commit(cs_world_t *w, cs_object *o, surf_edit *e, patch_list *pl,
                              int *fans, int *closing, bool record)
 {
     const cs_surface *s = &o->surf;
@@ -2095,6 +2430,12 @@ static int repair_and_commit(cs_world_t *w, cs_object *o, surf_edit *e, const pa
     int rc = -1;
     if (repair_region(e, pl, &rg))
         return -1;
+    /* each pass renames vertices of original triangles: the region follows (the triangles
+     * they flag rewired bring their vertices in) */
+    if (e->partial && (split_glued(e, &rg, pl) || (region_free(&rg), repair_region(e, pl, &rg)))) {
+        region_free(&rg);
+        return -1;
+    }
     const int n_orig = rg.list ? rg.n_list : e->nt0;
     if (edge_map_init(&em, (size_t)3 * (n_orig + pl->cell.n) + 64)) {
         region_free(&rg);
@@ -2780,7 +3121,8 @@ static bool face_open(const cs_object *o, int32_t c, int axis, int dir)
  * cell on the plane's + side (or the lower one). A face whose rim nodes stay shared is still
  * held there: it opens (and is closed) in the event that separates its last node.
  */
-static int opened_faces(cs_object *o, const int8_t *label, const uint8_t *affected, ivec *out)
+static int opened_faces(cs_object *o, const int8_t *label, const uint8_t *affected, bool partial,
+                        ivec *out)
 {
     const cs_cubemesh *cm = &o->cm;
     if (!o->cell_open && !(o->cell_open = calloc((size_t)cm->n_cells, 1)))
@@ -2805,7 +3147,7 @@ static int opened_faces(cs_object *o, const int8_t *label, const uint8_t *affect
                         break;
                     }
             }
-            if (n_shared > 0)
+            if (n_shared == 4 || (n_shared > 0 && !partial))
                 continue;
             o->cell_open[c] |= face_bit(axis, 1);
             o->cell_open[d] |= face_bit(axis, -1);
@@ -2817,6 +3159,163 @@ static int opened_faces(cs_object *o, const int8_t *label, const uint8_t *affect
         }
     }
     return 0;
+}
+
+/* Does every triangle of the object's own mesh lie in a lattice plane (a surface made of cube
+ * faces: objects given as cells, voxel models)? Then the mesh meets a face of the lattice only
+ * along its edges. */
+static bool mesh_on_lattice(const cs_object *o)
+{
+    const cs_surface *s = &o->surf;
+    const cs_cubemesh *cm = &o->cm;
+    for (int t = 0; t < s->n_triangles; t++) {
+        if (o->tri_kind[t] != 0)
+            continue;
+        const int32_t *q = s->tris + 3 * (size_t)t;
+        bool in_plane = false;
+        for (int a = 0; a < 3 && !in_plane; a++) {
+            const double x = s->rest[3 * (size_t)q[0] + a];
+            const double l = (x - cm->origin[a]) / cm->h;
+            in_plane = fabs(l - nearbyint(l)) <= 1e-9 && s->rest[3 * (size_t)q[1] + a] == x &&
+                       s->rest[3 * (size_t)q[2] + a] == x;
+        }
+        if (!in_plane)
+            return false;
+    }
+    return true;
+}
+
+/*
+ * The second corner vertices of nodes (split_glued made them for cavities meeting at one
+ * edge): used by closing triangles only, at the very rest point of the corner vertex a node at
+ * that lattice point names. corner_of[v] = -2 - node for them (split_surface groups them by
+ * node copy like the node's own).
+ */
+static int mark_cavity_corners(const cs_object *o, int32_t *corner_of)
+{
+    const cs_surface *s = &o->surf;
+    const cs_cubemesh *cm = &o->cm;
+    uint8_t *mesh_used = calloc((size_t)(s->n_vertices ? s->n_vertices : 1), 1);
+    if (!mesh_used)
+        return -1;
+    for (int t = 0; t < s->n_triangles; t++)
+        for (int k = 0; k < 3; k++)
+            if (o->tri_kind[t] == 0)
+                mesh_used[s->tris[3 * (size_t)t + k]] = 1;
+            else if (!mesh_used[s->tris[3 * (size_t)t + k]])
+                mesh_used[s->tris[3 * (size_t)t + k]] = 2;
+    for (int v = 0; v < s->n_vertices; v++) {
+        if (mesh_used[v] != 2 || corner_of[v] != -1)
+            continue;
+        const double *p = s->rest + 3 * (size_t)v;
+        int32_t li[3];
+        for (int k = 0; k < 3; k++)
+            li[k] = (int32_t)llround((p[k] - cm->origin[k]) / cm->h);
+        for (int d = 0; d < 8 && corner_of[v] == -1; d++) {
+            const int dx = d & 1, dy = (d >> 1) & 1, dz = (d >> 2) & 1;
+            const int32_t c = cs_cubemesh_find(cm, li[0] - dx, li[1] - dy, li[2] - dz);
+            if (c < 0)
+                continue;
+            const int32_t nd = cm->cell_nodes[8 * (size_t)c + corner_id(dx, dy, dz)];
+            const int32_t r = o->corner_vertex[nd];
+            if (r >= 0 && r != v && r < s->n_vertices &&
+                !memcmp(s->rest + 3 * (size_t)r, p, 3 * sizeof(double)))
+                corner_of[v] = -2 - nd;
+        }
+    }
+    free(mesh_used);
+    return 0;
+}
+
+/* Vertex x of a triangle of cell ct as the surface split will leave it: a corner vertex (of a
+ * node: corner_of) with the node copy ct holds now, another vertex as it is. */
+static int64_t split_ident(const cs_object *o, const int32_t *corner_of, int32_t x, int32_t ct)
+{
+    const int32_t c = corner_of[x];
+    if (c == -1)
+        return (int64_t)x << 32;
+    const double *p = o->cm.node_rest + 3 * (size_t)(c >= 0 ? c : -2 - c);
+    const int k = corner_at(&o->cm, ct, p);
+    return ((int64_t)x << 32) | (uint32_t)(k >= 0 ? o->cm.cell_nodes[8 * (size_t)ct + k] : -1);
+}
+
+/*
+ * Second corner vertices are a state of the moment: two cavities hinged on one edge. Where the
+ * cells around them changed (an affected cell holds one of its triangles), each goes back into
+ * the vertex its node copy names (before the event), so that the surface split below sees one
+ * vertex per node copy again; split_glued splits it anew where cavities still meet at an edge.
+ * Every triangle of such a vertex is merged or none (the surface stays closed), in s->tris and
+ * tris0 alike (the state the event starts from), and flagged rewired. A vertex is merged only where no edge at
+ * the merged vertex is then used twice in one direction, counted as the surface split will
+ * leave it; where that does not hold it stays (the repair closes what is left between the
+ * two vertices with fans; see fracture_shuffled_box_cuts_keep_closing_pairs).
+ */
+static void merge_cavity_corners(cs_object *o, surf_edit *e, const int32_t *cn0, int32_t *tris0,
+                                 const uint8_t *affected, const int32_t *corner_of)
+{
+    cs_surface *s = &o->surf;
+    const cs_cubemesh *cm = &o->cm;
+    for (int t = 0; t < e->nt0; t++) {
+        if (!affected[s->tri_cell[t]] || o->tri_kind[t] == 0)
+            continue;
+        for (int k = 0; k < 3; k++) {
+            const int32_t u = tris0[3 * (size_t)t + k];
+            if (corner_of[u] > -2)
+                continue;
+            /* the node copy each of u's triangles had; all must name the same vertex */
+            const double *p = cm->node_rest + 3 * (size_t)(-2 - corner_of[u]);
+            int32_t into = -1;
+            bool ok = true;
+            for (int j = 0; j < e->nt0 && ok; j++) {
+                const int32_t *q = tris0 + 3 * (size_t)j;
+                if (q[0] != u && q[1] != u && q[2] != u)
+                    continue;
+                const int32_t ct = s->tri_cell[j];
+                const int kc = corner_at(cm, ct, p);
+                const int32_t r = kc >= 0 ? o->corner_vertex[cn0[8 * (size_t)ct + kc]] : -1;
+                ok = r >= 0 && r != u && (into < 0 || r == into) &&
+                     !memcmp(s->rest + 3 * (size_t)r, s->rest + 3 * (size_t)u, 3 * sizeof(double));
+                into = r;
+            }
+            if (!ok || into < 0)
+                continue;
+            /* and only if no edge at the merged vertex is then used twice in one direction,
+             * counted as the surface split will leave it: a corner vertex taken per node copy
+             * of each triangle's cell (split_surface), other vertices as they are */
+            int64_t ein[2 * 96], eout[2 * 96];
+            int ni = 0, no = 0;
+            for (int j = 0; j < e->nt0 && ok; j++) {
+                const int32_t *q = tris0 + 3 * (size_t)j;
+                for (int i = 0; i < 3 && ok; i++) {
+                    if (q[i] != u && q[i] != into)
+                        continue;
+                    const int32_t ct = s->tri_cell[j];
+                    const int64_t self = split_ident(o, corner_of, into, ct),
+                                  nx = split_ident(o, corner_of, q[(i + 1) % 3] == u ? into : q[(i + 1) % 3], ct),
+                                  pv = split_ident(o, corner_of, q[(i + 2) % 3] == u ? into : q[(i + 2) % 3], ct);
+                    for (int x = 0; x < no && ok; x++)
+                        ok = eout[2 * x] != self || eout[2 * x + 1] != nx;
+                    for (int x = 0; x < ni && ok; x++)
+                        ok = ein[2 * x] != self || ein[2 * x + 1] != pv;
+                    ok = ok && no < 96 && ni < 96;
+                    if (ok) {
+                        eout[2 * no] = self;
+                        eout[2 * no++ + 1] = nx;
+                        ein[2 * ni] = self;
+                        ein[2 * ni++ + 1] = pv;
+                    }
+                }
+            }
+            if (!ok)
+                continue;
+            for (int j = 0; j < e->nt0; j++)
+                for (int i = 0; i < 3; i++)
+                    if (tris0[3 * (size_t)j + i] == u) {
+                        tris0[3 * (size_t)j + i] = s->tris[3 * (size_t)j + i] = into;
+                        e->rewired[j] = 1;
+                    }
+        }
+    }
 }
 
 /*
@@ -2903,6 +3402,9 @@ static int fracture_event(cs_world_t *w, cs_object *o, const int8_t *label, bool
     for (int i = 0; i < o->n; i++)
         if (o->corner_vertex[i] >= 0 && o->corner_vertex[i] < o->surf.n_vertices)
             corner_of[o->corner_vertex[i]] = i;
+    const bool partial = !paper && mesh_on_lattice(o);
+    if (partial && mark_cavity_corners(o, corner_of) != 0)
+        goto out_f;
     /* 2. nodes */
     if (split_nodes(o, F, nF, fset, label, paper, &touched, &newsrc) < 0 ||
         refresh_node_state(w, o, n_old, &newsrc) != 0)
@@ -2916,15 +3418,20 @@ static int fracture_event(cs_world_t *w, cs_object *o, const int8_t *label, bool
         for (int a = o->fem.adj_start[nd]; a < o->fem.adj_start[nd + 1]; a++)
             affected[o->fem.adj[a] / 8] = 1;
     }
-    if (opened_faces(o, label, affected, &Ov) != 0)
+    if (opened_faces(o, label, affected, partial, &Ov) != 0)
         goto out_f;
     const int nO = Ov.n / 4;
     O = (crack_face *)Ov.a; /* 4 int32 per face, laid out as crack_face */
     e.o = o;
+    e.partial = partial;
     e.nv0 = o->surf.n_vertices;
     e.nt0 = o->surf.n_triangles;
     e.rewired = calloc((size_t)(e.nt0 ? e.nt0 : 1), 1);
-    if (!e.rewired || split_surface(o, &e, cn0, tris0, affected, corner_of, &fam) != 0)
+    if (!e.rewired)
+        goto out_f;
+    if (partial)
+        merge_cavity_corners(o, &e, cn0, tris0, affected, corner_of);
+    if (split_surface(o, &e, cn0, tris0, affected, corner_of, &fam) != 0)
         goto out_f;
     /* 4. closing surfaces, 5. repair */
     if (close_faces(w, o, &e, tris0, O, nO, label, &fam, &pl) != 0)

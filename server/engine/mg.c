@@ -7,6 +7,9 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include <immintrin.h>
+#include <omp.h>
+
 #include "mat3.h"
 
 #define MG_NU 1           /* smoothing sweeps before and after the coarse correction */
@@ -18,6 +21,14 @@
 #endif
 #define MG_COARSE_SWEEPS 8 /* Jacobi sweeps on a coarsest level too large for Cholesky */
 #define MG_POWER_ITERS 10
+#define MG_CHUNK 64        /* batches per chunk of apply_ex (1024 cells, 96 KiB of fe) */
+#define MG_LANES 16        /* cells per batch of the element pass (one float SIMD lane each) */
+#define VF_LANES 8         /* lanes per vector of the element pass's arithmetic */
+typedef float vf __attribute__((vector_size(4 * VF_LANES)));
+#define MODAL_NAME modal_core_f
+#define MODAL_V vf
+#define MODAL_S float
+#include "modal_core.h"
 #define MG_LAMBDA_EVERY 64 /* re-estimate λmax(D⁻¹A) after this many setups */
 
 typedef struct mg_level {
@@ -42,8 +53,21 @@ typedef struct mg_level {
     const uint8_t *mask;
     uint8_t *own_mask;
     /* the V-cycle's single-precision copies (converted in cs_mg_setup) and scratch */
-    float *Rf, *sf, *dgf, *invf;      /* 9 per cell, 1 per cell, 1 per node, 9 per node */
-    float *fe, *x, *b, *t, *d;        /* 24 per cell; 3 per node each */
+    float *dgf, *invf;                /* 1 per node, 9 per node */
+    float *x, *b, *t, *d;             /* 3 per node each */
+    /* the element pass, in batches of MG_LANES cells (cell c: batch c / MG_LANES, lane
+     * c % MG_LANES; lanes past the last cell repeat the batch's first cell with L = M = 0) */
+    int n_batches;
+    int32_t *bidx;                    /* per batch 8 × MG_LANES: 3·node of corner k per lane */
+    float *bR;                        /* per batch 9 × MG_LANES: R_c (cs_mg_setup) */
+    float *bL, *bM;                   /* per batch MG_LANES: s_c·hλ/16, s_c·hμ/16 (cs_mg_setup) */
+    float *fe;                        /* per batch 24 × MG_LANES: the cells' products */
+    int32_t *fadj;                    /* per adj link: its corner's x component in fe */
+    /* the node pass follows the element pass chunk by chunk (apply_ex): the nodes ordered by
+     * the batch of their last cell (nodes without cells: batch 0), then by index */
+    int32_t *norder;                  /* n_nodes */
+    int32_t *nminb;                   /* per position in norder: the batch of its first cell */
+    int32_t *nfirst;                  /* n_batches + 1: first position whose last batch >= b */
     double lam;
     float omega;
 } mg_level;
@@ -55,7 +79,8 @@ struct cs_mg {
     int fine_nodes, fine_cells;
     const int32_t *fine_links;
     double K[576];
-    float Kf[576];
+    double hl, hm;     /* hλ, hμ of K (cs_cube_lame_h) */
+    bool avx512;       /* the element pass gathers with AVX-512 */
     double *dense;     /* coarsest: Cholesky factor (lower), NULL if swept */
     double *dense_x;   /* its right-hand side and solution in double */
     int dense_n;
@@ -321,18 +346,58 @@ static int alloc_level_state(mg_level *l, int level, int threads)
     l->threads = threads > 1 && l->n_cells >= CS_FEM_PARALLEL_CELLS ? threads : 1;
     l->s = malloc(nc * sizeof(double));
     l->dg = malloc((size_t)(l->n_nodes ? l->n_nodes : 1) * sizeof(double));
-    l->Rf = malloc(nc * 9 * sizeof(float));
-    l->sf = malloc(nc * sizeof(float));
     l->dgf = malloc((size_t)(l->n_nodes ? l->n_nodes : 1) * sizeof(float));
     l->invf = malloc((n3 ? n3 : 1) * 3 * sizeof(float));
-    l->fe = malloc(nc * 24 * sizeof(float));
+    const size_t nb = (nc + MG_LANES - 1) / MG_LANES, vb = MG_LANES * sizeof(float);
+    l->n_batches = (l->n_cells + MG_LANES - 1) / MG_LANES;
+    l->bidx = aligned_alloc(64, nb * 8 * vb);
+    l->bR = aligned_alloc(64, nb * 9 * vb);
+    l->bL = aligned_alloc(64, nb * vb);
+    l->bM = aligned_alloc(64, nb * vb);
+    l->fe = aligned_alloc(64, nb * 24 * vb);
+    l->fadj = malloc(nc * 8 * sizeof(int32_t));
+    l->norder = malloc((size_t)(l->n_nodes ? l->n_nodes : 1) * sizeof(int32_t));
+    l->nminb = malloc((size_t)(l->n_nodes ? l->n_nodes : 1) * sizeof(int32_t));
+    l->nfirst = calloc(nb + 2, sizeof(int32_t));
     l->x = malloc((n3 ? n3 : 1) * sizeof(float));
     l->b = malloc((n3 ? n3 : 1) * sizeof(float));
     l->t = malloc((n3 ? n3 : 1) * sizeof(float));
     l->d = malloc((n3 ? n3 : 1) * sizeof(float));
-    if (!l->d || !l->s || !l->dg || !l->Rf || !l->sf || !l->dgf || !l->invf || !l->fe || !l->x ||
-        !l->b || !l->t)
+    if (!l->d || !l->s || !l->dg || !l->dgf || !l->invf || !l->fe || !l->x || !l->b || !l->t ||
+        !l->bidx || !l->bR || !l->bL || !l->bM || !l->fadj || !l->norder || !l->nminb ||
+        !l->nfirst)
         return -1;
+    /* counting sort of the nodes by the batch of their last cell (adj: cells increasing) */
+    for (int n = 0; n < l->n_nodes; n++) {
+        const int a0 = l->adj_start[n], a1 = l->adj_start[n + 1];
+        l->nfirst[(a1 > a0 ? l->adj[a1 - 1] / 8 / MG_LANES : 0) + 1]++;
+    }
+    for (int b = 0; b <= l->n_batches; b++)
+        l->nfirst[b + 1] += l->nfirst[b];
+    {
+        int32_t *fill = malloc(((size_t)l->n_batches + 1) * sizeof(int32_t));
+        if (!fill)
+            return -1;
+        memcpy(fill, l->nfirst, ((size_t)l->n_batches + 1) * sizeof(int32_t));
+        for (int n = 0; n < l->n_nodes; n++) {
+            const int a0 = l->adj_start[n], a1 = l->adj_start[n + 1];
+            const int q = fill[a1 > a0 ? l->adj[a1 - 1] / 8 / MG_LANES : 0]++;
+            l->norder[q] = n;
+            l->nminb[q] = a1 > a0 ? l->adj[a0] / 8 / MG_LANES : 0;
+        }
+        free(fill);
+    }
+    for (int b = 0; b < l->n_batches; b++)
+        for (int p = 0; p < MG_LANES; p++) {
+            const int c = b * MG_LANES + p < l->n_cells ? b * MG_LANES + p : b * MG_LANES;
+            for (int k = 0; k < 8; k++)
+                l->bidx[(8 * b + k) * MG_LANES + p] = 3 * l->cell_nodes[8 * c + k];
+        }
+    for (int n = 0; n < l->n_nodes; n++)
+        for (int a = l->adj_start[n]; a < l->adj_start[n + 1]; a++) {
+            const int c = l->adj[a] / 8, k = l->adj[a] % 8;
+            l->fadj[a] = (24 * (c / MG_LANES) + 3 * k) * MG_LANES + c % MG_LANES;
+        }
     if (level == 0)
         return 0;
     l->own_R = malloc((size_t)l->n_cells * 9 * sizeof(double));
@@ -374,8 +439,14 @@ static void free_level(mg_level *l)
     free(l->dg);
     free(l->own_inv);
     free(l->own_mask);
-    free(l->Rf);
-    free(l->sf);
+    free(l->bidx);
+    free(l->bR);
+    free(l->bL);
+    free(l->bM);
+    free(l->fadj);
+    free(l->norder);
+    free(l->nminb);
+    free(l->nfirst);
     free(l->dgf);
     free(l->invf);
     free(l->fe);
@@ -411,8 +482,8 @@ cs_mg *cs_mg_build(const cs_cubemesh *cm, const cs_fem *fem, uint32_t version)
     mg->fine_cells = cm->n_cells;
     mg->fine_links = cm->cell_nodes;
     memcpy(mg->K, fem->K, sizeof mg->K);
-    for (int i = 0; i < 576; i++)
-        mg->Kf[i] = (float)fem->K[i];
+    cs_cube_lame_h(fem->K, &mg->hl, &mg->hm);
+    mg->avx512 = __builtin_cpu_supports("x86-64-v4");
     mg_level *l0 = &mg->lv[0];
     l0->n_cells = cm->n_cells;
     l0->n_nodes = cm->n_nodes;
@@ -492,57 +563,163 @@ double *cs_mg_node_diag(cs_mg *mg)
 
 /* ------------------------------------------------------------------ products */
 
-/* out = s R K Rᵀ u for one cell, u gathered from x at its nodes nd (single precision). */
-__attribute__((target_clones("arch=x86-64-v3", "default"))) static void
-cell_product(const float *restrict K, const float *restrict R, float s, const float *restrict x,
-             const int32_t *restrict nd, float *restrict out)
+/* The element pass of half h (lanes 8h..8h+7) of batch b: fe = s R K Rᵀ x per lane, by the
+ * modal kernel (fem.c, modal_core.h) in single precision, 8 lanes in 256-bit vectors (512-bit
+ * vectors of 16 lanes with gathers measured slower on this Zen 4, which splits them in two). */
+static inline __attribute__((always_inline)) void half_rest(const mg_level *l, int b, int h,
+                                                            const vf u[24])
 {
-    float u[24], ku[24] = {0};
-    for (int k = 0; k < 8; k++) {
-        const float *d = x + 3 * nd[k];
-        for (int i = 0; i < 3; i++)
-            u[3 * k + i] = R[i] * d[0] + R[3 + i] * d[1] + R[6 + i] * d[2];
+    vf R[9], y[24], L, M;
+    const size_t o = (size_t)b * MG_LANES + VF_LANES * h;
+    for (int j = 0; j < 9; j++)
+        memcpy(&R[j], l->bR + 9 * MG_LANES * (size_t)b + MG_LANES * j + VF_LANES * h, sizeof(vf));
+    memcpy(&L, l->bL + o, sizeof L);
+    memcpy(&M, l->bM + o, sizeof M);
+    modal_core_f(u, R, 0.0f, &L, &M, NULL, y);
+    float *out = l->fe + 24 * MG_LANES * (size_t)b + VF_LANES * h;
+    for (int k = 0; k < 24; k++)
+        memcpy(out + MG_LANES * k, &y[k], sizeof(vf));
+}
+
+/* Inputs lane by lane. */
+__attribute__((optimize("fp-contract=fast"), target_clones("arch=x86-64-v3", "default")))
+static void batches_generic(const mg_level *l, const float *restrict x, int b0, int b1)
+{
+    for (int b = b0; b < b1; b++)
+        for (int h = 0; h < MG_LANES / VF_LANES; h++) {
+            const int32_t *ix = l->bidx + 8 * MG_LANES * (size_t)b + VF_LANES * h;
+            vf u[24];
+            for (int k = 0; k < 8; k++)
+                for (int i = 0; i < 3; i++)
+                    for (int p = 0; p < VF_LANES; p++)
+                        u[3 * k + i][p] = x[ix[MG_LANES * k + p] + i];
+            half_rest(l, b, h, u);
+        }
+}
+
+/* Inputs with AVX-512VL: each corner's nodal 3-vectors by masked loads, transposed into x, y, z
+ * across the lanes in registers (the same values as batches_generic). */
+__attribute__((optimize("fp-contract=fast"), target("arch=x86-64-v4")))
+static void batches_avx512(const mg_level *l, const float *restrict x, int b0, int b1)
+{
+    _Static_assert(VF_LANES == 8, "two 4-lane groups per 256-bit vector");
+    for (int b = b0; b < b1; b++)
+        for (int h = 0; h < MG_LANES / VF_LANES; h++) {
+            const int32_t *ix = l->bidx + 8 * MG_LANES * (size_t)b + VF_LANES * h;
+            vf u[24];
+            for (int k = 0; k < 8; k++) {
+                const int32_t *q = ix + MG_LANES * k;
+                __m256 r[4]; /* (x, y, z, 0) of lanes j | j + 4 */
+                for (int j = 0; j < 4; j++)
+                    r[j] = _mm256_insertf128_ps(
+                        _mm256_castps128_ps256(_mm_maskz_loadu_ps(7, x + q[j])),
+                        _mm_maskz_loadu_ps(7, x + q[j + 4]), 1);
+                const __m256 t0 = _mm256_unpacklo_ps(r[0], r[1]); /* x0 x1 y0 y1 | 4 5 */
+                const __m256 t1 = _mm256_unpackhi_ps(r[0], r[1]); /* z0 z1 0 0 | 4 5 */
+                const __m256 t2 = _mm256_unpacklo_ps(r[2], r[3]);
+                const __m256 t3 = _mm256_unpackhi_ps(r[2], r[3]);
+                u[3 * k] = (vf)_mm256_shuffle_ps(t0, t2, _MM_SHUFFLE(1, 0, 1, 0));
+                u[3 * k + 1] = (vf)_mm256_shuffle_ps(t0, t2, _MM_SHUFFLE(3, 2, 3, 2));
+                u[3 * k + 2] = (vf)_mm256_shuffle_ps(t1, t3, _MM_SHUFFLE(1, 0, 1, 0));
+            }
+            half_rest(l, b, h, u);
+        }
+}
+
+/* A Chebyshev step fused into a residual's node pass: d = a d + c D⁻¹ r (d = c D⁻¹ r if
+ * first), x += d at free dofs, 0 at held ones (cheb_update's arithmetic, node by node). */
+typedef struct cheb_step {
+    float *d, *x;
+    float a, c;
+    bool first;
+} cheb_step;
+
+/* Node n's row of y (see apply_path): its cells' products summed in the adj order; with cs,
+ * instead of storing it, the Chebyshev step on node n (its cells are all done: no later cell
+ * of this pass reads its x). */
+static inline __attribute__((always_inline)) void node_out(const mg_level *l, int n,
+                                                           const float *x, const float *b,
+                                                           float *y, const cheb_step *cs)
+{
+    float s[3] = {0, 0, 0};
+    for (int a = l->adj_start[n]; a < l->adj_start[n + 1]; a++) {
+        const float *v = l->fe + l->fadj[a];
+        s[0] += v[0];
+        s[1] += v[MG_LANES];
+        s[2] += v[2 * MG_LANES];
     }
-    for (int j = 0; j < 24; j++) {
-        const float uj = u[j], *row = K + 24 * j;
-        for (int i = 0; i < 24; i++)
-            ku[i] += uj * row[i];
+    float r[3];
+    for (int k = 0; k < 3; k++) {
+        const int d = 3 * n + k;
+        const float ax = s[k] + l->dgf[n] * x[d];
+        r[k] = !b ? ax : l->mask[d] ? 0.0f : b[d] - ax;
     }
-    for (int k = 0; k < 8; k++) {
-        const float *v = ku + 3 * k;
-        for (int i = 0; i < 3; i++)
-            out[3 * k + i] = s * (R[3 * i] * v[0] + R[3 * i + 1] * v[1] + R[3 * i + 2] * v[2]);
+    if (!cs) {
+        for (int k = 0; k < 3; k++)
+            y[3 * n + k] = r[k];
+        return;
+    }
+    const float *m = l->invf + 9 * n;
+    for (int k = 0; k < 3; k++) {
+        const int j = 3 * n + k;
+        const float z = m[3 * k] * r[0] + m[3 * k + 1] * r[1] + m[3 * k + 2] * r[2];
+        const float dj = l->mask[j] ? 0.0f : cs->first ? cs->c * z : cs->a * cs->d[j] + cs->c * z;
+        cs->d[j] = dj;
+        cs->x[j] = l->mask[j] ? 0.0f : cs->x[j] + dj;
     }
 }
 
 /* y = Σ s R K Rᵀ x + dg x on any level (the finest too: rediscretized like the coarse ones);
- * with b, the residual y = b − (that) at free dofs and 0 at held ones, in the same pass. */
-static void apply_ex(const cs_mg *mg, int level, const float *x, const float *b, float *y)
+ * with b, the residual y = b − (that) at free dofs and 0 at held ones, in the same pass; with
+ * cs (and b), the Chebyshev step on that residual instead of y (cs->x is x). */
+static void apply_path(const cs_mg *mg, int level, bool avx512, const float *x, const float *b,
+                       float *y, const cheb_step *cs)
 {
     const mg_level *l = &mg->lv[level];
-#pragma omp parallel for num_threads(l->threads) schedule(static)
-    for (int c = 0; c < l->n_cells; c++)
-        cell_product(mg->Kf, l->Rf + 9 * c, l->sf[c], x, l->cell_nodes + 8 * c, l->fe + 24 * c);
-#pragma omp parallel for num_threads(l->threads) schedule(static)
-    for (int n = 0; n < l->n_nodes; n++) {
-        float s[3] = {0, 0, 0};
-        for (int a = l->adj_start[n]; a < l->adj_start[n + 1]; a++) {
-            const float *v = l->fe + 3 * l->adj[a];
-            s[0] += v[0];
-            s[1] += v[1];
-            s[2] += v[2];
-        }
-        for (int k = 0; k < 3; k++) {
-            const int d = 3 * n + k;
-            const float ax = s[k] + l->dgf[n] * x[d];
-            y[d] = !b ? ax : l->mask[d] ? 0.0f : b[d] - ax;
-        }
+    if (l->n_batches == 0) {
+        for (int n = 0; n < l->n_nodes; n++)
+            node_out(l, n, x, b, y, cs);
+        return;
     }
+#pragma omp parallel num_threads(l->threads)
+    {
+        /* Each thread: a contiguous range of batches, chunk by chunk, each chunk's element pass
+         * followed by the node pass of the nodes whose cells are all done and all its own (fe
+         * still in cache); after the barrier the nodes it shares with lower threads. */
+        const int nt = omp_get_num_threads(), t = omp_get_thread_num();
+        const int b0 = (int)((int64_t)l->n_batches * t / nt);
+        const int b1 = (int)((int64_t)l->n_batches * (t + 1) / nt);
+        for (int j0 = b0; j0 < b1; j0 += MG_CHUNK) {
+            const int j1 = j0 + MG_CHUNK < b1 ? j0 + MG_CHUNK : b1;
+            if (avx512)
+                batches_avx512(l, x, j0, j1);
+            else
+                batches_generic(l, x, j0, j1);
+            for (int q = l->nfirst[j0]; q < l->nfirst[j1]; q++)
+                if (l->nminb[q] >= b0)
+                    node_out(l, l->norder[q], x, b, y, cs);
+        }
+#pragma omp barrier
+        for (int q = l->nfirst[b0]; q < l->nfirst[b1]; q++)
+            if (l->nminb[q] < b0)
+                node_out(l, l->norder[q], x, b, y, cs);
+    }
+}
+
+static void apply_ex(const cs_mg *mg, int level, const float *x, const float *b, float *y)
+{
+    apply_path(mg, level, mg->avx512, x, b, y, NULL);
 }
 
 static void apply(const cs_mg *mg, int level, const float *x, float *y)
 {
     apply_ex(mg, level, x, NULL, y);
+}
+
+void cs_mg_apply_level(const cs_mg *mg, int level, bool portable, const float *x, float *y)
+{
+    if (level >= 0 && level < mg->n_levels)
+        apply_path(mg, level, mg->avx512 && !portable, x, NULL, y, NULL);
 }
 
 /* x (+)= ω D⁻¹ r at free dofs; zero at held ones. */
@@ -601,14 +778,14 @@ static void cheb(const cs_mg *mg, int level, const float *b, float *x, bool zero
     if (zero) {
         cheb_update(l, b, l->d, x, 0.0f, (float)(1.0 / theta), true, true);
     } else {
-        apply_ex(mg, level, x, b, l->t);
-        cheb_update(l, l->t, l->d, x, 0.0f, (float)(1.0 / theta), true, false);
+        /* apply_ex into l->t, then cheb_update: fused */
+        const cheb_step cs = {l->d, x, 0.0f, (float)(1.0 / theta), true};
+        apply_path(mg, level, mg->avx512, x, b, NULL, &cs);
     }
     for (int k = 1; k < MG_CHEB; k++) {
-        apply_ex(mg, level, x, b, l->t);
         const double rn = 1.0 / (2.0 * sigma - rho);
-        cheb_update(l, l->t, l->d, x, (float)(rn * rho), (float)(2.0 * rn / delta), false,
-                    false);
+        const cheb_step cs = {l->d, x, (float)(rn * rho), (float)(2.0 * rn / delta), false};
+        apply_path(mg, level, mg->avx512, x, b, NULL, &cs);
         rho = rn;
     }
 }
@@ -773,14 +950,18 @@ out:
 }
 
 /* The single-precision copies the V-cycle reads. */
-static void to_single(mg_level *l)
+static void to_single(mg_level *l, double hl, double hm)
 {
 #pragma omp parallel for num_threads(l->threads) schedule(static)
-    for (int c = 0; c < l->n_cells; c++) {
-        for (int k = 0; k < 9; k++)
-            l->Rf[9 * c + k] = (float)l->R[9 * c + k];
-        l->sf[c] = (float)l->s[c];
-    }
+    for (int b = 0; b < l->n_batches; b++)
+        for (int p = 0; p < MG_LANES; p++) {
+            const int c = b * MG_LANES + p;
+            const bool live = c < l->n_cells;
+            for (int k = 0; k < 9; k++)
+                l->bR[(9 * b + k) * MG_LANES + p] = live ? (float)l->R[9 * c + k] : k % 4 == 0;
+            l->bL[b * MG_LANES + p] = live ? (float)(l->s[c] * hl / 16.0) : 0.0f;
+            l->bM[b * MG_LANES + p] = live ? (float)(l->s[c] * hm / 16.0) : 0.0f;
+        }
 #pragma omp parallel for num_threads(l->threads) schedule(static)
     for (int n = 0; n < l->n_nodes; n++) {
         for (int k = 0; k < 9; k++)
@@ -803,7 +984,7 @@ int cs_mg_setup(cs_mg *mg, const cs_fem *fem, cs_matvec_fn A, void *ctx, const d
     if (mg->dense && setup_dense(mg))
         return -1;
     for (int l = 0; l < mg->n_levels; l++)
-        to_single(&mg->lv[l]);
+        to_single(&mg->lv[l], mg->hl, mg->hm);
     /* Smoothing weights: re-estimated when the operator's kind changes, and now and then. */
     const double key[3] = {l0->s[0], l0->dg[0], (double)mg->n_levels};
     if (mg->setups % MG_LAMBDA_EVERY == 0 || memcmp(key, mg->key, sizeof key) != 0) {

@@ -24,7 +24,10 @@
  *
  * Precision: the V-cycle runs in single precision (rotations, factors, D⁻¹ and vectors are
  * converted in cs_mg_setup; the coarsest Cholesky solve is double), which halves its memory
- * traffic and doubles its SIMD width. CG stays in double with the true operator, so the
+ * traffic and doubles its SIMD width. Its element products are fem.c's modal kernel
+ * (modal_core.h) in float, 16 cells per batch (rotations and λ, μ laid out per batch at set-up),
+ * 8 lanes per 256-bit vector; each level's element pass and node pass run chunk by chunk
+ * (64 batches), so a chunk's products are summed while still in cache. CG stays in double with the true operator, so the
  * stopping rule and the solution's accuracy are unchanged; B is symmetric only up to float
  * rounding, which cs_pcg_ex's flexible (Polak–Ribière) β absorbs.
  *
@@ -79,5 +82,11 @@ int cs_mg_setup(cs_mg *mg, const cs_fem *fem, cs_matvec_fn A, void *ctx, const d
 
 /* z = B r, one V-cycle (a cs_precond_fn; ctx is the cs_mg). */
 void cs_mg_vcycle(void *ctx, const double *r, double *z);
+
+/* y = A x with level `level`'s operator in the V-cycle's single precision (level 0: Σ_c s_c
+ * R_c K R_cᵀ x + dg x over the finest cells, as cs_mg_setup left them), x and y 3 per node of
+ * the level; portable: with the gathers of CPUs without AVX-512 even where it is present. For
+ * tests: the V-cycle's own products. */
+void cs_mg_apply_level(const cs_mg *mg, int level, bool portable, const float *x, float *y);
 
 #endif

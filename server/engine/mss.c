@@ -178,7 +178,7 @@ static void element_state(const cs_mss *m, const double *pos, double *st)
         const double inv = L > 0 ? 1.0 / L : 0.0;
         for (int i = 0; i < 3; i++)
             st[4 * s + i] = d[i] * inv;
-        st[4 * s + 3] = L > L0 ? 1 - L0 / L : 0.0;
+        st[4 * s + 3] = m->geometric && L > L0 ? 1 - L0 / L : 0.0;
     }
     double len[3];
     element_axes(pos, st + ST_AXES, len);

@@ -113,6 +113,7 @@ typedef struct cs_rigid_world {
     uint8_t *dyn;
     contact *c;
     int nc, cap_c;
+    struct dgrid *grid; /* broad phase against a deformable object (deformable_grid) */
 } cs_rigid_world;
 
 /* cs_world carries the pointer: world_internal.h. */
@@ -427,6 +428,213 @@ double cs_rigid_kinetic_energy(const cs_object *o)
     return 0.5 * rb->mass * dot3(rb->v, rb->v) + 0.5 * dot3(wb, Iw);
 }
 
+/* ---------------------------------------------------------------- broad phase: deformable */
+
+/*
+ * A deformable object's cells (by the box of their current corners) or nodes, filed in the
+ * buckets of a uniform grid of edge 2h over the object's box (a counting sort): a rigid
+ * body's box then finds the cells or nodes it may touch in time that grows with them, not
+ * with the object. The plain loop (every cell or node against every body's box) is kept for
+ * objects that few bodies overlap (w->broadphase_min_bodies), where building the grid costs
+ * more than it saves. Candidates are visited in ascending order, so both produce the same
+ * contacts in the same order.
+ */
+typedef struct dgrid {
+    double lo[3], g;
+    int32_t dim[3];
+    int32_t *start;  /* per bucket (linear index), its first entry in item; n_buckets + 1 */
+    int32_t *item;   /* the cells or nodes, bucket by bucket, ascending within each */
+    int32_t *range;  /* scratch: 6 per item, its bucket ranges */
+    int32_t *stamp, cur; /* per item: the query that last took it */
+    int32_t *cand;   /* the last query's items, ascending */
+    int n_cand;
+    size_t cap_start, cap_item, cap_items;
+} dgrid;
+
+static void grid_free(dgrid *gr)
+{
+    if (!gr)
+        return;
+    free(gr->start);
+    free(gr->item);
+    free(gr->range);
+    free(gr->stamp);
+    free(gr->cand);
+    free(gr);
+}
+
+static int cmp_i32(const void *x, const void *y)
+{
+    const int32_t a = *(const int32_t *)x, b = *(const int32_t *)y;
+    return (a > b) - (a < b);
+}
+
+/* The bucket index of coordinate v along axis a, clamped to the grid. */
+static int32_t bucket_at(const dgrid *gr, double v, int a)
+{
+    const double f = floor((v - gr->lo[a]) / gr->g);
+    return f < 0 ? 0 : f >= gr->dim[a] ? gr->dim[a] - 1 : (int32_t)f;
+}
+
+static int grow_i32(int32_t **p, size_t *cap, size_t n)
+{
+    if (n <= *cap)
+        return 0;
+    int32_t *g = realloc(*p, n * sizeof *g);
+    if (!g)
+        return -1;
+    *p = g;
+    *cap = n;
+    return 0;
+}
+
+/* File D's cells (cells) or nodes in rw->grid, by counting sort (linear in the items and
+ * buckets; the buckets are at most 8 per item). Returns 0 or -1 (out of memory). */
+static int grid_build(cs_rigid_world *rw, const cs_object *D, bool cells)
+{
+    if (!rw->grid && !(rw->grid = calloc(1, sizeof *rw->grid)))
+        return -1;
+    dgrid *gr = rw->grid;
+    const int n_items = cells ? D->cm.n_cells : D->n;
+    double hi[3];
+    for (int a = 0; a < 3; a++)
+        gr->lo[a] = hi[a] = D->x[a];
+    for (int i = 1; i < D->n; i++)
+        for (int a = 0; a < 3; a++) {
+            const double v = D->x[3 * (size_t)i + a];
+            gr->lo[a] = v < gr->lo[a] ? v : gr->lo[a];
+            hi[a] = v > hi[a] ? v : hi[a];
+        }
+    /* buckets of 2h, coarser if a stretched object would need more than 8 per item */
+    gr->g = 2.0 * D->cm.h;
+    double nb;
+    for (;;) {
+        nb = 1;
+        for (int a = 0; a < 3; a++)
+            nb *= floor((hi[a] - gr->lo[a]) / gr->g) + 1;
+        if (nb <= 8.0 * n_items + 64)
+            break;
+        gr->g *= 2;
+    }
+    for (int a = 0; a < 3; a++)
+        gr->dim[a] = (int32_t)(floor((hi[a] - gr->lo[a]) / gr->g) + 1);
+    const size_t n_buckets = (size_t)nb;
+    size_t items = 0;
+    if (grow_i32(&gr->range, &gr->cap_items, 6 * (size_t)n_items) ||
+        grow_i32(&gr->start, &gr->cap_start, n_buckets + 1))
+        return -1;
+    memset(gr->start, 0, (n_buckets + 1) * sizeof *gr->start);
+    for (int32_t it = 0; it < n_items; it++) {
+        double blo[3], bhi[3];
+        if (cells) {
+            const int32_t *cn = D->cm.cell_nodes + 8 * (size_t)it;
+            for (int a = 0; a < 3; a++)
+                blo[a] = bhi[a] = D->x[3 * (size_t)cn[0] + a];
+            for (int k = 1; k < 8; k++)
+                for (int a = 0; a < 3; a++) {
+                    const double v = D->x[3 * (size_t)cn[k] + a];
+                    blo[a] = v < blo[a] ? v : blo[a];
+                    bhi[a] = v > bhi[a] ? v : bhi[a];
+                }
+        } else {
+            for (int a = 0; a < 3; a++)
+                blo[a] = bhi[a] = D->x[3 * (size_t)it + a];
+        }
+        int32_t *r = gr->range + 6 * (size_t)it;
+        for (int a = 0; a < 3; a++) {
+            r[a] = bucket_at(gr, blo[a], a);
+            r[3 + a] = bucket_at(gr, bhi[a], a);
+        }
+        for (int32_t i = r[0]; i <= r[3]; i++)
+            for (int32_t j = r[1]; j <= r[4]; j++)
+                for (int32_t k = r[2]; k <= r[5]; k++) {
+                    gr->start[((size_t)i * gr->dim[1] + j) * gr->dim[2] + k + 1]++;
+                    items++;
+                }
+    }
+    for (size_t q = 0; q < n_buckets; q++)
+        gr->start[q + 1] += gr->start[q];
+    if (grow_i32(&gr->item, &gr->cap_item, items ? items : 1))
+        return -1;
+    for (int32_t it = 0; it < n_items; it++) { /* items ascending within each bucket */
+        const int32_t *r = gr->range + 6 * (size_t)it;
+        for (int32_t i = r[0]; i <= r[3]; i++)
+            for (int32_t j = r[1]; j <= r[4]; j++)
+                for (int32_t k = r[2]; k <= r[5]; k++)
+                    gr->item[gr->start[((size_t)i * gr->dim[1] + j) * gr->dim[2] + k]++] = it;
+    }
+    for (size_t q = n_buckets; q > 0; q--) /* the fill moved each start to the next one's */
+        gr->start[q] = gr->start[q - 1];
+    gr->start[0] = 0;
+    int32_t *st = realloc(gr->stamp, (size_t)(n_items ? n_items : 1) * sizeof *st);
+    if (st)
+        gr->stamp = st;
+    int32_t *cd = realloc(gr->cand, (size_t)(n_items ? n_items : 1) * sizeof *cd);
+    if (cd)
+        gr->cand = cd;
+    if (!st || !cd)
+        return -1;
+    memset(gr->stamp, 0, (size_t)n_items * sizeof *gr->stamp);
+    gr->cur = 0;
+    return 0;
+}
+
+/* The items filed in buckets that the box [qlo, qhi] overlaps, ascending, in gr->cand. */
+static void grid_query(dgrid *gr, const double qlo[3], const double qhi[3])
+{
+    gr->n_cand = 0;
+    for (int a = 0; a < 3; a++)
+        if (qhi[a] < gr->lo[a] || qlo[a] > gr->lo[a] + gr->g * gr->dim[a])
+            return;
+    gr->cur++;
+    int32_t r0[3], r1[3];
+    for (int a = 0; a < 3; a++) {
+        r0[a] = bucket_at(gr, qlo[a], a);
+        r1[a] = bucket_at(gr, qhi[a], a);
+    }
+    for (int32_t i = r0[0]; i <= r1[0]; i++)
+        for (int32_t j = r0[1]; j <= r1[1]; j++)
+            for (int32_t k = r0[2]; k <= r1[2]; k++) {
+                const size_t q = ((size_t)i * gr->dim[1] + j) * gr->dim[2] + k;
+                for (int32_t e = gr->start[q]; e < gr->start[q + 1]; e++) {
+                    const int32_t it = gr->item[e];
+                    if (gr->stamp[it] != gr->cur) {
+                        gr->stamp[it] = gr->cur;
+                        gr->cand[gr->n_cand++] = it;
+                    }
+                }
+            }
+    qsort(gr->cand, (size_t)gr->n_cand, sizeof *gr->cand, cmp_i32);
+}
+
+static double body_margin(const cs_object *o, double dt);
+
+/* How many bodies' boxes (grown by grow, or by each body's own margin if grow < 0) overlap
+ * D's current box; bodies at rest do not count against a sleeping D. */
+static int bodies_over(const cs_world_t *w, const cs_rigid_world *rw, const cs_object *D,
+                       double grow)
+{
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (int i = 0; i < D->n; i++)
+        for (int a = 0; a < 3; a++) {
+            const double v = D->x[3 * (size_t)i + a];
+            lo[a] = v < lo[a] ? v : lo[a];
+            hi[a] = v > hi[a] ? v : hi[a];
+        }
+    int n = 0;
+    for (int b = 0; b < rw->n_body; b++) {
+        const cs_rigid *rb = rw->body[b]->rb;
+        if (!rw->dyn[b] && D->sleeping)
+            continue;
+        const double m = grow >= 0 ? grow : body_margin(rw->body[b], rw->dt);
+        n += lo[0] <= rb->aabb_max[0] + m && hi[0] >= rb->aabb_min[0] - m &&
+             lo[1] <= rb->aabb_max[1] + m && hi[1] >= rb->aabb_min[1] - m &&
+             lo[2] <= rb->aabb_max[2] + m && hi[2] >= rb->aabb_min[2] - m;
+    }
+    (void)w;
+    return n;
+}
+
 void cs_rigid_world_free(cs_world_t *w)
 {
     cs_rigid_world *rw = w->rigid;
@@ -440,6 +648,7 @@ void cs_rigid_world_free(cs_world_t *w)
     free(rw->dyn);
     free(rw->c);
     free(rw->kept);
+    grid_free(rw->grid);
     free(rw);
     w->rigid = NULL;
 }
@@ -1219,114 +1428,119 @@ static void bounce_positions(const cs_world_t *w, cs_rigid_world *rw)
  * exposed face of the cube they are in, their velocity into the body removed by an impulse
  * whose opposite acts on the body (friction limited by μ times it).
  */
-static int deformable_contacts(cs_world_t *w, cs_rigid_world *rw, int n_objects)
+/* One node i of deformable D against rigid body b: a contact if it lies in one of b's cubes. */
+static int node_body(cs_world_t *w, cs_rigid_world *rw, cs_object *D, int b, int i)
 {
     const double dt = w->rigid->dt;
+    cs_object *B = rw->body[b];
+    cs_rigid *rb = B->rb;
+    const double h = B->cm.h;
+    double *x = D->x + 3 * (size_t)i, *v = D->v + 3 * (size_t)i;
+    if (D->mask[3 * (size_t)i] || x[0] < rb->aabb_min[0] || x[0] > rb->aabb_max[0] ||
+        x[1] < rb->aabb_min[1] || x[1] > rb->aabb_max[1] ||
+        x[2] < rb->aabb_min[2] || x[2] > rb->aabb_max[2])
+        return 0;
+    double dl[3], X[3], u[3];
+    int32_t ijk[3];
+    for (int a = 0; a < 3; a++)
+        dl[a] = x[a] - rb->c[a];
+    mat_t_vec(rb->R, dl, X);
+    for (int a = 0; a < 3; a++) {
+        u[a] = (X[a] + rb->com_rest[a] - B->cm.origin[a]) / h;
+        ijk[a] = (int32_t)floor(u[a]);
+    }
+    /* a node on a face of the body (up to rounding) belongs to it too */
+    int32_t cell = cs_cubemesh_find(&B->cm, ijk[0], ijk[1], ijk[2]);
+    for (int a = 0; a < 3 && cell < 0; a++) {
+        const double f = u[a] - ijk[a];
+        const int step = f < 1e-7 ? -1 : (f > 1 - 1e-7 ? 1 : 0);
+        if (!step)
+            continue;
+        ijk[a] += step;
+        cell = cs_cubemesh_find(&B->cm, ijk[0], ijk[1], ijk[2]);
+        if (cell < 0)
+            ijk[a] -= step;
+    }
+    if (cell < 0)
+        return 0;
+    /* the exposed face it is nearest to, counting the distance it moved in
+     * (relative to the body) in the last step: a node the body overtook is
+     * pushed back out the way it came, not through a nearer side */
+    double vrel_l[3], rr[3], wrr[3], vv[3];
+    for (int a = 0; a < 3; a++)
+        rr[a] = x[a] - rb->c[a];
+    cross3(rb->w, rr, wrr);
+    for (int a = 0; a < 3; a++)
+        vv[a] = v[a] - rb->v[a] - wrr[a];
+    mat_t_vec(rb->R, vv, vrel_l);
+    double best = INFINITY, score_best = INFINITY;
+    int bax = -1, bdir = 0;
+    for (int ax = 0; ax < 3; ax++)
+        for (int dir = -1; dir <= 1; dir += 2) {
+            int32_t nb[3] = {ijk[0], ijk[1], ijk[2]};
+            nb[ax] += dir;
+            if (cs_cubemesh_find(&B->cm, nb[0], nb[1], nb[2]) >= 0)
+                continue;
+            const double f = u[ax] - ijk[ax];
+            const double dist = (dir > 0 ? 1 - f : f) * h;
+            if (dist < 1e-7 * h)
+                continue; /* on that face's plane: not in through it */
+            const double score = dist + 2 * dt * dir * vrel_l[ax];
+            if (score < score_best) {
+                score_best = score;
+                best = dist;
+                bax = ax;
+                bdir = dir;
+            }
+        }
+    if (bax < 0)
+        return 0;
+    double nl[3] = {0, 0, 0}, n[3];
+    nl[bax] = bdir;
+    mat_vec(rb->R, nl, n);
+    contact *c = new_contact(rw);
+    if (!c)
+        return -1;
+    c->a = b;
+    c->b = -1;
+    c->D = D;
+    memcpy(c->p, x, sizeof c->p);
+    for (int a = 0; a < 3; a++)
+        c->n[a] = -n[a]; /* from the node towards the body */
+    c->sep = -best;
+    c->cell_a = cell;
+    c->key = ((int64_t)1 << 60) + ((int64_t)i * 3 + bax) * 2 + (bdir > 0);
+    c->dn[0] = c->dn[1] = c->dn[2] = c->dn[3] = i;
+    c->dw[0] = 1;
+    return 0;
+}
+
+static int deformable_contacts(cs_world_t *w, cs_rigid_world *rw, int n_objects)
+{
     for (int d = 0; d < n_objects; d++) {
         cs_object *D = w->objects[d];
         if (D->model == CS_MODEL_RIGID || D->n == 0)
             continue;
-        double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
-        bool any_overlap = false;
-        for (int b = 0; b < rw->n_body && !any_overlap; b++) {
-            if (b == 0)
-                for (int i = 0; i < D->n; i++)
-                    for (int a = 0; a < 3; a++) {
-                        lo[a] = fmin(lo[a], D->x[3 * (size_t)i + a]);
-                        hi[a] = fmax(hi[a], D->x[3 * (size_t)i + a]);
-                    }
-            const cs_rigid *rb = rw->body[b]->rb;
-            any_overlap = lo[0] <= rb->aabb_max[0] && hi[0] >= rb->aabb_min[0] &&
-                          lo[1] <= rb->aabb_max[1] && hi[1] >= rb->aabb_min[1] &&
-                          lo[2] <= rb->aabb_max[2] && hi[2] >= rb->aabb_min[2];
-        }
-        if (!any_overlap)
+        const int over = bodies_over(w, rw, D, 0.0);
+        if (over == 0)
             continue;
+        const bool grid = over >= w->broadphase_min_bodies;
+        if (grid && grid_build(rw, D, false) != 0)
+            return -1;
         for (int b = 0; b < rw->n_body; b++) {
-            cs_object *B = rw->body[b];
-            cs_rigid *rb = B->rb;
-            const double h = B->cm.h;
             if (!rw->dyn[b] && D->sleeping)
                 continue; /* both at rest */
-            for (int i = 0; i < D->n; i++) {
-                double *x = D->x + 3 * (size_t)i, *v = D->v + 3 * (size_t)i;
-                if (D->mask[3 * (size_t)i] || x[0] < rb->aabb_min[0] || x[0] > rb->aabb_max[0] ||
-                    x[1] < rb->aabb_min[1] || x[1] > rb->aabb_max[1] ||
-                    x[2] < rb->aabb_min[2] || x[2] > rb->aabb_max[2])
-                    continue;
-                double dl[3], X[3], u[3];
-                int32_t ijk[3];
-                for (int a = 0; a < 3; a++)
-                    dl[a] = x[a] - rb->c[a];
-                mat_t_vec(rb->R, dl, X);
-                for (int a = 0; a < 3; a++) {
-                    u[a] = (X[a] + rb->com_rest[a] - B->cm.origin[a]) / h;
-                    ijk[a] = (int32_t)floor(u[a]);
-                }
-                /* a node on a face of the body (up to rounding) belongs to it too */
-                int32_t cell = cs_cubemesh_find(&B->cm, ijk[0], ijk[1], ijk[2]);
-                for (int a = 0; a < 3 && cell < 0; a++) {
-                    const double f = u[a] - ijk[a];
-                    const int step = f < 1e-7 ? -1 : (f > 1 - 1e-7 ? 1 : 0);
-                    if (!step)
-                        continue;
-                    ijk[a] += step;
-                    cell = cs_cubemesh_find(&B->cm, ijk[0], ijk[1], ijk[2]);
-                    if (cell < 0)
-                        ijk[a] -= step;
-                }
-                if (cell < 0)
-                    continue;
-                /* the exposed face it is nearest to, counting the distance it moved in
-                 * (relative to the body) in the last step: a node the body overtook is
-                 * pushed back out the way it came, not through a nearer side */
-                double vrel_l[3], rr[3], wrr[3], vv[3];
-                for (int a = 0; a < 3; a++)
-                    rr[a] = x[a] - rb->c[a];
-                cross3(rb->w, rr, wrr);
-                for (int a = 0; a < 3; a++)
-                    vv[a] = v[a] - rb->v[a] - wrr[a];
-                mat_t_vec(rb->R, vv, vrel_l);
-                double best = INFINITY, score_best = INFINITY;
-                int bax = -1, bdir = 0;
-                for (int ax = 0; ax < 3; ax++)
-                    for (int dir = -1; dir <= 1; dir += 2) {
-                        int32_t nb[3] = {ijk[0], ijk[1], ijk[2]};
-                        nb[ax] += dir;
-                        if (cs_cubemesh_find(&B->cm, nb[0], nb[1], nb[2]) >= 0)
-                            continue;
-                        const double f = u[ax] - ijk[ax];
-                        const double dist = (dir > 0 ? 1 - f : f) * h;
-                        if (dist < 1e-7 * h)
-                            continue; /* on that face's plane: not in through it */
-                        const double score = dist + 2 * dt * dir * vrel_l[ax];
-                        if (score < score_best) {
-                            score_best = score;
-                            best = dist;
-                            bax = ax;
-                            bdir = dir;
-                        }
-                    }
-                if (bax < 0)
-                    continue;
-                double nl[3] = {0, 0, 0}, n[3];
-                nl[bax] = bdir;
-                mat_vec(rb->R, nl, n);
-                contact *c = new_contact(rw);
-                if (!c)
-                    return -1;
-                c->a = b;
-                c->b = -1;
-                c->D = D;
-                memcpy(c->p, x, sizeof c->p);
-                for (int a = 0; a < 3; a++)
-                    c->n[a] = -n[a]; /* from the node towards the body */
-                c->sep = -best;
-                c->cell_a = cell;
-                c->key = ((int64_t)1 << 60) + ((int64_t)i * 3 + bax) * 2 + (bdir > 0);
-                c->dn[0] = c->dn[1] = c->dn[2] = c->dn[3] = i;
-                c->dw[0] = 1;
+            if (!grid) {
+                for (int i = 0; i < D->n; i++)
+                    if (node_body(w, rw, D, b, i) != 0)
+                        return -1;
+                continue;
             }
+            const cs_rigid *rb = rw->body[b]->rb;
+            grid_query(rw->grid, rb->aabb_min, rb->aabb_max);
+            for (int e = 0; e < rw->grid->n_cand; e++)
+                if (node_body(w, rw, D, b, rw->grid->cand[e]) != 0)
+                    return -1;
         }
     }
     return 0;
@@ -1390,6 +1604,100 @@ static bool hex_local(const double x[8][3], const double p[3], double u[3], doub
  * two-way, with friction, warm starting and speculative approach like any contact. Fills
  * rw->c; returns 0 or -1 (out of memory).
  */
+static int cell_body(cs_world_t *w, cs_rigid_world *rw, cs_object *D, int b, int32_t cell,
+                     double margin, double tol)
+{
+    cs_object *B = rw->body[b];
+    const cs_rigid *rb = B->rb;
+    (void)w;
+    const int32_t *cn = D->cm.cell_nodes + 8 * (size_t)cell;
+    double X[8][3], lo[3] = {INFINITY, INFINITY, INFINITY};
+    double hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (int k = 0; k < 8; k++)
+        for (int a = 0; a < 3; a++) { /* (not fmin/fmax: libm calls, 40 % of this loop) */
+            X[k][a] = D->x[3 * (size_t)cn[k] + a];
+            lo[a] = X[k][a] - margin < lo[a] ? X[k][a] - margin : lo[a];
+            hi[a] = X[k][a] + margin > hi[a] ? X[k][a] + margin : hi[a];
+        }
+    if (lo[0] > rb->aabb_max[0] || hi[0] < rb->aabb_min[0] || lo[1] > rb->aabb_max[1] ||
+        hi[1] < rb->aabb_min[1] || lo[2] > rb->aabb_max[2] || hi[2] < rb->aabb_min[2])
+        return 0;
+    const int32_t *ijk = D->cm.cell_ijk + 3 * (size_t)cell;
+    for (int i = 0; i < B->n; i++) {
+        const double *p = B->x + 3 * (size_t)i;
+        if (p[0] < lo[0] || p[0] > hi[0] || p[1] < lo[1] || p[1] > hi[1] ||
+            p[2] < lo[2] || p[2] > hi[2])
+            continue;
+        double u[3];
+        if (!hex_local(X, p, u, tol))
+            continue;
+        /* outside the cell (within the margin) across one of its faces only:
+         * a speculative contact with that face if it is exposed */
+        int n_out = 0, oax = -1;
+        for (int a = 0; a < 3; a++)
+            if (u[a] < 0 || u[a] > 1) {
+                n_out++;
+                oax = a;
+            }
+        if (n_out > 1)
+            continue;
+        /* the nearest exposed face (in the cell's own coordinates); f < 0 outside */
+        int bax = -1, bdir = 0;
+        double bf = INFINITY;
+        for (int ax = 0; ax < 3; ax++)
+            for (int dir = -1; dir <= 1; dir += 2) {
+                if (n_out && (ax != oax || (dir > 0) != (u[ax] > 1)))
+                    continue;
+                int32_t nb[3] = {ijk[0], ijk[1], ijk[2]};
+                nb[ax] += dir;
+                if (cs_cubemesh_find(&D->cm, nb[0], nb[1], nb[2]) >= 0)
+                    continue;
+                const double f = dir > 0 ? 1 - u[ax] : u[ax];
+                if (f < bf) {
+                    bf = f;
+                    bax = ax;
+                    bdir = dir;
+                }
+            }
+        if (bax < 0)
+            continue;
+        /* e: the cell's mean edge along bax; the face normal is e's direction
+         * (sheared cells: close enough, the gap is measured along it) */
+        double e[3] = {0, 0, 0};
+        for (int k = 0; k < 8; k++) {
+            const double sg = CS_CORNER[k][bax] ? 0.25 : -0.25;
+            for (int a = 0; a < 3; a++)
+                e[a] += sg * X[k][a];
+        }
+        const double el = sqrt(dot3(e, e));
+        if (!(el > 0) || -bf * el >= margin)
+            continue;
+        contact *c = new_contact(rw);
+        if (!c)
+            return -1;
+        c->a = b;
+        c->b = -1;
+        c->D = D;
+        memcpy(c->p, p, sizeof c->p);
+        for (int a = 0; a < 3; a++)
+            c->n[a] = bdir * e[a] / el;
+        c->sep = -bf * el;
+        c->node_a = i;
+        c->key = ((int64_t)cell * 6 + 2 * bax + (bdir > 0)) * B->n + i;
+        const int a1 = (bax + 1) % 3, a2 = (bax + 2) % 3;
+        int j = 0;
+        for (int k = 0; k < 8 && j < 4; k++) {
+            if (CS_CORNER[k][bax] != (bdir > 0))
+                continue;
+            const double u1 = fmin(1, fmax(0, u[a1])), u2 = fmin(1, fmax(0, u[a2]));
+            c->dn[j] = cn[k];
+            c->dw[j] = (CS_CORNER[k][a1] ? u1 : 1 - u1) * (CS_CORNER[k][a2] ? u2 : 1 - u2);
+            j++;
+        }
+    }
+    return 0;
+}
+
 static int cell_contacts(cs_world_t *w, cs_rigid_world *rw, int n_objects)
 {
     const double dt = w->rigid->dt;
@@ -1397,6 +1705,12 @@ static int cell_contacts(cs_world_t *w, cs_rigid_world *rw, int n_objects)
         cs_object *D = w->objects[d];
         if (D->model == CS_MODEL_RIGID || D->n == 0 || D->cm.n_cells == 0)
             continue;
+        const int over = bodies_over(w, rw, D, -1.0);
+        if (over == 0)
+            continue;
+        const bool grid = over >= w->broadphase_min_bodies;
+        if (grid && grid_build(rw, D, true) != 0)
+            return -1;
         for (int b = 0; b < rw->n_body; b++) {
             cs_object *B = rw->body[b];
             const cs_rigid *rb = B->rb;
@@ -1404,93 +1718,20 @@ static int cell_contacts(cs_world_t *w, cs_rigid_world *rw, int n_objects)
                 continue; /* both at rest: nothing to do until one moves */
             /* speculative: nodes within the distance the body can close in a substep */
             const double margin = body_margin(B, dt), tol = fmin(0.5, margin / D->cm.h);
-            for (int32_t cell = 0; cell < D->cm.n_cells; cell++) {
-                const int32_t *cn = D->cm.cell_nodes + 8 * (size_t)cell;
-                double X[8][3], lo[3] = {INFINITY, INFINITY, INFINITY};
-                double hi[3] = {-INFINITY, -INFINITY, -INFINITY};
-                for (int k = 0; k < 8; k++)
-                    for (int a = 0; a < 3; a++) {
-                        X[k][a] = D->x[3 * (size_t)cn[k] + a];
-                        lo[a] = fmin(lo[a], X[k][a] - margin);
-                        hi[a] = fmax(hi[a], X[k][a] + margin);
-                    }
-                if (lo[0] > rb->aabb_max[0] || hi[0] < rb->aabb_min[0] || lo[1] > rb->aabb_max[1] ||
-                    hi[1] < rb->aabb_min[1] || lo[2] > rb->aabb_max[2] || hi[2] < rb->aabb_min[2])
-                    continue;
-                const int32_t *ijk = D->cm.cell_ijk + 3 * (size_t)cell;
-                for (int i = 0; i < B->n; i++) {
-                    const double *p = B->x + 3 * (size_t)i;
-                    if (p[0] < lo[0] || p[0] > hi[0] || p[1] < lo[1] || p[1] > hi[1] ||
-                        p[2] < lo[2] || p[2] > hi[2])
-                        continue;
-                    double u[3];
-                    if (!hex_local(X, p, u, tol))
-                        continue;
-                    /* outside the cell (within the margin) across one of its faces only:
-                     * a speculative contact with that face if it is exposed */
-                    int n_out = 0, oax = -1;
-                    for (int a = 0; a < 3; a++)
-                        if (u[a] < 0 || u[a] > 1) {
-                            n_out++;
-                            oax = a;
-                        }
-                    if (n_out > 1)
-                        continue;
-                    /* the nearest exposed face (in the cell's own coordinates); f < 0 outside */
-                    int bax = -1, bdir = 0;
-                    double bf = INFINITY;
-                    for (int ax = 0; ax < 3; ax++)
-                        for (int dir = -1; dir <= 1; dir += 2) {
-                            if (n_out && (ax != oax || (dir > 0) != (u[ax] > 1)))
-                                continue;
-                            int32_t nb[3] = {ijk[0], ijk[1], ijk[2]};
-                            nb[ax] += dir;
-                            if (cs_cubemesh_find(&D->cm, nb[0], nb[1], nb[2]) >= 0)
-                                continue;
-                            const double f = dir > 0 ? 1 - u[ax] : u[ax];
-                            if (f < bf) {
-                                bf = f;
-                                bax = ax;
-                                bdir = dir;
-                            }
-                        }
-                    if (bax < 0)
-                        continue;
-                    /* e: the cell's mean edge along bax; the face normal is e's direction
-                     * (sheared cells: close enough, the gap is measured along it) */
-                    double e[3] = {0, 0, 0};
-                    for (int k = 0; k < 8; k++) {
-                        const double sg = CS_CORNER[k][bax] ? 0.25 : -0.25;
-                        for (int a = 0; a < 3; a++)
-                            e[a] += sg * X[k][a];
-                    }
-                    const double el = sqrt(dot3(e, e));
-                    if (!(el > 0) || -bf * el >= margin)
-                        continue;
-                    contact *c = new_contact(rw);
-                    if (!c)
+            if (!grid) {
+                for (int32_t cell = 0; cell < D->cm.n_cells; cell++)
+                    if (cell_body(w, rw, D, b, cell, margin, tol) != 0)
                         return -1;
-                    c->a = b;
-                    c->b = -1;
-                    c->D = D;
-                    memcpy(c->p, p, sizeof c->p);
-                    for (int a = 0; a < 3; a++)
-                        c->n[a] = bdir * e[a] / el;
-                    c->sep = -bf * el;
-                    c->node_a = i;
-                    c->key = ((int64_t)cell * 6 + 2 * bax + (bdir > 0)) * B->n + i;
-                    const int a1 = (bax + 1) % 3, a2 = (bax + 2) % 3;
-                    int j = 0;
-                    for (int k = 0; k < 8 && j < 4; k++) {
-                        if (CS_CORNER[k][bax] != (bdir > 0))
-                            continue;
-                        const double u1 = fmin(1, fmax(0, u[a1])), u2 = fmin(1, fmax(0, u[a2]));
-                        c->dn[j] = cn[k];
-                        c->dw[j] = (CS_CORNER[k][a1] ? u1 : 1 - u1) * (CS_CORNER[k][a2] ? u2 : 1 - u2);
-                        j++;
-                    }
-                }
+                continue;
             }
+            const double qlo[3] = {rb->aabb_min[0] - margin, rb->aabb_min[1] - margin,
+                                   rb->aabb_min[2] - margin};
+            const double qhi[3] = {rb->aabb_max[0] + margin, rb->aabb_max[1] + margin,
+                                   rb->aabb_max[2] + margin};
+            grid_query(rw->grid, qlo, qhi);
+            for (int e = 0; e < rw->grid->n_cand; e++)
+                if (cell_body(w, rw, D, b, rw->grid->cand[e], margin, tol) != 0)
+                    return -1;
         }
     }
     return 0;

@@ -305,6 +305,82 @@ static int count_boundary_edges(const int32_t *tris, int nt)
     return boundary;
 }
 
+int cs_mesh_surface_check(const double *verts, int nv, const int32_t *tris, int nt, char *err,
+                          size_t errlen)
+{
+    /* directed edges keyed (lo, hi) with the direction in the lowest bit */
+    int64_t *e = malloc((size_t)(nt ? nt : 1) * 3 * sizeof *e);
+    if (!e) {
+        snprintf(err, errlen, "out of memory checking the mesh");
+        return -1;
+    }
+    int ne = 0, repeated = 0;
+    for (int t = 0; t < nt; t++) {
+        const int32_t *tr = tris + 3 * (size_t)t;
+        if (tr[0] == tr[1] || tr[1] == tr[2] || tr[0] == tr[2]) {
+            repeated++;
+            continue;
+        }
+        for (int k = 0; k < 3; k++) {
+            int64_t a = tr[k], b = tr[(k + 1) % 3];
+            e[ne++] = a < b ? (a << 33) | (b << 1) : (b << 33) | (a << 1) | 1;
+        }
+    }
+    qsort(e, (size_t)ne, sizeof *e, cmp_i64);
+    int open = 0, fins = 0, same = 0;
+    for (int i = 0; i < ne;) {
+        int j = i + 1;
+        while (j < ne && e[j] >> 1 == e[i] >> 1)
+            j++;
+        if (j - i == 1)
+            open++;
+        else if (j - i > 2)
+            fins++;
+        else if ((e[i] & 1) == (e[i + 1] & 1))
+            same++;
+        i = j;
+    }
+    free(e);
+    if (repeated) {
+        snprintf(err, errlen, "mesh has %d triangles with a repeated vertex", repeated);
+        return -1;
+    }
+    if (open) {
+        snprintf(err, errlen, "mesh is not closed: %d boundary edges", open);
+        return -1;
+    }
+    if (fins) {
+        snprintf(err, errlen, "mesh is not manifold: %d edges shared by three or more triangles",
+                 fins);
+        return -1;
+    }
+    if (same) {
+        snprintf(err, errlen, "mesh is not consistently oriented: %d edges used twice in the same "
+                 "direction", same);
+        return -1;
+    }
+    /* signed volume about the first vertex (divergence theorem) */
+    double vol = 0;
+    const double *o = verts;
+    for (int t = 0; t < nt; t++) {
+        const double *a = verts + 3 * (size_t)tris[3 * t], *b = verts + 3 * (size_t)tris[3 * t + 1],
+                     *c = verts + 3 * (size_t)tris[3 * t + 2];
+        const double u[3] = {a[0] - o[0], a[1] - o[1], a[2] - o[2]};
+        const double v[3] = {b[0] - o[0], b[1] - o[1], b[2] - o[2]};
+        const double w[3] = {c[0] - o[0], c[1] - o[1], c[2] - o[2]};
+        vol += u[0] * (v[1] * w[2] - v[2] * w[1]) - u[1] * (v[0] * w[2] - v[2] * w[0]) +
+               u[2] * (v[0] * w[1] - v[1] * w[0]);
+    }
+    vol /= 6.0;
+    if (!(vol > 0.0)) {
+        snprintf(err, errlen, "mesh is inside out: it encloses %.6g m^3 (its triangles must wind "
+                 "counter-clockwise seen from outside)", vol);
+        return -1;
+    }
+    (void)nv;
+    return 0;
+}
+
 enum { F_SURF = 1, F_BLOCK_X = 2, F_BLOCK_Y = 4, F_BLOCK_Z = 8, F_OUT = 16 };
 
 int cs_voxelize(const double *verts, int nv, const int32_t *tris, int nt, double h,

@@ -18,6 +18,16 @@ int cs_subdivide_edges(double **verts, int *nv, int32_t **tris, int *nt, double 
                        char *err, size_t errlen);
 
 /*
+ * What fracture and skinning need of an object's surface (the daemon's scene loader checks
+ * the same with common/watertight.c): every edge used by exactly two triangles in opposite
+ * directions, no triangle with a repeated vertex, and a positive enclosed volume. Returns 0,
+ * or -1 with one line naming the first problem found ("mesh is not manifold: ...", "mesh is
+ * inside out: ..."), or out of memory.
+ */
+int cs_mesh_surface_check(const double *verts, int nv, const int32_t *tris, int nt, char *err,
+                          size_t errlen);
+
+/*
  * Seed 000 §2.1: cut the mesh's axis-aligned bounding box into cubes of edge h and keep every
  * cube that intersects a triangle (exact separating-axis test) or lies inside the closed
  * surface. The mesh must be closed (see common/watertight.h); an open one is refused with

@@ -204,6 +204,7 @@ int cs_world_create(const cs_world_def *def, cs_world_t **out, char *err, size_t
     if (w->threads < 1)
         w->threads = 1;
     w->next_id = 1;
+    w->broadphase_min_bodies = CS_BROADPHASE_BODIES;
     *out = w;
     return CS_OK;
 }
@@ -380,6 +381,11 @@ static int build_geometry(cs_object *o, const cs_object_def *def, char *err, siz
     for (int i = 0; i < 3 * def->n_mesh_triangles; i++)
         if (def->mesh_triangles[i] < 0 || def->mesh_triangles[i] >= def->n_mesh_vertices)
             return cs_engine_fail(err, errlen, CS_ERR_GEOMETRY, "mesh: triangle %d has a bad index", i / 3);
+    /* The surface's orientation drives the closing surfaces (seed 000 Eq. 1) and its edges
+     * the surface split (§3.1): refuse what they cannot work with. */
+    if (cs_mesh_surface_check(def->mesh_vertices, def->n_mesh_vertices, def->mesh_triangles,
+                              def->n_mesh_triangles, err, errlen) != 0)
+        return CS_ERR_GEOMETRY;
     /* Seed 000 §3.3 on a private copy: no surface edge longer than h. */
     int nv = def->n_mesh_vertices, nt = def->n_mesh_triangles;
     double *v = malloc((size_t)nv * 3 * sizeof *v);

@@ -183,7 +183,13 @@ struct cs_world {
     int n_events, cap_events;
     cs_topo_list topo;
     struct cs_rigid_world *rigid; /* rigid.c's per-step scratch; NULL until a rigid step */
+    /* rigid.c: a deformable object that at least this many rigid bodies' boxes overlap gets
+     * its cells and nodes filed in a grid for the contact search (CS_BROADPHASE_BODIES; the
+     * tests set 0 and INT_MAX to compare both paths) */
+    int broadphase_min_bodies;
 };
+
+#define CS_BROADPHASE_BODIES 4
 
 /* Defined in world.c and fields.c, used by fracture.c and each other. */
 /* Write the message to err (if any) and return code: the engine's runtime-error idiom. */

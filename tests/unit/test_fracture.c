@@ -145,7 +145,8 @@ static int mirror_matches(mirror *m, const cs_world_t *w, char *why, size_t n)
 /* ---------------------------------------------------------------- checks */
 
 /* Every object of w passes the checker and their volumes add up to `volume`. */
-static int world_pieces_ok(const cs_world_t *w, double volume, double tol, char *why, size_t n)
+static int world_pieces_ok_v(const cs_world_t *w, double volume, double tol, double *total,
+                             char *why, size_t n)
 {
     cs_object_id ids[4096];
     cs_piece_view pv[4096];
@@ -158,7 +159,12 @@ static int world_pieces_ok(const cs_world_t *w, double volume, double tol, char 
         pv[i].t = t;
         pv[i].name = NULL;
     }
-    return cs_check_pieces(pv, no, volume, tol, NULL, why, n);
+    return cs_check_pieces(pv, no, volume, tol, total, why, n);
+}
+
+static int world_pieces_ok(const cs_world_t *w, double volume, double tol, char *why, size_t n)
+{
+    return world_pieces_ok_v(w, volume, tol, NULL, why, n);
 }
 
 static double world_mass(const cs_world_t *w)
@@ -281,10 +287,13 @@ static cs_object_id holder(const cs_world_t *w, const int32_t q[3])
 
 /* Cut every interior face of the cells, in the order given by `seed` (0: lattice order),
  * checking the invariants and the replayed changes after every cut; the pieces' volumes add
- * up to the original's within vol_tol (relative). */
+ * up to the original's within vol_tol (relative). *fans (if not NULL) receives the loops the
+ * repair closed by fans (cs_event.fallback_loops, summed), *max_err the largest relative
+ * volume error seen. */
 static void exhaustive_cuts(cs_world_t *w, const int32_t *cells, int n, unsigned seed,
-                            double vol_tol)
+                            double vol_tol, int *fans_out, double *max_err_out)
 {
+    const unsigned order = seed;
     int32_t *faces = malloc((size_t)n * 3 * 4 * sizeof *faces);
     int nf = 0;
     for (int c = 0; c < n; c++)
@@ -310,6 +319,8 @@ static void exhaustive_cuts(cs_world_t *w, const int32_t *cells, int n, unsigned
     mirror *m = calloc(1, sizeof *m);
     mirror_init(m, w);
     char why[256] = "";
+    int fans = 0;
+    double max_err = 0;
     for (int f = 0; f < nf; f++) {
         int32_t *q = faces + 4 * f, nb[3] = {q[0], q[1], q[2]};
         nb[q[3]]++;
@@ -320,9 +331,23 @@ static void exhaustive_cuts(cs_world_t *w, const int32_t *cells, int n, unsigned
                    why);
         ENSURE_MSG(mirror_apply(m, w, why, sizeof why) == 0, "cut %d: %s", f, why);
         ENSURE_MSG(mirror_matches(m, w, why, sizeof why), "cut %d: %s", f, why);
-        ENSURE_MSG(world_pieces_ok(w, v0, vol_tol, why, sizeof why), "after cut %d of %d: %s",
-                   f, nf, why);
+        double total = v0;
+        ENSURE_MSG(world_pieces_ok_v(w, v0, vol_tol, &total, why, sizeof why),
+                   "after cut %d of %d: %s", f, nf, why);
+        max_err = fmax(max_err, fabs(total - v0) / v0);
+        int nev = 0;
+        const cs_event *ev = cs_world_events(w, &nev);
+        for (int i = 0; i < nev; i++)
+            if (ev[i].kind == CS_EVENT_FRACTURE)
+                fans += ev[i].fallback_loops;
     }
+    if (fans_out)
+        *fans_out = fans;
+    if (max_err_out)
+        *max_err_out = max_err;
+    if (!fans_out)
+        printf("    %d cells, order %u: largest volume error %.3g (bound %g), fan loops %d\n", n,
+               order, max_err, vol_tol, fans);
     ENSURE(cs_world_object_ids(w, ids, 4096) == n);
     ENSURE_NEAR(world_mass(w), m0, 1e-12 * m0);
     mirror_free(m);
@@ -334,30 +359,126 @@ TEST(fracture_exhaustive_box_cuts_down_to_single_cubes)
 {
     cs_object_id id;
     int32_t *cells = NULL;
+    int fans = -1;
     cs_world_t *w = box_world(3, 3, 2, 0.05, &id, &cells);
     ENSURE(w);
-    exhaustive_cuts(w, cells, 18, 0, VOLUME_TOL);
+    exhaustive_cuts(w, cells, 18, 0, VOLUME_TOL, NULL, NULL);
     cs_world_destroy(w);
     free(cells);
     /* a 3×3×3 block: its centre cube has no mesh surface at all, only closing patches */
     w = box_world(3, 3, 3, 0.05, &id, &cells);
     ENSURE(w);
-    exhaustive_cuts(w, cells, 27, 0, VOLUME_TOL);
+    exhaustive_cuts(w, cells, 27, 0, VOLUME_TOL, NULL, NULL);
     cs_world_destroy(w);
     free(cells);
     w = box_world(3, 3, 3, 0.05, &id, &cells);
     ENSURE(w);
-    /* The same faces in a shuffled order. Here faces open partially (some corner nodes still
-     * shared through uncut neighbours) and the rim of such a crack is closed by fans. Traced
-     * per event: the whole 7.3e-4 comes from two events (cut 44, face (1,0,0) axis z: +5.3e-4;
-     * cut 52, face (2,1,0) axis z: +2.0e-4). In each, the face opens fully, one of its two
-     * t/t' pairs is dropped because one side already holds a triangle over that part of the
-     * face (from a fan of the earlier partial opening), so the two sides' open loops differ
-     * (6 and 8 vertices) and their fans do not cancel. Every other event changes the total
-     * by round-off only. Accepting the free side of a dropped pair alone was tried: 1.6e-3. */
-    exhaustive_cuts(w, cells, 27, 12345u, 1e-3);
+    /* The same faces in a shuffled order: here faces open partially (some corner nodes still
+     * shared through uncut neighbours). Each gets its closing pair when it first opens, glued
+     * along its still-shared corners (fracture.c steps 4-5); no loop is left for a fan and the
+     * volume is kept to round-off. (Before, such faces were closed only once fully open and
+     * the rims by fans: 39 fan loops here, and two events lost 7.3e-4 of the volume because a
+     * face's t/t' pair met a fan of its earlier partial opening.) */
+    double err = 1;
+    exhaustive_cuts(w, cells, 27, 12345u, VOLUME_TOL, &fans, &err);
+    printf("    27 cells, order 12345: largest volume error %.3g, fan loops %d\n", err, fans);
+    ENSURE_MSG(fans == 0, "%d loops closed by fans", fans);
     cs_world_destroy(w);
     free(cells);
+}
+
+/* The closing of the fracture event of the last call: triangles added and fan loops. */
+static int last_event(const cs_world_t *w, int *closing, int *fans)
+{
+    int n = 0;
+    const cs_event *ev = cs_world_events(w, &n);
+    for (int i = n - 1; i >= 0; i--)
+        if (ev[i].kind == CS_EVENT_FRACTURE) {
+            *closing = ev[i].closing_triangles;
+            *fans = ev[i].fallback_loops;
+            return 0;
+        }
+    return -1;
+}
+
+/*
+ * A face that opens partially is closed when it opens (seed 000 §3.2 generalised: fracture.c
+ * step 4). A 2×2×1 box, cubes A (0,0), B (1,0), C (0,1), D (1,1): cutting A|B separates the
+ * two nodes of its edge on the box's side y = 0 (only A and B hold them) and keeps the two
+ * at y = h (C and D still join A to B there). A|B gets its pair at once, glued along the
+ * shared edge: 2 triangles per side, no fan, the volume unchanged, one object. Cutting C|D
+ * then opens A|B fully too, and only C|D's pair is made (A|B's exists): 4 triangles again.
+ */
+TEST(fracture_partially_opened_face_closed_when_it_opens)
+{
+    cs_object_id id;
+    int32_t *cells = NULL;
+    cs_world_t *w = box_world(2, 2, 1, 0.05, &id, &cells);
+    ENSURE(w);
+    const double v0 = object_volume(w, id);
+    mirror *m = calloc(1, sizeof *m);
+    mirror_init(m, w);
+    char why[256] = "";
+    const int32_t ab[3] = {0, 0, 0}, cd[3] = {0, 1, 0};
+    int closing = -1, fans = -1;
+    ENSURE_MSG(cs_world_cut_face(w, id, ab, 0, why, sizeof why) == CS_OK, "%s", why);
+    ENSURE_MSG(mirror_apply(m, w, why, sizeof why) == 0 && mirror_matches(m, w, why, sizeof why),
+               "%s", why);
+    ENSURE(last_event(w, &closing, &fans) == 0);
+    ENSURE_MSG(closing == 4 && fans == 0, "A|B: %d closing triangles, %d fan loops", closing,
+               fans);
+    cs_object_id ids[8];
+    ENSURE(cs_world_object_ids(w, ids, 8) == 1);
+    ENSURE_MSG(world_pieces_ok(w, v0, VOLUME_TOL, why, sizeof why), "after A|B: %s", why);
+    ENSURE_MSG(cs_world_cut_face(w, id, cd, 0, why, sizeof why) == CS_OK, "%s", why);
+    ENSURE_MSG(mirror_apply(m, w, why, sizeof why) == 0 && mirror_matches(m, w, why, sizeof why),
+               "%s", why);
+    ENSURE(last_event(w, &closing, &fans) == 0);
+    ENSURE_MSG(closing == 4 && fans == 0, "C|D: %d closing triangles, %d fan loops", closing,
+               fans);
+    ENSURE(cs_world_object_ids(w, ids, 8) == 2);
+    ENSURE_MSG(world_pieces_ok(w, v0, VOLUME_TOL, why, sizeof why), "after C|D: %s", why);
+    mirror_free(m);
+    free(m);
+    free(cells);
+    cs_world_destroy(w);
+}
+
+/*
+ * Many shuffled orders on boxes of 18 to 36 cubes. Measured over these 40 orders: every
+ * surface closed and consistent after every cut; 28 orders need no fan at all, 37 keep the
+ * volume to round-off, the largest volume error is 1.25e-4 (over 200 orders: 143 without
+ * fans, 191 at round-off, the largest 6.4e-4; the code before this change left fans in 135
+ * of the 137 orders it finished within the 1e-3 bound, and exceeded that bound in the other
+ * 63, by up to 0.8 %). What is left: a second
+ * corner vertex made where two cavities were hinged on one edge goes back into its node's
+ * vertex only where that leaves every edge at it used once each way, counted before the event
+ * (fracture.c, merge_cavity_corners); where it stays, the opened cavities meet over two
+ * vertices at one point and the repair closes what is between them with fans.
+ */
+TEST(fracture_shuffled_box_cuts_keep_closing_pairs)
+{
+    int without_fans = 0, at_roundoff = 0;
+    double worst = 0;
+    for (unsigned s = 1; s <= 40; s++) {
+        cs_object_id id;
+        int32_t *cells = NULL;
+        const int nx = 3 + (s % 2), ny = 3, nz = 2 + (s % 3 == 0);
+        cs_world_t *w = box_world(nx, ny, nz, 0.05, &id, &cells);
+        ENSURE(w);
+        int fans = -1;
+        double err = 1;
+        exhaustive_cuts(w, cells, nx * ny * nz, s * 7919u, 1e-3, &fans, &err);
+        cs_world_destroy(w);
+        free(cells);
+        ENSURE_MSG(fans >= 0, "order %u did not finish", s * 7919u);
+        without_fans += fans == 0;
+        at_roundoff += err <= VOLUME_TOL;
+        worst = fmax(worst, err);
+    }
+    printf("    40 orders: %d without fans, %d with the volume kept to round-off, largest volume "
+           "error %.3g\n", without_fans, at_roundoff, worst);
+    ENSURE(without_fans >= 28 && at_roundoff >= 37 && worst <= 2e-4);
 }
 
 /* A ν = 0 bar of nx cubes held at x = 0 and pulled by F at x = L: uniform uniaxial stress. */
@@ -488,3 +609,4 @@ TEST(fracture_refuses_bad_arguments)
     ENSURE(cs_world_object_ids(w, ids, 4) == 2);
     cs_world_destroy(w);
 }
+

@@ -19,25 +19,11 @@
 #include "localframe.h"
 #include "surface.h"
 #include "world_internal.h"
-
-static int32_t *box_ijk(int nx, int ny, int nz)
-{
-    int32_t *ijk = malloc(sizeof(int32_t) * 3 * (size_t)(nx * ny * nz));
-    int c = 0;
-    for (int k = 0; k < nz; k++)
-        for (int j = 0; j < ny; j++)
-            for (int i = 0; i < nx; i++) {
-                ijk[3 * c] = i;
-                ijk[3 * c + 1] = j;
-                ijk[3 * c + 2] = k;
-                c++;
-            }
-    return ijk;
-}
+#include "lattice.h"
 
 static int box_mesh(cs_cubemesh *cm, int nx, int ny, int nz, double h)
 {
-    int32_t *ijk = box_ijk(nx, ny, nz);
+    int32_t *ijk = cs_box_cells(nx, ny, nz);
     char err[128];
     const double origin[3] = {0.1, -0.2, 0.3};
     int rc = cs_cubemesh_build(cm, h, origin, ijk, nx * ny * nz, err, sizeof err);
@@ -348,7 +334,7 @@ static int make_lbeam(lbeam *b, cs_world_def wd, cs_model model, cs_integrator i
     memset(b, 0, sizeof *b);
     if (cs_world_create(&wd, &b->w, err, errlen) != CS_OK)
         return -1;
-    int32_t *ijk = box_ijk(nx, nz, nz);
+    int32_t *ijk = cs_box_cells(nx, nz, nz);
     cs_object_def d = cs_object_def_default();
     d.name = "beam";
     d.model = model;
@@ -430,7 +416,7 @@ static int bending_beam(lbeam *b, cs_model model, double E, int nx, int nz, doub
     if (cs_world_create(&wd, &b->w, err, errlen) != CS_OK)
         return -1;
     const double h = H / nz;
-    int32_t *ijk = box_ijk(nx, nz, nz);
+    int32_t *ijk = cs_box_cells(nx, nz, nz);
     cs_material mat = cs_material_default();
     mat.young = E;
     mat.poisson = 0.0;
@@ -572,7 +558,7 @@ TEST(lf_stability_estimate_bounds_assembled_objects)
             wd.dt = 1e-4;
             cs_world_t *w;
             ENSURE(cs_world_create(&wd, &w, NULL, 0) == CS_OK);
-            int32_t *ijk = box_ijk(shapes[s][0], shapes[s][1], shapes[s][2]);
+            int32_t *ijk = cs_box_cells(shapes[s][0], shapes[s][1], shapes[s][2]);
             cs_object_def d = cs_object_def_default();
             d.name = "box";
             d.model = CS_MODEL_LOCALFRAME;
@@ -739,7 +725,7 @@ TEST(lf_fracture_then_step)
     cs_material mat = cs_material_default(); /* E = 1000 Pa: 1/60 s is below the limit */
     cs_world_t *w;
     ENSURE(cs_world_create(&wd, &w, NULL, 0) == CS_OK);
-    int32_t *ijk = box_ijk(8, 4, 4);
+    int32_t *ijk = cs_box_cells(8, 4, 4);
     cs_object_def d = cs_object_def_default();
     d.name = "box";
     d.model = CS_MODEL_LOCALFRAME;
@@ -901,7 +887,7 @@ TEST(lf_central_difference_ground_damping_sleep_drag)
     wd.dt = 0.003; /* the limit is 0.0037 s for E = 1e5 Pa, ρ = 1000, h = 0.1 m */
     cs_world_t *w;
     ENSURE(cs_world_create(&wd, &w, NULL, 0) == CS_OK);
-    int32_t *ijk = box_ijk(3, 3, 3);
+    int32_t *ijk = cs_box_cells(3, 3, 3);
     cs_object_def d = cs_object_def_default();
     d.name = "block";
     d.model = CS_MODEL_LOCALFRAME;

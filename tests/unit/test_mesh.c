@@ -7,6 +7,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 #include <unistd.h>
 
 #include "check.h"
@@ -175,6 +176,40 @@ TEST(mesh_load_errors_name_the_problem)
 
     ENSURE(cs_mesh_load("/tmp", &m, err, sizeof err) == -1);
     ENSURE_MSG(strstr(err, "not a regular file"), "%s", err);
+}
+
+/* The importer runs in a child process under a memory cap and a time limit: an OFF header
+ * that claims 353 535 235 358 vertices (assimp's own invalid/OutOfMemory.off) once made the
+ * load allocate without bound; now it is refused at once with one line naming the file. */
+TEST(mesh_load_survives_an_absurd_header)
+{
+    char off[] = "/tmp/cs_test_oom_XXXXXX.off";
+    int fd = mkstemps(off, 4);
+    ENSURE(fd >= 0);
+    FILE *f = fdopen(fd, "w");
+    fprintf(f, "OFF\n353535235358 6 0\n");
+    for (int i = 0; i < 8; i++)
+        fprintf(f, "%d %d %d\n", i & 1, (i >> 1) & 1, (i >> 2) & 1);
+    fprintf(f, "4 0 1 3 2\n4 2 3 7 6\n4 6 7 5 4\n4 4 5 1 0\n4 1 5 7 3\n4 4 0 2 6\n");
+    fclose(f);
+    char err[512];
+    cs_mesh m;
+    struct timespec t0, t1;
+    clock_gettime(CLOCK_MONOTONIC, &t0);
+    int rc = cs_mesh_load(off, &m, err, sizeof err);
+    clock_gettime(CLOCK_MONOTONIC, &t1);
+    unlink(off);
+    ENSURE(rc == -1 && m.v == NULL && m.t == NULL && m.nv == 0);
+    ENSURE_MSG(strstr(err, off) && !strchr(err, '\n'), "%s", err);
+    double s = (double)(t1.tv_sec - t0.tv_sec) + 1e-9 * (double)(t1.tv_nsec - t0.tv_nsec);
+    ENSURE_MSG(s < 60, "the load took %.1f s", s);
+    /* and the guarded path still returns a mesh intact */
+    char p[512];
+    ENSURE(cs_mesh_load(mesh_path(p, sizeof p, "icosphere.obj"), &m, err, sizeof err) == 0);
+    ENSURE_MSG(m.nv == 162 && m.nt == 320, "%d vertices, %d triangles", m.nv, m.nt);
+    for (int i = 0; i < 3 * m.nt; i++)
+        ENSURE(m.t[i] >= 0 && m.t[i] < m.nv);
+    cs_mesh_free(&m);
 }
 
 TEST(mesh_transform_scale_rotate_translate)

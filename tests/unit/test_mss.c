@@ -18,6 +18,7 @@
 #include "mss.h"
 #include "scene.h"
 #include "world_internal.h"
+#include "lattice.h"
 
 #ifndef CS_SOURCE_DIR
 #define CS_SOURCE_DIR "."
@@ -40,16 +41,7 @@ static int make_box(box *b, cs_world_def wd, cs_model model, cs_integrator integ
     if (cs_world_create(&wd, &b->w, err, errlen) != CS_OK)
         return -1;
     const int n = nx * ny * nz;
-    b->ijk = malloc(sizeof(int32_t) * 3 * (size_t)n);
-    int c = 0;
-    for (int k = 0; k < nz; k++)
-        for (int j = 0; j < ny; j++)
-            for (int i = 0; i < nx; i++) {
-                b->ijk[3 * c] = i;
-                b->ijk[3 * c + 1] = j;
-                b->ijk[3 * c + 2] = k;
-                c++;
-            }
+    b->ijk = cs_box_cells(nx, ny, nz);
     cs_object_def d = cs_object_def_default();
     d.name = "box";
     d.model = model;

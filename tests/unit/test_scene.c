@@ -15,6 +15,7 @@
 #include <unistd.h>
 
 #include "scene.h"
+#include "watertight.h"
 
 #include <cJSON.h>
 
@@ -625,6 +626,49 @@ TEST(scene_mesh_errors)
     rmdir(dir);
     ENSURE(rc == -1);
     ENSURE_MSG(contains(err, "objects[0].mesh.file") && contains(err, "gone.obj"), "%s", err);
+}
+
+/* A closed, consistently oriented mesh wound clockwise (enclosed volume < 0, as DirectX .x
+ * files import) is turned outward; a closed non-manifold one is refused, naming the problem. */
+TEST(scene_mesh_inside_out_turned_outward)
+{
+    char dir[] = "/tmp/cs_scene_XXXXXX";
+    ENSURE(mkdtemp(dir) != NULL);
+    char obj[300], err[512];
+    snprintf(obj, sizeof obj, "%s/inverted.obj", dir);
+    ENSURE(write_text(obj, "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 1 1 1\n"
+                           "v 0 1 1\nf 1 2 3\nf 1 3 4\nf 5 7 6\nf 5 8 7\nf 1 6 2\nf 1 5 6\n"
+                           "f 2 7 3\nf 2 6 7\nf 3 8 4\nf 3 7 8\nf 4 5 1\nf 4 8 5\n") == 0);
+    cs_scene s;
+    int rc = cs_scene_parse("{\"objects\": [{\"name\": \"c\", \"cube_size\": 0.25, "
+                            "\"mesh\": {\"file\": \"inverted.obj\"}}]}",
+                            dir, &s, err, sizeof err);
+    unlink(obj);
+    ENSURE_MSG(rc == 0, "%s", err);
+    const cs_object_def *o = &s.objects[0];
+    double vol = cs_mesh_volume(o->mesh_vertices, o->mesh_triangles, o->n_mesh_triangles);
+    ENSURE_MSG(fabs(vol - 1.0) < 1e-12, "volume %.17g after turning outward", vol);
+    cs_world_t *w = NULL;
+    rc = cs_scene_instantiate(&s, &w, err, sizeof err);
+    cs_scene_free(&s);
+    ENSURE_MSG(rc == 0, "%s", err);
+    cs_world_destroy(w);
+
+    /* two unit cubes sharing an edge: closed but not manifold */
+    ENSURE(write_text(obj, "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 1 1 1\n"
+                           "v 0 1 1\nv 2 1 0\nv 2 2 0\nv 1 2 0\nv 2 1 1\nv 2 2 1\nv 1 2 1\n"
+                           "f 1 3 2\nf 1 4 3\nf 5 6 7\nf 5 7 8\nf 1 2 6\nf 1 6 5\n"
+                           "f 2 3 7\nf 2 7 6\nf 3 4 8\nf 3 8 7\nf 4 1 5\nf 4 5 8\n"
+                           "f 3 10 9\nf 3 11 10\nf 7 9 10\nf 7 10 13\nf 7 13 14\nf 7 12 9\n"
+                           "f 3 9 12\nf 3 12 7\nf 9 10 13\nf 9 13 12\nf 10 11 14\nf 10 14 13\n"
+                           "f 11 3 7\nf 11 7 14\n") == 0);
+    rc = cs_scene_parse("{\"objects\": [{\"name\": \"c\", \"cube_size\": 0.25, "
+                        "\"mesh\": {\"file\": \"inverted.obj\"}}]}",
+                        dir, &s, err, sizeof err);
+    unlink(obj);
+    rmdir(dir);
+    ENSURE(rc == -1);
+    ENSURE_MSG(contains(err, "inverted.obj") && good_message(err, sizeof err), "%s", err);
 }
 
 /* ---------------------------------------------------------------- engine */

@@ -12,6 +12,7 @@
 
 #include "check.h"
 #include "cubemesh.h"
+#include "cubesim.h"
 #include "mesh.h"
 #include "surface.h"
 #include "voxelize.h"
@@ -485,6 +486,58 @@ TEST(voxelize_nonmanifold_closed_mesh)
     ENSURE_MSG(rc == 0, "%s", err);
     free(ijk);
     ENSURE_MSG(n == 128, "%d cells", n);
+}
+
+/* What the engine refuses at cs_world_add_object (cs_mesh_surface_check): a closed surface it
+ * cannot fracture or skin — not manifold, mixed orientation, inside out — each with one line
+ * naming the problem; the good surface passes. */
+TEST(mesh_surface_check_names_the_problem)
+{
+    char p[512], err[256];
+    cs_mesh m;
+    ENSURE(cs_mesh_load(vox_mesh_path(p, sizeof p, "icosphere.obj"), &m, err, sizeof err) == 0);
+    ENSURE_MSG(cs_mesh_surface_check(m.v, m.nv, m.t, m.nt, err, sizeof err) == 0, "%s", err);
+    /* every triangle reversed: inside out */
+    for (int t = 0; t < m.nt; t++) {
+        int32_t a = m.t[3 * t + 1];
+        m.t[3 * t + 1] = m.t[3 * t + 2];
+        m.t[3 * t + 2] = a;
+    }
+    ENSURE(cs_mesh_surface_check(m.v, m.nv, m.t, m.nt, err, sizeof err) == -1);
+    ENSURE_MSG(strstr(err, "inside out") && !strchr(err, '\n'), "%s", err);
+    /* the first triangle turned back alone: its three edges now run the same way twice */
+    int32_t a = m.t[1];
+    m.t[1] = m.t[2];
+    m.t[2] = a;
+    ENSURE(cs_mesh_surface_check(m.v, m.nv, m.t, m.nt, err, sizeof err) == -1);
+    ENSURE_MSG(strstr(err, "not consistently oriented: 3 edges"), "%s", err);
+    /* a triangle with a repeated vertex */
+    m.t[1] = m.t[0];
+    ENSURE(cs_mesh_surface_check(m.v, m.nv, m.t, m.nt, err, sizeof err) == -1);
+    ENSURE_MSG(strstr(err, "repeated vertex"), "%s", err);
+    cs_mesh_free(&m);
+    ENSURE(cs_mesh_load(vox_mesh_path(p, sizeof p, "nonmanifold.obj"), &m, err, sizeof err) == 0);
+    ENSURE(cs_mesh_surface_check(m.v, m.nv, m.t, m.nt, err, sizeof err) == -1);
+    ENSURE_MSG(strstr(err, "not manifold"), "%s", err);
+    /* and the engine refuses it at add time with that message, the world unchanged */
+    cs_world_def wd = cs_world_def_default();
+    cs_world_t *w = NULL;
+    ENSURE(cs_world_create(&wd, &w, err, sizeof err) == CS_OK);
+    cs_object_def od = cs_object_def_default();
+    od.name = "two cubes";
+    od.cube_size = 0.0125;
+    od.geometry = CS_GEOMETRY_MESH;
+    od.mesh_vertices = m.v;
+    od.n_mesh_vertices = m.nv;
+    od.mesh_triangles = m.t;
+    od.n_mesh_triangles = m.nt;
+    cs_object_id id;
+    int rc = cs_world_add_object(w, &od, &id, err, sizeof err);
+    cs_mesh_free(&m);
+    ENSURE(rc == CS_ERR_GEOMETRY);
+    ENSURE_MSG(strstr(err, "not manifold"), "%s", err);
+    ENSURE(cs_world_object_ids(w, NULL, 0) == 0);
+    cs_world_destroy(w);
 }
 
 /* ---------------------------------------------------------------- surface binding */

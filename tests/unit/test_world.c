@@ -11,6 +11,7 @@
 
 #include "check.h"
 #include "cubesim.h"
+#include "lattice.h"
 
 typedef struct beam {
     cs_world_t *w;
@@ -29,16 +30,8 @@ static int make_beam(beam *b, cs_world_def wd, cs_model model, cs_material mat, 
         printf("    world: %s\n", err);
         return -1;
     }
-    int n = nx * ny * nz, c = 0;
-    b->ijk = malloc(sizeof(int32_t) * 3 * n);
-    for (int k = 0; k < nz; k++)
-        for (int j = 0; j < ny; j++)
-            for (int i = 0; i < nx; i++) {
-                b->ijk[3 * c] = i;
-                b->ijk[3 * c + 1] = j;
-                b->ijk[3 * c + 2] = k;
-                c++;
-            }
+    int n = nx * ny * nz;
+    b->ijk = cs_box_cells(nx, ny, nz);
     cs_object_def d = cs_object_def_default();
     d.name = "beam";
     d.model = model;
