@@ -427,10 +427,16 @@ int main(int argc, char **argv)
      * converge as h² in bending (checked: the two meshes' errors scale so), so each reference
      * is the Richardson extrapolation (n₂²u₂ − n₁²u₁)/(n₂² − n₁²) of the two finest meshes,
      * and how converged it is is said by the finer mesh's own distance to it. */
+    /* The static references are solved to 1e-7 of the load: on the small load, corotational
+     * Newton at 1e-8 stalls at its round-off floor (3e-8 reached at 1e-7; asked for 1e-8 it
+     * gives up at the last load level, and the solve reports not converged with the state of
+     * the level before, residual 1e-6: see README "Known limitations"). 1e-7 moves the tip by
+     * far less than the digits reported. */
+    const double ref_tol = 1e-7;
     run rs[2], rl[2], rd[2];
     for (int k = 0; k < 2; k++) {
-        run_static(CS_MODEL_COROTATIONAL, refs[k], 1e-8, G_SMALL, &rs[k]);
-        run_static(CS_MODEL_COROTATIONAL, refs[k], 1e-8, G_LARGE, &rl[k]);
+        run_static(CS_MODEL_COROTATIONAL, refs[k], ref_tol, G_SMALL, &rs[k]);
+        run_static(CS_MODEL_COROTATIONAL, refs[k], ref_tol, G_LARGE, &rl[k]);
         failed |= rs[k].rc || rl[k].rc;
         REF("corotational nz %d (h = %.4g m): small tip %.6g m (%+.3f %% vs Timoshenko), "
             "large tip (%.5g, %.5g) m\n",
@@ -458,7 +464,7 @@ int main(int argc, char **argv)
                                                                  .density = RHO},
                                                   H / drefs[k]);
         run st;
-        run_static(CS_MODEL_COROTATIONAL, drefs[k], 1e-8, G_SMALL, &st);
+        run_static(CS_MODEL_COROTATIONAL, drefs[k], ref_tol, G_SMALL, &st);
         run_dynamic(CS_MODEL_COROTATIONAL, CS_INTEGRATOR_VERLET, drefs[k], 0.5 * dtc, 1e-8, sim,
                     st.tip[2], 1e9, &rd[k]);
         failed |= rd[k].rc != 0;
