@@ -153,20 +153,6 @@ static void mat_t_vec(const double M[9], const double v[3], double r[3])
     memcpy(r, t, sizeof t);
 }
 
-static void quat_to_mat(const double q[4], double R[9])
-{
-    const double w = q[0], x = q[1], y = q[2], z = q[3];
-    R[0] = 1 - 2 * (y * y + z * z);
-    R[1] = 2 * (x * y - w * z);
-    R[2] = 2 * (x * z + w * y);
-    R[3] = 2 * (x * y + w * z);
-    R[4] = 1 - 2 * (x * x + z * z);
-    R[5] = 2 * (y * z - w * x);
-    R[6] = 2 * (x * z - w * y);
-    R[7] = 2 * (y * z + w * x);
-    R[8] = 1 - 2 * (x * x + y * y);
-}
-
 static void quat_mul(const double a[4], const double b[4], double r[4])
 {
     double t[4] = {a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3],
@@ -333,7 +319,7 @@ void cs_rigid_reset(cs_object *o)
     cs_rigid *rb = o->rb;
     rb->q[0] = 1;
     rb->q[1] = rb->q[2] = rb->q[3] = 0;
-    quat_to_mat(rb->q, rb->R);
+    cs_quat_to_mat(rb->q, rb->R);
     memcpy(rb->c, rb->com_rest, sizeof rb->c);
     memset(rb->v, 0, sizeof rb->v);
     memset(rb->w, 0, sizeof rb->w);
@@ -352,7 +338,7 @@ int cs_rigid_refit(cs_object *o, const double q[4], const double c0[3], const do
         return -1;
     }
     memcpy(rb->q, q, sizeof rb->q);
-    quat_to_mat(rb->q, rb->R);
+    cs_quat_to_mat(rb->q, rb->R);
     double d[3], r[3], wr[3];
     for (int a = 0; a < 3; a++)
         d[a] = rb->com_rest[a] - C0[a];
@@ -708,7 +694,7 @@ static void rotate(cs_rigid *rb, double dt)
     const double qn = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
     for (int a = 0; a < 4; a++)
         rb->q[a] = q[a] / qn;
-    quat_to_mat(rb->q, rb->R);
+    cs_quat_to_mat(rb->q, rb->R);
     mat_vec(rb->R, w1, rb->w);
     update_inertia(rb);
 }
@@ -1545,7 +1531,6 @@ static int deformable_contacts(cs_world_t *w, cs_rigid_world *rw, int n_objects)
     }
     return 0;
 }
-
 
 /* The local coordinates u ∈ [0,1]³ of p in the (deformed) hexahedron with corners x[k]
  * (CS_CORNER order), by Newton on the trilinear map. False if it does not converge or p is
