@@ -474,23 +474,17 @@ static int grow_i32(int32_t **p, size_t *cap, size_t n)
     return 0;
 }
 
-/* File D's cells (cells) or nodes in rw->grid, by counting sort (linear in the items and
- * buckets; the buckets are at most 8 per item). Returns 0 or -1 (out of memory). */
-static int grid_build(cs_rigid_world *rw, const cs_object *D, bool cells)
+/* File D's cells (cells) or nodes in rw->grid over D's box [lo, hi] (bodies_over's), by
+ * counting sort (linear in the items and buckets; the buckets are at most 8 per item).
+ * Returns 0 or -1 (out of memory). */
+static int grid_build(cs_rigid_world *rw, const cs_object *D, bool cells, const double lo[3],
+                      const double hi[3])
 {
     if (!rw->grid && !(rw->grid = calloc(1, sizeof *rw->grid)))
         return -1;
     dgrid *gr = rw->grid;
     const int n_items = cells ? D->cm.n_cells : D->n;
-    double hi[3];
-    for (int a = 0; a < 3; a++)
-        gr->lo[a] = hi[a] = D->x[a];
-    for (int i = 1; i < D->n; i++)
-        for (int a = 0; a < 3; a++) {
-            const double v = D->x[3 * (size_t)i + a];
-            gr->lo[a] = v < gr->lo[a] ? v : gr->lo[a];
-            hi[a] = v > hi[a] ? v : hi[a];
-        }
+    memcpy(gr->lo, lo, sizeof gr->lo);
     /* buckets of 2h, coarser if a stretched object would need more than 8 per item */
     gr->g = 2.0 * D->cm.h;
     double nb;
@@ -596,11 +590,15 @@ static void grid_query(dgrid *gr, const double qlo[3], const double qhi[3])
 static double body_margin(const cs_object *o, double dt);
 
 /* How many bodies' boxes (grown by grow, or by each body's own margin if grow < 0) overlap
- * D's current box; bodies at rest do not count against a sleeping D. */
-static int bodies_over(const cs_world_t *w, const cs_rigid_world *rw, const cs_object *D,
-                       double grow)
+ * D's current box, which it writes to lo, hi; bodies at rest do not count against a sleeping
+ * D. */
+static int bodies_over(const cs_rigid_world *rw, const cs_object *D, double grow, double lo[3],
+                       double hi[3])
 {
-    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (int a = 0; a < 3; a++) {
+        lo[a] = INFINITY;
+        hi[a] = -INFINITY;
+    }
     for (int i = 0; i < D->n; i++)
         for (int a = 0; a < 3; a++) {
             const double v = D->x[3 * (size_t)i + a];
@@ -617,7 +615,6 @@ static int bodies_over(const cs_world_t *w, const cs_rigid_world *rw, const cs_o
              lo[1] <= rb->aabb_max[1] + m && hi[1] >= rb->aabb_min[1] - m &&
              lo[2] <= rb->aabb_max[2] + m && hi[2] >= rb->aabb_min[2] - m;
     }
-    (void)w;
     return n;
 }
 
@@ -1507,11 +1504,12 @@ static int deformable_contacts(cs_world_t *w, cs_rigid_world *rw, int n_objects)
         cs_object *D = w->objects[d];
         if (D->model == CS_MODEL_RIGID || D->n == 0)
             continue;
-        const int over = bodies_over(w, rw, D, 0.0);
+        double lo[3], hi[3];
+        const int over = bodies_over(rw, D, 0.0, lo, hi);
         if (over == 0)
             continue;
         const bool grid = over >= w->broadphase_min_bodies;
-        if (grid && grid_build(rw, D, false) != 0)
+        if (grid && grid_build(rw, D, false, lo, hi) != 0)
             return -1;
         for (int b = 0; b < rw->n_body; b++) {
             if (!rw->dyn[b] && D->sleeping)
@@ -1690,11 +1688,12 @@ static int cell_contacts(cs_world_t *w, cs_rigid_world *rw, int n_objects)
         cs_object *D = w->objects[d];
         if (D->model == CS_MODEL_RIGID || D->n == 0 || D->cm.n_cells == 0)
             continue;
-        const int over = bodies_over(w, rw, D, -1.0);
+        double lo[3], hi[3];
+        const int over = bodies_over(rw, D, -1.0, lo, hi);
         if (over == 0)
             continue;
         const bool grid = over >= w->broadphase_min_bodies;
-        if (grid && grid_build(rw, D, true) != 0)
+        if (grid && grid_build(rw, D, true, lo, hi) != 0)
             return -1;
         for (int b = 0; b < rw->n_body; b++) {
             cs_object *B = rw->body[b];
