@@ -45,20 +45,27 @@ static int check_all(cs_world_t *w, double volume, double *vsum, char *why, size
     return cs_check_pieces(pv, no, volume, 0.05, vsum, why, n);
 }
 
-static int boxes(int n)
+/* A world with the ground, default dt and gravity, one engine thread; NULL on failure. */
+static cs_world_t *ground_world(void)
 {
     cs_world_def wd = cs_world_def_default();
     wd.has_ground = true;
     wd.threads = 1;
     cs_world_t *w;
     char err[256];
-    if (cs_world_create(&wd, &w, err, sizeof err) != CS_OK)
+    return cs_world_create(&wd, &w, err, sizeof err) == CS_OK ? w : NULL;
+}
+
+static int boxes(int n)
+{
+    cs_world_t *w = ground_world();
+    char err[256];
+    if (!w)
         return 1;
-    int32_t ijk[24];
-    for (int c = 0; c < 8; c++) {
-        ijk[3 * c] = c & 1;
-        ijk[3 * c + 1] = (c >> 1) & 1;
-        ijk[3 * c + 2] = c >> 2;
+    int32_t *ijk = cs_box_cells(2, 2, 2);
+    if (!ijk) {
+        cs_world_destroy(w);
+        return 1;
     }
     for (int a = 0; a < n; a++)
         for (int b = 0; b < n; b++)
@@ -77,6 +84,7 @@ static int boxes(int n)
                 if (cs_world_add_object(w, &d, NULL, err, sizeof err) != CS_OK) {
                     fprintf(stderr, "bench_rigid: %s\n", err);
                     cs_world_destroy(w);
+                    free(ijk);
                     return 1;
                 }
             }
@@ -100,18 +108,16 @@ static int boxes(int n)
     printf("%d boxes (%d cubes): falling and settling %.3f ms/step; after 10 s %.4f ms/step, "
            "%d asleep\n", no, 8 * no, 1e3 * falling, 1e3 * asleep_ms, asleep);
     cs_world_destroy(w);
+    free(ijk);
     return 0;
 }
 
 /* One run of the slab scene: ms per step over steps 10–40 (boxes landing and resting), or -1. */
 static double slab_run(int n, int min_bodies)
 {
-    cs_world_def wd = cs_world_def_default();
-    wd.has_ground = true;
-    wd.threads = 1;
-    cs_world_t *w;
+    cs_world_t *w = ground_world();
     char err[256];
-    if (cs_world_create(&wd, &w, err, sizeof err) != CS_OK)
+    if (!w)
         return -1;
     w->broadphase_min_bodies = min_bodies;
     const int m = 16 * n, c = m * m * 2;
