@@ -1617,6 +1617,86 @@ static bool hex_local(const double x[8][3], const double p[3], double u[3], doub
     return true;
 }
 
+/* A point against a deformable cell: the face it is pushed out through, its gap and the face
+ * point's nodes and bilinear weights. */
+typedef struct cell_face {
+    double n[3];    /* outward normal of the face (the cell's mean edge across it) */
+    double sep;     /* the point's gap to the face along n (negative inside) */
+    int32_t dn[4];
+    double dw[4];
+    int face;       /* 2·axis + (side > 0) */
+} cell_face;
+
+/* Point p inside D's deformed cell (corners X, CS_CORNER order; inverse trilinear map), or
+ * within `margin` outside it across one face only: true with the nearest exposed face of the
+ * cell (in the cell's own coordinates) in *cf. False if p is elsewhere or no face of the
+ * cell that it could leave by is exposed. */
+static bool point_in_cell(const cs_object *D, int32_t cell, const double X[8][3],
+                          const double p[3], double margin, double tol, cell_face *cf)
+{
+    const int32_t *cn = D->cm.cell_nodes + 8 * (size_t)cell;
+    const int32_t *ijk = D->cm.cell_ijk + 3 * (size_t)cell;
+    double u[3];
+    if (!hex_local(X, p, u, tol))
+        return false;
+    /* outside the cell (within the margin) across one of its faces only:
+     * a speculative contact with that face if it is exposed */
+    int n_out = 0, oax = -1;
+    for (int a = 0; a < 3; a++)
+        if (u[a] < 0 || u[a] > 1) {
+            n_out++;
+            oax = a;
+        }
+    if (n_out > 1)
+        return false;
+    /* the nearest exposed face (in the cell's own coordinates); f < 0 outside */
+    int bax = -1, bdir = 0;
+    double bf = INFINITY;
+    for (int ax = 0; ax < 3; ax++)
+        for (int dir = -1; dir <= 1; dir += 2) {
+            if (n_out && (ax != oax || (dir > 0) != (u[ax] > 1)))
+                continue;
+            int32_t nb[3] = {ijk[0], ijk[1], ijk[2]};
+            nb[ax] += dir;
+            if (cs_cubemesh_find(&D->cm, nb[0], nb[1], nb[2]) >= 0)
+                continue;
+            const double f = dir > 0 ? 1 - u[ax] : u[ax];
+            if (f < bf) {
+                bf = f;
+                bax = ax;
+                bdir = dir;
+            }
+        }
+    if (bax < 0)
+        return false;
+    /* e: the cell's mean edge along bax; the face normal is e's direction
+     * (sheared cells: close enough, the gap is measured along it) */
+    double e[3] = {0, 0, 0};
+    for (int k = 0; k < 8; k++) {
+        const double sg = CS_CORNER[k][bax] ? 0.25 : -0.25;
+        for (int a = 0; a < 3; a++)
+            e[a] += sg * X[k][a];
+    }
+    const double el = sqrt(dot3(e, e));
+    if (!(el > 0) || -bf * el >= margin)
+        return false;
+    for (int a = 0; a < 3; a++)
+        cf->n[a] = bdir * e[a] / el;
+    cf->sep = -bf * el;
+    cf->face = 2 * bax + (bdir > 0);
+    const int a1 = (bax + 1) % 3, a2 = (bax + 2) % 3;
+    int j = 0;
+    for (int k = 0; k < 8 && j < 4; k++) {
+        if (CS_CORNER[k][bax] != (bdir > 0))
+            continue;
+        const double u1 = fmin(1, fmax(0, u[a1])), u2 = fmin(1, fmax(0, u[a2]));
+        cf->dn[j] = cn[k];
+        cf->dw[j] = (CS_CORNER[k][a1] ? u1 : 1 - u1) * (CS_CORNER[k][a2] ? u2 : 1 - u2);
+        j++;
+    }
+    return true;
+}
+
 /*
  * Rigid nodes (the corners of its cubes) against the cells of deformable objects: a rigid
  * corner or edge pressing into a deformable face between its nodes, which deformable_contacts
@@ -1650,55 +1730,13 @@ static int cell_body(cs_world_t *w, cs_rigid_world *rw, cs_object *D, int b, int
     if (lo[0] > rb->aabb_max[0] || hi[0] < rb->aabb_min[0] || lo[1] > rb->aabb_max[1] ||
         hi[1] < rb->aabb_min[1] || lo[2] > rb->aabb_max[2] || hi[2] < rb->aabb_min[2])
         return 0;
-    const int32_t *ijk = D->cm.cell_ijk + 3 * (size_t)cell;
     for (int i = 0; i < B->n; i++) {
         const double *p = B->x + 3 * (size_t)i;
         if (p[0] < lo[0] || p[0] > hi[0] || p[1] < lo[1] || p[1] > hi[1] ||
             p[2] < lo[2] || p[2] > hi[2])
             continue;
-        double u[3];
-        if (!hex_local(X, p, u, tol))
-            continue;
-        /* outside the cell (within the margin) across one of its faces only:
-         * a speculative contact with that face if it is exposed */
-        int n_out = 0, oax = -1;
-        for (int a = 0; a < 3; a++)
-            if (u[a] < 0 || u[a] > 1) {
-                n_out++;
-                oax = a;
-            }
-        if (n_out > 1)
-            continue;
-        /* the nearest exposed face (in the cell's own coordinates); f < 0 outside */
-        int bax = -1, bdir = 0;
-        double bf = INFINITY;
-        for (int ax = 0; ax < 3; ax++)
-            for (int dir = -1; dir <= 1; dir += 2) {
-                if (n_out && (ax != oax || (dir > 0) != (u[ax] > 1)))
-                    continue;
-                int32_t nb[3] = {ijk[0], ijk[1], ijk[2]};
-                nb[ax] += dir;
-                if (cs_cubemesh_find(&D->cm, nb[0], nb[1], nb[2]) >= 0)
-                    continue;
-                const double f = dir > 0 ? 1 - u[ax] : u[ax];
-                if (f < bf) {
-                    bf = f;
-                    bax = ax;
-                    bdir = dir;
-                }
-            }
-        if (bax < 0)
-            continue;
-        /* e: the cell's mean edge along bax; the face normal is e's direction
-         * (sheared cells: close enough, the gap is measured along it) */
-        double e[3] = {0, 0, 0};
-        for (int k = 0; k < 8; k++) {
-            const double sg = CS_CORNER[k][bax] ? 0.25 : -0.25;
-            for (int a = 0; a < 3; a++)
-                e[a] += sg * X[k][a];
-        }
-        const double el = sqrt(dot3(e, e));
-        if (!(el > 0) || -bf * el >= margin)
+        cell_face cf;
+        if (!point_in_cell(D, cell, X, p, margin, tol, &cf))
             continue;
         contact *c = new_contact(rw);
         if (!c)
@@ -1708,21 +1746,12 @@ static int cell_body(cs_world_t *w, cs_rigid_world *rw, cs_object *D, int b, int
         c->D = D;
         c->S = rw->cur;
         memcpy(c->p, p, sizeof c->p);
-        for (int a = 0; a < 3; a++)
-            c->n[a] = bdir * e[a] / el;
-        c->sep = -bf * el;
+        memcpy(c->n, cf.n, sizeof c->n);
+        c->sep = cf.sep;
         c->node_a = i;
-        c->key = ((int64_t)cell * 6 + 2 * bax + (bdir > 0)) * B->n + i;
-        const int a1 = (bax + 1) % 3, a2 = (bax + 2) % 3;
-        int j = 0;
-        for (int k = 0; k < 8 && j < 4; k++) {
-            if (CS_CORNER[k][bax] != (bdir > 0))
-                continue;
-            const double u1 = fmin(1, fmax(0, u[a1])), u2 = fmin(1, fmax(0, u[a2]));
-            c->dn[j] = cn[k];
-            c->dw[j] = (CS_CORNER[k][a1] ? u1 : 1 - u1) * (CS_CORNER[k][a2] ? u2 : 1 - u2);
-            j++;
-        }
+        c->key = ((int64_t)cell * 6 + cf.face) * B->n + i;
+        memcpy(c->dn, cf.dn, sizeof c->dn);
+        memcpy(c->dw, cf.dw, sizeof c->dw);
     }
     return 0;
 }
