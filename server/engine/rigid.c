@@ -41,6 +41,10 @@
  * in their object's next implicit step (their diagonal stiffness blocks plus the object's
  * rigid modes, contact_soft.h), not as free point masses.
  *
+ * Deformable objects against each other (soft_contacts), once per step after the bodies: a
+ * node of one in (or just outside) a deformed cell of the other against that cell's nearest
+ * exposed face, both sides answering as above; only pairs whose boxes overlap.
+ *
  * Impact fracture: when the contact force (impulse/dt) on a body with fracture enabled exceeds
  * strength·h² and twice its weight, the body's cube mesh is solved statically (linear FEM,
  * inertia relief: the contact loads minus the rigid acceleration they cause, K + εM for the
