@@ -58,6 +58,7 @@ static void coarse_modes(cs_soft_resp *r, const cs_object *D, const double *mass
     }
     if (pinned || !(M > 0))
         return;
+    r->coarse = true;
     for (int a = 0; a < 3; a++)
         r->c[a] /= M;
     double I[9] = {0};
@@ -181,6 +182,7 @@ int cs_soft_prepare(cs_soft_resp *r, cs_object *D, double dt, uint64_t step)
     r->step = step;
     r->n = D->n;
     r->stiff = stiff;
+    r->coarse = false;
     memset(r->V, 0, sizeof r->V);
     memset(r->W, 0, sizeof r->W);
     memset(r->minv, 0, sizeof r->minv);
@@ -220,10 +222,13 @@ void cs_soft_arm(const cs_soft_resp *r, const int32_t *nodes, const double *w, i
 void cs_soft_velocity(const cs_soft_resp *r, const int32_t *nodes, const double *w, int k,
                       const double arm[3], double v[3])
 {
-    double wr[3];
-    cross(r->W, arm, wr);
-    for (int a = 0; a < 3; a++)
-        v[a] = r->V[a] + wr[a];
+    v[0] = v[1] = v[2] = 0;
+    if (r->coarse) {
+        double wr[3];
+        cross(r->W, arm, wr);
+        for (int a = 0; a < 3; a++)
+            v[a] = r->V[a] + wr[a];
+    }
     for (int j = 0; j < k; j++)
         for (int a = 0; a < 3; a++)
             v[a] += w[j] * r->u[3 * (size_t)nodes[j] + a];
@@ -245,11 +250,13 @@ double cs_soft_compliance(const cs_soft_resp *r, const int32_t *nodes, const dou
             s += w[j] * w[j] * (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) / r->D->m[i];
         }
     }
-    double rd[3], t[3];
-    cross(arm, d, rd);
-    mul3(r->iinv, rd, t);
-    for (int a = 0; a < 3; a++)
-        s += r->minv[a] * d[a] * d[a] + rd[a] * t[a];
+    if (r->coarse) {
+        double rd[3], t[3];
+        cross(arm, d, rd);
+        mul3(r->iinv, rd, t);
+        for (int a = 0; a < 3; a++)
+            s += r->minv[a] * d[a] * d[a] + rd[a] * t[a];
+    }
     return s;
 }
 
@@ -274,7 +281,7 @@ void cs_soft_impulse(cs_soft_resp *r, const int32_t *nodes, const double *w, int
             r->u[3 * i + a] += w[j] * du[a];          /* the solve's view of the response */
         }
     }
-    if (!any)
+    if (!any || !r->coarse)
         return;
     double rj[3], dw[3];
     cross(arm, J, rj);

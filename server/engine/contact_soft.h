@@ -21,8 +21,8 @@
  * The velocity each node heads for without contacts, u0, is one two-level iteration of D's
  * next step from v (coarse, then block Jacobi on what is left): a node held up by its elastic
  * force is seen to stay, a falling object to fall. Neither part bounds the true response
- * A⁻¹ exactly: the diagonal blocks make slender objects' bending stiffer than it is (a rigid
- * body dropped on the tip of a soft cantilever bounces as off a firmer surface).
+ * A⁻¹: a load spread over many nodes meets less stiffness than the diagonal blocks say, and a
+ * held slender object's bending is seen stiffer than it is (not measured).
  *
  * Explicit integrators (symplectic Euler, Verlet) and central differences: the free point
  * masses (1/m) and u0 = v, as their next step sees an impulse.
@@ -50,6 +50,7 @@ typedef struct cs_soft_resp {
      * each axis (0: a blocked translation), iinv the inverse inertia restricted to the free
      * rotations; V, W the coarse velocity the impulses gave so far */
     double c[3], minv[3], iinv[9], V[3], W[3];
+    bool coarse;        /* D has free rigid modes (else the coarse terms are all zero) */
 } cs_soft_resp;
 
 /* Make r (whose arrays may be from an earlier use) D's response for step `step` of world
