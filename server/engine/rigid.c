@@ -41,10 +41,6 @@
  * in their object's next implicit step (their diagonal stiffness blocks plus the object's
  * rigid modes, contact_soft.h), not as free point masses.
  *
- * Deformable objects against each other (soft_contacts), once per step after the bodies: a
- * node of one in (or just outside) a deformed cell of the other against that cell's nearest
- * exposed face, both sides answering as above; only pairs whose boxes overlap.
- *
  * Impact fracture: when the contact force (impulse/dt) on a body with fracture enabled exceeds
  * strength·h² and twice its weight, the body's cube mesh is solved statically (linear FEM,
  * inertia relief: the contact loads minus the rigid acceleration they cause, K + εM for the
@@ -127,10 +123,6 @@ typedef struct cs_rigid_world {
     int n_soft, cap_soft;
     uint64_t step;      /* cs_rigid_step calls so far */
     cs_soft_resp *cur;  /* the object's whose contacts are being made */
-    struct soft_contact *sc; /* deformable against deformable (soft_contacts) */
-    int nsc, cap_sc;
-    double *sbox;       /* soft_contacts: 7 per object, its box and fastest node's speed */
-    int cap_sbox;
 } cs_rigid_world;
 
 /* cs_world carries the pointer: world_internal.h. */
@@ -654,8 +646,6 @@ void cs_rigid_world_free(cs_world_t *w)
         free(rw->soft[i]);
     }
     free(rw->soft);
-    free(rw->sc);
-    free(rw->sbox);
     free(rw);
     w->rigid = NULL;
 }
@@ -1827,261 +1817,6 @@ static void cell_contacts_done(cs_rigid_world *rw)
     }
 }
 
-/* ---------------------------------------------------------------- deformable against deformable */
-
-/*
- * A node of deformable object A inside (or within the speculative margin outside) a deformed
- * cell of deformable object B, pushed out through the cell's nearest exposed face like a rigid
- * corner (point_in_cell): the face point Σ wk x_k of B's face against A's node. Both sides
- * answer as their objects' next implicit steps will (contact_soft.h); an impulse J on A's
- * node is −wk J on B's corner k, so momentum is exchanged exactly.
- */
-typedef struct soft_contact {
-    cs_soft_resp *SA, *SB;
-    int32_t node;       /* of A */
-    int32_t bn[4];      /* B's face corners and their weights */
-    double bw[4];
-    double n[3];        /* B's outward face normal: from B towards A */
-    double sep, hB;
-    double ra[3], rb[3];
-    double t1[3], t2[3];
-    double kn, kt1, kt2, target, jn, jt1, jt2, mu;
-} soft_contact;
-
-static const double ONE[1] = {1.0};
-
-static void soft_rel_velocity(const soft_contact *c, double v[3])
-{
-    double va[3], vb[3];
-    cs_soft_velocity(c->SA, &c->node, ONE, 1, c->ra, va);
-    cs_soft_velocity(c->SB, c->bn, c->bw, 4, c->rb, vb);
-    for (int a = 0; a < 3; a++)
-        v[a] = va[a] - vb[a];
-}
-
-static double soft_eff_mass(const soft_contact *c, const double d[3])
-{
-    const double k = cs_soft_compliance(c->SA, &c->node, ONE, 1, c->ra, d) +
-                     cs_soft_compliance(c->SB, c->bn, c->bw, 4, c->rb, d);
-    return k > 0 ? 1.0 / k : 0.0;
-}
-
-static void soft_impulse(soft_contact *c, const double J[3])
-{
-    const double mJ[3] = {-J[0], -J[1], -J[2]};
-    cs_soft_impulse(c->SA, &c->node, ONE, 1, c->ra, J);
-    cs_soft_impulse(c->SB, c->bn, c->bw, 4, c->rb, mJ);
-}
-
-/* D's box (of its nodes) and its fastest node's speed. */
-static void object_box(const cs_object *D, double lo[3], double hi[3], double *vmax)
-{
-    double v2 = 0;
-    for (int a = 0; a < 3; a++) {
-        lo[a] = INFINITY;
-        hi[a] = -INFINITY;
-    }
-    for (int i = 0; i < D->n; i++) {
-        const double *x = D->x + 3 * (size_t)i, *v = D->v + 3 * (size_t)i;
-        for (int a = 0; a < 3; a++) {
-            lo[a] = x[a] < lo[a] ? x[a] : lo[a];
-            hi[a] = x[a] > hi[a] ? x[a] : hi[a];
-        }
-        const double s = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
-        v2 = s > v2 ? s : v2;
-    }
-    *vmax = sqrt(v2);
-}
-
-/* The nodes of A in the overlap [olo, ohi] against B's cells (filed in rw->grid over B's box
- * [blo, bhi]): at most one contact per node, with the face it is least deep behind. */
-static int soft_nodes_in_cells(cs_rigid_world *rw, cs_object *A, cs_object *B,
-                               cs_soft_resp *SA, cs_soft_resp *SB, const double olo[3],
-                               const double ohi[3], const double blo[3], const double bhi[3],
-                               double margin)
-{
-    if (grid_build(rw, B, true, blo, bhi) != 0)
-        return -1;
-    const double tol = fmin(0.5, margin / B->cm.h);
-    for (int i = 0; i < A->n; i++) {
-        const double *p = A->x + 3 * (size_t)i;
-        if (p[0] < olo[0] || p[0] > ohi[0] || p[1] < olo[1] || p[1] > ohi[1] || p[2] < olo[2] ||
-            p[2] > ohi[2])
-            continue;
-        const double qlo[3] = {p[0] - margin, p[1] - margin, p[2] - margin};
-        const double qhi[3] = {p[0] + margin, p[1] + margin, p[2] + margin};
-        grid_query(rw->grid, qlo, qhi);
-        cell_face best = {.sep = -INFINITY};
-        for (int e = 0; e < rw->grid->n_cand; e++) {
-            const int32_t cell = rw->grid->cand[e];
-            const int32_t *cn = B->cm.cell_nodes + 8 * (size_t)cell;
-            double X[8][3];
-            bool near = true;
-            for (int a = 0; a < 3 && near; a++) {
-                double l = INFINITY, h = -INFINITY;
-                for (int k = 0; k < 8; k++) {
-                    X[k][a] = B->x[3 * (size_t)cn[k] + a];
-                    l = X[k][a] < l ? X[k][a] : l;
-                    h = X[k][a] > h ? X[k][a] : h;
-                }
-                near = p[a] >= l - margin && p[a] <= h + margin;
-            }
-            cell_face cf;
-            if (near && point_in_cell(B, cell, X, p, margin, tol, &cf) && cf.sep > best.sep)
-                best = cf;
-        }
-        if (best.sep == -INFINITY)
-            continue;
-        if (rw->nsc == rw->cap_sc) {
-            const int cap = rw->cap_sc ? 2 * rw->cap_sc : 256;
-            soft_contact *g = realloc(rw->sc, (size_t)cap * sizeof *g);
-            if (!g)
-                return -1;
-            rw->sc = g;
-            rw->cap_sc = cap;
-        }
-        soft_contact *c = &rw->sc[rw->nsc++];
-        memset(c, 0, sizeof *c);
-        c->SA = SA;
-        c->SB = SB;
-        c->node = i;
-        memcpy(c->bn, best.dn, sizeof c->bn);
-        memcpy(c->bw, best.dw, sizeof c->bw);
-        memcpy(c->n, best.n, sizeof c->n);
-        c->sep = best.sep;
-        c->hB = B->cm.h;
-        c->mu = sqrt(A->mat.friction * B->mat.friction);
-        c->target = fmax(A->mat.restitution, B->mat.restitution); /* e, until prepared */
-    }
-    return 0;
-}
-
-/*
- * Contacts between deformable objects, once per step after the rigid bodies' (the same
- * sequential impulses, their own solve): only pairs whose boxes, grown by the distance they can
- * close in a step, overlap, and not both asleep; each object's nodes in the overlap against
- * the other's cells. Returns CS_OK or CS_ERR_NOMEM.
- */
-static int soft_contacts(cs_world_t *w, cs_rigid_world *rw, cs_step_stats *st)
-{
-    const double t0 = now_ms();
-    const double dt = w->def.dt;
-    rw->nsc = 0;
-    int soft = 0;
-    for (int i = 0; i < w->n_objects; i++)
-        soft += w->objects[i]->model != CS_MODEL_RIGID;
-    if (soft < 2)
-        return CS_OK;
-    if (w->n_objects > rw->cap_sbox) {
-        double *g = realloc(rw->sbox, (size_t)w->n_objects * 7 * sizeof *g);
-        if (!g)
-            return CS_ERR_NOMEM;
-        rw->sbox = g;
-        rw->cap_sbox = w->n_objects;
-    }
-    for (int i = 0; i < w->n_objects; i++) {
-        const cs_object *o = w->objects[i];
-        if (o->model != CS_MODEL_RIGID && o->n > 0)
-            object_box(o, rw->sbox + 7 * i, rw->sbox + 7 * i + 3, rw->sbox + 7 * i + 6);
-    }
-    for (int i = 0; i < w->n_objects; i++) {
-        cs_object *A = w->objects[i];
-        if (A->model == CS_MODEL_RIGID || A->n == 0 || A->cm.n_cells == 0)
-            continue;
-        const double *alo = rw->sbox + 7 * i, *ahi = alo + 3, va = alo[6];
-        for (int j = i + 1; j < w->n_objects; j++) {
-            cs_object *B = w->objects[j];
-            if (B->model == CS_MODEL_RIGID || B->n == 0 || B->cm.n_cells == 0 ||
-                (A->sleeping && B->sleeping))
-                continue;
-            const double *blo = rw->sbox + 7 * j, *bhi = blo + 3, vb = blo[6];
-            const double margin = dt * (va + vb) + 0.05 * fmin(A->cm.h, B->cm.h);
-            double olo[3], ohi[3];
-            bool over = true;
-            for (int a = 0; a < 3; a++) {
-                olo[a] = fmax(alo[a], blo[a]) - margin;
-                ohi[a] = fmin(ahi[a], bhi[a]) + margin;
-                over = over && olo[a] <= ohi[a];
-            }
-            if (!over)
-                continue;
-            if (soft_prepare(w, rw, A) != 0)
-                return CS_ERR_NOMEM;
-            cs_soft_resp *SA = rw->cur;
-            if (soft_prepare(w, rw, B) != 0)
-                return CS_ERR_NOMEM;
-            cs_soft_resp *SB = rw->cur;
-            if (soft_nodes_in_cells(rw, A, B, SA, SB, olo, ohi, blo, bhi, margin) != 0 ||
-                soft_nodes_in_cells(rw, B, A, SB, SA, olo, ohi, alo, ahi, margin) != 0)
-                return CS_ERR_NOMEM;
-        }
-    }
-    if (rw->nsc == 0)
-        return CS_OK;
-    /* prepare: arms, tangents, effective masses, target normal velocities */
-    const double gn = sqrt(dot3(w->def.gravity, w->def.gravity));
-    const double v_bounce = 2 * gn * dt + 1e-3;
-    for (int k = 0; k < rw->nsc; k++) {
-        soft_contact *c = &rw->sc[k];
-        const double e = c->target;
-        cs_soft_arm(c->SA, &c->node, ONE, 1, c->ra);
-        cs_soft_arm(c->SB, c->bn, c->bw, 4, c->rb);
-        tangents(c->n, c->t1, c->t2);
-        c->kn = soft_eff_mass(c, c->n);
-        c->kt1 = soft_eff_mass(c, c->t1);
-        c->kt2 = soft_eff_mass(c, c->t2);
-        double vr[3];
-        soft_rel_velocity(c, vr);
-        const double vn0 = dot3(vr, c->n), slop = 0.01 * c->hB;
-        c->target = c->sep > 0 ? -c->sep / dt
-                               : BAUMGARTE * fmin(fmax(0, -c->sep - slop), 0.1 * c->hB) / dt;
-        if (vn0 < -v_bounce && vn0 * dt < -c->sep)
-            c->target = fmax(c->target, -e * vn0);
-    }
-    for (int it = 0; it < PGS_ITERATIONS; it++)
-        for (int k = 0; k < rw->nsc; k++) {
-            soft_contact *c = &rw->sc[k];
-            if (c->kn == 0)
-                continue;
-            double vr[3], J[3];
-            soft_rel_velocity(c, vr);
-            double dj = (c->target - dot3(vr, c->n)) * c->kn;
-            const double jn = fmax(0, c->jn + dj);
-            dj = jn - c->jn;
-            c->jn = jn;
-            for (int a = 0; a < 3; a++)
-                J[a] = dj * c->n[a];
-            soft_impulse(c, J);
-            soft_rel_velocity(c, vr);
-            const double lim = c->mu * c->jn;
-            double *jt[2] = {&c->jt1, &c->jt2};
-            const double *t[2] = {c->t1, c->t2}, kt[2] = {c->kt1, c->kt2};
-            for (int s = 0; s < 2; s++) {
-                double d = -dot3(vr, t[s]) * kt[s];
-                const double nj = fmin(lim, fmax(-lim, *jt[s] + d));
-                d = nj - *jt[s];
-                *jt[s] = nj;
-                for (int a = 0; a < 3; a++)
-                    J[a] = d * t[s][a];
-                soft_impulse(c, J);
-            }
-        }
-    /* the objects pushed stay awake; their energies follow the velocities they now have */
-    for (int k = 0; k < rw->nsc; k++) {
-        const soft_contact *c = &rw->sc[k];
-        if (c->jn <= 0)
-            continue;
-        cs_object *o[2] = {c->SA->D, c->SB->D};
-        for (int s = 0; s < 2; s++) {
-            o[s]->sleeping = false;
-            o[s]->still_steps = 0;
-            o[s]->elastic_energy_valid = false;
-        }
-    }
-    st->ms_solve += now_ms() - t0;
-    return CS_OK;
-}
-
 /* ---------------------------------------------------------------- impact fracture */
 
 typedef struct relief_ctx {
@@ -2523,13 +2258,10 @@ static int substep(cs_world_t *w, cs_rigid_world *rw, bool last, cs_step_stats *
 int cs_rigid_step(cs_world_t *w, cs_step_stats *st)
 {
     if (!w->rigid) {
-        /* rigid bodies, or two deformable objects that may touch (soft_contacts) */
-        int rigid = 0, soft = 0;
-        for (int i = 0; i < w->n_objects; i++) {
-            rigid += w->objects[i]->model == CS_MODEL_RIGID;
-            soft += w->objects[i]->model != CS_MODEL_RIGID;
-        }
-        if (rigid == 0 && soft < 2)
+        bool any = false;
+        for (int i = 0; i < w->n_objects && !any; i++)
+            any = w->objects[i]->model == CS_MODEL_RIGID;
+        if (!any)
             return CS_OK;
         if (!(w->rigid = calloc(1, sizeof *w->rigid)))
             return CS_ERR_NOMEM;
@@ -2563,11 +2295,6 @@ int cs_rigid_step(cs_world_t *w, cs_step_stats *st)
             rc = r;
         if (r == CS_ERR_NOMEM)
             break;
-    }
-    if (rc != CS_ERR_NOMEM) {
-        const int r = soft_contacts(w, rw, st);
-        if (r != CS_OK && rc == CS_OK)
-            rc = r;
     }
     return rc;
 }
