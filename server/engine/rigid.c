@@ -2268,6 +2268,18 @@ int cs_rigid_step(cs_world_t *w, cs_step_stats *st)
     }
     cs_rigid_world *rw = w->rigid;
     rw->step++; /* soft_resp records of earlier steps are stale */
+    /* and those of objects no contact reached last step are dropped (removed objects, pieces
+     * that broke off: their memory does not pile up) */
+    int kept_soft = 0;
+    for (int i = 0; i < rw->n_soft; i++) {
+        if (rw->soft[i]->step + 1 >= rw->step) {
+            rw->soft[kept_soft++] = rw->soft[i];
+            continue;
+        }
+        cs_soft_free(rw->soft[i]);
+        free(rw->soft[i]);
+    }
+    rw->n_soft = kept_soft;
     if (cs_rigid_sync(w) != CS_OK)
         return CS_ERR_NOMEM;
     const double dt = w->def.dt, gn = sqrt(dot3(w->def.gravity, w->def.gravity));
