@@ -37,6 +37,9 @@
  * rigid body's cubes (out through the exposed face they came in by) and the rigid nodes inside
  * or just outside their deformed cells (against the cell's nearest exposed face, the face
  * point weighted bilinearly over its corners) are contacts whose other side is those nodes.
+ * An impulse J gives those nodes momentum J at once; the solve sees them answer as they will
+ * in their object's next implicit step (their diagonal stiffness blocks plus the object's
+ * rigid modes, contact_soft.h), not as free point masses.
  *
  * Impact fracture: when the contact force (impulse/dt) on a body with fracture enabled exceeds
  * strength·h² and twice its weight, the body's cube mesh is solved statically (linear FEM,
@@ -52,17 +55,17 @@
 #include <string.h>
 #include <time.h>
 
+#include "contact_soft.h"
 #include "elastic.h"
 #include "mat3.h"
 
 #define PGS_ITERATIONS 60
 #define BAUMGARTE 0.2
-/* Against a deformable object: its side takes part of the push-out velocity and its own
- * step pulls its nodes back towards its elastic rest every frame, so the bias must be the
- * whole depth per substep (test_rigid: 0.2 leaves a box 0.09 h deep in a soft block, 1.0
- * 0.04 h; moving the deformable nodes out instead, a projection, pumps energy: the box
- * jitters and never sleeps). */
-#define BAUMGARTE_SOFT 1.0
+/* (Against deformable objects too. The whole depth per substep was needed while the solve saw
+ * their nodes as free masses: they took most of the push-out and their own step pulled them
+ * back. Seen with their stiffness (contact_soft.h) 0.2 rests boxes as deep as 1.0 did, and a
+ * soft block dropped on a rigid floor rebounds 0.107 m from 1 m, against 0.141 m with 1.0;
+ * restitution 0.3 says 0.09.) */
 #define MAX_SUBSTEPS 8
 /* The impact stress solve (a stress test, not a trajectory): its relative residual, and at
  * most this many PCG iterations, ~10 ms for the drop demo's 1300 nodes. The local stress
@@ -90,6 +93,8 @@ typedef struct contact {
     cs_object *D;
     int32_t dn[4];
     double dw[4];
+    cs_soft_resp *S;     /* D's response to impulses (contact_soft.h) */
+    double rd[3];        /* the face point's arm from D's centre of mass */
 } contact;
 
 /* A contact's accumulated impulse, kept for the next step (warm start). */
@@ -114,6 +119,10 @@ typedef struct cs_rigid_world {
     contact *c;
     int nc, cap_c;
     struct dgrid *grid; /* broad phase against a deformable object (deformable_grid) */
+    cs_soft_resp **soft; /* per deformable object in contact (soft_prepare) */
+    int n_soft, cap_soft;
+    uint64_t step;      /* cs_rigid_step calls so far */
+    cs_soft_resp *cur;  /* the object's whose contacts are being made */
 } cs_rigid_world;
 
 /* cs_world carries the pointer: world_internal.h. */
@@ -632,6 +641,11 @@ void cs_rigid_world_free(cs_world_t *w)
     free(rw->c);
     free(rw->kept);
     grid_free(rw->grid);
+    for (int i = 0; i < rw->n_soft; i++) {
+        cs_soft_free(rw->soft[i]);
+        free(rw->soft[i]);
+    }
+    free(rw->soft);
     free(rw);
     w->rigid = NULL;
 }
@@ -1161,11 +1175,8 @@ static double eff_mass(const cs_rigid_world *rw, const contact *c, const double 
         mat_vec(rb->I_inv_world, rxd, t);
         k += rb->inv_mass + dot3(rxd, t);
     }
-    for (int j = 0; c->D && j < 4; j++) {
-        const size_t nk = (size_t)c->dn[j];
-        if (!c->D->mask[3 * nk] && c->D->m[nk] > 0)
-            k += c->dw[j] * c->dw[j] / c->D->m[nk];
-    }
+    if (c->D)
+        k += cs_soft_compliance(c->S, c->dn, c->dw, 4, c->rd, d);
     return k > 0 ? 1.0 / k : 0.0;
 }
 
@@ -1184,9 +1195,12 @@ static void rel_velocity_at(const cs_rigid_world *rw, const contact *c, double v
         for (int a = 0; a < 3; a++)
             v[a] += (s ? -1 : 1) * (bv[a] + wr[a]);
     }
-    for (int j = 0; c->D && j < 4; j++)
+    if (c->D) {
+        double vd[3];
+        cs_soft_velocity(c->S, c->dn, c->dw, 4, c->rd, vd);
         for (int a = 0; a < 3; a++)
-            v[a] -= c->dw[j] * c->D->v[3 * (size_t)c->dn[j] + a];
+            v[a] -= vd[a];
+    }
 }
 
 static void rel_velocity(const cs_rigid_world *rw, const contact *c, double v[3])
@@ -1200,12 +1214,9 @@ static void contact_impulse(cs_rigid_world *rw, const contact *c, const double J
         apply_impulse(rw->body[c->a]->rb, c->ra, J, 1.0);
     if (c->b >= 0 && rw->dyn[c->b])
         apply_impulse(rw->body[c->b]->rb, c->rb, J, -1.0);
-    for (int j = 0; c->D && j < 4; j++) {
-        const size_t nk = (size_t)c->dn[j];
-        if (c->D->mask[3 * nk] || !(c->D->m[nk] > 0))
-            continue;
-        for (int a = 0; a < 3; a++)
-            c->D->v[3 * nk + a] -= c->dw[j] * J[a] / c->D->m[nk];
+    if (c->D) { /* −J on the deformable side */
+        const double mJ[3] = {-J[0], -J[1], -J[2]};
+        cs_soft_impulse(c->S, c->dn, c->dw, 4, c->rd, mJ);
     }
 }
 
@@ -1221,6 +1232,8 @@ static void prepare_contacts(const cs_world_t *w, cs_rigid_world *rw)
             c->ra[a] = c->p[a] - A->rb->c[a];
             c->rb[a] = B ? c->p[a] - B->rb->c[a] : 0;
         }
+        if (c->D)
+            cs_soft_arm(c->S, c->dn, c->dw, 4, c->rd);
         tangents(c->n, c->t1, c->t2);
         c->kn = eff_mass(rw, c, c->n);
         c->kt1 = eff_mass(rw, c, c->t1);
@@ -1232,7 +1245,7 @@ static void prepare_contacts(const cs_world_t *w, cs_rigid_world *rw)
         const double vn_pre = dot3(vr, c->n);
         const double slop = 0.01 * A->cm.h;
         c->target = c->sep > 0 ? -c->sep / dt
-                               : (c->D ? BAUMGARTE_SOFT : BAUMGARTE) * fmin(fmax(0, -c->sep - slop), 0.1 * A->cm.h) / dt;
+                               : BAUMGARTE * fmin(fmax(0, -c->sep - slop), 0.1 * A->cm.h) / dt;
         const double e = B ? fmax(A->mat.restitution, B->mat.restitution) : A->mat.restitution;
         /* restitution reverses the approach speed before this step's forces, so that a
          * bounce retraces the fall (symplectic Euler is time-symmetric that way) */
@@ -1406,6 +1419,34 @@ static void bounce_positions(const cs_world_t *w, cs_rigid_world *rw)
     }
 }
 
+/* D's response to this step's impulses (contact_soft.h), made on the first contact search
+ * of the step that reaches D and kept through the step's substeps, into rw->cur for the
+ * contacts about to be made. Returns 0 or -1 (out of memory). */
+static int soft_prepare(const cs_world_t *w, cs_rigid_world *rw, cs_object *D)
+{
+    cs_soft_resp *r = NULL;
+    for (int i = 0; i < rw->n_soft && !r; i++)
+        if (rw->soft[i]->id == D->id)
+            r = rw->soft[i];
+    if (!r) {
+        if (rw->n_soft == rw->cap_soft) {
+            const int cap = rw->cap_soft ? 2 * rw->cap_soft : 4;
+            cs_soft_resp **g = realloc(rw->soft, (size_t)cap * sizeof *g);
+            if (!g)
+                return -1;
+            rw->soft = g;
+            rw->cap_soft = cap;
+        }
+        if (!(r = calloc(1, sizeof *r)))
+            return -1;
+        rw->soft[rw->n_soft++] = r;
+    }
+    if (cs_soft_prepare(r, D, w->def.dt, rw->step) != 0)
+        return -1;
+    rw->cur = r;
+    return 0;
+}
+
 /*
  * Nodes of deformable objects inside a rigid body's cubes: pushed out through the nearest
  * exposed face of the cube they are in, their velocity into the body removed by an impulse
@@ -1418,7 +1459,7 @@ static int node_body(cs_world_t *w, cs_rigid_world *rw, cs_object *D, int b, int
     cs_object *B = rw->body[b];
     cs_rigid *rb = B->rb;
     const double h = B->cm.h;
-    double *x = D->x + 3 * (size_t)i, *v = D->v + 3 * (size_t)i;
+    const double *x = D->x + 3 * (size_t)i, *v = rw->cur->u + 3 * (size_t)i;
     if (D->mask[3 * (size_t)i] || x[0] < rb->aabb_min[0] || x[0] > rb->aabb_max[0] ||
         x[1] < rb->aabb_min[1] || x[1] > rb->aabb_max[1] ||
         x[2] < rb->aabb_min[2] || x[2] > rb->aabb_max[2])
@@ -1487,6 +1528,7 @@ static int node_body(cs_world_t *w, cs_rigid_world *rw, cs_object *D, int b, int
     c->a = b;
     c->b = -1;
     c->D = D;
+    c->S = rw->cur;
     memcpy(c->p, x, sizeof c->p);
     for (int a = 0; a < 3; a++)
         c->n[a] = -n[a]; /* from the node towards the body */
@@ -1508,6 +1550,8 @@ static int deformable_contacts(cs_world_t *w, cs_rigid_world *rw, int n_objects)
         const int over = bodies_over(rw, D, 0.0, lo, hi);
         if (over == 0)
             continue;
+        if (soft_prepare(w, rw, D) != 0)
+            return -1;
         const bool grid = over >= w->broadphase_min_bodies;
         if (grid && grid_build(rw, D, false, lo, hi) != 0)
             return -1;
@@ -1573,6 +1617,86 @@ static bool hex_local(const double x[8][3], const double p[3], double u[3], doub
     return true;
 }
 
+/* A point against a deformable cell: the face it is pushed out through, its gap and the face
+ * point's nodes and bilinear weights. */
+typedef struct cell_face {
+    double n[3];    /* outward normal of the face (the cell's mean edge across it) */
+    double sep;     /* the point's gap to the face along n (negative inside) */
+    int32_t dn[4];
+    double dw[4];
+    int face;       /* 2·axis + (side > 0) */
+} cell_face;
+
+/* Point p inside D's deformed cell (corners X, CS_CORNER order; inverse trilinear map), or
+ * within `margin` outside it across one face only: true with the nearest exposed face of the
+ * cell (in the cell's own coordinates) in *cf. False if p is elsewhere or no face of the
+ * cell that it could leave by is exposed. */
+static bool point_in_cell(const cs_object *D, int32_t cell, const double X[8][3],
+                          const double p[3], double margin, double tol, cell_face *cf)
+{
+    const int32_t *cn = D->cm.cell_nodes + 8 * (size_t)cell;
+    const int32_t *ijk = D->cm.cell_ijk + 3 * (size_t)cell;
+    double u[3];
+    if (!hex_local(X, p, u, tol))
+        return false;
+    /* outside the cell (within the margin) across one of its faces only:
+     * a speculative contact with that face if it is exposed */
+    int n_out = 0, oax = -1;
+    for (int a = 0; a < 3; a++)
+        if (u[a] < 0 || u[a] > 1) {
+            n_out++;
+            oax = a;
+        }
+    if (n_out > 1)
+        return false;
+    /* the nearest exposed face (in the cell's own coordinates); f < 0 outside */
+    int bax = -1, bdir = 0;
+    double bf = INFINITY;
+    for (int ax = 0; ax < 3; ax++)
+        for (int dir = -1; dir <= 1; dir += 2) {
+            if (n_out && (ax != oax || (dir > 0) != (u[ax] > 1)))
+                continue;
+            int32_t nb[3] = {ijk[0], ijk[1], ijk[2]};
+            nb[ax] += dir;
+            if (cs_cubemesh_find(&D->cm, nb[0], nb[1], nb[2]) >= 0)
+                continue;
+            const double f = dir > 0 ? 1 - u[ax] : u[ax];
+            if (f < bf) {
+                bf = f;
+                bax = ax;
+                bdir = dir;
+            }
+        }
+    if (bax < 0)
+        return false;
+    /* e: the cell's mean edge along bax; the face normal is e's direction
+     * (sheared cells: close enough, the gap is measured along it) */
+    double e[3] = {0, 0, 0};
+    for (int k = 0; k < 8; k++) {
+        const double sg = CS_CORNER[k][bax] ? 0.25 : -0.25;
+        for (int a = 0; a < 3; a++)
+            e[a] += sg * X[k][a];
+    }
+    const double el = sqrt(dot3(e, e));
+    if (!(el > 0) || -bf * el >= margin)
+        return false;
+    for (int a = 0; a < 3; a++)
+        cf->n[a] = bdir * e[a] / el;
+    cf->sep = -bf * el;
+    cf->face = 2 * bax + (bdir > 0);
+    const int a1 = (bax + 1) % 3, a2 = (bax + 2) % 3;
+    int j = 0;
+    for (int k = 0; k < 8 && j < 4; k++) {
+        if (CS_CORNER[k][bax] != (bdir > 0))
+            continue;
+        const double u1 = fmin(1, fmax(0, u[a1])), u2 = fmin(1, fmax(0, u[a2]));
+        cf->dn[j] = cn[k];
+        cf->dw[j] = (CS_CORNER[k][a1] ? u1 : 1 - u1) * (CS_CORNER[k][a2] ? u2 : 1 - u2);
+        j++;
+    }
+    return true;
+}
+
 /*
  * Rigid nodes (the corners of its cubes) against the cells of deformable objects: a rigid
  * corner or edge pressing into a deformable face between its nodes, which deformable_contacts
@@ -1582,8 +1706,9 @@ static bool hex_local(const double x[8][3], const double p[3], double u[3], doub
  * coordinates), the normal the cell's mean edge across it, the gap the node's distance to it
  * along that edge (negative inside). The other side of the contact is the face point under
  * the node, Σ wk x_k over the face's 4 corners with their bilinear weights: it takes part in
- * the sequential-impulse solve with the bodies' contacts (effective mass Σ wk²/mk on its side,
- * an impulse −wk J on corner k), so the body and the deformable object exchange momentum
+ * the sequential-impulse solve with the bodies' contacts (effective mass from Σ wk² times each
+ * corner's compliance, contact_soft.h; an impulse −wk J on corner k), so the body and the
+ * deformable object exchange momentum
  * two-way, with friction, warm starting and speculative approach like any contact. Fills
  * rw->c; returns 0 or -1 (out of memory).
  */
@@ -1605,55 +1730,13 @@ static int cell_body(cs_world_t *w, cs_rigid_world *rw, cs_object *D, int b, int
     if (lo[0] > rb->aabb_max[0] || hi[0] < rb->aabb_min[0] || lo[1] > rb->aabb_max[1] ||
         hi[1] < rb->aabb_min[1] || lo[2] > rb->aabb_max[2] || hi[2] < rb->aabb_min[2])
         return 0;
-    const int32_t *ijk = D->cm.cell_ijk + 3 * (size_t)cell;
     for (int i = 0; i < B->n; i++) {
         const double *p = B->x + 3 * (size_t)i;
         if (p[0] < lo[0] || p[0] > hi[0] || p[1] < lo[1] || p[1] > hi[1] ||
             p[2] < lo[2] || p[2] > hi[2])
             continue;
-        double u[3];
-        if (!hex_local(X, p, u, tol))
-            continue;
-        /* outside the cell (within the margin) across one of its faces only:
-         * a speculative contact with that face if it is exposed */
-        int n_out = 0, oax = -1;
-        for (int a = 0; a < 3; a++)
-            if (u[a] < 0 || u[a] > 1) {
-                n_out++;
-                oax = a;
-            }
-        if (n_out > 1)
-            continue;
-        /* the nearest exposed face (in the cell's own coordinates); f < 0 outside */
-        int bax = -1, bdir = 0;
-        double bf = INFINITY;
-        for (int ax = 0; ax < 3; ax++)
-            for (int dir = -1; dir <= 1; dir += 2) {
-                if (n_out && (ax != oax || (dir > 0) != (u[ax] > 1)))
-                    continue;
-                int32_t nb[3] = {ijk[0], ijk[1], ijk[2]};
-                nb[ax] += dir;
-                if (cs_cubemesh_find(&D->cm, nb[0], nb[1], nb[2]) >= 0)
-                    continue;
-                const double f = dir > 0 ? 1 - u[ax] : u[ax];
-                if (f < bf) {
-                    bf = f;
-                    bax = ax;
-                    bdir = dir;
-                }
-            }
-        if (bax < 0)
-            continue;
-        /* e: the cell's mean edge along bax; the face normal is e's direction
-         * (sheared cells: close enough, the gap is measured along it) */
-        double e[3] = {0, 0, 0};
-        for (int k = 0; k < 8; k++) {
-            const double sg = CS_CORNER[k][bax] ? 0.25 : -0.25;
-            for (int a = 0; a < 3; a++)
-                e[a] += sg * X[k][a];
-        }
-        const double el = sqrt(dot3(e, e));
-        if (!(el > 0) || -bf * el >= margin)
+        cell_face cf;
+        if (!point_in_cell(D, cell, X, p, margin, tol, &cf))
             continue;
         contact *c = new_contact(rw);
         if (!c)
@@ -1661,22 +1744,14 @@ static int cell_body(cs_world_t *w, cs_rigid_world *rw, cs_object *D, int b, int
         c->a = b;
         c->b = -1;
         c->D = D;
+        c->S = rw->cur;
         memcpy(c->p, p, sizeof c->p);
-        for (int a = 0; a < 3; a++)
-            c->n[a] = bdir * e[a] / el;
-        c->sep = -bf * el;
+        memcpy(c->n, cf.n, sizeof c->n);
+        c->sep = cf.sep;
         c->node_a = i;
-        c->key = ((int64_t)cell * 6 + 2 * bax + (bdir > 0)) * B->n + i;
-        const int a1 = (bax + 1) % 3, a2 = (bax + 2) % 3;
-        int j = 0;
-        for (int k = 0; k < 8 && j < 4; k++) {
-            if (CS_CORNER[k][bax] != (bdir > 0))
-                continue;
-            const double u1 = fmin(1, fmax(0, u[a1])), u2 = fmin(1, fmax(0, u[a2]));
-            c->dn[j] = cn[k];
-            c->dw[j] = (CS_CORNER[k][a1] ? u1 : 1 - u1) * (CS_CORNER[k][a2] ? u2 : 1 - u2);
-            j++;
-        }
+        c->key = ((int64_t)cell * 6 + cf.face) * B->n + i;
+        memcpy(c->dn, cf.dn, sizeof c->dn);
+        memcpy(c->dw, cf.dw, sizeof c->dw);
     }
     return 0;
 }
@@ -1692,6 +1767,8 @@ static int cell_contacts(cs_world_t *w, cs_rigid_world *rw, int n_objects)
         const int over = bodies_over(rw, D, -1.0, lo, hi);
         if (over == 0)
             continue;
+        if (soft_prepare(w, rw, D) != 0)
+            return -1;
         const bool grid = over >= w->broadphase_min_bodies;
         if (grid && grid_build(rw, D, true, lo, hi) != 0)
             return -1;
@@ -2190,6 +2267,19 @@ int cs_rigid_step(cs_world_t *w, cs_step_stats *st)
             return CS_ERR_NOMEM;
     }
     cs_rigid_world *rw = w->rigid;
+    rw->step++; /* soft_resp records of earlier steps are stale */
+    /* and those of objects no contact reached last step are dropped (removed objects, pieces
+     * that broke off: their memory does not pile up) */
+    int kept_soft = 0;
+    for (int i = 0; i < rw->n_soft; i++) {
+        if (rw->soft[i]->step + 1 >= rw->step) {
+            rw->soft[kept_soft++] = rw->soft[i];
+            continue;
+        }
+        cs_soft_free(rw->soft[i]);
+        free(rw->soft[i]);
+    }
+    rw->n_soft = kept_soft;
     if (cs_rigid_sync(w) != CS_OK)
         return CS_ERR_NOMEM;
     const double dt = w->def.dt, gn = sqrt(dot3(w->def.gravity, w->def.gravity));

@@ -1,0 +1,293 @@
+/*
+ * contact_soft.c — a deformable object's response to contact impulses (contact_soft.h).
+ */
+#include "contact_soft.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "elastic.h"
+#include "mat3.h"
+#include "solver.h"
+
+static int grow_f64(double **p, size_t *cap, size_t n)
+{
+    if (n <= *cap)
+        return 0;
+    double *g = realloc(*p, n * sizeof *g);
+    if (!g)
+        return -1;
+    *p = g;
+    *cap = n;
+    return 0;
+}
+
+static void cross(const double a[3], const double b[3], double c[3])
+{
+    c[0] = a[1] * b[2] - a[2] * b[1];
+    c[1] = a[2] * b[0] - a[0] * b[2];
+    c[2] = a[0] * b[1] - a[1] * b[0];
+}
+
+static void mul3(const double M[9], const double v[3], double r[3])
+{
+    for (int a = 0; a < 3; a++)
+        r[a] = M[3 * a] * v[0] + M[3 * a + 1] * v[1] + M[3 * a + 2] * v[2];
+}
+
+/*
+ * The coarse part: centre of mass, inverse mass per free axis and inverse inertia over the
+ * free rotations, of the mass A gives the nodes (mass[i]). Held or pinned nodes: no coarse
+ * part. Nodes on the ground (constrained by it in D's last step): x, y translation and the
+ * rotation about z only (the ground takes the rest).
+ */
+static void coarse_modes(cs_soft_resp *r, const cs_object *D, const double *mass)
+{
+    memset(r->minv, 0, sizeof r->minv);
+    memset(r->iinv, 0, sizeof r->iinv);
+    memset(r->c, 0, sizeof r->c);
+    bool pinned = D->n_fixed_nodes > 0, ground = false;
+    double M = 0;
+    for (int i = 0; i < D->n; i++) {
+        pinned = pinned || D->pin[i];
+        ground = ground || (D->contact && D->contact[i] == 1);
+        M += mass[i];
+        for (int a = 0; a < 3; a++)
+            r->c[a] += mass[i] * D->x[3 * (size_t)i + a];
+    }
+    if (pinned || !(M > 0))
+        return;
+    r->coarse = true;
+    for (int a = 0; a < 3; a++)
+        r->c[a] /= M;
+    double I[9] = {0};
+    for (int i = 0; i < D->n; i++) {
+        double d[3];
+        for (int a = 0; a < 3; a++)
+            d[a] = D->x[3 * (size_t)i + a] - r->c[a];
+        const double d2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+        for (int a = 0; a < 3; a++)
+            for (int b = 0; b < 3; b++)
+                I[3 * a + b] += mass[i] * ((a == b ? d2 : 0.0) - d[a] * d[b]);
+    }
+    r->minv[0] = r->minv[1] = 1 / M;
+    if (ground) {
+        if (I[8] > 0)
+            r->iinv[8] = 1 / I[8];
+        return;
+    }
+    r->minv[2] = 1 / M;
+    double adj[9];
+    const double det = cs_mat3_adjugate(I, adj);
+    if (det > 0) /* (a body of one row of nodes has a singular inertia: no rotations then) */
+        for (int k = 0; k < 9; k++)
+            r->iinv[k] = adj[k] / det;
+}
+
+/*
+ * The blocks A_ii⁻¹, the coarse modes, and u0 = v + Φ U + A_ii⁻¹ (res − A Φ U) with
+ * res = M v + dt f − A v the residual of D's next step at v and U = (Φᵀ M Φ)⁻¹ Φᵀ res its
+ * coarse correction (K Φ = 0 for rigid modes). Client forces and drags are not in f.
+ */
+static void prepare_stiff(cs_soft_resp *r, cs_object *D, double dt)
+{
+    const size_t n = (size_t)D->n;
+    const double al = D->mat.damping[0], be = D->mat.damping[1];
+    const bool fld = D->fld.has_damping;
+    const double mc = fld ? 1 : 1 + dt * al, kc = dt * dt + (fld ? 0 : dt * be);
+    double *f = r->scratch, *av = r->scratch + 3 * n, *kd = r->scratch + 6 * n;
+    const double *v = D->v;
+    cs_elastic_update(D, D->x);
+    D->elastic_energy_valid = false;
+    if (fld) /* the damping field's blocks, in the scratch until folded in */
+        cs_elastic_diag_blocks_d(D, r->scratch);
+    cs_elastic_diag_blocks(D, r->ainv);
+    for (size_t i = 0; i < n; i++) {
+        double *B = r->ainv + 9 * i;
+        for (int k = 0; k < 9; k++)
+            B[k] = kc * B[k] + (fld ? dt * be * r->scratch[9 * i + k] : 0.0);
+        for (int a = 0; a < 3; a++)
+            B[4 * a] += mc * D->m[i] + (fld ? dt * al * D->fld.md[i] : 0.0) +
+                        (D->pin[i] ? dt * dt * D->penalty : 0.0);
+        cs_invert_block(B);
+    }
+    /* the residual res (into f), then the mass A gives each node */
+    cs_elastic_force(D, D->x, f, NULL);
+    cs_elastic_apply_K(D, v, av);
+    if (fld)
+        cs_elastic_apply_Kd(D, v, kd);
+    for (size_t i = 0; i < n; i++) {
+        for (int a = 0; a < 3; a++) {
+            const size_t d = 3 * i + a;
+            double F = f[d] + D->f_const[d];
+            double Av = kc * av[d] + mc * D->m[i] * v[d];
+            if (fld)
+                Av += dt * be * kd[d] + dt * al * D->fld.md[i] * v[d];
+            if (D->pin[i]) {
+                F += D->penalty * (D->cm.node_rest[d] - D->x[d]);
+                Av += dt * dt * D->penalty * v[d];
+            }
+            f[d] = D->mask[d] ? 0.0 : D->m[i] * v[d] + dt * F - Av;
+        }
+    }
+    double *mass = av; /* (done with av) */
+    for (size_t i = 0; i < n; i++)
+        mass[i] = mc * D->m[i] + (fld ? dt * al * D->fld.md[i] : 0.0);
+    coarse_modes(r, D, mass);
+    /* U = (Φᵀ A Φ)⁻¹ Φᵀ res */
+    double P[3] = {0, 0, 0}, L[3] = {0, 0, 0}, U[3], Wc[3];
+    for (size_t i = 0; i < n; i++) {
+        double d[3], t[3];
+        for (int a = 0; a < 3; a++) {
+            d[a] = D->x[3 * i + a] - r->c[a];
+            P[a] += f[3 * i + a];
+        }
+        cross(d, f + 3 * i, t);
+        for (int a = 0; a < 3; a++)
+            L[a] += t[a];
+    }
+    for (int a = 0; a < 3; a++)
+        U[a] = r->minv[a] * P[a];
+    mul3(r->iinv, L, Wc);
+    for (size_t i = 0; i < n; i++) {
+        double d[3], wd[3], res[3], du[3];
+        for (int a = 0; a < 3; a++)
+            d[a] = D->x[3 * i + a] - r->c[a];
+        cross(Wc, d, wd);
+        for (int a = 0; a < 3; a++)
+            res[a] = f[3 * i + a] - mass[i] * (U[a] + wd[a]);
+        mul3(r->ainv + 9 * i, res, du);
+        for (int a = 0; a < 3; a++)
+            if (!D->mask[3 * i + a])
+                r->u[3 * i + a] += U[a] + wd[a] + du[a];
+        /* a node on the ground does not go down through it */
+        if (D->contact && D->contact[i] == 1 && r->u[3 * i + 2] < 0)
+            r->u[3 * i + 2] = 0;
+    }
+}
+
+int cs_soft_prepare(cs_soft_resp *r, cs_object *D, double dt, uint64_t step)
+{
+    if (r->D == D && r->id == D->id && r->step == step && r->n == D->n)
+        return 0;
+    const size_t n = (size_t)D->n;
+    const bool stiff = D->integrator == CS_INTEGRATOR_IMPLICIT_EULER && D->n_fixed_nodes < D->n;
+    if (grow_f64(&r->u, &r->cap_u, 3 * n) ||
+        (stiff && (grow_f64(&r->ainv, &r->cap_a, 9 * n) ||
+                   grow_f64(&r->scratch, &r->cap_s, 9 * n))))
+        return -1;
+    r->D = D;
+    r->id = D->id;
+    r->step = step;
+    r->n = D->n;
+    r->stiff = stiff;
+    r->coarse = false;
+    memset(r->V, 0, sizeof r->V);
+    memset(r->W, 0, sizeof r->W);
+    memset(r->minv, 0, sizeof r->minv);
+    memset(r->iinv, 0, sizeof r->iinv);
+    memset(r->c, 0, sizeof r->c);
+    memcpy(r->u, D->v, 3 * n * sizeof *r->u);
+    if (stiff)
+        prepare_stiff(r, D, dt);
+    return 0;
+}
+
+void cs_soft_free(cs_soft_resp *r)
+{
+    free(r->u);
+    free(r->ainv);
+    free(r->scratch);
+    memset(r, 0, sizeof *r);
+}
+
+/* A node the contacts move: not held, with mass. */
+static bool movable(const cs_object *D, size_t i)
+{
+    return !D->mask[3 * i] && D->m[i] > 0;
+}
+
+void cs_soft_arm(const cs_soft_resp *r, const int32_t *nodes, const double *w, int k,
+                 double arm[3])
+{
+    arm[0] = arm[1] = arm[2] = 0;
+    for (int j = 0; j < k; j++)
+        for (int a = 0; a < 3; a++)
+            arm[a] += w[j] * r->D->x[3 * (size_t)nodes[j] + a];
+    for (int a = 0; a < 3; a++)
+        arm[a] -= r->c[a];
+}
+
+void cs_soft_velocity(const cs_soft_resp *r, const int32_t *nodes, const double *w, int k,
+                      const double arm[3], double v[3])
+{
+    v[0] = v[1] = v[2] = 0;
+    if (r->coarse) {
+        double wr[3];
+        cross(r->W, arm, wr);
+        for (int a = 0; a < 3; a++)
+            v[a] = r->V[a] + wr[a];
+    }
+    for (int j = 0; j < k; j++)
+        for (int a = 0; a < 3; a++)
+            v[a] += w[j] * r->u[3 * (size_t)nodes[j] + a];
+}
+
+double cs_soft_compliance(const cs_soft_resp *r, const int32_t *nodes, const double *w, int k,
+                          const double arm[3], const double d[3])
+{
+    double s = 0;
+    for (int j = 0; j < k; j++) {
+        const size_t i = (size_t)nodes[j];
+        if (!movable(r->D, i))
+            continue;
+        if (r->stiff) {
+            double t[3];
+            mul3(r->ainv + 9 * i, d, t);
+            s += w[j] * w[j] * (d[0] * t[0] + d[1] * t[1] + d[2] * t[2]);
+        } else {
+            s += w[j] * w[j] * (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) / r->D->m[i];
+        }
+    }
+    if (r->coarse) {
+        double rd[3], t[3];
+        cross(arm, d, rd);
+        mul3(r->iinv, rd, t);
+        for (int a = 0; a < 3; a++)
+            s += r->minv[a] * d[a] * d[a] + rd[a] * t[a];
+    }
+    return s;
+}
+
+void cs_soft_impulse(cs_soft_resp *r, const int32_t *nodes, const double *w, int k,
+                     const double arm[3], const double J[3])
+{
+    cs_object *D = r->D;
+    bool any = false;
+    for (int j = 0; j < k; j++) {
+        const size_t i = (size_t)nodes[j];
+        if (!movable(D, i))
+            continue;
+        any = true;
+        double du[3];
+        if (r->stiff)
+            mul3(r->ainv + 9 * i, J, du);
+        else
+            for (int a = 0; a < 3; a++)
+                du[a] = J[a] / D->m[i];
+        for (int a = 0; a < 3; a++) {
+            D->v[3 * i + a] += w[j] * J[a] / D->m[i]; /* the momentum, now */
+            r->u[3 * i + a] += w[j] * du[a];          /* the solve's view of the response */
+        }
+    }
+    if (!any || !r->coarse)
+        return;
+    double rj[3], dw[3];
+    cross(arm, J, rj);
+    mul3(r->iinv, rj, dw);
+    for (int a = 0; a < 3; a++) {
+        r->V[a] += r->minv[a] * J[a];
+        r->W[a] += dw[a];
+    }
+}

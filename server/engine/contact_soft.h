@@ -1,0 +1,74 @@
+/*
+ * contact_soft.h — how a deformable object answers contact impulses in the sequential-impulse
+ * solve of rigid.c. Not part of the API.
+ *
+ * The contact solve runs after the deformable objects' own steps: an impulse J on a node of D
+ * gives the node momentum J at once (D->v += J/m, so momentum is exact), and D's next
+ * implicit Euler step, A v' = M v + dt f with A = (1 + dt α) M + (dt² + dt β) K, shares it
+ * with the rest of D. The solve must see that response, not a free point mass (a heavy body
+ * would push the nodes aside and D's step would pull them back only after the solve: a loaded
+ * stack went through a soft slab that way). The response is modelled in two parts that add:
+ *
+ *   local   A_ii⁻¹ J at the node, A_ii the node's 3×3 diagonal block of A (its stiffness
+ *           against its neighbours held, elastic.h's diag_blocks);
+ *   coarse  the object's rigid modes, which K does not resist: Φ (Φᵀ A Φ)⁻¹ Φᵀ J = a change
+ *           of a common velocity V + Ω × (x − c) with the object's mass and inertia about its
+ *           centre of mass c. Without it a free soft block seen by its diagonal blocks alone is
+ *           ~40 times stiffer than it is: a drop on a rigid floor threw it ten times higher.
+ *           An object held in place (removed dofs) has no coarse part; one lying on the ground
+ *           keeps only the modes the ground leaves free (x, y translation, rotation about z).
+ *
+ * The velocity each node heads for without contacts, u0, is one two-level iteration of D's
+ * next step from v (coarse, then block Jacobi on what is left): a node held up by its elastic
+ * force is seen to stay, a falling object to fall. Neither part bounds the true response
+ * A⁻¹: a load spread over many nodes meets less stiffness than the diagonal blocks say, and a
+ * held slender object's bending is seen stiffer than it is (not measured).
+ *
+ * Explicit integrators (symplectic Euler, Verlet) and central differences: the free point
+ * masses (1/m) and u0 = v, as their next step sees an impulse.
+ *
+ * Owns: the arrays of each cs_soft_resp (cs_soft_free).
+ */
+#ifndef CS_CONTACT_SOFT_H
+#define CS_CONTACT_SOFT_H
+
+#include <stdint.h>
+
+#include "world_internal.h"
+
+typedef struct cs_soft_resp {
+    cs_object *D;
+    cs_object_id id;
+    uint64_t step;      /* the step it was prepared for (valid through that step's substeps) */
+    int n;              /* D's nodes */
+    double *u;          /* 3n: u0 plus the local responses A_ii⁻¹ J of the impulses since */
+    double *ainv;       /* 9n: A_ii⁻¹ row-major (when stiff) */
+    double *scratch;    /* 9n */
+    size_t cap_u, cap_a, cap_s;
+    bool stiff;         /* implicit Euler and not every node held: local + coarse response */
+    /* coarse: the rigid modes D may move in, c its centre of mass, minv the inverse mass on
+     * each axis (0: a blocked translation), iinv the inverse inertia restricted to the free
+     * rotations; V, W the coarse velocity the impulses gave so far */
+    double c[3], minv[3], iinv[9], V[3], W[3];
+    bool coarse;        /* D has free rigid modes (else the coarse terms are all zero) */
+} cs_soft_resp;
+
+/* Make r (whose arrays may be from an earlier use) D's response for step `step` of world
+ * step dt: nothing is done if it already is. Returns 0 or -1 (out of memory). */
+int cs_soft_prepare(cs_soft_resp *r, cs_object *D, double dt, uint64_t step);
+void cs_soft_free(cs_soft_resp *r);
+
+/* A point of D given by k nodes and weights (Σ w = 1): its arm from the centre of mass. */
+void cs_soft_arm(const cs_soft_resp *r, const int32_t *nodes, const double *w, int k,
+                 double arm[3]);
+/* Its velocity as the solve sees it. */
+void cs_soft_velocity(const cs_soft_resp *r, const int32_t *nodes, const double *w, int k,
+                      const double arm[3], double v[3]);
+/* dᵀ W d: the velocity change along d of an impulse d on that point (W its compliance). */
+double cs_soft_compliance(const cs_soft_resp *r, const int32_t *nodes, const double *w, int k,
+                          const double arm[3], const double d[3]);
+/* An impulse J on D at that point: D->v and the solve's view of it change. */
+void cs_soft_impulse(cs_soft_resp *r, const int32_t *nodes, const double *w, int k,
+                     const double arm[3], const double J[3]);
+
+#endif
