@@ -1810,6 +1810,7 @@ static void cell_contacts_done(cs_rigid_world *rw)
             D->elastic_energy_valid = false;
             D->sleeping = false;
             D->still_steps = 0;
+            D->contact_pushed = true;
             if (D != last)
                 cs_surface_skin(&D->surf, &D->cm, D->x);
             last = D;

@@ -1771,6 +1771,11 @@ static double kinetic_energy(const cs_object *o, const double *v)
 
 static int step_implicit(cs_world_t *w, cs_object *o, cs_step_stats *st, bool trap)
 {
+    /* Newmark: a step after a rigid contact pushed the object is implicit Euler's (the
+     * contact solve modelled that step's response, and it damps the contact's jolt) */
+    if (trap && o->contact_pushed)
+        trap = false;
+    o->contact_pushed = false;
     const double dt = w->def.dt;
     const size_t n3 = (size_t)o->n * 3;
     double t0 = now_ms();
