@@ -550,6 +550,9 @@ typedef struct surf_edit {
     /* this event closes partially opened faces too (fracture_event: the cut path on an object
      * whose mesh lies in lattice planes) */
     bool partial;
+    /* loops with the same apex points (twin_points) share one apex (close_loops): set for the
+     * cut path (fracture_event) */
+    bool twin_apex;
     int nv0, nt0;     /* counts before the event */
     dvec rest, pos;   /* appended vertices: 3 each */
     ivec vcell;       /* appended vertices: bound cell */
@@ -2030,10 +2033,79 @@ static int split_pinches(surf_edit *e, edge_map *em, const region *rg, ivec *tri
  * vertex; each closing triangle takes the cell of the triangle across its boundary edge.
  * Appends to e (vertices) and tri/cell. Returns the number of fans, or -1.
  */
+/* vertex ids ordered by their rest positions (qsort_r, the edit as context) */
+static int cmp_rest(const void *x, const void *y, void *ctx)
+{
+    const double *p = sv_rest(ctx, *(const int32_t *)x), *q = sv_rest(ctx, *(const int32_t *)y);
+    for (int a = 0; a < 3; a++)
+        if (p[a] != q[a])
+            return p[a] < q[a] ? -1 : 1;
+    return 0;
+}
+
+static bool same_rest(const surf_edit *e, int32_t a, int32_t b)
+{
+    return a == b || !memcmp(sv_rest(e, a), sv_rest(e, b), 3 * sizeof(double));
+}
+
+/*
+ * The points of loop cyc (k vertices) that say whether two loops are twins: the loop without
+ * its zero-area excursions (a vertex at the rest point of the one before it; an out-and-back
+ * p, q, p' to q and back to p's rest point), each rest point once, sorted by position. Two
+ * loops with the same points close the same hole on the two sides of a crack up to such
+ * excursions (one side's split or closing pair left a sliver the other has not) and up to a
+ * point passed twice: a fan's volume is its apex dotted with the loop's area vector, which the
+ * excursions leave unchanged, so twins with one apex cancel, and with the apex of each loop's
+ * own mean (where an excursion moves the mean) they did not.
+ */
+static int twin_points(const surf_edit *e, const int32_t *cyc, int k, ivec *red)
+{
+    red->n = 0;
+    for (int j = 0; j < k; j++)
+        if (ivec_push(red, cyc[j]))
+            return -1;
+    for (bool changed = true; changed && red->n > 3;) {
+        changed = false;
+        int32_t *r = red->a;
+        const int n = red->n;
+        for (int j = 0; j < n && !changed; j++) {
+            const int j1 = (j + 1) % n, j2 = (j + 2) % n;
+            const bool dup = same_rest(e, r[j], r[j1]), spike = !dup && same_rest(e, r[j], r[j2]);
+            if (!dup && !spike)
+                continue;
+            int m = 0; /* drop j1 (and j2 for an excursion), keeping the cyclic order */
+            for (int i = 0; i < n; i++)
+                if (i != j1 && (!spike || i != j2))
+                    r[m++] = r[i];
+            red->n = m;
+            changed = true;
+        }
+    }
+    if (red->n < 3) { /* nothing left that has area: the loop's own points */
+        red->n = 0;
+        for (int j = 0; j < k; j++)
+            if (ivec_push(red, cyc[j]))
+                return -1;
+    }
+    int m = 0;
+    for (int j = 0; j < red->n; j++) {
+        bool seen = false;
+        for (int i = 0; i < m && !seen; i++)
+            seen = same_rest(e, red->a[i], red->a[j]);
+        if (!seen)
+            red->a[m++] = red->a[j];
+    }
+    red->n = m;
+    qsort_r(red->a, (size_t)red->n, sizeof *red->a, cmp_rest, (void *)e);
+    return 0;
+}
+
 static int close_loops(cs_world_t *w, surf_edit *e, edge_map *em, const region *rg, ivec *tri,
                        ivec *cell, int32_t *n_loops)
 {
     ivec bsrc = {0}, bdst = {0}, bcell = {0}, walk = {0}, walk_e = {0};
+    ivec lstart = {0}, lv = {0}, lc = {0}; /* the loops: starts in lv, vertices, edge cells */
+    ivec sstart = {0}, sig = {0}, red = {0}; /* their twin points (twin_apex) */
     int fans = 0, rc = -1;
     *n_loops = 0;
     const int nt = region_count(rg, e, cell);
@@ -2101,21 +2173,56 @@ static int close_loops(cs_world_t *w, surf_edit *e, edge_map *em, const region *
         const int k = walk.n;
         if (!ok || k < 3)
             continue; /* cannot happen for oriented triangles without pinches */
-        const int32_t *cyc = walk.a;
+        /* kept: its vertices and the cell of each of its edges; closed below */
+        if (ivec_push(&lstart, lv.n))
+            goto out2;
+        for (int j = 0; j < k; j++)
+            if (ivec_push(&lv, walk.a[j]) || ivec_push(&lc, bcell.a[walk_e.a[j]]))
+                goto out2;
+    }
+    const int nl = lstart.n;
+    if (ivec_push(&lstart, lv.n))
+        goto out2;
+    /* each loop's twin points (twin_points); two loops with the same ones are twins */
+    for (int l = 0; l < nl && e->twin_apex; l++) {
+        if (ivec_push(&sstart, sig.n) ||
+            twin_points(e, lv.a + lstart.a[l], lstart.a[l + 1] - lstart.a[l], &red))
+            goto out2;
+        for (int j = 0; j < red.n; j++)
+            if (ivec_push(&sig, red.a[j]))
+                goto out2;
+    }
+    if (e->twin_apex && ivec_push(&sstart, sig.n))
+        goto out2;
+    for (int l = 0; l < nl; l++) {
+        const int32_t *cyc = lv.a + lstart.a[l], *lcell = lc.a + lstart.a[l];
+        const int k = lstart.a[l + 1] - lstart.a[l];
         (*n_loops)++;
         if (k == 3 && !tri_degenerate(sv_rest(e, cyc[0]), sv_rest(e, cyc[2]), sv_rest(e, cyc[1]))) {
-            if (ivec_push3(tri, cyc[0], cyc[2], cyc[1]) ||
-                ivec_push(cell, bcell.a[walk_e.a[0]]))
+            if (ivec_push3(tri, cyc[0], cyc[2], cyc[1]) || ivec_push(cell, lcell[0]))
                 goto out2;
             continue;
         }
+        /* the apex over a twin's common points, else over the loop's own */
+        bool twin = false;
+        const int32_t *sl = e->twin_apex ? sig.a + sstart.a[l] : NULL;
+        const int ns = e->twin_apex ? sstart.a[l + 1] - sstart.a[l] : 0;
+        for (int m = 0; m < nl && e->twin_apex && !twin; m++) {
+            if (m == l || sstart.a[m + 1] - sstart.a[m] != ns)
+                continue;
+            twin = true;
+            for (int j = 0; j < ns && twin; j++)
+                twin = same_rest(e, sl[j], sig.a[sstart.a[m] + j]);
+        }
+        const int32_t *ap = twin ? sl : cyc;
+        const int kr = twin ? ns : k;
         double c[3] = {0, 0, 0};
-        for (int j = 0; j < k; j++)
+        for (int j = 0; j < kr; j++)
             for (int a = 0; a < 3; a++)
-                c[a] += sv_rest(e, cyc[j])[a] / k;
-        /* a small offset off the loop's mean keeps the fan from being flat; it depends only
-         * on where the loop is, so the two sides of a crack that close twin loops get the
-         * same apex and their volumes cancel */
+                c[a] += sv_rest(e, ap[j])[a] / kr;
+        /* a small offset off the mean keeps the fan from being flat; it depends only on the
+         * mean, so twin loops on the two sides of a crack get the same apex and their volumes
+         * cancel */
         uint64_t r = w->def.seed;
         for (int a = 0; a < 3; a++)
             r = mix64(r ^ (uint64_t)llround(c[a] / e->o->cm.h * 1e6));
@@ -2125,21 +2232,20 @@ static int close_loops(cs_world_t *w, surf_edit *e, edge_map *em, const region *
             d[a] = 1e-3 * e->o->cm.h * ((double)(r >> 11) / 9007199254740992.0 - 0.5);
             c[a] += d[a];
         }
-        int32_t cv = sv_append(e, c, bcell.a[walk_e.a[0]]);
+        int32_t cv = sv_append(e, c, lcell[0]);
         if (cv < 0)
             goto out2;
-        /* It starts at the loop's current mean plus the same offset (not where its binding
-         * puts it; the next skin moves it): twin loops lie over copies at the same positions,
-         * so their fans coincide now too and cancel in a client's volume check. */
-        for (int j = 0; j < k; j++)
+        /* It starts at the same points' current mean plus the same offset (not where its
+         * binding puts it; the next skin moves it): twin loops lie over copies at the same
+         * positions, so their fans coincide now too and cancel in a client's volume check. */
+        for (int j = 0; j < kr; j++)
             for (int a = 0; a < 3; a++)
-                x[a] += (cyc[j] < e->nv0 ? e->o->surf.pos + 3 * (size_t)cyc[j]
-                                         : e->pos.a + 3 * (size_t)(cyc[j] - e->nv0))[a] / k;
+                x[a] += (ap[j] < e->nv0 ? e->o->surf.pos + 3 * (size_t)ap[j]
+                                        : e->pos.a + 3 * (size_t)(ap[j] - e->nv0))[a] / kr;
         for (int a = 0; a < 3; a++)
             e->pos.a[3 * (size_t)(cv - e->nv0) + a] = x[a] + d[a];
         for (int j = 0; j < k; j++)
-            if (ivec_push3(tri, cv, cyc[(j + 1) % k], cyc[j]) ||
-                ivec_push(cell, bcell.a[walk_e.a[j]]))
+            if (ivec_push3(tri, cv, cyc[(j + 1) % k], cyc[j]) || ivec_push(cell, lcell[j]))
                 goto out2;
         fans++;
     }
@@ -2153,6 +2259,12 @@ out:
     free(bcell.a);
     free(walk.a);
     free(walk_e.a);
+    free(lstart.a);
+    free(lv.a);
+    free(lc.a);
+    free(sstart.a);
+    free(sig.a);
+    free(red.a);
     return rc;
 }
 
@@ -3424,6 +3536,7 @@ static int fracture_event(cs_world_t *w, cs_object *o, const int8_t *label, bool
     O = (crack_face *)Ov.a; /* 4 int32 per face, laid out as crack_face */
     e.o = o;
     e.partial = partial;
+    e.twin_apex = !paper;
     e.nv0 = o->surf.n_vertices;
     e.nt0 = o->surf.n_triangles;
     e.rewired = calloc((size_t)(e.nt0 ? e.nt0 : 1), 1);
