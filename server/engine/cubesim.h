@@ -188,13 +188,24 @@ typedef enum cs_preconditioner {
 /* Parse "auto", "jacobi", "multigrid"; returns 0 and sets *out, or -1. */
 int cs_preconditioner_from_name(const char *name, cs_preconditioner *out);
 
+/* What the CG tolerance of an implicit Euler step is relative to. */
+typedef enum cs_cg_relative {
+    CS_CG_RELATIVE_STEP = 0, /* ‖b − A v‖: the Δv form of the step (what the step changes) */
+    CS_CG_RELATIVE_RHS = 1   /* ‖b‖ = ‖M v + dt f‖ (before session 13; mostly momentum at
+                                small dt) */
+} cs_cg_relative;
+
+/* Parse "step", "rhs"; returns 0 and sets *out, or -1. */
+int cs_cg_relative_from_name(const char *name, cs_cg_relative *out);
+
 typedef struct cs_world_def {
     double dt;               /* time step [s], in [1e-6, 1]; default 1/60 */
     double gravity[3];       /* [m/s²]; default (0, 0, -9.81) */
     bool has_ground;         /* default false */
     double ground_height;    /* the plane z = ground_height, solid below; default 0 */
     double ground_friction;  /* Coulomb coefficient at the ground, >= 0; default 0.5 */
-    double cg_tolerance;     /* relative residual ‖r‖/‖b‖ of every solve, in (0, 1); 1e-4 (README "Defaults (issue 6 part 3)": the evidence) */
+    double cg_tolerance;     /* relative residual of every solve, in (0, 1); 1e-4 (README "Defaults (issue 6 part 3)": the evidence); relative to ‖b‖ except in implicit Euler steps (cg_relative_to) */
+    cs_cg_relative cg_relative_to; /* implicit Euler steps: default CS_CG_RELATIVE_STEP */
     int cg_max_iterations;   /* >= 1; default 500 */
     cs_preconditioner preconditioner; /* default CS_PRECOND_AUTO */
     int threads;             /* worker threads inside a step, >= 0; 0 = all cores; default 0 */

@@ -88,6 +88,17 @@ int cs_model_from_name(const char *name, cs_model *out)
 
 static const char *const PRECOND_NAMES[] = {"auto", "jacobi", "multigrid"};
 
+int cs_cg_relative_from_name(const char *name, cs_cg_relative *out)
+{
+    static const char *const names[] = {"step", "rhs"};
+    for (int i = 0; i < 2; i++)
+        if (name && strcmp(name, names[i]) == 0) {
+            *out = (cs_cg_relative)i;
+            return 0;
+        }
+    return -1;
+}
+
 int cs_preconditioner_from_name(const char *name, cs_preconditioner *out)
 {
     for (int i = 0; i < 3; i++)
@@ -182,6 +193,9 @@ int cs_world_create(const cs_world_def *def, cs_world_t **out, char *err, size_t
     if ((int)def->preconditioner < 0 || (int)def->preconditioner > CS_PRECOND_MULTIGRID)
         return cs_engine_fail(err, errlen, CS_ERR_INVALID, "preconditioner: unknown value %d",
                               (int)def->preconditioner);
+    if ((int)def->cg_relative_to < 0 || (int)def->cg_relative_to > CS_CG_RELATIVE_RHS)
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "solver relative_to: unknown value %d",
+                              (int)def->cg_relative_to);
     if (def->cg_max_iterations < 1 || def->cg_max_iterations > 1000000)
         return cs_engine_fail(err, errlen, CS_ERR_INVALID, "solver max_iterations must be in [1, 1e6]");
     if (def->threads < 0 || def->threads > 256)
@@ -1744,7 +1758,10 @@ static int step_implicit_euler(cs_world_t *w, cs_object *o, cs_step_stats *st)
     int contacts = constrain_ground(w, o);
     active_hold(o);
     double t3 = now_ms(), t4 = t3, *av = NULL;
-    cs_cg_result r = {0, 0, 1};
+    cs_cg_result r = {0, 0, 1, 0};
+    /* The tolerance is relative to ‖b − A v1‖ at the guess above (w->def.cg_relative_to):
+     * the Δv form's right-hand side; a re-solve of this step keeps that reference. */
+    o->cg.stop = w->def.cg_relative_to == CS_CG_RELATIVE_STEP ? CS_CG_STOP_START : CS_CG_STOP_RHS;
     /* With frozen nodes: solve, and while the reactions wake some, solve again with them free
      * (warm start), so the step ends with every frozen node near balance. */
     for (int round = 0;; round++) {
@@ -1756,9 +1773,14 @@ static int step_implicit_euler(cs_world_t *w, cs_object *o, cs_step_stats *st)
         r.iterations += rr.iterations;
         r.relres = rr.relres;
         r.converged = rr.converged;
+        if (o->cg.stop == CS_CG_STOP_START) {
+            o->cg.stop = CS_CG_STOP_GIVEN;
+            o->cg.stop_ref = rr.ref;
+        }
         t4 = now_ms();
         if (!all_finite(o->v1, n3)) {
             o->fem.cell_active = NULL;
+            o->cg.stop = CS_CG_STOP_RHS;
             return CS_ERR_DIVERGED;
         }
         if (!active_needs_av(w, o, contacts))
@@ -1778,6 +1800,7 @@ static int step_implicit_euler(cs_world_t *w, cs_object *o, cs_step_stats *st)
         build_preconditioner(o);
         active_hold(o);
     }
+    o->cg.stop = CS_CG_STOP_RHS; /* the other solves on this work (statics, impacts) */
     ground_after_solve(w, o, contacts);
     active_end(w, o, av);
     o->fem.cell_active = NULL;
@@ -2205,7 +2228,7 @@ static int solve_static_object(cs_world_t *w, cs_object *o, cs_step_stats *st)
             /* Newton with the geometric stiffness where it is positive definite; where CG
              * meets a direction of negative curvature (compression, near buckling), the
              * warped stiffness alone, which always is. */
-            cs_cg_result r = {0, 1, 0};
+            cs_cg_result r = {0, 1, 0, 0};
             bool geometric = cs_elastic_prepare_tangent(o, o->x) == 0;
             if (geometric) {
                 const bool use_mg = setup_multigrid(w, o, tangent_operator, o->mask);
