@@ -60,6 +60,15 @@ typedef struct cs_fem {
     int32_t *adj_start; /* n_nodes + 1 */
     int32_t *adj;       /* cell*8 + corner, grouped by node */
     double *tg;         /* 33 per cell while a static solve runs (see cs_fem_prepare_tangent) */
+    /* The products' element and node passes run fused, chunk by chunk (fem.c, fused_pass): the
+     * cells in batches of 8, split into `nseg` segments (one per thread); the node pass
+     * follows the element pass through the nodes ordered by the batch of their last cell
+     * (norder; nminb: the batch of the node's first cell; nfirst[b]: the first position whose
+     * last batch is >= b), and the element pass's results live in a window of fe per segment
+     * (bslot: a batch's slot of 8 × 24 doubles; fadj: where link a of adj reads them). Built by
+     * cs_fem_relink. */
+    int nseg;
+    int32_t *norder, *nminb, *nfirst, *bslot, *fadj;
 } cs_fem;
 
 int cs_fem_init(cs_fem *fem, const cs_cubemesh *cm, double young, double poisson,
