@@ -61,7 +61,8 @@ typedef struct mg_level {
     int32_t *bidx;                    /* per batch 8 × MG_LANES: 3·node of corner k per lane */
     float *bR;                        /* per batch 9 × MG_LANES: R_c (cs_mg_setup) */
     float *bL, *bM;                   /* per batch MG_LANES: s_c·hλ/16, s_c·hμ/16 (cs_mg_setup) */
-    /* The cells' products, 24 × MG_LANES per batch, in a window per segment of batches
+    /* The cells' products, 8 corners × (x, y, z, ·) per cell (32 floats), in a window per
+     * segment of batches
      * (product_layout): a node's links are read back soon after they are written, and the
      * window stays in L2 instead of going out to memory. */
     float *fe;
@@ -386,13 +387,13 @@ static int product_layout(mg_level *l)
         }
         total += b1 - b0 < head + ring ? b1 - b0 : head + ring;
     }
-    l->fe = aligned_alloc(64, (size_t)(total ? total : 1) * 24 * MG_LANES * sizeof(float));
+    l->fe = aligned_alloc(64, (size_t)(total ? total : 1) * 32 * MG_LANES * sizeof(float));
     if (!l->fe)
         return -1;
     for (int n = 0; n < l->n_nodes; n++)
         for (int a = l->adj_start[n]; a < l->adj_start[n + 1]; a++) {
             const int c = l->adj[a] / 8, k = l->adj[a] % 8;
-            l->fadj[a] = (24 * l->bslot[c / MG_LANES] + 3 * k) * MG_LANES + c % MG_LANES;
+            l->fadj[a] = 32 * (MG_LANES * l->bslot[c / MG_LANES] + c % MG_LANES) + 4 * k;
         }
     return 0;
 }
@@ -621,6 +622,7 @@ double *cs_mg_node_diag(cs_mg *mg)
 /* The element pass of half h (lanes 8h..8h+7) of batch b: fe = s R K Rᵀ x per lane, by the
  * modal kernel (fem.c, modal_core.h) in single precision, 8 lanes in 256-bit vectors (512-bit
  * vectors of 16 lanes with gathers measured slower on this Zen 4, which splits them in two). */
+typedef int vi8 __attribute__((vector_size(32)));
 static inline __attribute__((always_inline)) void half_rest(const mg_level *l, int b, int h,
                                                             const vf u[24])
 {
@@ -631,9 +633,26 @@ static inline __attribute__((always_inline)) void half_rest(const mg_level *l, i
     memcpy(&L, l->bL + o, sizeof L);
     memcpy(&M, l->bM + o, sizeof M);
     modal_core_f(u, R, 0.0f, &L, &M, NULL, y);
-    float *out = l->fe + 24 * MG_LANES * (size_t)l->bslot[b] + VF_LANES * h;
-    for (int k = 0; k < 24; k++)
-        memcpy(out + MG_LANES * k, &y[k], sizeof(vf));
+    /* lane p's corner k at out + 32 p + 4 k as (x, y, z, z): the components transposed across
+     * lanes in registers (lanes j and j + 4 per 256-bit vector), whole 16-byte stores */
+    float *out = l->fe + 32 * ((size_t)MG_LANES * l->bslot[b] + VF_LANES * h);
+    for (int k = 0; k < 8; k++) {
+        const vf X = y[3 * k], Y = y[3 * k + 1], Z = y[3 * k + 2];
+        const vf t0 = __builtin_shuffle(X, Y, (vi8){0, 8, 1, 9, 4, 12, 5, 13});
+        const vf t1 = __builtin_shuffle(X, Y, (vi8){2, 10, 3, 11, 6, 14, 7, 15});
+        const vf t2 = __builtin_shuffle(Z, (vi8){0, 0, 1, 1, 4, 4, 5, 5});
+        const vf t3 = __builtin_shuffle(Z, (vi8){2, 2, 3, 3, 6, 6, 7, 7});
+        vf r[4];
+        r[0] = __builtin_shuffle(t0, t2, (vi8){0, 1, 8, 9, 4, 5, 12, 13});
+        r[1] = __builtin_shuffle(t0, t2, (vi8){2, 3, 10, 11, 6, 7, 14, 15});
+        r[2] = __builtin_shuffle(t1, t3, (vi8){0, 1, 8, 9, 4, 5, 12, 13});
+        r[3] = __builtin_shuffle(t1, t3, (vi8){2, 3, 10, 11, 6, 7, 14, 15});
+        for (int j = 0; j < 4; j++) {
+            memcpy(out + 32 * j + 4 * k, (const char *)&r[j], 4 * sizeof(float));
+            memcpy(out + 32 * (j + 4) + 4 * k, (const char *)&r[j] + 4 * sizeof(float),
+                   4 * sizeof(float));
+        }
+    }
 }
 
 /* Inputs lane by lane. */
@@ -696,24 +715,23 @@ static inline __attribute__((always_inline)) void node_out(const mg_level *l, in
                                                            const float *x, const float *b,
                                                            float *y, const cheb_step *cs)
 {
-    float s[3] = {0, 0, 0};
+    /* (x, y, z, ·) per link: one 16-byte load and add each, the same sums per component */
+    typedef float vf4 __attribute__((vector_size(16)));
+    vf4 s = {0, 0, 0, 0};
     const int a0 = l->adj_start[n], a1 = l->adj_start[n + 1];
+    const float *fe = __builtin_assume_aligned(l->fe, 16);
     if (a1 - a0 == 8) {
         /* an interior node: its 8 links loaded at once, summed in the same order */
-        const float *v[8];
+        vf4 v[8];
         for (int a = 0; a < 8; a++)
-            v[a] = l->fe + l->fadj[a0 + a];
-        for (int a = 0; a < 8; a++) {
-            s[0] += v[a][0];
-            s[1] += v[a][MG_LANES];
-            s[2] += v[a][2 * MG_LANES];
-        }
+            memcpy(&v[a], fe + l->fadj[a0 + a], sizeof v[a]);
+        for (int a = 0; a < 8; a++)
+            s += v[a];
     } else {
         for (int a = a0; a < a1; a++) {
-            const float *v = l->fe + l->fadj[a];
-            s[0] += v[0];
-            s[1] += v[MG_LANES];
-            s[2] += v[2 * MG_LANES];
+            vf4 v;
+            memcpy(&v, fe + l->fadj[a], sizeof v);
+            s += v;
         }
     }
     float r[3];
