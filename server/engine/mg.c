@@ -21,7 +21,7 @@
 #endif
 #define MG_COARSE_SWEEPS 8 /* Jacobi sweeps on a coarsest level too large for Cholesky */
 #define MG_POWER_ITERS 10
-#define MG_CHUNK 64        /* batches per chunk of apply_ex (1024 cells, 96 KiB of fe) */
+#define MG_CHUNK 64        /* batches per chunk of apply_ex (1024 cells, 128 KiB of results) */
 #define MG_LANES 16        /* cells per batch of the element pass (one float SIMD lane each) */
 #define VF_LANES 8         /* lanes per vector of the element pass's arithmetic */
 typedef float vf __attribute__((vector_size(4 * VF_LANES)));
