@@ -19,7 +19,8 @@
  * --kernel N the GFLOP/s of cs_fem_apply_K on an N³ corotational block (flops from
  * cs_fem_product_flops) as a fraction of that peak, in the same run. Sizes of 200 000 cubes
  * or more get --big-steps steps × --big-runs runs (default 3 × 3). --vcycle N: the time of one
- * multigrid V-cycle (cs_mg_vcycle) on the implicit step's operator of an N³ block.
+ * multigrid V-cycle (cs_mg_vcycle) on the implicit step's operator of an N³ block, and the CPU
+ * time of its finest-level product alone (cs_mg_apply_level 0).
  *
  * Usage: bench_blocks [--sizes 8,16,32,48] [--runs 5] [--threads 1,2] [--csv FILE [--append]]
  *                     [--field none|cubes|gradient] [--precond jacobi,multigrid,auto]
