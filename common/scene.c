@@ -972,7 +972,7 @@ static int parse_object(sc_ctx *c, const cJSON *o, int index, const char *base_d
         if (cs_integrator_from_name(it->valuestring, &d->integrator) != 0)
             return fail(c, p,
                         "unknown integrator '%s' (default, implicit_euler, symplectic_euler, "
-                        "verlet, central_difference)",
+                        "verlet, central_difference, newmark)",
                         show(it->valuestring, b));
     }
 

@@ -67,11 +67,16 @@ typedef enum cs_integrator {
     CS_INTEGRATOR_SYMPLECTIC_EULER = 2,  /* explicit: v += dt M⁻¹f(x, v), x += dt v (seed 004) */
     CS_INTEGRATOR_VERLET = 3,            /* explicit velocity Verlet (seed 004); both explicit
                                             ones need dt below a limit checked at add time */
-    CS_INTEGRATOR_CENTRAL_DIFFERENCE = 4 /* seed 001 Eq. (20), solved by CG; conditionally
+    CS_INTEGRATOR_CENTRAL_DIFFERENCE = 4, /* seed 001 Eq. (20), solved by CG; conditionally
                                             stable: dt above the limit is refused */
+    CS_INTEGRATOR_NEWMARK = 5            /* Newmark's average acceleration (trapezoidal rule,
+                                            β = 1/4, γ = 1/2), linearized like implicit Euler:
+                                            (M + dt/2 C + dt²/4 K) v1 = 2 M v + dt f − A v,
+                                            x1 = x + dt (v + v1)/2; second order, no numerical
+                                            damping, unconditionally stable for linear models */
 } cs_integrator;
 
-/* "default", "implicit_euler", "symplectic_euler", "verlet", "central_difference". */
+/* "default", "implicit_euler", "symplectic_euler", "verlet", "central_difference", "newmark". */
 int cs_integrator_from_name(const char *name, cs_integrator *out);
 const char *cs_integrator_name(cs_integrator i);
 
@@ -358,6 +363,8 @@ typedef struct cs_step_stats {
                                passes (inactive cells of active regions not counted) */
     int cells_awake;        /* every cell of the stepped objects */
     bool converged;
+    int newmark_redone;     /* Newmark steps whose energy rose and were redone by implicit
+                               Euler (the energy guard, README "Newmark") */
 } cs_step_stats;
 const cs_step_stats *cs_world_last_stats(const cs_world_t *w);
 
