@@ -14,10 +14,21 @@
 
 #define MG_NU 1           /* smoothing sweeps before and after the coarse correction */
 #ifndef MG_CHEB
-#define MG_CHEB 2         /* Chebyshev smoother degree (0: damped Jacobi, MG_NU sweeps) */
+#define MG_CHEB 2         /* Chebyshev degree on the finest level (0: damped Jacobi, MG_NU sweeps) */
 #endif
+#ifndef MG_CHEB_COARSE
+#define MG_CHEB_COARSE 3  /* ... and on the coarse levels (an eighth of the cost each) */
+#endif
+/* The smoothed interval is [λ/MG_CHEB_RATIO, λ] with λ = MG_LAMBDA_SAFETY × the power estimate of
+ * λmax(D⁻¹A). Any Chebyshev error polynomial on [a, b] stays at most 1 in modulus up to
+ * a + b = λ (1 + 1/ratio), so B stays positive definite while λmax ≤ 1.18 (1 + 1/6) = 1.377×
+ * the estimate — the margin of the former ratio 4 and factor 1.1 (1.1 × 1.25 = 1.375), with a
+ * wider interval (fewer iterations: see README "Multigrid against block Jacobi"). */
 #ifndef MG_CHEB_RATIO
-#define MG_CHEB_RATIO 4.0
+#define MG_CHEB_RATIO 6.0
+#endif
+#ifndef MG_LAMBDA_SAFETY
+#define MG_LAMBDA_SAFETY 1.18
 #endif
 #define MG_COARSE_SWEEPS 8 /* Jacobi sweeps on a coarsest level too large for Cholesky */
 #define MG_POWER_ITERS 10
@@ -70,6 +81,7 @@ typedef struct mg_level {
     int32_t *nfirst;                  /* n_batches + 1: first position whose last batch >= b */
     double lam;
     float omega;
+    int cheb_deg;                     /* Chebyshev degree of this level's smoother */
 } mg_level;
 
 struct cs_mg {
@@ -344,6 +356,7 @@ static int alloc_level_state(mg_level *l, int level, int threads)
 {
     const size_t n3 = 3 * (size_t)l->n_nodes, nc = l->n_cells ? (size_t)l->n_cells : 1;
     l->threads = threads > 1 && l->n_cells >= CS_FEM_PARALLEL_CELLS ? threads : 1;
+    l->cheb_deg = level == 0 ? MG_CHEB : MG_CHEB_COARSE;
     l->s = malloc(nc * sizeof(double));
     l->dg = malloc((size_t)(l->n_nodes ? l->n_nodes : 1) * sizeof(double));
     l->dgf = malloc((size_t)(l->n_nodes ? l->n_nodes : 1) * sizeof(float));
@@ -763,7 +776,8 @@ static void cheb_update(const mg_level *l, const float *t, float *d, float *x, f
 }
 
 /*
- * Chebyshev smoothing of degree MG_CHEB: x += p(D⁻¹A) D⁻¹ (b − A x), p the polynomial that
+ * Chebyshev smoothing of the level's degree (MG_CHEB on the finest, MG_CHEB_COARSE below):
+ * x += p(D⁻¹A) D⁻¹ (b − A x), p the polynomial that
  * minimises max |1 − λ p(λ)| over [λmax/MG_CHEB_RATIO, λmax] (the upper part of the spectrum,
  * which the coarse levels do not reach); from x = 0 if zero (one product less). The same
  * polynomial before and after the coarse correction keeps the V-cycle symmetric, and
@@ -782,7 +796,7 @@ static void cheb(const cs_mg *mg, int level, const float *b, float *x, bool zero
         const cheb_step cs = {l->d, x, 0.0f, (float)(1.0 / theta), true};
         apply_path(mg, level, mg->avx512, x, b, NULL, &cs);
     }
-    for (int k = 1; k < MG_CHEB; k++) {
+    for (int k = 1; k < l->cheb_deg; k++) {
         const double rn = 1.0 / (2.0 * sigma - rho);
         const cheb_step cs = {l->d, x, (float)(rn * rho), (float)(2.0 * rn / delta), false};
         apply_path(mg, level, mg->avx512, x, b, NULL, &cs);
@@ -990,7 +1004,7 @@ int cs_mg_setup(cs_mg *mg, const cs_fem *fem, cs_matvec_fn A, void *ctx, const d
     if (mg->setups % MG_LAMBDA_EVERY == 0 || memcmp(key, mg->key, sizeof key) != 0) {
         memcpy(mg->key, key, sizeof key);
         for (int l = 0; l < mg->n_levels; l++) {
-            mg->lv[l].lam = 1.1 * estimate_lambda(mg, l);
+            mg->lv[l].lam = MG_LAMBDA_SAFETY * estimate_lambda(mg, l);
             mg->lv[l].omega = (float)(4.0 / (3.0 * mg->lv[l].lam));
         }
     }
@@ -1037,7 +1051,7 @@ static void vcycle(cs_mg *mg, int level, const float *b, float *x)
         return;
     }
     mg_level *f = &mg->lv[level], *c = &mg->lv[level + 1];
-    if (MG_CHEB) {
+    if (f->cheb_deg) {
         cheb(mg, level, b, x, true);
     } else {
         jacobi(f, b, x, f->omega, false);
@@ -1072,7 +1086,7 @@ static void vcycle(cs_mg *mg, int level, const float *b, float *x)
             if (!f->mask[3 * n + k])
                 x[3 * n + k] += s[k];
     }
-    if (MG_CHEB)
+    if (f->cheb_deg)
         cheb(mg, level, b, x, false);
     else
         for (int s = 0; s < MG_NU; s++)
@@ -1091,4 +1105,34 @@ void cs_mg_vcycle(void *ctx, const double *r, double *z)
 #pragma omp parallel for num_threads(l0->threads) schedule(static)
     for (int d = 0; d < n3; d++)
         z[d] = l0->x[d];
+}
+
+/* ------------------------------------------------------------------ transfers (for tests) */
+
+void cs_mg_prolong(const cs_mg *mg, int level, const float *xc, float *xf)
+{
+    if (level < 0 || level + 1 >= mg->n_levels)
+        return;
+    const mg_level *f = &mg->lv[level];
+    for (int n = 0; n < f->n_nodes; n++)
+        for (int k = 0; k < 3; k++) {
+            float s = 0;
+            for (int a = f->p_start[n]; a < f->p_start[n + 1]; a++)
+                s += (float)f->p_w[a] * xc[3 * f->p_node[a] + k];
+            xf[3 * n + k] = s;
+        }
+}
+
+void cs_mg_restrict(const cs_mg *mg, int level, const float *xf, float *xc)
+{
+    if (level < 0 || level + 1 >= mg->n_levels)
+        return;
+    const mg_level *f = &mg->lv[level], *c = &mg->lv[level + 1];
+    for (int J = 0; J < c->n_nodes; J++)
+        for (int k = 0; k < 3; k++) {
+            float s = 0;
+            for (int a = f->r_start[J]; a < f->r_start[J + 1]; a++)
+                s += (float)f->r_w[a] * xf[3 * f->r_node[a] + k];
+            xc[3 * J + k] = s;
+        }
 }
