@@ -102,6 +102,8 @@ struct cs_mg {
     double key[3];
 };
 
+static bool corner_blocks_ok(const double *K);
+
 /* ------------------------------------------------------------------ building */
 
 static int64_t floordiv2(int32_t v)
@@ -496,6 +498,8 @@ cs_mg *cs_mg_build(const cs_cubemesh *cm, const cs_fem *fem, uint32_t version)
     mg->fine_links = cm->cell_nodes;
     memcpy(mg->K, fem->K, sizeof mg->K);
     cs_cube_lame_h(fem->K, &mg->hl, &mg->hm);
+    if (!corner_blocks_ok(mg->K))
+        goto fail;
     mg->avx512 = __builtin_cpu_supports("x86-64-v4");
     mg_level *l0 = &mg->lv[0];
     l0->n_cells = cm->n_cells;
@@ -860,16 +864,48 @@ static void setup_coarse(cs_mg *mg, int level, bool corotational)
         for (int k = 0; k < 3; k++)
             c->own_mask[3 * J + k] = held[k] ? 1 : 0;
     }
-    /* diagonal blocks */
-    memset(c->own_inv, 0, 9 * (size_t)c->n_nodes * sizeof(double));
-    for (int C = 0; C < c->n_cells; C++)
-        for (int k = 0; k < 8; k++)
-            add_rotated_block(mg->K, c->R + 9 * C, c->s[C], k, k,
-                              c->own_inv + 9 * c->cell_nodes[8 * C + k], 3);
-    for (int J = 0; J < c->n_nodes; J++)
+    /* D⁻¹: node by node (the cells of a node in adj order, so any thread count gives the same
+     * sums), each corner block by R K_kk Rᵀ = (K00 − K01) I + K01 (R σ)(R σ)ᵀ, σ the corner's
+     * signs (2·CS_CORNER − 1): the cube's corner block is K00 on the diagonal and K01 σ_a σ_b
+     * off it (cs_mg_build checks that on the model's K) */
+    const double kd = mg->K[0] - mg->K[1], ko = mg->K[1];
+#pragma omp parallel for num_threads(c->threads) schedule(static)
+    for (int J = 0; J < c->n_nodes; J++) {
+        double m[9] = {0};
+        for (int a = c->adj_start[J]; a < c->adj_start[J + 1]; a++) {
+            const int C = c->adj[a] / 8, k = c->adj[a] % 8;
+            const double *R = c->R + 9 * C, sc = c->s[C];
+            double v[3];
+            for (int i = 0; i < 3; i++)
+                v[i] = R[3 * i] * (2 * CS_CORNER[k][0] - 1) +
+                       R[3 * i + 1] * (2 * CS_CORNER[k][1] - 1) +
+                       R[3 * i + 2] * (2 * CS_CORNER[k][2] - 1);
+            for (int i = 0; i < 3; i++) {
+                for (int j = 0; j < 3; j++)
+                    m[3 * i + j] += sc * ko * v[i] * v[j];
+                m[4 * i] += sc * kd;
+            }
+        }
+        for (int i = 0; i < 3; i++)
+            m[4 * i] += c->dg[J];
+        cs_invert_block(m);
+        memcpy(c->own_inv + 9 * J, m, sizeof m);
+    }
+}
+
+/* Does the model's K have the corner-block form setup_coarse's D⁻¹ assumes? */
+static bool corner_blocks_ok(const double *K)
+{
+    const double kd = K[0] - K[1], ko = K[1], tol = 1e-12 * fabs(K[0]);
+    for (int k = 0; k < 8; k++)
         for (int a = 0; a < 3; a++)
-            c->own_inv[9 * J + 4 * a] += c->dg[J];
-    cs_invert_blocks(c->own_inv, c->n_nodes);
+            for (int b = 0; b < 3; b++) {
+                const double want = (a == b ? kd : 0.0) + ko * (2 * CS_CORNER[k][a] - 1) *
+                                                           (2 * CS_CORNER[k][b] - 1);
+                if (fabs(K[(3 * k + a) * 24 + 3 * k + b] - want) > tol)
+                    return false;
+            }
+    return true;
 }
 
 /* Dense Cholesky of the coarsest operator (held dofs: identity rows). */
