@@ -14,10 +14,21 @@
 
 #define MG_NU 1           /* smoothing sweeps before and after the coarse correction */
 #ifndef MG_CHEB
-#define MG_CHEB 2         /* Chebyshev smoother degree (0: damped Jacobi, MG_NU sweeps) */
+#define MG_CHEB 2         /* Chebyshev degree on the finest level (0: damped Jacobi, MG_NU sweeps) */
 #endif
+#ifndef MG_CHEB_COARSE
+#define MG_CHEB_COARSE 3  /* ... and on the coarse levels (an eighth of the cost each) */
+#endif
+/* The smoothed interval is [λ/MG_CHEB_RATIO, λ] with λ = MG_LAMBDA_SAFETY × the power estimate of
+ * λmax(D⁻¹A). Any Chebyshev error polynomial on [a, b] stays at most 1 in modulus up to
+ * a + b = λ (1 + 1/ratio), so B stays positive definite while λmax ≤ 1.18 (1 + 1/6) = 1.377×
+ * the estimate — the margin of the former ratio 4 and factor 1.1 (1.1 × 1.25 = 1.375), with a
+ * wider interval (fewer iterations: see README "Multigrid against block Jacobi"). */
 #ifndef MG_CHEB_RATIO
-#define MG_CHEB_RATIO 4.0
+#define MG_CHEB_RATIO 6.0
+#endif
+#ifndef MG_LAMBDA_SAFETY
+#define MG_LAMBDA_SAFETY 1.18
 #endif
 #define MG_COARSE_SWEEPS 8 /* Jacobi sweeps on a coarsest level too large for Cholesky */
 #define MG_POWER_ITERS 10
@@ -76,6 +87,7 @@ typedef struct mg_level {
     int32_t *nfirst;                  /* n_batches + 1: first position whose last batch >= b */
     double lam;
     float omega;
+    int cheb_deg;                     /* Chebyshev degree of this level's smoother */
 } mg_level;
 
 struct cs_mg {
@@ -95,6 +107,8 @@ struct cs_mg {
     int setups;
     double key[3];
 };
+
+static bool corner_blocks_ok(const double *K);
 
 /* ------------------------------------------------------------------ building */
 
@@ -402,6 +416,7 @@ static int alloc_level_state(mg_level *l, int level, int threads)
 {
     const size_t n3 = 3 * (size_t)l->n_nodes, nc = l->n_cells ? (size_t)l->n_cells : 1;
     l->threads = threads > 1 && l->n_cells >= CS_FEM_PARALLEL_CELLS ? threads : 1;
+    l->cheb_deg = level == 0 ? MG_CHEB : MG_CHEB_COARSE;
     l->s = malloc(nc * sizeof(double));
     l->dg = malloc((size_t)(l->n_nodes ? l->n_nodes : 1) * sizeof(double));
     l->dgf = malloc((size_t)(l->n_nodes ? l->n_nodes : 1) * sizeof(float));
@@ -539,6 +554,8 @@ cs_mg *cs_mg_build(const cs_cubemesh *cm, const cs_fem *fem, uint32_t version)
     mg->fine_links = cm->cell_nodes;
     memcpy(mg->K, fem->K, sizeof mg->K);
     cs_cube_lame_h(fem->K, &mg->hl, &mg->hm);
+    if (!corner_blocks_ok(mg->K))
+        goto fail;
     mg->avx512 = __builtin_cpu_supports("x86-64-v4");
     mg_level *l0 = &mg->lv[0];
     l0->n_cells = cm->n_cells;
@@ -854,7 +871,8 @@ static void cheb_update(const mg_level *l, const float *t, float *d, float *x, f
 }
 
 /*
- * Chebyshev smoothing of degree MG_CHEB: x += p(D⁻¹A) D⁻¹ (b − A x), p the polynomial that
+ * Chebyshev smoothing of the level's degree (MG_CHEB on the finest, MG_CHEB_COARSE below):
+ * x += p(D⁻¹A) D⁻¹ (b − A x), p the polynomial that
  * minimises max |1 − λ p(λ)| over [λmax/MG_CHEB_RATIO, λmax] (the upper part of the spectrum,
  * which the coarse levels do not reach); from x = 0 if zero (one product less). The same
  * polynomial before and after the coarse correction keeps the V-cycle symmetric, and
@@ -873,7 +891,7 @@ static void cheb(const cs_mg *mg, int level, const float *b, float *x, bool zero
         const cheb_step cs = {l->d, x, 0.0f, (float)(1.0 / theta), true};
         apply_path(mg, level, mg->avx512, x, b, NULL, &cs);
     }
-    for (int k = 1; k < MG_CHEB; k++) {
+    for (int k = 1; k < l->cheb_deg; k++) {
         const double rn = 1.0 / (2.0 * sigma - rho);
         const cheb_step cs = {l->d, x, (float)(rn * rho), (float)(2.0 * rn / delta), false};
         apply_path(mg, level, mg->avx512, x, b, NULL, &cs);
@@ -937,16 +955,48 @@ static void setup_coarse(cs_mg *mg, int level, bool corotational)
         for (int k = 0; k < 3; k++)
             c->own_mask[3 * J + k] = held[k] ? 1 : 0;
     }
-    /* diagonal blocks */
-    memset(c->own_inv, 0, 9 * (size_t)c->n_nodes * sizeof(double));
-    for (int C = 0; C < c->n_cells; C++)
-        for (int k = 0; k < 8; k++)
-            add_rotated_block(mg->K, c->R + 9 * C, c->s[C], k, k,
-                              c->own_inv + 9 * c->cell_nodes[8 * C + k], 3);
-    for (int J = 0; J < c->n_nodes; J++)
+    /* D⁻¹: node by node (the cells of a node in adj order, so any thread count gives the same
+     * sums), each corner block by R K_kk Rᵀ = (K00 − K01) I + K01 (R σ)(R σ)ᵀ, σ the corner's
+     * signs (2·CS_CORNER − 1): the cube's corner block is K00 on the diagonal and K01 σ_a σ_b
+     * off it (cs_mg_build checks that on the model's K) */
+    const double kd = mg->K[0] - mg->K[1], ko = mg->K[1];
+#pragma omp parallel for num_threads(c->threads) schedule(static)
+    for (int J = 0; J < c->n_nodes; J++) {
+        double m[9] = {0};
+        for (int a = c->adj_start[J]; a < c->adj_start[J + 1]; a++) {
+            const int C = c->adj[a] / 8, k = c->adj[a] % 8;
+            const double *R = c->R + 9 * C, sc = c->s[C];
+            double v[3];
+            for (int i = 0; i < 3; i++)
+                v[i] = R[3 * i] * (2 * CS_CORNER[k][0] - 1) +
+                       R[3 * i + 1] * (2 * CS_CORNER[k][1] - 1) +
+                       R[3 * i + 2] * (2 * CS_CORNER[k][2] - 1);
+            for (int i = 0; i < 3; i++) {
+                for (int j = 0; j < 3; j++)
+                    m[3 * i + j] += sc * ko * v[i] * v[j];
+                m[4 * i] += sc * kd;
+            }
+        }
+        for (int i = 0; i < 3; i++)
+            m[4 * i] += c->dg[J];
+        cs_invert_block(m);
+        memcpy(c->own_inv + 9 * J, m, sizeof m);
+    }
+}
+
+/* Does the model's K have the corner-block form setup_coarse's D⁻¹ assumes? */
+static bool corner_blocks_ok(const double *K)
+{
+    const double kd = K[0] - K[1], ko = K[1], tol = 1e-12 * fabs(K[0]);
+    for (int k = 0; k < 8; k++)
         for (int a = 0; a < 3; a++)
-            c->own_inv[9 * J + 4 * a] += c->dg[J];
-    cs_invert_blocks(c->own_inv, c->n_nodes);
+            for (int b = 0; b < 3; b++) {
+                const double want = (a == b ? kd : 0.0) + ko * (2 * CS_CORNER[k][a] - 1) *
+                                                           (2 * CS_CORNER[k][b] - 1);
+                if (fabs(K[(3 * k + a) * 24 + 3 * k + b] - want) > tol)
+                    return false;
+            }
+    return true;
 }
 
 /* Dense Cholesky of the coarsest operator (held dofs: identity rows). */
@@ -1081,7 +1131,7 @@ int cs_mg_setup(cs_mg *mg, const cs_fem *fem, cs_matvec_fn A, void *ctx, const d
     if (mg->setups % MG_LAMBDA_EVERY == 0 || memcmp(key, mg->key, sizeof key) != 0) {
         memcpy(mg->key, key, sizeof key);
         for (int l = 0; l < mg->n_levels; l++) {
-            mg->lv[l].lam = 1.1 * estimate_lambda(mg, l);
+            mg->lv[l].lam = MG_LAMBDA_SAFETY * estimate_lambda(mg, l);
             mg->lv[l].omega = (float)(4.0 / (3.0 * mg->lv[l].lam));
         }
     }
@@ -1128,7 +1178,7 @@ static void vcycle(cs_mg *mg, int level, const float *b, float *x)
         return;
     }
     mg_level *f = &mg->lv[level], *c = &mg->lv[level + 1];
-    if (MG_CHEB) {
+    if (f->cheb_deg) {
         cheb(mg, level, b, x, true);
     } else {
         jacobi(f, b, x, f->omega, false);
@@ -1163,7 +1213,7 @@ static void vcycle(cs_mg *mg, int level, const float *b, float *x)
             if (!f->mask[3 * n + k])
                 x[3 * n + k] += s[k];
     }
-    if (MG_CHEB)
+    if (f->cheb_deg)
         cheb(mg, level, b, x, false);
     else
         for (int s = 0; s < MG_NU; s++)
@@ -1182,4 +1232,34 @@ void cs_mg_vcycle(void *ctx, const double *r, double *z)
 #pragma omp parallel for num_threads(l0->threads) schedule(static)
     for (int d = 0; d < n3; d++)
         z[d] = l0->x[d];
+}
+
+/* ------------------------------------------------------------------ transfers (for tests) */
+
+void cs_mg_prolong(const cs_mg *mg, int level, const float *xc, float *xf)
+{
+    if (level < 0 || level + 1 >= mg->n_levels)
+        return;
+    const mg_level *f = &mg->lv[level];
+    for (int n = 0; n < f->n_nodes; n++)
+        for (int k = 0; k < 3; k++) {
+            float s = 0;
+            for (int a = f->p_start[n]; a < f->p_start[n + 1]; a++)
+                s += (float)f->p_w[a] * xc[3 * f->p_node[a] + k];
+            xf[3 * n + k] = s;
+        }
+}
+
+void cs_mg_restrict(const cs_mg *mg, int level, const float *xf, float *xc)
+{
+    if (level < 0 || level + 1 >= mg->n_levels)
+        return;
+    const mg_level *f = &mg->lv[level], *c = &mg->lv[level + 1];
+    for (int J = 0; J < c->n_nodes; J++)
+        for (int k = 0; k < 3; k++) {
+            float s = 0;
+            for (int a = f->r_start[J]; a < f->r_start[J + 1]; a++)
+                s += (float)f->r_w[a] * xf[3 * f->r_node[a] + k];
+            xc[3 * J + k] = s;
+        }
 }
