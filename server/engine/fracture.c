@@ -1330,14 +1330,11 @@ static double dist2_cell(const cs_cubemesh *cm, int32_t c, const double p[3])
     return d;
 }
 
-/* Per cell, the root of its piece as split_pieces will find it: face neighbours still sharing
- * a node are joined. NULL if out of memory. */
-static int32_t *piece_roots(const cs_cubemesh *cm)
+/* parent[c] (union-find over the cells): face neighbours still sharing a node of their face
+ * joined (what split_pieces and piece_roots call one piece). */
+static void union_face_neighbours(const cs_cubemesh *cm, int32_t *parent)
 {
     const int nc = cm->n_cells;
-    int32_t *parent = malloc((size_t)(nc ? nc : 1) * sizeof *parent);
-    if (!parent)
-        return NULL;
     for (int c = 0; c < nc; c++)
         parent[c] = c;
     for (int c = 0; c < nc; c++) {
@@ -1350,6 +1347,16 @@ static int32_t *piece_roots(const cs_cubemesh *cm)
                 uf_union(parent, c, d);
         }
     }
+}
+
+/* Per cell, the root of its piece as split_pieces will find it. NULL if out of memory. */
+static int32_t *piece_roots(const cs_cubemesh *cm)
+{
+    const int nc = cm->n_cells;
+    int32_t *parent = malloc((size_t)(nc ? nc : 1) * sizeof *parent);
+    if (!parent)
+        return NULL;
+    union_face_neighbours(cm, parent);
     for (int c = 0; c < nc; c++)
         parent[c] = uf_find(parent, c);
     return parent;
@@ -3149,18 +3156,7 @@ static int split_pieces(cs_world_t *w, cs_object *o, int *n_rebuilt, int *n_drop
     /* face-connected: face neighbours still sharing a node of their face (cells that touch
      * only along an edge or at a corner become pieces of their own; each keeps a copy of the
      * nodes they shared) */
-    for (int c = 0; c < nc; c++)
-        parent[c] = c;
-    for (int c = 0; c < nc; c++) {
-        const int32_t *q = cm->cell_ijk + 3 * (size_t)c;
-        for (int axis = 0; axis < 3; axis++) {
-            int32_t nb[3] = {q[0], q[1], q[2]};
-            nb[axis]++;
-            int32_t d = cs_cubemesh_find(cm, nb[0], nb[1], nb[2]);
-            if (d >= 0 && cells_share_node(cm, c, d))
-                uf_union(parent, c, d);
-        }
-    }
+    union_face_neighbours(cm, parent);
     /* components numbered by their first cell */
     int ncomp = 0;
     int32_t *root_comp = malloc((size_t)nc * sizeof *root_comp);
