@@ -830,10 +830,17 @@ void cs_cube_cells_product(const double K[24 * 24], int n_cells, const int32_t *
     }
 }
 
-double cs_fem_energy(const cs_fem *fem, const double *x)
+/* Energy batches per block of the parallel sum: blocks are summed in order, so the result does
+ * not depend on the thread count. */
+#define ENERGY_BLOCK 64
+
+/* The energy of batches [b0, b1): exact rotations at x (not the cached ones), then the batch
+ * product's energies. */
+static double energy_batches(const cs_fem *fem, const double *x, int b0, int b1)
 {
-    double e_sum = 0;
-    for (int c0 = 0; c0 < fem->n_cells; c0 += LANES) {
+    double s = 0;
+    for (int b = b0; b < b1; b++) {
+        const int c0 = b * LANES;
         double Rb[9 * LANES], e[LANES];
         for (int l = 0; fem->corotational && l < LANES && c0 + l < fem->n_cells; l++) {
             double F[9], q[4];
@@ -844,8 +851,29 @@ double cs_fem_energy(const cs_fem *fem, const double *x)
         }
         batch_product(fem, fem->kf, c0, fem->corotational ? Rb : NULL, x, fem->h, NULL, e);
         for (int l = 0; l < LANES; l++)
-            e_sum += e[l];
+            s += e[l];
     }
+    return s;
+}
+
+double cs_fem_energy(const cs_fem *fem, const double *x)
+{
+    const int nb = (fem->n_cells + LANES - 1) / LANES;
+    const int nblk = (nb + ENERGY_BLOCK - 1) / ENERGY_BLOCK;
+    double stack[16], *part = nblk <= 16 ? stack : malloc(sizeof(double) * (size_t)nblk);
+    double e_sum = 0;
+    if (!part) { /* out of memory: the same blocks in the same order, on this thread */
+        for (int k = 0; k < nblk; k++)
+            e_sum += energy_batches(fem, x, k * ENERGY_BLOCK, (nb < (k + 1) * ENERGY_BLOCK ? nb : (k + 1) * ENERGY_BLOCK));
+        return e_sum;
+    }
+#pragma omp parallel for num_threads(fem->threads) schedule(static) if (nblk > 1 && fem->threads > 1)
+    for (int k = 0; k < nblk; k++)
+        part[k] = energy_batches(fem, x, k * ENERGY_BLOCK, (nb < (k + 1) * ENERGY_BLOCK ? nb : (k + 1) * ENERGY_BLOCK));
+    for (int k = 0; k < nblk; k++)
+        e_sum += part[k];
+    if (part != stack)
+        free(part);
     return e_sum;
 }
 
