@@ -1152,16 +1152,14 @@ static void add_spring_blocks(cs_object *o, double coef)
     }
 }
 
-/* y = mcoef·M p + kcoef·K_R p + dcoef·Σ drags k w (w·p): the implicit Euler operator. */
-static void step_operator(void *ctx, const double *p, double *y)
+/* The operator below with K p already computed (kp; kp may be y): y = kcoef·kp + the rest. */
+static void step_operator_kp(cs_object *o, const double *p, const double *kp, double *y)
 {
-    cs_object *o = ctx;
-    cs_elastic_apply_K(o, p, y);
     const double mc = o->mcoef, kc = o->kcoef;
 #pragma omp parallel for num_threads(cs_elastic_threads(o)) schedule(static)
     for (int i = 0; i < o->n; i++)
         for (int a = 0; a < 3; a++)
-            y[3 * i + a] = kc * y[3 * i + a] + mc * o->m[i] * p[3 * i + a];
+            y[3 * i + a] = kc * kp[3 * i + a] + mc * o->m[i] * p[3 * i + a];
     if (o->fld.has_damping && (o->cmcoef != 0 || o->ckcoef != 0)) {
         /* the damping field: + dt·α M_d p + dt·β K_d p */
         double *t = o->fld.tmp;
@@ -1176,6 +1174,14 @@ static void step_operator(void *ctx, const double *p, double *y)
     }
     add_penalty_operator(o, o->pcoef, p, y);
     add_spring_operator(o, o->dcoef, p, y);
+}
+
+/* y = mcoef·M p + kcoef·K_R p + dcoef·Σ drags k w (w·p): the implicit Euler operator. */
+static void step_operator(void *ctx, const double *p, double *y)
+{
+    cs_object *o = ctx;
+    cs_elastic_apply_K(o, p, y);
+    step_operator_kp(o, p, y, y);
 }
 
 /* The Newton operator of corotational statics: warped stiffness plus geometric stiffness. */
@@ -1343,11 +1349,13 @@ static void ground_after_solve(const cs_world_t *w, cs_object *o, int contacts)
     }
 }
 
-static void ground_project(const cs_world_t *w, cs_object *o)
+/* Returns how many nodes it moved. */
+static int ground_project(const cs_world_t *w, cs_object *o)
 {
     if (!w->def.has_ground)
-        return;
+        return 0;
     const double g = w->def.ground_height;
+    int moved = 0;
     for (int i = 0; i < o->n; i++) {
         double *x = o->x + 3 * i, *v = o->v + 3 * i;
         if (x[2] >= g || o->mask[3 * i + 2])
@@ -1355,7 +1363,9 @@ static void ground_project(const cs_world_t *w, cs_object *o)
         x[2] = g;
         if (v[2] < 0)
             v[2] = 0;
+        moved++;
     }
+    return moved;
 }
 
 static bool all_finite(const double *a, size_t n)
@@ -1425,24 +1435,24 @@ static void add_solve_stats(cs_step_stats *st, cs_cg_result r)
 }
 
 /* The end of a step that solved for the new velocities v1 (implicit Euler, Newmark, central
- * differences): positions (x += dt v1; Newmark: dt (v + v1)/2, except at the dofs the solve
- * held — ground contacts move by dt v1 onto the plane, as in implicit Euler), ground
+ * differences): positions (x += dt v1, or x_end when the step computed them: Newmark), ground
  * projection, finish_step, and the stage times t[0..4] (inputs, rotations, right-hand side,
- * solve) and solve statistics into st. */
+ * solve) and solve statistics into st. el_end, if finite, is the elastic energy at x_end,
+ * kept as the object's cached energy unless the ground projection moved a node. */
 static void end_solved_step(const cs_world_t *w, cs_object *o, cs_step_stats *st,
-                            const double t[5], cs_cg_result r, bool trap)
+                            const double t[5], cs_cg_result r, const double *x_end, double el_end)
 {
     const size_t n3 = (size_t)o->n * 3;
     const double dt = w->def.dt;
-    if (trap)
-        for (size_t d = 0; d < n3; d++)
-            o->x[d] += o->smask[d] ? dt * o->v1[d] : 0.5 * dt * (o->v[d] + o->v1[d]);
+    if (x_end)
+        memcpy(o->x, x_end, n3 * sizeof(double));
     else
         for (size_t d = 0; d < n3; d++)
             o->x[d] += dt * o->v1[d];
     memcpy(o->v, o->v1, n3 * sizeof(double));
-    ground_project(w, o);
-    o->elastic_energy_valid = false;
+    const int moved = ground_project(w, o);
+    o->elastic_energy = el_end;
+    o->elastic_energy_valid = x_end && isfinite(el_end) && moved == 0;
     const double t5 = now_ms();
     st->ms_skin += finish_step(w, o);
     st->ms_inputs += t[1] - t[0];
@@ -1811,8 +1821,8 @@ static int step_implicit(cs_world_t *w, cs_object *o, cs_step_stats *st, bool tr
     set_implicit_coefs(o, dt, trap);
     if (trap) {
         double *av = o->cg.q, *kv = o->cg.z; /* scratch until the solve */
-        step_operator(o, o->v, av);
         cs_elastic_apply_K(o, o->v, kv);
+        step_operator_kp(o, o->v, kv, av);
         const double c = 0.5 * dt * dt;
 #pragma omp parallel for num_threads(cs_elastic_threads(o)) schedule(static)
         for (int i = 0; i < o->n; i++)
@@ -1877,7 +1887,7 @@ static int step_implicit(cs_world_t *w, cs_object *o, cs_step_stats *st, bool tr
     ground_after_solve(w, o, contacts);
     active_end(w, o, av);
     o->fem.cell_active = NULL;
-    double e_end = 0;
+    double el_end = NAN;
     if (trap) {
         /* The guard: without damping nothing takes out what a poorly linearized step puts in
          * (a strain increment v dt / h of order 1 in a nonlinear model: the 6×2×2 beam of
@@ -1889,14 +1899,16 @@ static int step_implicit(cs_world_t *w, cs_object *o, cs_step_stats *st, bool tr
             x1[d] = o->x[d] + (o->smask[d] ? dt * o->v1[d] : 0.5 * dt * (o->v[d] + o->v1[d]));
             work += o->f[d] * (x1[d] - o->x[d]);
         }
-        e_end = kinetic_energy(o, o->v1) + cs_elastic_energy(o, x1);
+        el_end = cs_elastic_energy(o, x1);
+        const double e_end = kinetic_energy(o, o->v1) + el_end;
         if (!(e_end <= e_start + work + CS_NEWMARK_GUARD * e_start + 1e-300)) {
             add_solve_stats(st, r);
             st->newmark_redone++;
             return step_implicit(w, o, st, false);
         }
     }
-    end_solved_step(w, o, st, (const double[5]){t0, t1, t2, t3, t4}, r, trap);
+    end_solved_step(w, o, st, (const double[5]){t0, t1, t2, t3, t4}, r, trap ? o->cg.zo : NULL,
+                    el_end);
     if (!o->sleeping)
         cs_cg_record(&o->cg, o->v);
     return CS_OK;
@@ -2042,7 +2054,7 @@ static int step_central_difference(cs_world_t *w, cs_object *o, cs_step_stats *s
             v[1] *= sc;
         }
     }
-    end_solved_step(w, o, st, (const double[5]){t0, t1, t2, t3, t4}, r, false);
+    end_solved_step(w, o, st, (const double[5]){t0, t1, t2, t3, t4}, r, NULL, NAN);
     return CS_OK;
 }
 
