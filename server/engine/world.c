@@ -2572,10 +2572,9 @@ int cs_object_energy(const cs_world_t *w, cs_object_id id, cs_energy *e)
     const cs_object *o = cs_world_find_internal(w, id);
     if (!o || !e)
         return CS_ERR_UNKNOWN_OBJECT;
-    double ek = 0, eg = 0;
+    double ek = kinetic_energy(o, o->v), eg = 0;
     for (int i = 0; i < o->n; i++) {
-        const double *v = o->v + 3 * i, *x = o->x + 3 * i;
-        ek += 0.5 * o->m[i] * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+        const double *x = o->x + 3 * i;
         eg -= o->m[i] * (w->def.gravity[0] * x[0] + w->def.gravity[1] * x[1] +
                          w->def.gravity[2] * x[2]);
     }
