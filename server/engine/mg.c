@@ -1261,29 +1261,21 @@ static void vcycle(cs_mg *mg, int level, const float *b, float *x)
     apply_ex(mg, level, x, b, f->t);
 #pragma omp parallel for num_threads(c->threads) schedule(static)
     for (int J = 0; J < c->n_nodes; J++) {
-        float s[3] = {0, 0, 0};
-        for (int a = f->r_start[J]; a < f->r_start[J + 1]; a++) {
-            const float w = (float)f->r_w[a], *v = f->t + 3 * f->r_node[a];
-            s[0] += w * v[0];
-            s[1] += w * v[1];
-            s[2] += w * v[2];
-        }
-        for (int k = 0; k < 3; k++)
-            c->b[3 * J + k] = c->mask[3 * J + k] ? 0.0f : s[k];
+        /* (x, y, z, 0) vectors: per component the scalar sums in the same order */
+        vf4 s = {0, 0, 0, 0};
+        for (int a = f->r_start[J]; a < f->r_start[J + 1]; a++)
+            s += (float)f->r_w[a] * load3(f->t + 3 * f->r_node[a]);
+        store3(c->b + 3 * J, and4(s, free_mask(c, J)));
     }
     vcycle(mg, level + 1, c->b, c->x);
 #pragma omp parallel for num_threads(f->threads) schedule(static)
     for (int n = 0; n < f->n_nodes; n++) {
-        float s[3] = {0, 0, 0};
-        for (int a = f->p_start[n]; a < f->p_start[n + 1]; a++) {
-            const float w = (float)f->p_w[a], *v = c->x + 3 * f->p_node[a];
-            s[0] += w * v[0];
-            s[1] += w * v[1];
-            s[2] += w * v[2];
-        }
-        for (int k = 0; k < 3; k++)
-            if (!f->mask[3 * n + k])
-                x[3 * n + k] += s[k];
+        vf4 s = {0, 0, 0, 0};
+        for (int a = f->p_start[n]; a < f->p_start[n + 1]; a++)
+            s += (float)f->p_w[a] * load3(c->x + 3 * f->p_node[a]);
+        /* held dofs keep their value (bit for bit: not x + 0) */
+        const vf4 fr = free_mask(f, n), xn = load3(x + 3 * n);
+        store3(x + 3 * n, (vf4)(((vi4)(xn + s) & (vi4)fr) | ((vi4)xn & ~(vi4)fr)));
     }
     if (f->cheb_deg)
         cheb(mg, level, b, x, false);
