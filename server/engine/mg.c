@@ -906,6 +906,34 @@ void cs_mg_apply_level(const cs_mg *mg, int level, bool portable, const float *x
         apply_path(mg, level, mg->avx512 && !portable, x, NULL, y, NULL);
 }
 
+void cs_mg_residual_level(const cs_mg *mg, int level, const float *x, const float *b, float *y)
+{
+    if (level >= 0 && level < mg->n_levels)
+        apply_path(mg, level, mg->avx512, x, b, y, NULL);
+}
+
+void cs_mg_cheb_step_level(const cs_mg *mg, int level, const float *b, float *x, float *d,
+                           float a, float c, bool first)
+{
+    if (level < 0 || level >= mg->n_levels)
+        return;
+    const cheb_step cs = {d, x, a, c, first};
+    apply_path(mg, level, mg->avx512, x, b, NULL, &cs);
+}
+
+void cs_mg_level_smoother(const cs_mg *mg, int level, float *inv, uint8_t *mask)
+{
+    if (level < 0 || level >= mg->n_levels)
+        return;
+    const mg_level *l = &mg->lv[level];
+    for (int n = 0; n < l->n_nodes; n++)
+        for (int k = 0; k < 3; k++) {
+            for (int j = 0; j < 3; j++)
+                inv[9 * n + 3 * k + j] = l->invf[9 * n + 3 * j + k];
+            mask[3 * n + k] = (uint8_t)(l->held[n] >> k & 1);
+        }
+}
+
 /* x (+)= ω D⁻¹ r at free dofs; zero at held ones. */
 static void jacobi(const mg_level *l, const float *r, float *x, float omega, bool add)
 {
