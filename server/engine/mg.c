@@ -73,7 +73,9 @@ typedef struct mg_level {
     const uint8_t *mask;
     uint8_t *own_mask;
     /* the V-cycle's single-precision copies (converted in cs_mg_setup) and scratch */
-    float *dgf, *invf;                /* 1 per node, 9 per node */
+    float *dgf;                       /* per node: dg */
+    float *invf;                      /* per node: D⁻¹ by columns (9, and one float of tail) */
+    uint8_t *held;                    /* per node: its held dofs, bits 1, 2, 4 for x, y, z */
     float *x, *b, *t, *d;             /* 3 per node each */
     /* the element pass, in batches of MG_LANES cells (cell c: batch c / MG_LANES, lane
      * c % MG_LANES; lanes past the last cell repeat the batch's first cell with L = M = 0) */
@@ -503,7 +505,8 @@ static int alloc_level_state(mg_level *l, int level, int threads)
     l->s = malloc(nc * sizeof(double));
     l->dg = malloc((size_t)(l->n_nodes ? l->n_nodes : 1) * sizeof(double));
     l->dgf = malloc((size_t)(l->n_nodes ? l->n_nodes : 1) * sizeof(float));
-    l->invf = malloc((n3 ? n3 : 1) * 3 * sizeof(float));
+    l->invf = malloc((n3 * 3 + 1) * sizeof(float));
+    l->held = malloc((size_t)(l->n_nodes ? l->n_nodes : 1));
     const size_t nb = (nc + MG_LANES - 1) / MG_LANES, vb = MG_LANES * sizeof(float);
     l->n_batches = (l->n_cells + MG_LANES - 1) / MG_LANES;
     l->bidx = aligned_alloc(64, nb * 8 * vb);
@@ -519,7 +522,7 @@ static int alloc_level_state(mg_level *l, int level, int threads)
     l->b = malloc((n3 ? n3 : 1) * sizeof(float));
     l->t = malloc((n3 ? n3 : 1) * sizeof(float));
     l->d = malloc((n3 ? n3 : 1) * sizeof(float));
-    if (!l->d || !l->s || !l->dg || !l->dgf || !l->invf || !l->bslot || !l->x || !l->b || !l->t ||
+    if (!l->d || !l->s || !l->dg || !l->dgf || !l->invf || !l->held || !l->bslot || !l->x || !l->b || !l->t ||
         !l->bidx || !l->bR || !l->bL || !l->bM || !l->fadj || !l->norder || !l->nminb ||
         !l->nfirst)
         return -1;
@@ -602,6 +605,7 @@ static void free_level(mg_level *l)
     free(l->nfirst);
     free(l->dgf);
     free(l->invf);
+    free(l->held);
     free(l->fe);
     free(l->bslot);
     free(l->x);
@@ -808,15 +812,64 @@ typedef struct cheb_step {
     bool first;
 } cheb_step;
 
-/* Node n's row of y (see apply_path): its cells' products summed in the adj order; with cs,
- * instead of storing it, the Chebyshev step on node n (its cells are all done: no later cell
- * of this pass reads its x). */
+/* The node pass's variants, compile-time in node_out: y = A x; y = b − A x (0 at held dofs);
+ * that residual's Chebyshev step, the first (d = c D⁻¹ r) or a later one. */
+enum { NP_APPLY, NP_RESID, NP_CHEB_FIRST, NP_CHEB };
+
+/* A node's 3-vector as (x, y, z, 0) and back: 8 + 4 bytes, never past the node's own dofs (the
+ * vectors are 3 per node, and other threads write their neighbours' dofs). */
+typedef float vf4 __attribute__((vector_size(16)));
+typedef int32_t vi4 __attribute__((vector_size(16)));
+static inline vf4 load3(const float *p)
+{
+    return (vf4)_mm_movelh_ps(_mm_loadl_pi(_mm_setzero_ps(), (const __m64 *)p),
+                              _mm_load_ss(p + 2));
+}
+
+static inline void store3(float *p, vf4 v)
+{
+    _mm_storel_pi((__m64 *)p, (__m128)v);
+    _mm_store_ss(p + 2, _mm_movehl_ps((__m128)v, (__m128)v));
+}
+
+/* The free dofs of node n (all bits set; lane 3 clear). */
+static inline vf4 free_mask(const mg_level *l, int n)
+{
+    static const vi4 FREE[8] = {{-1, -1, -1, 0}, {0, -1, -1, 0}, {-1, 0, -1, 0}, {0, 0, -1, 0},
+                                {-1, -1, 0, 0},  {0, -1, 0, 0},  {-1, 0, 0, 0},  {0, 0, 0, 0}};
+    return (vf4)FREE[l->held[n] & 7];
+}
+
+/* D⁻¹ v at node n by its columns (16-byte loads: lane 3 is the next column's first entry, or
+ * the tail), per component in the order of a row-major product: (m_k0 v0 + m_k1 v1) + m_k2 v2. */
+static inline vf4 dinv(const mg_level *l, int n, vf4 v)
+{
+    const float *m = l->invf + 9 * (size_t)n;
+    vf4 c0, c1, c2;
+    memcpy(&c0, m, sizeof c0);
+    memcpy(&c1, m + 3, sizeof c1);
+    memcpy(&c2, m + 6, sizeof c2);
+    const vf4 v0 = __builtin_shuffle(v, (vi4){0, 0, 0, 0});
+    const vf4 v1 = __builtin_shuffle(v, (vi4){1, 1, 1, 1});
+    const vf4 v2 = __builtin_shuffle(v, (vi4){2, 2, 2, 2});
+    return c0 * v0 + c1 * v1 + c2 * v2;
+}
+
+static inline vf4 and4(vf4 v, vf4 m)
+{
+    return (vf4)((vi4)v & (vi4)m);
+}
+
+/* Node n's row of y (see apply_path): its cells' products summed in the adj order; in the
+ * Chebyshev variants, instead of storing it, the step on node n (its cells are all done: no
+ * later cell of this pass reads its x). Component by component the same arithmetic in the
+ * same order as scalar code, 4 lanes wide (lane 3 is discarded). */
 static inline __attribute__((always_inline)) void node_out(const mg_level *l, int n,
                                                            const float *x, const float *b,
-                                                           float *y, const cheb_step *cs)
+                                                           float *y, const cheb_step *cs,
+                                                           const int mode)
 {
     /* (x, y, z, ·) per link: one 16-byte load and add each, the same sums per component */
-    typedef float vf4 __attribute__((vector_size(16)));
     vf4 s = {0, 0, 0, 0};
     const int a0 = l->adj_start[n], a1 = l->adj_start[n + 1];
     const float *fe = __builtin_assume_aligned(l->fe, 16);
@@ -834,24 +887,54 @@ static inline __attribute__((always_inline)) void node_out(const mg_level *l, in
             s += v;
         }
     }
-    float r[3];
-    for (int k = 0; k < 3; k++) {
-        const int d = 3 * n + k;
-        const float ax = s[k] + l->dgf[n] * x[d];
-        r[k] = !b ? ax : l->mask[d] ? 0.0f : b[d] - ax;
-    }
-    if (!cs) {
-        for (int k = 0; k < 3; k++)
-            y[3 * n + k] = r[k];
+    const vf4 ax = s + l->dgf[n] * load3(x + 3 * n);
+    if (mode == NP_APPLY) {
+        store3(y + 3 * n, ax);
         return;
     }
-    const float *m = l->invf + 9 * n;
-    for (int k = 0; k < 3; k++) {
-        const int j = 3 * n + k;
-        const float z = m[3 * k] * r[0] + m[3 * k + 1] * r[1] + m[3 * k + 2] * r[2];
-        const float dj = l->mask[j] ? 0.0f : cs->first ? cs->c * z : cs->a * cs->d[j] + cs->c * z;
-        cs->d[j] = dj;
-        cs->x[j] = l->mask[j] ? 0.0f : cs->x[j] + dj;
+    const vf4 fr = free_mask(l, n);
+    const vf4 r = and4(load3(b + 3 * n) - ax, fr);
+    if (mode == NP_RESID) {
+        store3(y + 3 * n, r);
+        return;
+    }
+    const vf4 z = dinv(l, n, r);
+    const vf4 dj = and4(mode == NP_CHEB_FIRST ? cs->c * z : cs->a * load3(cs->d + 3 * n) + cs->c * z,
+                        fr);
+    store3(cs->d + 3 * n, dj);
+    store3(cs->x + 3 * n, and4(load3(cs->x + 3 * n) + dj, fr));
+}
+
+/* One thread's share of apply_path (mode compile-time once inlined): its segments' element
+ * and node passes chunk by chunk, then (after the barrier) the nodes they share with lower
+ * segments. */
+static inline __attribute__((always_inline)) void path_share(const mg_level *l, bool avx512,
+                                                             const float *x, const float *b,
+                                                             float *y, const cheb_step *csp,
+                                                             const int mode)
+{
+    /* a private copy: the node pass's stores cannot change it (no reloads of d, x, a, c) */
+    const cheb_step c = csp ? *csp : (cheb_step){NULL, NULL, 0.0f, 0.0f, false}, *cs = &c;
+    const int nt = omp_get_num_threads(), t = omp_get_thread_num();
+    for (int sg = t; sg < l->nseg; sg += nt) {
+        const int b0 = seg_start(l, sg), b1 = seg_start(l, sg + 1);
+        for (int j0 = b0; j0 < b1; j0 += MG_CHUNK) {
+            const int j1 = j0 + MG_CHUNK < b1 ? j0 + MG_CHUNK : b1;
+            if (avx512)
+                batches_avx512(l, x, j0, j1);
+            else
+                batches_generic(l, x, j0, j1);
+            for (int q = l->nfirst[j0]; q < l->nfirst[j1]; q++)
+                if (l->nminb[q] >= b0)
+                    node_out(l, l->norder[q], x, b, y, cs, mode);
+        }
+    }
+#pragma omp barrier
+    for (int sg = t; sg < l->nseg; sg += nt) {
+        const int b0 = seg_start(l, sg), b1 = seg_start(l, sg + 1);
+        for (int q = l->nfirst[b0]; q < l->nfirst[b1]; q++)
+            if (l->nminb[q] < b0)
+                node_out(l, l->norder[q], x, b, y, cs, mode);
     }
 }
 
@@ -862,38 +945,30 @@ static void apply_path(const cs_mg *mg, int level, bool avx512, const float *x, 
                        float *y, const cheb_step *cs)
 {
     const mg_level *l = &mg->lv[level];
+    const int mode = !b ? NP_APPLY : !cs ? NP_RESID : cs->first ? NP_CHEB_FIRST : NP_CHEB;
     if (l->n_batches == 0) {
         for (int n = 0; n < l->n_nodes; n++)
-            node_out(l, n, x, b, y, cs);
+            node_out(l, n, x, b, y, cs, mode);
         return;
     }
+    /* Each segment (product_layout; one per thread when the team is complete): its batches
+     * chunk by chunk, each chunk's element pass followed by the node pass of the nodes whose
+     * cells are all done and all in the segment (their results still in cache); after the
+     * barrier the nodes it shares with lower segments. One copy per variant. */
 #pragma omp parallel num_threads(l->threads)
-    {
-        /* Each segment (product_layout; one per thread when the team is complete): its
-         * batches chunk by chunk, each chunk's element pass followed by the node pass of the
-         * nodes whose cells are all done and all in the segment (their results still in
-         * cache); after the barrier the nodes it shares with lower segments. */
-        const int nt = omp_get_num_threads(), t = omp_get_thread_num();
-        for (int sg = t; sg < l->nseg; sg += nt) {
-            const int b0 = seg_start(l, sg), b1 = seg_start(l, sg + 1);
-            for (int j0 = b0; j0 < b1; j0 += MG_CHUNK) {
-                const int j1 = j0 + MG_CHUNK < b1 ? j0 + MG_CHUNK : b1;
-                if (avx512)
-                    batches_avx512(l, x, j0, j1);
-                else
-                    batches_generic(l, x, j0, j1);
-                for (int q = l->nfirst[j0]; q < l->nfirst[j1]; q++)
-                    if (l->nminb[q] >= b0)
-                        node_out(l, l->norder[q], x, b, y, cs);
-            }
-        }
-#pragma omp barrier
-        for (int sg = t; sg < l->nseg; sg += nt) {
-            const int b0 = seg_start(l, sg), b1 = seg_start(l, sg + 1);
-            for (int q = l->nfirst[b0]; q < l->nfirst[b1]; q++)
-                if (l->nminb[q] < b0)
-                    node_out(l, l->norder[q], x, b, y, cs);
-        }
+    switch (mode) {
+    case NP_APPLY:
+        path_share(l, avx512, x, b, y, cs, NP_APPLY);
+        break;
+    case NP_RESID:
+        path_share(l, avx512, x, b, y, cs, NP_RESID);
+        break;
+    case NP_CHEB_FIRST:
+        path_share(l, avx512, x, b, y, cs, NP_CHEB_FIRST);
+        break;
+    default:
+        path_share(l, avx512, x, b, y, cs, NP_CHEB);
+        break;
     }
 }
 
@@ -913,17 +988,41 @@ void cs_mg_apply_level(const cs_mg *mg, int level, bool portable, const float *x
         apply_path(mg, level, mg->avx512 && !portable, x, NULL, y, NULL);
 }
 
+void cs_mg_residual_level(const cs_mg *mg, int level, const float *x, const float *b, float *y)
+{
+    if (level >= 0 && level < mg->n_levels)
+        apply_path(mg, level, mg->avx512, x, b, y, NULL);
+}
+
+void cs_mg_cheb_step_level(const cs_mg *mg, int level, const float *b, float *x, float *d,
+                           float a, float c, bool first)
+{
+    if (level < 0 || level >= mg->n_levels)
+        return;
+    const cheb_step cs = {d, x, a, c, first};
+    apply_path(mg, level, mg->avx512, x, b, NULL, &cs);
+}
+
+void cs_mg_level_smoother(const cs_mg *mg, int level, float *inv, uint8_t *mask)
+{
+    if (level < 0 || level >= mg->n_levels)
+        return;
+    const mg_level *l = &mg->lv[level];
+    for (int n = 0; n < l->n_nodes; n++)
+        for (int k = 0; k < 3; k++) {
+            for (int j = 0; j < 3; j++)
+                inv[9 * n + 3 * k + j] = l->invf[9 * n + 3 * j + k];
+            mask[3 * n + k] = (uint8_t)(l->held[n] >> k & 1);
+        }
+}
+
 /* x (+)= ω D⁻¹ r at free dofs; zero at held ones. */
 static void jacobi(const mg_level *l, const float *r, float *x, float omega, bool add)
 {
 #pragma omp parallel for num_threads(l->threads) schedule(static)
     for (int i = 0; i < l->n_nodes; i++) {
-        const float *m = l->invf + 9 * i, *v = r + 3 * i;
-        for (int a = 0; a < 3; a++) {
-            const float s = omega * (m[3 * a] * v[0] + m[3 * a + 1] * v[1] + m[3 * a + 2] * v[2]);
-            const int d = 3 * i + a;
-            x[d] = l->mask[d] ? 0.0f : (add ? x[d] + s : s);
-        }
+        const vf4 s = omega * dinv(l, i, load3(r + 3 * i));
+        store3(x + 3 * i, and4(add ? load3(x + 3 * i) + s : s, free_mask(l, i)));
     }
 }
 
@@ -942,14 +1041,10 @@ static void cheb_update(const mg_level *l, const float *t, float *d, float *x, f
 {
 #pragma omp parallel for num_threads(l->threads) schedule(static)
     for (int i = 0; i < l->n_nodes; i++) {
-        const float *m = l->invf + 9 * i, *v = t + 3 * i;
-        for (int k = 0; k < 3; k++) {
-            const int j = 3 * i + k;
-            const float z = m[3 * k] * v[0] + m[3 * k + 1] * v[1] + m[3 * k + 2] * v[2];
-            const float dj = l->mask[j] ? 0.0f : first ? c * z : a * d[j] + c * z;
-            d[j] = dj;
-            x[j] = l->mask[j] ? 0.0f : zero ? dj : x[j] + dj;
-        }
+        const vf4 z = dinv(l, i, load3(t + 3 * i)), fr = free_mask(l, i);
+        const vf4 dj = and4(first ? c * z : a * load3(d + 3 * i) + c * z, fr);
+        store3(d + 3 * i, dj);
+        store3(x + 3 * i, zero ? dj : and4(load3(x + 3 * i) + dj, fr));
     }
 }
 
@@ -1203,10 +1298,14 @@ static void to_single(mg_level *l, double hl, double hm)
         }
 #pragma omp parallel for num_threads(l->threads) schedule(static)
     for (int n = 0; n < l->n_nodes; n++) {
-        for (int k = 0; k < 9; k++)
-            l->invf[9 * n + k] = (float)l->inv[9 * n + k];
+        for (int j = 0; j < 3; j++)
+            for (int k = 0; k < 3; k++)
+                l->invf[9 * n + 3 * j + k] = (float)l->inv[9 * n + 3 * k + j];
         l->dgf[n] = (float)l->dg[n];
+        l->held[n] = (uint8_t)((l->mask[3 * n] ? 1 : 0) | (l->mask[3 * n + 1] ? 2 : 0) |
+                               (l->mask[3 * n + 2] ? 4 : 0));
     }
+    l->invf[9 * (size_t)l->n_nodes] = 0.0f; /* the tail dinv's last column load reads */
 }
 
 int cs_mg_setup(cs_mg *mg, const cs_fem *fem, cs_matvec_fn A, void *ctx, const double *inv0,
@@ -1287,29 +1386,21 @@ static void vcycle(cs_mg *mg, int level, const float *b, float *x)
     apply_ex(mg, level, x, b, f->t);
 #pragma omp parallel for num_threads(c->threads) schedule(static)
     for (int J = 0; J < c->n_nodes; J++) {
-        float s[3] = {0, 0, 0};
-        for (int a = f->r_start[J]; a < f->r_start[J + 1]; a++) {
-            const float w = (float)f->r_w[a], *v = f->t + 3 * f->r_node[a];
-            s[0] += w * v[0];
-            s[1] += w * v[1];
-            s[2] += w * v[2];
-        }
-        for (int k = 0; k < 3; k++)
-            c->b[3 * J + k] = c->mask[3 * J + k] ? 0.0f : s[k];
+        /* (x, y, z, 0) vectors: per component the scalar sums in the same order */
+        vf4 s = {0, 0, 0, 0};
+        for (int a = f->r_start[J]; a < f->r_start[J + 1]; a++)
+            s += (float)f->r_w[a] * load3(f->t + 3 * f->r_node[a]);
+        store3(c->b + 3 * J, and4(s, free_mask(c, J)));
     }
     vcycle(mg, level + 1, c->b, c->x);
 #pragma omp parallel for num_threads(f->threads) schedule(static)
     for (int n = 0; n < f->n_nodes; n++) {
-        float s[3] = {0, 0, 0};
-        for (int a = f->p_start[n]; a < f->p_start[n + 1]; a++) {
-            const float w = (float)f->p_w[a], *v = c->x + 3 * f->p_node[a];
-            s[0] += w * v[0];
-            s[1] += w * v[1];
-            s[2] += w * v[2];
-        }
-        for (int k = 0; k < 3; k++)
-            if (!f->mask[3 * n + k])
-                x[3 * n + k] += s[k];
+        vf4 s = {0, 0, 0, 0};
+        for (int a = f->p_start[n]; a < f->p_start[n + 1]; a++)
+            s += (float)f->p_w[a] * load3(c->x + 3 * f->p_node[a]);
+        /* held dofs keep their value (bit for bit: not x + 0) */
+        const vf4 fr = free_mask(f, n), xn = load3(x + 3 * n);
+        store3(x + 3 * n, (vf4)(((vi4)(xn + s) & (vi4)fr) | ((vi4)xn & ~(vi4)fr)));
     }
     if (f->cheb_deg)
         cheb(mg, level, b, x, false);

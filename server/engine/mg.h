@@ -100,6 +100,16 @@ int cs_mg_smoother_steps(int deg, double *c);
  * tests: the V-cycle's own products. */
 void cs_mg_apply_level(const cs_mg *mg, int level, bool portable, const float *x, float *y);
 
+/* For tests, the V-cycle's other node-pass variants on level `level` (vectors 3 per node of
+ * the level): y = b − A x at free dofs and 0 at held ones (the residual it restricts); and the
+ * Chebyshev step fused into that residual's pass, d = a d + c D⁻¹ r (d = c D⁻¹ r if first) and
+ * x += d at free dofs, both 0 at held ones. cs_mg_level_smoother gives what they read: the
+ * level's D⁻¹ blocks in single precision (9 per node, row-major) and its held dofs (3 per node). */
+void cs_mg_residual_level(const cs_mg *mg, int level, const float *x, const float *b, float *y);
+void cs_mg_cheb_step_level(const cs_mg *mg, int level, const float *b, float *x, float *d,
+                           float a, float c, bool first);
+void cs_mg_level_smoother(const cs_mg *mg, int level, float *inv, uint8_t *mask);
+
 /* The transfers between level `level` and the next coarser one, without masks (for tests):
  * xf = P xc (prolongation, trilinear) and xc = Pᵀ xf (restriction); nothing on the coarsest. */
 void cs_mg_prolong(const cs_mg *mg, int level, const float *xc, float *xf);
