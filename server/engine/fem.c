@@ -232,6 +232,34 @@ cs_extract_rotation(const double A[9], double q[4], int max_iter)
         q[j] = qv[j][0];
 }
 
+/* Lanes run the same operations on their own data and a stopped lane keeps its q, so each
+ * matrix's result is cs_extract_rotation's bit for bit, whatever its lane. */
+__attribute__((optimize("no-math-errno"), target_clones("arch=x86-64-v4", "arch=x86-64-v3",
+                                                          "default"))) void
+cs_extract_rotations(int n, const double *A, double *q, int max_iter)
+{
+    for (int c0 = 0; c0 < n; c0 += ROT_LANES) {
+        double a[9][ROT_LANES], b[4][ROT_LANES];
+        rv Av[9], qv[4];
+        rm live = {0};
+        for (int l = 0; l < ROT_LANES; l++) {
+            const int c = c0 + l < n ? c0 + l : c0; /* a lane past n repeats the first */
+            live[l] = c0 + l < n ? -1 : 0;
+            for (int j = 0; j < 9; j++)
+                a[j][l] = A[9 * (size_t)c + j];
+            for (int j = 0; j < 4; j++)
+                b[j][l] = q[4 * (size_t)c + j];
+        }
+        memcpy(Av, a, sizeof Av);
+        memcpy(qv, b, sizeof qv);
+        rot_extract(Av, qv, live, max_iter);
+        memcpy(b, qv, sizeof b);
+        for (int l = 0; l < ROT_LANES && c0 + l < n; l++)
+            for (int j = 0; j < 4; j++)
+                q[4 * (size_t)(c0 + l) + j] = b[j][l];
+    }
+}
+
 static int product_layout(cs_fem *fem);
 
 int cs_fem_relink(cs_fem *fem, const cs_cubemesh *cm)

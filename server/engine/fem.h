@@ -139,6 +139,9 @@ void cs_fem_diag_blocks(cs_fem *fem, double *blocks);
  * its steps are Newton's (quadratic convergence, fem.c). Robust for inverted and degenerate A.
  * Gives bit for bit what cs_fem_update_rotations computes for the same A and warm start. */
 void cs_extract_rotation(const double A[9], double q[4], int max_iter);
+/* n extractions (A 9 per matrix, q 4 per warm start, updated), ROT_LANES side by side: each
+ * q as cs_extract_rotation(A + 9i, q + 4i, max_iter) leaves it, bit for bit. */
+void cs_extract_rotations(int n, const double *A, double *q, int max_iter);
 void cs_quat_to_mat(const double q[4], double R[9]);
 
 #endif

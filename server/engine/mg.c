@@ -33,6 +33,7 @@
 #endif
 #define MG_COARSE_SWEEPS 8 /* Jacobi sweeps on a coarsest level too large for Cholesky */
 #define MG_POWER_ITERS 10
+#define MG_ROT_BATCH 16    /* coarse cells per batch of setup_coarse's rotation extraction */
 #define MG_CHUNK 64        /* batches per chunk of apply_ex (1024 cells, 128 KiB of results) */
 #define MG_LANES 16        /* cells per batch of the element pass (one float SIMD lane each) */
 #define VF_LANES 8         /* lanes per vector of the element pass's arithmetic */
@@ -55,6 +56,7 @@ typedef struct mg_level {
     double *r_w;
     /* from the next finer level (level >= 1) */
     int32_t *ch_start, *ch;           /* children of each cell */
+    int32_t *walk;                    /* the cells in the order of their first child */
     /* per solve */
     const double *R;                  /* 9 per cell (level 0: fem's) */
     double *own_R, *q;                /* level >= 1 */
@@ -258,6 +260,15 @@ static int coarsen(mg_level *f, mg_level *c)
     c->ch_start[nc] = nch;
     c->n_cells = nc;
     c->cell_ijk = c->own_ijk;
+    /* The coarse cells are numbered in key order (k fastest) and the fine ones are usually i
+     * fastest: setup_coarse visits them by first child instead (a cell's children are
+     * listed increasing), so that it reads the fine rotations forward. */
+    c->walk = malloc((size_t)(nc ? nc : 1) * sizeof(int32_t));
+    if (!c->walk)
+        goto out;
+    for (int fc = 0, w = 0; fc < nf; fc++)
+        if (c->ch[c->ch_start[f->parent[fc]]] == fc)
+            c->walk[w++] = f->parent[fc];
     /* Coarse corners: merge the slots a fine node joins at the same lattice point. */
     slot = malloc((size_t)nc * 8 * sizeof(int32_t));
     nid = malloc((size_t)nc * 8 * sizeof(int32_t));
@@ -504,6 +515,7 @@ static void free_level(mg_level *l)
     free(l->r_w);
     free(l->ch_start);
     free(l->ch);
+    free(l->walk);
     free(l->own_R);
     free(l->q);
     free(l->s);
@@ -923,20 +935,35 @@ static void add_rotated_block(const double *K, const double *R, double s, int k,
 static void setup_coarse(cs_mg *mg, int level, bool corotational)
 {
     mg_level *f = &mg->lv[level - 1], *c = &mg->lv[level];
+    /* Cells by first child (walk: the fine rotations are read forward, not once per k row),
+     * MG_ROT_BATCH at a time: the rotations of their summed child rotations extracted side
+     * by side (cs_extract_rotations, each cs_extract_rotation's bit for bit). */
+    const int nwb = (c->n_cells + MG_ROT_BATCH - 1) / MG_ROT_BATCH;
 #pragma omp parallel for num_threads(c->threads) schedule(static)
-    for (int C = 0; C < c->n_cells; C++) {
-        double sum = 0, Ra[9] = {0};
-        for (int a = c->ch_start[C]; a < c->ch_start[C + 1]; a++) {
-            const int fc = c->ch[a];
-            sum += f->s[fc];
-            if (corotational)
-                for (int i = 0; i < 9; i++)
-                    Ra[i] += f->R[9 * fc + i];
+    for (int wb = 0; wb < nwb; wb++) {
+        double Ra[MG_ROT_BATCH][9] = {{0}}, q[MG_ROT_BATCH][4];
+        const int p0 = wb * MG_ROT_BATCH;
+        const int m = c->n_cells - p0 < MG_ROT_BATCH ? c->n_cells - p0 : MG_ROT_BATCH;
+        for (int l = 0; l < m; l++) {
+            const int C = c->walk[p0 + l];
+            double sum = 0;
+            for (int a = c->ch_start[C]; a < c->ch_start[C + 1]; a++) {
+                const int fc = c->ch[a];
+                sum += f->s[fc];
+                if (corotational)
+                    for (int i = 0; i < 9; i++)
+                        Ra[l][i] += f->R[9 * fc + i];
+            }
+            c->s[C] = 2.0 * sum / 8.0;
+            memcpy(q[l], c->q + 4 * C, sizeof q[l]);
         }
-        c->s[C] = 2.0 * sum / 8.0;
-        if (corotational) {
-            cs_extract_rotation(Ra, c->q + 4 * C, 30);
-            cs_quat_to_mat(c->q + 4 * C, c->own_R + 9 * C);
+        if (!corotational)
+            continue;
+        cs_extract_rotations(m, &Ra[0][0], &q[0][0], 30);
+        for (int l = 0; l < m; l++) {
+            const int C = c->walk[p0 + l];
+            memcpy(c->q + 4 * C, q[l], sizeof q[l]);
+            cs_quat_to_mat(q[l], c->own_R + 9 * C);
         }
     }
 #pragma omp parallel for num_threads(c->threads) schedule(static)
