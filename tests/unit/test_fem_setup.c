@@ -140,6 +140,12 @@ TEST(fem_diag_blocks_match_dense_blocks)
         ENSURE_MSG(worst < 1e-9, "pass %d: (kcoef K + d) P - I up to %g", pass, worst);
     }
     f1.cell_active = f2.cell_active = NULL;
+    /* no factors (diag_node's plain loop) against factors all 1 (its general loop): f·β = β */
+    for (int d = 0; d < 8 * nc; d++)
+        kf[d] = 1.0;
+    cs_fem_diag_blocks_w(&f1, NULL, b1);
+    cs_fem_diag_blocks_w(&f1, kf, b2);
+    ENSURE_MSG(memcmp(b1, b2, sizeof(double) * 9 * n) == 0, "plain and unit factors differ");
     free(x);
     free(kf);
     free(b1);
