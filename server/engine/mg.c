@@ -57,6 +57,7 @@ typedef struct mg_level {
     /* from the next finer level (level >= 1) */
     int32_t *ch_start, *ch;           /* children of each cell */
     int32_t *walk;                    /* the cells in the order of their first child */
+    int32_t *nwalk;                   /* the nodes in the order of their first fine node */
     /* per solve */
     const double *R;                  /* 9 per cell (level 0: fem's) */
     double *own_R, *q;                /* level >= 1 */
@@ -363,6 +364,19 @@ static int coarsen(mg_level *f, mg_level *c)
             f->r_w[fill[J]++] = f->p_w[a];
         }
     free(fill);
+    /* setup_coarse's node pass visits the coarse nodes by their first fine node (their
+     * r lists are increasing), as walk does the cells */
+    c->nwalk = malloc((size_t)(nn ? nn : 1) * sizeof(int32_t));
+    if (!c->nwalk)
+        goto out;
+    int nw = 0;
+    for (int n = 0; n < f->n_nodes; n++)
+        for (int a = f->p_start[n]; a < f->p_start[n + 1]; a++)
+            if (f->r_node[f->r_start[f->p_node[a]]] == n)
+                c->nwalk[nw++] = f->p_node[a];
+    if (nw != nn) /* a node without fine nodes (none on cube lattices): in index order */
+        for (int J = 0; J < nn; J++)
+            c->nwalk[J] = J;
     rc = 0;
 out:
     free(ks);
@@ -516,6 +530,7 @@ static void free_level(mg_level *l)
     free(l->ch_start);
     free(l->ch);
     free(l->walk);
+    free(l->nwalk);
     free(l->own_R);
     free(l->q);
     free(l->s);
@@ -967,7 +982,8 @@ static void setup_coarse(cs_mg *mg, int level, bool corotational)
         }
     }
 #pragma omp parallel for num_threads(c->threads) schedule(static)
-    for (int J = 0; J < c->n_nodes; J++) {
+    for (int p = 0; p < c->n_nodes; p++) {
+        const int J = c->nwalk[p];
         double d = 0, wmax = 0;
         uint8_t held[3] = {0, 0, 0};
         for (int a = f->r_start[J]; a < f->r_start[J + 1]; a++) {
