@@ -1004,21 +1004,27 @@ static void setup_coarse(cs_mg *mg, int level, bool corotational)
      * signs (2·CS_CORNER − 1): the cube's corner block is K00 on the diagonal and K01 σ_a σ_b
      * off it (cs_mg_build checks that on the model's K) */
     const double kd = mg->K[0] - mg->K[1], ko = mg->K[1];
+    double sg[8][3]; /* σ as doubles (±1: the products are exact either way) */
+    for (int k = 0; k < 8; k++)
+        for (int i = 0; i < 3; i++)
+            sg[k][i] = 2 * CS_CORNER[k][i] - 1;
 #pragma omp parallel for num_threads(c->threads) schedule(static)
     for (int J = 0; J < c->n_nodes; J++) {
         double m[9] = {0};
         for (int a = c->adj_start[J]; a < c->adj_start[J + 1]; a++) {
             const int C = c->adj[a] / 8, k = c->adj[a] % 8;
             const double *R = c->R + 9 * C, sc = c->s[C];
-            double v[3];
+            double v[3], p[3];
             for (int i = 0; i < 3; i++)
-                v[i] = R[3 * i] * (2 * CS_CORNER[k][0] - 1) +
-                       R[3 * i + 1] * (2 * CS_CORNER[k][1] - 1) +
-                       R[3 * i + 2] * (2 * CS_CORNER[k][2] - 1);
+                v[i] = R[3 * i] * sg[k][0] + R[3 * i + 1] * sg[k][1] + R[3 * i + 2] * sg[k][2];
+            /* sc·ko·v_i·v_j evaluates left to right: (sc·ko·v_i)·v_j, the p_i hoisted */
+            const double sk = sc * ko, skd = sc * kd;
+            for (int i = 0; i < 3; i++)
+                p[i] = sk * v[i];
             for (int i = 0; i < 3; i++) {
                 for (int j = 0; j < 3; j++)
-                    m[3 * i + j] += sc * ko * v[i] * v[j];
-                m[4 * i] += sc * kd;
+                    m[3 * i + j] += p[i] * v[j];
+                m[4 * i] += skd;
             }
         }
         for (int i = 0; i < 3; i++)
