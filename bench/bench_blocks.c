@@ -22,6 +22,11 @@
  * multigrid V-cycle (cs_mg_vcycle) on the implicit step's operator of an N³ block, and the CPU
  * time of its finest-level product alone (cs_mg_apply_level 0).
  *
+ * The stage columns (rotations, rhs+precond, CG solve, post, skin) are the engine's
+ * cs_step_stats, wall time; in a build with -DCS_STAGE_CPU (make OPT="-O3 -g
+ * -march=x86-64-v2 -DCS_STAGE_CPU") they are the process's CPU time, all threads together,
+ * which a machine shared with other work inflates much less (say so on stderr).
+ *
  * Usage: bench_blocks [--sizes 8,16,32,48] [--runs 5] [--threads 1,2] [--csv FILE [--append]]
  *                     [--field none|cubes|gradient] [--precond jacobi,multigrid,auto]
  *        bench_blocks --box 75x15x15 [--h 0.04] [--young 1e5] [--steps S] ...
@@ -650,6 +655,9 @@ int main(int argc, char **argv)
     if (f && !append)
         fprintf(f, "cubes,precond,threads,runs,steps_per_s,ms_per_step,cpu_ms_per_step,cg_iters_per_step,ms_rotations,"
                    "ms_rhs,ms_solve,ms_post,ms_skin,shape,young\n");
+#ifdef CS_STAGE_CPU
+    fprintf(stderr, "bench_blocks: stage columns in CPU ms (CS_STAGE_CPU build)\n");
+#endif
     if (!append)
         printf("| cubes | precond | threads | steps/s | ms/step | CPU ms/step | CG it/step | rotations | "
                "rhs+precond | CG solve | post | skin |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n");

@@ -17,6 +17,7 @@
 
 #include "cubesim.h"
 #include "mat3.h"
+#include "solver.h"
 
 /* Sign pattern (2·corner − 1) of each corner: the gradient directions of the shape functions. */
 static const double SGN[8][3] = {
@@ -230,6 +231,34 @@ cs_extract_rotation(const double A[9], double q[4], int max_iter)
     rot_extract(Av, qv, (rm){-1}, max_iter);
     for (int j = 0; j < 4; j++)
         q[j] = qv[j][0];
+}
+
+/* Lanes run the same operations on their own data and a stopped lane keeps its q, so each
+ * matrix's result is cs_extract_rotation's bit for bit, whatever its lane. */
+__attribute__((optimize("no-math-errno"), target_clones("arch=x86-64-v4", "arch=x86-64-v3",
+                                                          "default"))) void
+cs_extract_rotations(int n, const double *A, double *q, int max_iter)
+{
+    for (int c0 = 0; c0 < n; c0 += ROT_LANES) {
+        double a[9][ROT_LANES], b[4][ROT_LANES];
+        rv Av[9], qv[4];
+        rm live = {0};
+        for (int l = 0; l < ROT_LANES; l++) {
+            const int c = c0 + l < n ? c0 + l : c0; /* a lane past n repeats the first */
+            live[l] = c0 + l < n ? -1 : 0;
+            for (int j = 0; j < 9; j++)
+                a[j][l] = A[9 * (size_t)c + j];
+            for (int j = 0; j < 4; j++)
+                b[j][l] = q[4 * (size_t)c + j];
+        }
+        memcpy(Av, a, sizeof Av);
+        memcpy(qv, b, sizeof qv);
+        rot_extract(Av, qv, live, max_iter);
+        memcpy(b, qv, sizeof b);
+        for (int l = 0; l < ROT_LANES && c0 + l < n; l++)
+            for (int j = 0; j < 4; j++)
+                q[4 * (size_t)(c0 + l) + j] = b[j][l];
+    }
 }
 
 static int product_layout(cs_fem *fem);
@@ -1127,12 +1156,10 @@ void cs_fem_diag_blocks(cs_fem *fem, double *blocks)
  * at the end): no two threads write one block, and the sums do not depend on the thread
  * count. Each cell's factor is looked up once (into the scratch fe) instead of per corner.
  */
-void cs_fem_diag_blocks_w(cs_fem *fem, const double *kf, double *blocks)
+/* Each cell's factor (NaN: graded) into the element pass's scratch fe (kf not NULL), read
+ * once per cell by diag_node instead of 8 times (once per corner). */
+static const double *cell_factors(cs_fem *fem, const double *kf)
 {
-    const double alpha = fem->K[0], beta = fem->K[1], ab = alpha - beta;
-    static const double I[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
-    /* Each cell's factor (NaN: graded) into the element pass's scratch, read once per cell
-     * here instead of 8 times (once per corner) below. */
     double *fc = fem->fe;
     if (kf) {
 #pragma omp parallel for num_threads(fem->threads) schedule(static)
@@ -1141,65 +1168,123 @@ void cs_fem_diag_blocks_w(cs_fem *fem, const double *kf, double *blocks)
             fc[c] = uniform_factor(kf, c, &f) ? f : NAN;
         }
     }
+    return fc;
+}
+
+/* Node n's diagonal block of Σ R K_w Rᵀ into B (9, overwritten); fc from cell_factors. */
+static inline __attribute__((always_inline)) void diag_node(const cs_fem *fem, const double *kf,
+                                                            const double *fc, int n, double *B)
+{
+    const double alpha = fem->K[0], beta = fem->K[1], ab = alpha - beta;
+    static const double I[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
     const int32_t *restrict as = fem->adj_start, *restrict adj = fem->adj;
     const uint8_t *act = fem->cell_active;
     const double *Rs = fem->corotational ? fem->R : NULL;
-#pragma omp parallel for num_threads(fem->threads) schedule(static)
-    for (int n = 0; n < fem->n_nodes; n++) {
-        /* the symmetric part of the uniform cells' sum in 6 entries, graded cells in G */
-        double b00 = 0, b01 = 0, b02 = 0, b11 = 0, b12 = 0, b22 = 0, G[9] = {0};
-        bool graded = false;
+    if (!kf && !act && Rs) {
+        /* every cell rotated, factor 1 (f·β = β, f·(α − β) = α − β exactly): the loop below
+         * without its lookups and its graded branch, whose 9 sums crowd the registers */
+        double b00 = 0, b01 = 0, b02 = 0, b11 = 0, b12 = 0, b22 = 0;
         for (int a = as[n]; a < as[n + 1]; a++) {
-            const int c = adj[a] >> 3, k = adj[a] & 7;
-            if (act && !act[c])
-                continue;
-            const double *R = Rs ? Rs + 9 * (size_t)c : I;
-            const double f = kf ? fc[c] : 1.0;
-            if (!isnan(f)) {
-                const double s0 = SGN[k][0], s1 = SGN[k][1], s2 = SGN[k][2];
-                const double v0 = R[0] * s0 + R[1] * s1 + R[2] * s2;
-                const double v1 = R[3] * s0 + R[4] * s1 + R[5] * s2;
-                const double v2 = R[6] * s0 + R[7] * s1 + R[8] * s2;
-                const double fb = f * beta, fd = f * ab;
-                const double t0 = fb * v0, t1 = fb * v1, t2 = fb * v2;
-                b00 += t0 * v0 + fd;
-                b01 += t0 * v1;
-                b02 += t0 * v2;
-                b11 += t1 * v1 + fd;
-                b12 += t1 * v2;
-                b22 += t2 * v2 + fd;
-                continue;
-            }
-            graded = true;
-            double Kk[9], T[9];
-            const int at = (3 * k) * 24 + 3 * k;
-            for (int i = 0; i < 3; i++)
-                for (int j = 0; j < 3; j++) {
-                    double sum = 0;
-                    for (int g = 0; g < 8; g++)
-                        sum += kf[8 * (size_t)c + g] * fem->Kg[576 * g + at + 24 * i + j];
-                    Kk[3 * i + j] = sum;
-                }
-            /* T = R Kk, then B += T Rᵀ */
-            for (int i = 0; i < 3; i++)
-                for (int j = 0; j < 3; j++)
-                    T[3 * i + j] = R[3 * i] * Kk[j] + R[3 * i + 1] * Kk[3 + j] +
-                                   R[3 * i + 2] * Kk[6 + j];
-            for (int i = 0; i < 3; i++)
-                for (int j = 0; j < 3; j++)
-                    G[3 * i + j] += T[3 * i] * R[3 * j] + T[3 * i + 1] * R[3 * j + 1] +
-                                    T[3 * i + 2] * R[3 * j + 2];
+            const int k = adj[a] & 7;
+            const double *R = Rs + 9 * (size_t)(adj[a] >> 3);
+            const double s0 = SGN[k][0], s1 = SGN[k][1], s2 = SGN[k][2];
+            const double v0 = R[0] * s0 + R[1] * s1 + R[2] * s2;
+            const double v1 = R[3] * s0 + R[4] * s1 + R[5] * s2;
+            const double v2 = R[6] * s0 + R[7] * s1 + R[8] * s2;
+            const double t0 = beta * v0, t1 = beta * v1, t2 = beta * v2;
+            b00 += t0 * v0 + ab;
+            b01 += t0 * v1;
+            b02 += t0 * v2;
+            b11 += t1 * v1 + ab;
+            b12 += t1 * v2;
+            b22 += t2 * v2 + ab;
         }
-        double *B = blocks + 9 * (size_t)n;
         B[0] = b00;
         B[1] = B[3] = b01;
         B[2] = B[6] = b02;
         B[4] = b11;
         B[5] = B[7] = b12;
         B[8] = b22;
-        if (graded)
-            for (int i = 0; i < 9; i++)
-                B[i] += G[i];
+        return;
+    }
+    /* the symmetric part of the uniform cells' sum in 6 entries, graded cells in G */
+    double b00 = 0, b01 = 0, b02 = 0, b11 = 0, b12 = 0, b22 = 0, G[9] = {0};
+    bool graded = false;
+    for (int a = as[n]; a < as[n + 1]; a++) {
+        const int c = adj[a] >> 3, k = adj[a] & 7;
+        if (act && !act[c])
+            continue;
+        const double *R = Rs ? Rs + 9 * (size_t)c : I;
+        const double f = kf ? fc[c] : 1.0;
+        if (!isnan(f)) {
+            const double s0 = SGN[k][0], s1 = SGN[k][1], s2 = SGN[k][2];
+            const double v0 = R[0] * s0 + R[1] * s1 + R[2] * s2;
+            const double v1 = R[3] * s0 + R[4] * s1 + R[5] * s2;
+            const double v2 = R[6] * s0 + R[7] * s1 + R[8] * s2;
+            const double fb = f * beta, fd = f * ab;
+            const double t0 = fb * v0, t1 = fb * v1, t2 = fb * v2;
+            b00 += t0 * v0 + fd;
+            b01 += t0 * v1;
+            b02 += t0 * v2;
+            b11 += t1 * v1 + fd;
+            b12 += t1 * v2;
+            b22 += t2 * v2 + fd;
+            continue;
+        }
+        graded = true;
+        double Kk[9], T[9];
+        const int at = (3 * k) * 24 + 3 * k;
+        for (int i = 0; i < 3; i++)
+            for (int j = 0; j < 3; j++) {
+                double sum = 0;
+                for (int g = 0; g < 8; g++)
+                    sum += kf[8 * (size_t)c + g] * fem->Kg[576 * g + at + 24 * i + j];
+                Kk[3 * i + j] = sum;
+            }
+        /* T = R Kk, then B += T Rᵀ */
+        for (int i = 0; i < 3; i++)
+            for (int j = 0; j < 3; j++)
+                T[3 * i + j] = R[3 * i] * Kk[j] + R[3 * i + 1] * Kk[3 + j] +
+                               R[3 * i + 2] * Kk[6 + j];
+        for (int i = 0; i < 3; i++)
+            for (int j = 0; j < 3; j++)
+                G[3 * i + j] += T[3 * i] * R[3 * j] + T[3 * i + 1] * R[3 * j + 1] +
+                                T[3 * i + 2] * R[3 * j + 2];
+    }
+    B[0] = b00;
+    B[1] = B[3] = b01;
+    B[2] = B[6] = b02;
+    B[4] = b11;
+    B[5] = B[7] = b12;
+    B[8] = b22;
+    if (graded)
+        for (int i = 0; i < 9; i++)
+            B[i] += G[i];
+}
+
+void cs_fem_diag_blocks_w(cs_fem *fem, const double *kf, double *blocks)
+{
+    const double *fc = cell_factors(fem, kf);
+#pragma omp parallel for num_threads(fem->threads) schedule(static)
+    for (int n = 0; n < fem->n_nodes; n++)
+        diag_node(fem, kf, fc, n, blocks + 9 * (size_t)n);
+}
+
+void cs_fem_precond_blocks(cs_fem *fem, const double *kf, double kcoef, const cs_fem_node_terms *t,
+                           double *blocks)
+{
+    const double *fc = cell_factors(fem, kf);
+#pragma omp parallel for num_threads(fem->threads) schedule(static)
+    for (int n = 0; n < fem->n_nodes; n++) {
+        double *B = blocks + 9 * (size_t)n;
+        diag_node(fem, kf, fc, n, B);
+        for (int k = 0; k < 9; k++)
+            B[k] *= kcoef;
+        const double d = t->mcoef * t->m[n] + (t->md ? t->cmcoef * t->md[n] : 0.0) +
+                         (t->pin[n] ? t->pk : 0.0);
+        for (int a = 0; a < 3; a++)
+            B[4 * a] += d;
+        cs_invert_block(B);
     }
 }
 

@@ -102,6 +102,17 @@ void cs_fem_apply_K(cs_fem *fem, const double *p, double *y);
 void cs_fem_apply_Kw(cs_fem *fem, const double *kf, const double *p, double *y);
 /* Diagonal blocks of that weighted K (9 per node, overwritten). */
 void cs_fem_diag_blocks_w(cs_fem *fem, const double *kf, double *blocks);
+/* The diagonal term of node i that cs_fem_precond_blocks adds:
+ * d_i = mcoef·m[i] + (md ? cmcoef·md[i] : 0) + (pin[i] ? pk : 0). */
+typedef struct cs_fem_node_terms {
+    const double *m, *md; /* md may be NULL */
+    const uint8_t *pin;
+    double mcoef, cmcoef, pk;
+} cs_fem_node_terms;
+/* Block Jacobi in one node pass: blocks = (kcoef·B_i + d_i I)⁻¹ (cs_invert_block), B_i node
+ * i's block of cs_fem_diag_blocks_w(fem, kf), bit for bit what those two passes give. */
+void cs_fem_precond_blocks(cs_fem *fem, const double *kf, double kcoef, const cs_fem_node_terms *t,
+                           double *blocks);
 /* The unit matrix of Gauss point g (0..7) of a cube: K = Σ_g Kg. */
 void cs_cube_stiffness_gauss(double young, double poisson, double h, int g, double K[24 * 24]);
 /*
@@ -139,6 +150,9 @@ void cs_fem_diag_blocks(cs_fem *fem, double *blocks);
  * its steps are Newton's (quadratic convergence, fem.c). Robust for inverted and degenerate A.
  * Gives bit for bit what cs_fem_update_rotations computes for the same A and warm start. */
 void cs_extract_rotation(const double A[9], double q[4], int max_iter);
+/* n extractions (A 9 per matrix, q 4 per warm start, updated), ROT_LANES side by side: each
+ * q as cs_extract_rotation(A + 9i, q + 4i, max_iter) leaves it, bit for bit. */
+void cs_extract_rotations(int n, const double *A, double *q, int max_iter);
 void cs_quat_to_mat(const double q[4], double R[9]);
 
 #endif

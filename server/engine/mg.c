@@ -41,6 +41,7 @@ _Static_assert(MG_CHEB_KIND != 4 || (MG_CHEB <= 3 && MG_CHEB_COARSE <= 3),
 #endif
 #define MG_COARSE_SWEEPS 8 /* Jacobi sweeps on a coarsest level too large for Cholesky */
 #define MG_POWER_ITERS 10
+#define MG_ROT_BATCH 16    /* coarse cells per batch of setup_coarse's rotation extraction */
 #define MG_CHUNK 64        /* batches per chunk of apply_ex (1024 cells, 128 KiB of results) */
 #define MG_LANES 16        /* cells per batch of the element pass (one float SIMD lane each) */
 #define VF_LANES 8         /* lanes per vector of the element pass's arithmetic */
@@ -63,6 +64,8 @@ typedef struct mg_level {
     double *r_w;
     /* from the next finer level (level >= 1) */
     int32_t *ch_start, *ch;           /* children of each cell */
+    int32_t *walk;                    /* the cells in the order of their first child */
+    int32_t *nwalk;                   /* the nodes in the order of their first fine node */
     /* per solve */
     const double *R;                  /* 9 per cell (level 0: fem's) */
     double *own_R, *q;                /* level >= 1 */
@@ -269,6 +272,15 @@ static int coarsen(mg_level *f, mg_level *c)
     c->ch_start[nc] = nch;
     c->n_cells = nc;
     c->cell_ijk = c->own_ijk;
+    /* The coarse cells are numbered in key order (k fastest) and the fine ones are usually i
+     * fastest: setup_coarse visits them by first child instead (a cell's children are
+     * listed increasing), so that it reads the fine rotations forward. */
+    c->walk = malloc((size_t)(nc ? nc : 1) * sizeof(int32_t));
+    if (!c->walk)
+        goto out;
+    for (int fc = 0, w = 0; fc < nf; fc++)
+        if (c->ch[c->ch_start[f->parent[fc]]] == fc)
+            c->walk[w++] = f->parent[fc];
     /* Coarse corners: merge the slots a fine node joins at the same lattice point. */
     slot = malloc((size_t)nc * 8 * sizeof(int32_t));
     nid = malloc((size_t)nc * 8 * sizeof(int32_t));
@@ -363,6 +375,19 @@ static int coarsen(mg_level *f, mg_level *c)
             f->r_w[fill[J]++] = f->p_w[a];
         }
     free(fill);
+    /* setup_coarse's node pass visits the coarse nodes by their first fine node (their
+     * r lists are increasing), as walk does the cells */
+    c->nwalk = malloc((size_t)(nn ? nn : 1) * sizeof(int32_t));
+    if (!c->nwalk)
+        goto out;
+    int nw = 0;
+    for (int n = 0; n < f->n_nodes; n++)
+        for (int a = f->p_start[n]; a < f->p_start[n + 1]; a++)
+            if (f->r_node[f->r_start[f->p_node[a]]] == n)
+                c->nwalk[nw++] = f->p_node[a];
+    if (nw != nn) /* a node without fine nodes (none on cube lattices): in index order */
+        for (int J = 0; J < nn; J++)
+            c->nwalk[J] = J;
     rc = 0;
 out:
     free(ks);
@@ -589,6 +614,8 @@ static void free_level(mg_level *l)
     free(l->r_w);
     free(l->ch_start);
     free(l->ch);
+    free(l->walk);
+    free(l->nwalk);
     free(l->own_R);
     free(l->q);
     free(l->s);
@@ -1115,24 +1142,40 @@ static void add_rotated_block(const double *K, const double *R, double s, int k,
 static void setup_coarse(cs_mg *mg, int level, bool corotational)
 {
     mg_level *f = &mg->lv[level - 1], *c = &mg->lv[level];
+    /* Cells by first child (walk: the fine rotations are read forward, not once per k row),
+     * MG_ROT_BATCH at a time: the rotations of their summed child rotations extracted side
+     * by side (cs_extract_rotations, each cs_extract_rotation's bit for bit). */
+    const int nwb = (c->n_cells + MG_ROT_BATCH - 1) / MG_ROT_BATCH;
 #pragma omp parallel for num_threads(c->threads) schedule(static)
-    for (int C = 0; C < c->n_cells; C++) {
-        double sum = 0, Ra[9] = {0};
-        for (int a = c->ch_start[C]; a < c->ch_start[C + 1]; a++) {
-            const int fc = c->ch[a];
-            sum += f->s[fc];
-            if (corotational)
-                for (int i = 0; i < 9; i++)
-                    Ra[i] += f->R[9 * fc + i];
+    for (int wb = 0; wb < nwb; wb++) {
+        double Ra[MG_ROT_BATCH][9] = {{0}}, q[MG_ROT_BATCH][4];
+        const int p0 = wb * MG_ROT_BATCH;
+        const int m = c->n_cells - p0 < MG_ROT_BATCH ? c->n_cells - p0 : MG_ROT_BATCH;
+        for (int l = 0; l < m; l++) {
+            const int C = c->walk[p0 + l];
+            double sum = 0;
+            for (int a = c->ch_start[C]; a < c->ch_start[C + 1]; a++) {
+                const int fc = c->ch[a];
+                sum += f->s[fc];
+                if (corotational)
+                    for (int i = 0; i < 9; i++)
+                        Ra[l][i] += f->R[9 * fc + i];
+            }
+            c->s[C] = 2.0 * sum / 8.0;
+            memcpy(q[l], c->q + 4 * C, sizeof q[l]);
         }
-        c->s[C] = 2.0 * sum / 8.0;
-        if (corotational) {
-            cs_extract_rotation(Ra, c->q + 4 * C, 30);
-            cs_quat_to_mat(c->q + 4 * C, c->own_R + 9 * C);
+        if (!corotational)
+            continue;
+        cs_extract_rotations(m, &Ra[0][0], &q[0][0], 30);
+        for (int l = 0; l < m; l++) {
+            const int C = c->walk[p0 + l];
+            memcpy(c->q + 4 * C, q[l], sizeof q[l]);
+            cs_quat_to_mat(q[l], c->own_R + 9 * C);
         }
     }
 #pragma omp parallel for num_threads(c->threads) schedule(static)
-    for (int J = 0; J < c->n_nodes; J++) {
+    for (int p = 0; p < c->n_nodes; p++) {
+        const int J = c->nwalk[p];
         double d = 0, wmax = 0;
         uint8_t held[3] = {0, 0, 0};
         for (int a = f->r_start[J]; a < f->r_start[J + 1]; a++) {
@@ -1153,21 +1196,27 @@ static void setup_coarse(cs_mg *mg, int level, bool corotational)
      * signs (2·CS_CORNER − 1): the cube's corner block is K00 on the diagonal and K01 σ_a σ_b
      * off it (cs_mg_build checks that on the model's K) */
     const double kd = mg->K[0] - mg->K[1], ko = mg->K[1];
+    double sg[8][3]; /* σ as doubles (±1: the products are exact either way) */
+    for (int k = 0; k < 8; k++)
+        for (int i = 0; i < 3; i++)
+            sg[k][i] = 2 * CS_CORNER[k][i] - 1;
 #pragma omp parallel for num_threads(c->threads) schedule(static)
     for (int J = 0; J < c->n_nodes; J++) {
         double m[9] = {0};
         for (int a = c->adj_start[J]; a < c->adj_start[J + 1]; a++) {
             const int C = c->adj[a] / 8, k = c->adj[a] % 8;
             const double *R = c->R + 9 * C, sc = c->s[C];
-            double v[3];
+            double v[3], p[3];
             for (int i = 0; i < 3; i++)
-                v[i] = R[3 * i] * (2 * CS_CORNER[k][0] - 1) +
-                       R[3 * i + 1] * (2 * CS_CORNER[k][1] - 1) +
-                       R[3 * i + 2] * (2 * CS_CORNER[k][2] - 1);
+                v[i] = R[3 * i] * sg[k][0] + R[3 * i + 1] * sg[k][1] + R[3 * i + 2] * sg[k][2];
+            /* sc·ko·v_i·v_j evaluates left to right: (sc·ko·v_i)·v_j, the p_i hoisted */
+            const double sk = sc * ko, skd = sc * kd;
+            for (int i = 0; i < 3; i++)
+                p[i] = sk * v[i];
             for (int i = 0; i < 3; i++) {
                 for (int j = 0; j < 3; j++)
-                    m[3 * i + j] += sc * ko * v[i] * v[j];
-                m[4 * i] += sc * kd;
+                    m[3 * i + j] += p[i] * v[j];
+                m[4 * i] += skd;
             }
         }
         for (int i = 0; i < 3; i++)

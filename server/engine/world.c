@@ -43,10 +43,16 @@ int cs_engine_fail(char *err, size_t errlen, int code, const char *fmt, ...)
     return code;
 }
 
+/* The stage clock of cs_step_stats: wall time; with -DCS_STAGE_CPU the process's CPU time (all
+ * threads' together), for A/B comparisons of stages on a machine shared with other work. */
 static double now_ms(void)
 {
     struct timespec t;
+#ifdef CS_STAGE_CPU
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
+#else
     clock_gettime(CLOCK_MONOTONIC, &t);
+#endif
     return t.tv_sec * 1e3 + t.tv_nsec / 1e6;
 }
 
@@ -1197,13 +1203,21 @@ static void tangent_operator(void *ctx, const double *p, double *y)
  * touch a few nodes, are added before the inversion in a pass of their own). */
 static void build_preconditioner(cs_object *o)
 {
-    cs_elastic_diag_blocks(o, o->blocks);
     const bool damp = o->fld.has_damping && o->ckcoef != 0;
-    if (damp) /* + dt·β diag(K_d) */
-        cs_elastic_diag_blocks_d(o, o->fld.tmp);
     bool springs = false;
     for (int i = 0; o->dcoef != 0 && i < o->n_inputs; i++)
         springs = springs || (cs_input_is_spring(&o->inputs[i]) && o->inputs[i].delay <= 0);
+    if (!damp && !springs && !o->lf && o->model != CS_MODEL_MSS) {
+        /* FEM (cs_elastic_diag_blocks' dispatch): the blocks, their terms and the inversion
+         * in one node pass, the same operations as below */
+        const cs_fem_node_terms t = {o->m, o->fld.has_damping ? o->fld.md : NULL, o->pin,
+                                     o->mcoef, o->cmcoef, o->pcoef * o->penalty};
+        cs_fem_precond_blocks(&o->fem, o->fem.kf, o->kcoef, &t, o->blocks);
+        return;
+    }
+    cs_elastic_diag_blocks(o, o->blocks);
+    if (damp) /* + dt·β diag(K_d) */
+        cs_elastic_diag_blocks_d(o, o->fld.tmp);
 #pragma omp parallel for num_threads(cs_elastic_threads(o)) schedule(static)
     for (int i = 0; i < o->n; i++) {
         double *B = o->blocks + 9 * (size_t)i;

@@ -199,3 +199,51 @@ TEST(fem_rotation_batched_update_matches_single_cell)
     cs_fem_free(&fem);
     cs_cubemesh_free(&cm);
 }
+
+/*
+ * cs_extract_rotations (n matrices side by side, setup_coarse's coarse rotations) leaves every
+ * q bit for bit as cs_extract_rotation does one at a time, for every count 1..11 (full and
+ * partial groups of lanes): sums of 8 jittered rotations (a coarse cell's summed children),
+ * big turns from a stale warm start (Müller steps with sin/cos), a flat and an inverted matrix
+ * (they stop at different iterations from their neighbours), and the rotations are the polar
+ * ones of the well-conditioned matrices.
+ */
+TEST(fem_rotation_many_match_one_at_a_time)
+{
+    unsigned seed = 23;
+    for (int n = 1; n <= 11; n++) {
+        double A[11][9], q[11][4], q1[11][4];
+        for (int m = 0; m < n; m++) {
+            double qa[4], Ra[9];
+            axis_quat((double[3]){urand(&seed) - 0.5, urand(&seed) - 0.5, urand(&seed) - 0.5},
+                      m % 3 == 0 ? 2.5 : 0.4 * urand(&seed), qa);
+            cs_quat_to_mat(qa, Ra);
+            memset(A[m], 0, sizeof A[m]);
+            for (int c = 0; c < 8; c++) /* 8 children turned a little apart */
+                for (int i = 0; i < 9; i++)
+                    A[m][i] += Ra[i] + 0.05 * (2 * urand(&seed) - 1);
+            if (m == 4) /* flat */
+                for (int i = 0; i < 3; i++)
+                    A[m][3 * i + 2] = 1e-9 * A[m][3 * i + 2];
+            if (m == 6) /* inverted */
+                for (int i = 0; i < 3; i++)
+                    A[m][3 * i + 2] = -A[m][3 * i + 2];
+            q[m][0] = 1, q[m][1] = q[m][2] = q[m][3] = 0;
+            if (m % 2) /* a warm start near the answer */
+                memcpy(q[m], qa, sizeof qa);
+            memcpy(q1[m], q[m], sizeof q[m]);
+        }
+        cs_extract_rotations(n, &A[0][0], &q[0][0], 30);
+        for (int m = 0; m < n; m++) {
+            cs_extract_rotation(A[m], q1[m], 30);
+            ENSURE_MSG(memcmp(q[m], q1[m], sizeof q[m]) == 0, "n %d, matrix %d: q differs", n, m);
+            if (m == 4 || m == 6)
+                continue;
+            double R[9], Rp[9];
+            cs_quat_to_mat(q[m], R);
+            polar(A[m], Rp);
+            for (int i = 0; i < 9; i++)
+                ENSURE_NEAR(R[i], Rp[i], 1e-9);
+        }
+    }
+}
