@@ -328,27 +328,19 @@ static double warm_subspace(cs_cg_work *w, cs_matvec_fn A, void *ctx, const uint
             s -= L[k * nd + i] * al[k];
         al[i] = s / L[i * nd + i];
     }
-#pragma omp parallel for num_threads(threads) schedule(static) if (nb > 1)
-    for (int k = 0; k < nb; k++) {
-        const int lo = k * CS_DOT_BLOCK, hi = lo + CS_DOT_BLOCK < n ? lo + CS_DOT_BLOCK : n;
-        double s = 0;
-        for (int i = lo; i < hi; i++) {
-            double dx = 0, dq = 0;
-            for (int a = 0; a < m; a++) {
-                dx += al[a] * D[a][i];
-                dq += al[a] * Q[a][i];
-            }
-            x[i] += dx;
-            const double ri = mask[i] ? 0.0 : r[i] - dq;
-            r[i] = ri;
-            s += ri * ri;
+    /* p = D α, q = Q α; then x += p, r −= q (update_xr: x + 1·p is x + p exactly) */
+    double *p = w->p, *q = w->q;
+#pragma omp parallel for num_threads(threads) schedule(static)
+    for (int i = 0; i < n; i++) {
+        double dx = 0, dq = 0;
+        for (int a = 0; a < m; a++) {
+            dx += al[a] * D[a][i];
+            dq += al[a] * Q[a][i];
         }
-        w->partial[k] = s;
+        p[i] = dx;
+        q[i] = dq;
     }
-    double s = 0;
-    for (int k = 0; k < nb; k++)
-        s += w->partial[k];
-    return sqrt(s);
+    return sqrt(update_xr(w, mask, 1.0, p, q, x, r, n, threads));
 }
 
 static cs_cg_result pcg(cs_cg_work *w, cs_matvec_fn A, void *ctx, cs_precond_fn B, void *bctx,
