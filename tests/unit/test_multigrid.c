@@ -13,6 +13,7 @@
 #include "check.h"
 #include "cubesim.h"
 #include "fem.h"
+#include "lattice.h"
 #include "mg.h"
 #include "solver.h"
 #include "world_internal.h"
@@ -623,14 +624,9 @@ static double galerkin_gap(int nx, int ny, int nz)
 {
     char err[256];
     const int nc = nx * ny * nz;
-    int32_t *ijk = malloc(sizeof(int32_t) * 3 * (size_t)nc);
-    for (int c = 0, k = 0; k < nz; k++)
-        for (int j = 0; j < ny; j++)
-            for (int i = 0; i < nx; i++, c++) {
-                ijk[3 * c] = i;
-                ijk[3 * c + 1] = j;
-                ijk[3 * c + 2] = k;
-            }
+    int32_t *ijk = cs_box_cells(nx, ny, nz);
+    if (!ijk)
+        return INFINITY;
     cs_cubemesh cm;
     const double origin[3] = {0, 0, 0};
     double gap = INFINITY;

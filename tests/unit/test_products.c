@@ -13,6 +13,7 @@
 #include "check.h"
 #include "cubemesh.h"
 #include "fem.h"
+#include "lattice.h"
 #include "mg.h"
 
 static double urand(unsigned *seed)
@@ -24,16 +25,9 @@ static double urand(unsigned *seed)
 static int block(cs_cubemesh *cm, int nx, int ny, int nz, double h, bool scrambled)
 {
     const int n = nx * ny * nz;
-    int32_t *ijk = malloc(sizeof(int32_t) * 3 * (size_t)n);
+    int32_t *ijk = cs_box_cells(nx, ny, nz);
     if (!ijk)
         return -1;
-    for (int c = 0, k = 0; k < nz; k++)
-        for (int j = 0; j < ny; j++)
-            for (int i = 0; i < nx; i++, c++) {
-                ijk[3 * c] = i;
-                ijk[3 * c + 1] = j;
-                ijk[3 * c + 2] = k;
-            }
     unsigned seed = 5;
     for (int c = n - 1; scrambled && c > 0; c--) {
         const int d = rand_r(&seed) % (c + 1);
