@@ -10,6 +10,7 @@
 #include "check.h"
 #include "cubemesh.h"
 #include "cubesim.h"
+#include "dense_ref.h"
 #include "fem.h"
 #include "solver.h"
 
@@ -383,41 +384,6 @@ static double urand(unsigned *seed)
     return rand_r(seed) / (double)RAND_MAX - 0.5;
 }
 
-/* y = Σ_c R_c K_c R_cᵀ p with the dense 24×24 matrices: K_c = f K (uniform factors) or
- * Σ_g kf_g K_g (graded), R_c = fem->R. */
-static void dense_apply(const cs_fem *fem, const double *kf, const double *p, double *y)
-{
-    memset(y, 0, sizeof(double) * 3 * fem->n_nodes);
-    for (int c = 0; c < fem->n_cells; c++) {
-        const int32_t *nd = fem->cell_nodes + 8 * c;
-        const double *R = fem->R + 9 * c;
-        double Ke[576], u[24], ku[24];
-        for (int i = 0; i < 576; i++) {
-            if (!kf) {
-                Ke[i] = fem->K[i];
-                continue;
-            }
-            Ke[i] = 0;
-            for (int g = 0; g < 8; g++)
-                Ke[i] += kf[8 * c + g] * fem->Kg[576 * g + i];
-        }
-        for (int k = 0; k < 8; k++)
-            for (int i = 0; i < 3; i++) {
-                const double *d = p + 3 * nd[k];
-                u[3 * k + i] = R[i] * d[0] + R[3 + i] * d[1] + R[6 + i] * d[2];
-            }
-        for (int i = 0; i < 24; i++) {
-            ku[i] = 0;
-            for (int j = 0; j < 24; j++)
-                ku[i] += Ke[24 * i + j] * u[j];
-        }
-        for (int k = 0; k < 8; k++)
-            for (int i = 0; i < 3; i++)
-                y[3 * nd[k] + i] += R[3 * i] * ku[3 * k] + R[3 * i + 1] * ku[3 * k + 1] +
-                                    R[3 * i + 2] * ku[3 * k + 2];
-    }
-}
-
 static double max_abs(const double *v, int n)
 {
     double m = 0;
@@ -455,7 +421,7 @@ TEST(fem_modal_product_matches_dense_K)
                 fem.kf = field ? kf : NULL;
                 cs_fem_update_rotations(&fem, x);
                 cs_fem_apply_K(&fem, p, a);
-                dense_apply(&fem, fem.kf, p, b);
+                dense_apply(&fem, fem.kf, NULL, p, b);
                 const double m = max_abs(b, 3 * n);
                 for (int i = 0; i < 3 * n; i++)
                     ENSURE_MSG(fabs(a[i] - b[i]) <= 1e-13 * m,
@@ -528,7 +494,7 @@ TEST(fem_modal_force_energy_consistent)
                 ENSURE(cs_fem_prepare_tangent(&fem, x) == 0);
                 cs_fem_apply_tangent(&fem, p, a);
                 cs_fem_release_tangent(&fem);
-                dense_apply(&fem, fem.kf, p, b);
+                dense_apply(&fem, fem.kf, NULL, p, b);
                 const double m = max_abs(b, 3 * n);
                 for (int i = 0; i < 3 * n; i++)
                     ENSURE_NEAR(a[i], b[i], 1e-9 * m);
