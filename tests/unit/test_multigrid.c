@@ -722,17 +722,9 @@ TEST(mg_stiff_beam_iterations)
     char err[256];
     cs_world_t *w;
     ENSURE(cs_world_create(&wd, &w, err, sizeof err) == CS_OK);
-    const int nx = 32, ny = 8, nz = 8;
-    int32_t *ijk = malloc(sizeof(int32_t) * 3 * nx * ny * nz);
+    const int nx = 32, ny = 8, nz = 8, n = nx * ny * nz;
+    int32_t *ijk = cs_box_cells(nx, ny, nz);
     ENSURE(ijk);
-    int n = 0;
-    for (int k = 0; k < nz; k++)
-        for (int j = 0; j < ny; j++)
-            for (int i = 0; i < nx; i++, n++) {
-                ijk[3 * n] = i;
-                ijk[3 * n + 1] = j;
-                ijk[3 * n + 2] = k;
-            }
     cs_object_def d = cs_object_def_default();
     d.name = "stiff";
     d.model = CS_MODEL_COROTATIONAL;
