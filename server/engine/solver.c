@@ -29,6 +29,19 @@ int cs_cg_work_init(cs_cg_work *w, int n)
     return 0;
 }
 
+static void free_history(cs_cg_work *w)
+{
+    free(w->hist_prev);
+    free(w->hist_end);
+    free(w->gpartial);
+    w->hist_prev = w->hist_end = w->gpartial = NULL;
+    for (int k = 0; k < CS_CG_DIRS; k++) {
+        free(w->dirs[k]);
+        free(w->adirs[k]);
+        w->dirs[k] = w->adirs[k] = NULL;
+    }
+}
+
 void cs_cg_work_free(cs_cg_work *w)
 {
     free(w->r);
@@ -37,27 +50,8 @@ void cs_cg_work_free(cs_cg_work *w)
     free(w->q);
     free(w->zo);
     free(w->partial);
-    free(w->hist_prev);
-    free(w->hist_end);
-    for (int k = 0; k < CS_CG_DIRS; k++) {
-        free(w->dirs[k]);
-        free(w->adirs[k]);
-    }
-    free(w->gpartial);
+    free_history(w);
     memset(w, 0, sizeof *w);
-}
-
-static void free_history(cs_cg_work *w)
-{
-    free(w->hist_prev);
-    free(w->hist_end);
-    free(w->gpartial);
-    w->hist_prev = w->hist_end = w->gpartial = w->dir = NULL;
-    for (int k = 0; k < CS_CG_DIRS; k++) {
-        free(w->dirs[k]);
-        free(w->adirs[k]);
-        w->dirs[k] = w->adirs[k] = NULL;
-    }
 }
 
 int cs_cg_guess(cs_cg_work *w, const double *v, double *x)
@@ -87,7 +81,7 @@ int cs_cg_guess(cs_cg_work *w, const double *v, double *x)
     double *d = w->dirs[CS_CG_DIRS - 1];
     for (int k = CS_CG_DIRS - 1; k > 0; k--)
         w->dirs[k] = w->dirs[k - 1];
-    w->dirs[0] = w->dir = d;
+    w->dirs[0] = d;
     /* One pass: d = v − v_prev (used only if v is bit for bit where the last step ended) and
      * v_prev = v. */
     bool same = w->hist_valid;

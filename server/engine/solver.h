@@ -46,7 +46,6 @@ typedef struct cs_cg_work {
     double *dirs[CS_CG_DIRS];  /* the last steps' velocity changes, newest first (a ring) */
     double *adirs[CS_CG_DIRS]; /* their products in the solve that uses them (scratch) */
     double *gpartial;          /* per block partial sums of the Galerkin system */
-    double *dir;               /* the newest direction: dirs[0] */
     int ndirs;                 /* how many consecutive directions dirs holds */
     int max_dirs;              /* how many to use (1..CS_CG_DIRS; 0 = CS_CG_DIRS) */
     bool hist_valid, dir_ready;

@@ -46,7 +46,7 @@ TEST(warmstart_history_rules)
     ENSURE(cs_cg_guess(&w, v1, x) == 1); /* continuous: armed with d = v1 − v0 */
     ENSURE(memcmp(x, v1, sizeof x) == 0);
     for (int i = 0; i < 6; i++)
-        ENSURE(w.dir[i] == 1.0);
+        ENSURE(w.dirs[0][i] == 1.0);
     /* a state changed between steps (one bit of one component) does not match */
     cs_cg_record(&w, v1);
     double v2[6];
