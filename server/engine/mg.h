@@ -33,7 +33,7 @@
  *
  * Smoother: Chebyshev polynomials of the fourth kind (Lottes' optimised weights) in D⁻¹A over
  * [0, λ], λ = 1.1× a power-iteration estimate of λmax(D⁻¹A), of degree 2 on the finest level
- * and 3 on the coarse ones (an eighth of the cost each, fewer iterations), before (from zero:
+ * (3 if the material's Poisson ratio is 0.4 or more) and 3 on the coarse ones (an eighth of the cost each, fewer iterations), before (from zero:
  * one product less) and after the coarse correction with the same polynomial, so the V-cycle
  * B is symmetric; it is positive definite because the polynomial's error factor stays below 1
  * in modulus up to 1.17 λ (degree 2) and 1.11 λ (degree 3), and the
@@ -73,6 +73,9 @@ int cs_mg_level_nodes(const cs_mg *mg, int level);
 /* Cycles that solve level `level`'s problem per visit from the next finer level: 1, or 2
  * where the level is thin (W-cycle below it); 1 on level 0 and the coarsest. */
 int cs_mg_level_cycles(const cs_mg *mg, int level);
+/* The Chebyshev degree of level `level`'s smoother: 2 on the finest (3 for a Poisson ratio of
+ * 0.4 or more), 3 on the coarse levels; 0 for a level that does not exist. */
+int cs_mg_level_degree(const cs_mg *mg, int level);
 
 /* Per-fine-cell stiffness multipliers (K_e = scale·R K Rᵀ approximately) and per-fine-node
  * diagonal part of the operator, filled by the caller before cs_mg_setup. */

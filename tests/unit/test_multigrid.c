@@ -711,7 +711,7 @@ TEST(mg_coarse_operator_is_galerkin_on_full_blocks)
 /* A stiff cantilever (E = 1e8 Pa: the implicit system is K, barely the mass), nx×ny×nz cubes
  * of 0.05 m held at x = 0: CG iterations per step over its first 6 steps with multigrid,
  * tolerance 1e-6 as in the targets; -1 if a solve failed. */
-static double stiff_cantilever_iterations(int nx, int ny, int nz)
+static double stiff_cantilever_iterations(int nx, int ny, int nz, double poisson)
 {
     cs_world_def wd = cs_world_def_default();
     wd.preconditioner = CS_PRECOND_MULTIGRID;
@@ -728,6 +728,7 @@ static double stiff_cantilever_iterations(int nx, int ny, int nz)
     d.name = "stiff";
     d.model = CS_MODEL_COROTATIONAL;
     d.material.young = 1e8;
+    d.material.poisson = poisson;
     d.material.density = 1000;
     d.cube_size = 0.05;
     d.geometry = CS_GEOMETRY_CELLS;
@@ -764,7 +765,7 @@ static double stiff_cantilever_iterations(int nx, int ny, int nz)
  * session 15). The bound fails if the W-cycle's gain is lost. */
 TEST(mg_stiff_beam_iterations)
 {
-    const double it = stiff_cantilever_iterations(32, 8, 8);
+    const double it = stiff_cantilever_iterations(32, 8, 8, 0.3);
     printf("    32×8×8 cantilever, E = 1e8: CG it/step %.2f\n", it);
     ENSURE(it > 1 && it < 6.2);
 }
@@ -813,9 +814,53 @@ TEST(mg_w_cycle_on_thin_levels)
  * Measured 20.0 CG it/step with V-cycles, 11.5 with two cycles per thin level. */
 TEST(mg_stiff_plate_iterations)
 {
-    const double plate = stiff_cantilever_iterations(24, 24, 2);
+    const double plate = stiff_cantilever_iterations(24, 24, 2, 0.3);
     printf("    24×24×2 plate cantilever, E = 1e8: CG it/step %.2f\n", plate);
     ENSURE(plate > 1 && plate < 15);
+}
+
+/* The finest smoother's degree follows the Poisson ratio: 2 below 0.4, 3 from 0.4 on (the
+ * coarse levels 3 either way), read from the built hierarchy; the cycle stays symmetric
+ * positive definite with either; and a stiff, nearly
+ * incompressible cantilever (ν = 0.45) converges in fewer iterations than with degree 2
+ * (measured 32×8×8: 9.33 with degree 2, 6.67 with 3). */
+TEST(mg_near_incompressible_degree)
+{
+    const double nus[3] = {0.3, 0.399, 0.45};
+    const int want[3] = {2, 2, 3};
+    for (int k = 0; k < 3; k++) {
+        char err[256];
+        cs_world_def wd = cs_world_def_default();
+        cs_world_t *w;
+        ENSURE(cs_world_create(&wd, &w, err, sizeof err) == CS_OK);
+        int32_t *ijk = cs_box_cells(8, 8, 8);
+        ENSURE(ijk);
+        cs_object_def d = cs_object_def_default();
+        d.name = "o";
+        d.model = CS_MODEL_COROTATIONAL;
+        d.material.poisson = nus[k];
+        d.cube_size = 0.05;
+        d.geometry = CS_GEOMETRY_CELLS;
+        d.cells_ijk = ijk;
+        d.n_cells = 512;
+        cs_object_id id;
+        const int rc = cs_world_add_object(w, &d, &id, err, sizeof err);
+        free(ijk);
+        ENSURE_MSG(rc == CS_OK, "add: %s", err);
+        cs_object *o = cs_world_find_internal(w, id);
+        cs_mg *mg = cs_mg_build(&o->cm, &o->fem, 0);
+        ENSURE(mg);
+        const int d0 = cs_mg_level_degree(mg, 0), d1 = cs_mg_level_degree(mg, 1);
+        cs_mg_free(mg);
+        int levels = 0; /* the cycle with either degree: symmetric positive definite */
+        ENSURE(check_spd(o, &levels) == 0);
+        cs_world_destroy(w);
+        printf("    ν = %.3f: degrees %d (finest), %d (level 1)\n", nus[k], d0, d1);
+        ENSURE(d0 == want[k] && d1 == 3);
+    }
+    const double it = stiff_cantilever_iterations(32, 8, 8, 0.45);
+    printf("    32×8×8 cantilever, E = 1e8, ν = 0.45: CG it/step %.2f\n", it);
+    ENSURE(it > 1 && it < 8.1);
 }
 
 /* ---------------------------------------------------------------- the node pass's variants */
