@@ -33,16 +33,17 @@
  *
  * Smoother: Chebyshev polynomials of the fourth kind (Lottes' optimised weights) in D⁻¹A over
  * [0, λ], λ = 1.1× a power-iteration estimate of λmax(D⁻¹A), of degree 2 on the finest level
- * (3 if the material's Poisson ratio is 0.4 or more) and 3 on the coarse ones (an eighth of the cost each, fewer iterations), before (from zero:
- * one product less) and after the coarse correction with the same polynomial, so the V-cycle
- * B is symmetric; it is positive definite because the polynomial's error factor stays below 1
- * in modulus up to 1.17 λ (degree 2) and 1.11 λ (degree 3), and the
- * coarsest level is solved exactly (dense Cholesky) or, if coarsening stalls above
- * CS_MG_DENSE_NODES nodes, by a fixed number of damped Jacobi sweeps (ω = 4/(3λ), a symmetric
- * polynomial). A coarse level with at least 1.5 nodes per cell (thin or small: where coarse
- * cubes lock in bending) is solved by two cycles instead of one (a W-cycle below it; two
- * cycles of a symmetric B are 2B − BAB, symmetric too). Products run on the object's threads in fixed-order element and node passes,
- * so the result is independent of the thread count.
+ * (3 if the material's Poisson ratio is 0.4 or more) and 3 on the coarse ones (an eighth of
+ * the cost each, fewer iterations), before (from zero: one product less) and after the coarse
+ * correction with the same polynomial, so the V-cycle B is symmetric; it is positive definite
+ * because the polynomial's error factor stays below 1 in modulus up to 1.17 λ (degree 2) and
+ * 1.11 λ (degree 3), and the coarsest level is solved exactly (dense Cholesky) or, if
+ * coarsening stalls above CS_MG_DENSE_NODES nodes, by a fixed number of damped Jacobi sweeps
+ * (ω = 4/(3λ), a symmetric polynomial). A coarse level with at least 1.5 nodes per cell (thin
+ * or small: where coarse cubes lock in bending) is solved by two cycles instead of one (a
+ * W-cycle below it; two cycles of a symmetric B are 2B − BAB, symmetric too). Products run on
+ * the object's threads in fixed-order element and node passes, so the result is independent
+ * of the thread count.
  *
  * Owns: every array of every coarse level and the scratch vectors. Borrows: the finest level's
  * cell links and lattice indices (the object's cube mesh), its adjacency and rotations (fem).
@@ -94,7 +95,7 @@ int cs_mg_setup(cs_mg *mg, const cs_fem *fem, cs_matvec_fn A, void *ctx, const d
 void cs_mg_vcycle(void *ctx, const double *r, double *z);
 
 /* The smoother: Chebyshev polynomials of the fourth kind with Lottes' optimised weights, of
- * degree 2 on the finest level and 3 on the coarse ones, over [0, λ] (λ = 1.1 × the power
+ * degree 2 on the finest level (3 at ν ≥ 0.4) and 3 on the coarse ones, over [0, λ] (λ = 1.1 × the power
  * estimate of λmax(D⁻¹A)). cs_mg_smoother_poly: the error polynomial e(t) = 1 − t p(t) in
  * t = λ(D⁻¹A)/λ, coefficients e[0..deg]; cs_mg_smoother_steps: the weights c_i (the
  * reciprocals of its roots, mildest first) of the product form e(t) = Π (1 − c_i t) the
