@@ -96,10 +96,11 @@ void cs_mg_vcycle(void *ctx, const double *r, double *z);
 
 /* The smoother: Chebyshev polynomials of the fourth kind with Lottes' optimised weights, of
  * degree 2 on the finest level (3 at ν ≥ 0.4) and 3 on the coarse ones, over [0, λ]
- * (λ = 1.1 × the power estimate of λmax(D⁻¹A)). cs_mg_smoother_poly: the error polynomial e(t) = 1 − t p(t) in
- * t = λ(D⁻¹A)/λ, coefficients e[0..deg]; cs_mg_smoother_steps: the weights c_i (the
- * reciprocals of its roots, mildest first) of the product form e(t) = Π (1 − c_i t) the
- * V-cycle applies as x += (c_i/λ) D⁻¹ (b − A x); −1 if deg is not 1..CS_MG_CHEB_MAX. */
+ * (λ = 1.1 × the power estimate of λmax(D⁻¹A)). cs_mg_smoother_poly: the error polynomial
+ * e(t) = 1 − t p(t) in t = λ(D⁻¹A)/λ, coefficients e[0..deg]; cs_mg_smoother_steps: the
+ * weights c_i (the reciprocals of its roots, mildest first) of the product form
+ * e(t) = Π (1 − c_i t) the V-cycle applies as x += (c_i/λ) D⁻¹ (b − A x); −1 if deg is not
+ * 1..CS_MG_CHEB_MAX. */
 #define CS_MG_CHEB_MAX 4
 void cs_mg_smoother_poly(int deg, double *e);
 int cs_mg_smoother_steps(int deg, double *c);
