@@ -544,6 +544,7 @@ modal_avx512_body(mlanes *restrict b, int rot, double rest, int energy, const in
     for (int h = 0; h < LANES; h += 4) {
         vd4 u[24], R[9], y[24], e, L, M;
         const double *x = b->x;
+#pragma GCC unroll 8
         for (int k = 0; k < 8; k++) {
             int32_t q[4];
             for (int l = 0; l < 4; l++)
@@ -614,11 +615,16 @@ modal_avx512_body(mlanes *restrict b, int rot, double rest, int energy, const in
  * instructions than element by element; 256-bit vectors with 32 registers: 512-bit vectors of
  * 8 lanes measured slower on this Zen 4, which splits them in two). A plain batch (cn) reads
  * its corner indices from the cells' node lists, its rotations and writes its results with
- * whole vectors transposed in registers (no per-batch tables). */
+ * whole vectors transposed in registers (no per-batch tables). A product's plain batch (rotated,
+ * no rest shape, no energy: cs_fem_apply_K's) gets its own instance with those flags constant
+ * and the corner loop unrolled, so the 24 nodal vectors stay in registers instead of a stack
+ * array and no flag is tested per half (32³ product 0.77 → 0.70 ms, bit for bit the same). */
 __attribute__((optimize("fp-contract=fast"), target("arch=x86-64-v4")))
 static void modal_kernel_avx512(mlanes *restrict b, int rot, double rest, int energy)
 {
-    if (b->cn)
+    if (b->cn && rot && rest == 0 && !energy)
+        modal_avx512_body(b, 1, 0.0, 0, 1); /* a product's batch: the flags constant */
+    else if (b->cn)
         modal_avx512_body(b, rot, rest, energy, 1);
     else
         modal_avx512_body(b, rot, rest, energy, 0);
