@@ -204,3 +204,79 @@ TEST(mg_fine_product_windowed_matches_fem)
         cs_cubemesh_free(&cm);
     }
 }
+
+/* cs_fem_apply_K_multi is k calls of cs_fem_apply_K bit for bit: k = 3 and 5 (lanes without a
+ * vector; a pass of 4 and a remainder), corotational (and linear: its fallback), uniform and
+ * graded cells (every fifth), with and without an active region, box and scrambled order, 1
+ * and 2 threads; and a relink that changes the windows' size between calls (the kept buffers
+ * regrown). */
+TEST(fem_multi_product_equals_single_products)
+{
+    for (int scrambled = 0; scrambled < 2; scrambled++) {
+        cs_cubemesh cm;
+        ENSURE(block(&cm, 31, 10, 10, 0.05, scrambled) == 0);
+        const int n = cm.n_nodes, nc = cm.n_cells;
+        double *x = malloc(sizeof(double) * 3 * n), *kf = malloc(sizeof(double) * 8 * nc),
+               *ref = malloc(sizeof(double) * 3 * n), *P[6], *Y[6];
+        uint8_t *act = malloc((size_t)nc);
+        unsigned seed = 33;
+        bent(&cm, x, &seed);
+        for (int j = 0; j < 6; j++) {
+            P[j] = malloc(sizeof(double) * 3 * n);
+            Y[j] = malloc(sizeof(double) * 3 * n);
+            for (int i = 0; i < 3 * n; i++)
+                P[j][i] = urand(&seed);
+        }
+        for (int c = 0; c < nc; c++) {
+            act[c] = c % 7 != 3 && (c / 50) % 4 != 1;
+            for (int g = 0; g < 8; g++)
+                kf[8 * c + g] = c % 5 == 0 ? 0.5 + 0.2 * g : 1.0 + 0.25 * (c % 3);
+        }
+        for (int rot = 0; rot < 2; rot++)
+            for (int t = 1; t <= 2; t++)
+                for (int variant = 0; variant < (rot ? 3 : 1); variant++) {
+                    /* plain, graded, active */
+                    cs_fem f;
+                    ENSURE(cs_fem_init(&f, &cm, 2e6, 0.3, rot, t) == 0);
+                    ENSURE(f.threads == t);
+                    cs_fem_update_rotations(&f, x);
+                    if (variant >= 1)
+                        f.kf = kf;
+                    if (variant == 2)
+                        f.cell_active = act;
+                    for (int k = 3; k <= 5; k += 2) {
+                        for (int j = 0; j < k; j++)
+                            for (int i = 0; i < 3 * n; i++)
+                                Y[j][i] = NAN;
+                        cs_fem_apply_K_multi(&f, k, (const double *const *)P, Y);
+                        for (int j = 0; j < k; j++) {
+                            cs_fem_apply_K(&f, P[j], ref);
+                            ENSURE_MSG(memcmp(ref, Y[j], sizeof(double) * 3 * n) == 0,
+                                       "scrambled %d rot %d threads %d variant %d k %d vector %d",
+                                       scrambled, rot, t, variant, k, j);
+                        }
+                    }
+                    if (variant == 0 && t == 1) {
+                        /* a relink to the same mesh on 2 threads' layout: windows of another
+                         * size, buffers kept from before */
+                        f.threads = 2;
+                        ENSURE(cs_fem_relink(&f, &cm) == 0);
+                        cs_fem_apply_K_multi(&f, 3, (const double *const *)P, Y);
+                        for (int j = 0; j < 3; j++) {
+                            cs_fem_apply_K(&f, P[j], ref);
+                            ENSURE(memcmp(ref, Y[j], sizeof(double) * 3 * n) == 0);
+                        }
+                    }
+                    cs_fem_free(&f);
+                }
+        for (int j = 0; j < 6; j++) {
+            free(P[j]);
+            free(Y[j]);
+        }
+        free(x);
+        free(kf);
+        free(ref);
+        free(act);
+        cs_cubemesh_free(&cm);
+    }
+}
