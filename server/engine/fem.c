@@ -1075,30 +1075,35 @@ static void node_range_any(const cs_fem *fem, int q0, int q1, int b0, int after,
             node_sum(fem, o->fe, fem->norder[q], o->out, o->sign);
 }
 
-/* The same with AVX-512VL: an interior node (8 links, no active region) sums its 8 corner
- * results as masked 3-double vectors (one load and one add per link instead of two of each),
- * the same terms in the same order from the same zero, so bit for bit node_sum's; one masked
- * store. */
+/* The same with AVX-512VL: a node sums its corner results as masked 3-double vectors (one
+ * load and one add per link instead of two of each), the same terms in the same order from the
+ * same zero, so bit for bit node_sum's (an interior node's 8 unrolled); one masked store. No
+ * call in the loop: with node_sum's scalar branch inlined or called, GCC kept fadj in a vector
+ * register and moved it back before every link. */
 __attribute__((target("arch=x86-64-v4"))) static void
 node_range_avx512(const cs_fem *fem, int q0, int q1, int b0, int after, const node_out *o)
 {
     const int32_t *restrict fadj = fem->fadj, *restrict as = fem->adj_start;
     const int32_t *restrict norder = fem->norder, *restrict nminb = fem->nminb;
+    const int32_t *restrict adj = fem->adj;
+    const uint8_t *act = fem->cell_active;
     const double *restrict fe = o->fe;
     double *out = o->out;
     const __m256d sg = _mm256_set1_pd(o->sign);
     for (int q = q0; q < q1; q++) {
         if ((nminb[q] < b0) != after)
             continue;
-        const int n = norder[q], a0 = as[n];
-        if (as[n + 1] - a0 != 8 || fem->cell_active) {
-            node_sum(fem, fe, n, out, o->sign);
-            continue;
-        }
-        const int32_t *f = fadj + a0;
+        const int n = norder[q], a0 = as[n], a1 = as[n + 1];
         __m256d s = _mm256_setzero_pd();
-        for (int k = 0; k < 8; k++)
-            s = _mm256_add_pd(s, _mm256_maskz_loadu_pd(7, fe + f[k]));
+        if (a1 - a0 == 8 && !act) {
+            const int32_t *f = fadj + a0;
+            for (int k = 0; k < 8; k++)
+                s = _mm256_add_pd(s, _mm256_maskz_loadu_pd(7, fe + f[k]));
+        } else {
+            for (int a = a0; a < a1; a++)
+                if (!act || act[adj[a] >> 3])
+                    s = _mm256_add_pd(s, _mm256_maskz_loadu_pd(7, fe + fadj[a]));
+        }
         _mm256_mask_storeu_pd(out + 3 * (size_t)n, 7, _mm256_mul_pd(sg, s));
     }
 }
