@@ -17,8 +17,7 @@
  * of cs_world_solve_static on such a cantilever (default E = 1e7 Pa). --peak: the machine's
  * FMA throughput (16 independent AVX2 / AVX-512 chains per thread, OpenMP threads), and with
  * --kernel N the GFLOP/s of cs_fem_apply_K on an N³ corotational block (flops from
- * cs_fem_product_flops) as a fraction of that peak, in the same run, and the same per product
- * for 4 products at once (cs_fem_apply_K_multi, the warm start's 4 directions). Sizes of 200 000 cubes
+ * cs_fem_product_flops) as a fraction of that peak, in the same run. Sizes of 200 000 cubes
  * or more get --big-steps steps × --big-runs runs (default 3 × 3). --vcycle N: the time of one
  * multigrid V-cycle (cs_mg_vcycle) on the implicit step's operator of an N³ block, and the CPU
  * time of its finest-level product alone (cs_mg_apply_level 0).
@@ -269,9 +268,7 @@ static int unit_block(int n, int threads, cs_cubemesh *cm, cs_fem *fem)
     return 0;
 }
 
-/* nvec = 0: cs_fem_apply_K; nvec > 0: cs_fem_apply_K_multi on nvec vectors, the figures per
- * product (ms, flops) */
-static int kernel_gflops(int n, int threads, int calls, int runs, int nvec, double *gflops,
+static int kernel_gflops(int n, int threads, int calls, int runs, double *gflops,
                          double *cpu_gflops, double *flops_per_call, double *ms_call)
 {
     cs_cubemesh cm;
@@ -279,15 +276,8 @@ static int kernel_gflops(int n, int threads, int calls, int runs, int nvec, doub
     if (unit_block(n, threads, &cm, &fem) != 0)
         return -1;
     size_t nn = 3 * (size_t)cm.n_nodes;
-    const int nv = nvec > 0 ? nvec : 1;
-    double *x = malloc(sizeof(double) * nn), *p = malloc(sizeof(double) * nn * nv),
-           *y = malloc(sizeof(double) * nn * nv);
-    const double *P[64];
-    double *Y[64];
-    for (int j = 0; j < nv && j < 64; j++) {
-        P[j] = p + nn * j;
-        Y[j] = y + nn * j;
-    }
+    double *x = malloc(sizeof(double) * nn), *p = malloc(sizeof(double) * nn),
+           *y = malloc(sizeof(double) * nn);
     for (int a = 0; a < cm.n_nodes; a++) { /* bent about y: every element rotated differently */
         const double *X = cm.node_rest + 3 * a;
         double th = 0.5 * X[2];
@@ -295,27 +285,20 @@ static int kernel_gflops(int n, int threads, int calls, int runs, int nvec, doub
         x[3 * a + 1] = X[1];
         x[3 * a + 2] = -X[0] * sin(th) + X[2] * cos(th);
     }
-    for (size_t k = 0; k < nn * nv; k++)
+    for (size_t k = 0; k < nn; k++)
         p[k] = sin(0.37 * (double)k);
     cs_fem_update_rotations(&fem, x);
     double fl = cs_fem_product_flops(&fem);
-    if (nvec > 0) /* warm-up (and its buffers) */
-        cs_fem_apply_K_multi(&fem, nv, P, Y);
-    else
-        cs_fem_apply_K(&fem, p, y);
+    cs_fem_apply_K(&fem, p, y); /* warm-up */
     double g[100], gc[100], ms[100];
     for (int r = 0; r < runs; r++) {
         double t0 = now_s(), c0 = cpu_s();
-        for (int k = 0; k < calls; k++) {
-            if (nvec > 0)
-                cs_fem_apply_K_multi(&fem, nv, P, Y);
-            else
-                cs_fem_apply_K(&fem, p, y);
-        }
+        for (int k = 0; k < calls; k++)
+            cs_fem_apply_K(&fem, p, y);
         double el = now_s() - t0, cpu = cpu_s() - c0;
-        g[r] = 1e-9 * fl * calls * nv / el;
-        gc[r] = cpu > 0 ? 1e-9 * fl * calls * nv / cpu * fem.threads : NAN;
-        ms[r] = 1e3 * el / calls / nv;
+        g[r] = 1e-9 * fl * calls / el;
+        gc[r] = cpu > 0 ? 1e-9 * fl * calls / cpu * fem.threads : NAN;
+        ms[r] = 1e3 * el / calls;
     }
     *gflops = median(g, runs);
     *cpu_gflops = median(gc, runs);
@@ -622,18 +605,10 @@ int main(int argc, char **argv)
             double g1 = 0;
             for (int ti = 0; ti < nt; ti++) {
                 double g, gc, fl, ms;
-                if (kernel_gflops(kernel_n, threads[ti], calls, runs, 0, &g, &gc, &fl, &ms) != 0)
+                if (kernel_gflops(kernel_n, threads[ti], calls, runs, &g, &gc, &fl, &ms) != 0)
                     return 1;
                 printf("| cs_fem_apply_K, %d³ corotational | %d | %.3g | %.2f | %.2f | %.2f | %.1f %% |\n",
                        kernel_n, threads[ti], fl, ms, g, gc, pk[ti] > 0 ? 100.0 * gc / pk[ti] : NAN);
-                fflush(stdout);
-                /* 4 products per call (the warm start's directions): figures per product */
-                double gm, gcm, flm, msm;
-                if (kernel_gflops(kernel_n, threads[ti], calls, runs, 4, &gm, &gcm, &flm, &msm) != 0)
-                    return 1;
-                printf("| 4 at once, cs_fem_apply_K_multi, per product | %d | %.3g | %.2f | %.2f | %.2f | "
-                       "%.1f %% |\n", threads[ti], flm, msm, gm, gcm,
-                       pk[ti] > 0 ? 100.0 * gcm / pk[ti] : NAN);
                 fflush(stdout);
                 if (ti == 0)
                     g1 = g;

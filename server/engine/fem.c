@@ -333,7 +333,6 @@ void cs_fem_free(cs_fem *fem)
     free(fem->R);
     free(fem->q);
     free(fem->fe);
-    free(fem->fe_multi);
     free(fem->adj_start);
     free(fem->adj);
     free(fem->tg);
@@ -538,55 +537,9 @@ static void modal_kernel_any(mlanes *restrict b, int rot, double rest, int energ
         d = _mm256_permute2f128_pd(t1_, t3_, 0x31);                                          \
     } while (0)
 
-#define AVX512_INLINE                                                                          \
-    __attribute__((optimize("fp-contract=fast"), target("arch=x86-64-v4"))) static inline      \
-        __attribute__((always_inline))
-
-/* Corner k's nodal vectors of 4 lanes (x + q[l]) transposed into u[3k..3k+2]. */
-AVX512_INLINE void gather4(const double *x, const int32_t q[4], vd4 *u)
-{
-    const __m256d r0 = _mm256_maskz_loadu_pd(7, x + q[0]);
-    const __m256d r1 = _mm256_maskz_loadu_pd(7, x + q[1]);
-    const __m256d r2 = _mm256_maskz_loadu_pd(7, x + q[2]);
-    const __m256d r3 = _mm256_maskz_loadu_pd(7, x + q[3]);
-    const __m256d t0 = _mm256_unpacklo_pd(r0, r1), t1 = _mm256_unpackhi_pd(r0, r1);
-    const __m256d t2 = _mm256_unpacklo_pd(r2, r3), t3 = _mm256_unpackhi_pd(r2, r3);
-    u[0] = (vd4)_mm256_permute2f128_pd(t0, t2, 0x20);
-    u[1] = (vd4)_mm256_permute2f128_pd(t1, t3, 0x20);
-    u[2] = (vd4)_mm256_permute2f128_pd(t0, t2, 0x31);
-}
-
-/* 4 cells' contiguous rotations (9 each from Rp) across the lanes: entries 0–3 and 4–7 by two
- * 4 × 4 transposes. */
-AVX512_INLINE void rot_load4(const double *Rp, vd4 R[9])
-{
-    __m256d a0 = _mm256_loadu_pd(Rp), a1 = _mm256_loadu_pd(Rp + 9), a2 = _mm256_loadu_pd(Rp + 18),
-            a3 = _mm256_loadu_pd(Rp + 27);
-    __m256d c0 = _mm256_loadu_pd(Rp + 4), c1 = _mm256_loadu_pd(Rp + 13),
-            c2 = _mm256_loadu_pd(Rp + 22), c3 = _mm256_loadu_pd(Rp + 31);
-    TRANSPOSE4(a0, a1, a2, a3);
-    TRANSPOSE4(c0, c1, c2, c3);
-    R[0] = (vd4)a0, R[1] = (vd4)a1, R[2] = (vd4)a2, R[3] = (vd4)a3;
-    R[4] = (vd4)c0, R[5] = (vd4)c1, R[6] = (vd4)c2, R[7] = (vd4)c3;
-    R[8] = (vd4){Rp[8], Rp[17], Rp[26], Rp[35]};
-}
-
-/* 4 lanes' 24 results, contiguous per lane from o: 6 transposes of 4 × 4, whole stores. */
-AVX512_INLINE void store_plain4(double *o, const vd4 y[24])
-{
-    for (int m = 0; m < 6; m++) {
-        __m256d a = (__m256d)y[4 * m], bb = (__m256d)y[4 * m + 1], c = (__m256d)y[4 * m + 2],
-                d = (__m256d)y[4 * m + 3];
-        TRANSPOSE4(a, bb, c, d);
-        _mm256_storeu_pd(o + 4 * m, a);
-        _mm256_storeu_pd(o + 24 + 4 * m, bb);
-        _mm256_storeu_pd(o + 48 + 4 * m, c);
-        _mm256_storeu_pd(o + 72 + 4 * m, d);
-    }
-}
-
-AVX512_INLINE void modal_avx512_body(mlanes *restrict b, int rot, double rest, int energy,
-                                     const int plain)
+__attribute__((optimize("fp-contract=fast"), target("arch=x86-64-v4"))) static inline
+    __attribute__((always_inline)) void
+modal_avx512_body(mlanes *restrict b, int rot, double rest, int energy, const int plain)
 {
     for (int h = 0; h < LANES; h += 4) {
         vd4 u[24], R[9], y[24], e, L, M;
@@ -596,10 +549,28 @@ AVX512_INLINE void modal_avx512_body(mlanes *restrict b, int rot, double rest, i
             int32_t q[4];
             for (int l = 0; l < 4; l++)
                 q[l] = plain ? 3 * b->cn[8 * (h + l) + k] : b->ix[k][h + l];
-            gather4(x, q, u + 3 * k);
+            const __m256d r0 = _mm256_maskz_loadu_pd(7, x + q[0]);
+            const __m256d r1 = _mm256_maskz_loadu_pd(7, x + q[1]);
+            const __m256d r2 = _mm256_maskz_loadu_pd(7, x + q[2]);
+            const __m256d r3 = _mm256_maskz_loadu_pd(7, x + q[3]);
+            const __m256d t0 = _mm256_unpacklo_pd(r0, r1), t1 = _mm256_unpackhi_pd(r0, r1);
+            const __m256d t2 = _mm256_unpacklo_pd(r2, r3), t3 = _mm256_unpackhi_pd(r2, r3);
+            u[3 * k] = (vd4)_mm256_permute2f128_pd(t0, t2, 0x20);
+            u[3 * k + 1] = (vd4)_mm256_permute2f128_pd(t1, t3, 0x20);
+            u[3 * k + 2] = (vd4)_mm256_permute2f128_pd(t0, t2, 0x31);
         }
         if (rot && plain) {
-            rot_load4(b->R + 9 * h, R);
+            /* 4 cells' 9 entries: entries 0–3 and 4–7 by two 4 × 4 transposes */
+            const double *Rp = b->R + 9 * h;
+            __m256d a0 = _mm256_loadu_pd(Rp), a1 = _mm256_loadu_pd(Rp + 9),
+                    a2 = _mm256_loadu_pd(Rp + 18), a3 = _mm256_loadu_pd(Rp + 27);
+            __m256d c0 = _mm256_loadu_pd(Rp + 4), c1 = _mm256_loadu_pd(Rp + 13),
+                    c2 = _mm256_loadu_pd(Rp + 22), c3 = _mm256_loadu_pd(Rp + 31);
+            TRANSPOSE4(a0, a1, a2, a3);
+            TRANSPOSE4(c0, c1, c2, c3);
+            R[0] = (vd4)a0, R[1] = (vd4)a1, R[2] = (vd4)a2, R[3] = (vd4)a3;
+            R[4] = (vd4)c0, R[5] = (vd4)c1, R[6] = (vd4)c2, R[7] = (vd4)c3;
+            R[8] = (vd4){Rp[8], Rp[17], Rp[26], Rp[35]};
         } else if (rot) {
             const int32_t *rix = b->rix + h;
             for (int j = 0; j < 9; j++)
@@ -612,7 +583,17 @@ AVX512_INLINE void modal_avx512_body(mlanes *restrict b, int rot, double rest, i
         if (energy)
             memcpy(b->e + h, &e, sizeof e);
         if (plain) {
-            store_plain4(b->ob + 24 * h, y);
+            /* lane l's 24 results are contiguous: 6 transposes of 4 × 4, whole stores */
+            double *o = b->ob + 24 * h;
+            for (int m = 0; m < 6; m++) {
+                __m256d a = (__m256d)y[4 * m], bb = (__m256d)y[4 * m + 1],
+                        c = (__m256d)y[4 * m + 2], d = (__m256d)y[4 * m + 3];
+                TRANSPOSE4(a, bb, c, d);
+                _mm256_storeu_pd(o + 4 * m, a);
+                _mm256_storeu_pd(o + 24 + 4 * m, bb);
+                _mm256_storeu_pd(o + 48 + 4 * m, c);
+                _mm256_storeu_pd(o + 72 + 4 * m, d);
+            }
             continue;
         }
         for (int k = 0; k < 8; k++) {
@@ -1000,7 +981,6 @@ static int product_layout(cs_fem *fem)
     }
     free(fill);
     fem->span = span;
-    fem->nslot = 0;
     const int64_t head = span, ring = (int64_t)span + FEM_CHUNK;
     int64_t total = 0;
     for (int sg = 0; sg < fem->nseg; sg++) {
@@ -1011,7 +991,6 @@ static int product_layout(cs_fem *fem)
         }
         total += b1 - b0 < head + ring ? b1 - b0 : head + ring;
     }
-    fem->nslot = (int)total;
     for (int a = 0; a < 8 * fem->n_cells; a++) {
         const int c = adj[a] / 8, k = adj[a] % 8;
         fem->fadj[a] = 24 * (LANES * fem->bslot[c / LANES] + c % LANES) + 3 * k;
@@ -1024,10 +1003,11 @@ static int product_layout(cs_fem *fem)
  * of a block) sums them unrolled, in the same order: its 8 slots are loaded at once instead of
  * one per trip of a loop whose length varies from node to node (measured 20–30 % faster on
  * 32³–64³ blocks). */
-static inline __attribute__((always_inline)) void node_sum(const cs_fem *fem, const double *fe,
-                                                           int n, double *out, double sign)
+static inline __attribute__((always_inline)) void node_sum(const cs_fem *fem, int n,
+                                                           double *out, double sign)
 {
     const int32_t *restrict fadj = fem->fadj;
+    const double *restrict fe = fem->fe;
     const uint8_t *act = fem->cell_active;
     const int a0 = fem->adj_start[n], a1 = fem->adj_start[n + 1];
     double s0 = 0, s1 = 0, s2 = 0;
@@ -1055,24 +1035,15 @@ static inline __attribute__((always_inline)) void node_sum(const cs_fem *fem, co
     out[3 * (size_t)n + 2] = sign * s2;
 }
 
-/* Where a single product's node pass reads (its window fe) and writes (out = sign · Σ). */
-typedef struct node_out {
-    const double *fe;
-    double *out;
-    double sign;
-} node_out;
-
 /* The node pass over positions [q0, q1) of norder: the nodes whose first batch is >= b0
  * (after = 0: their cells are all in this segment) or < b0 (after = 1: shared with a lower
  * segment, after the barrier). */
-typedef void (*node_fn)(const cs_fem *fem, int q0, int q1, int b0, int after, const void *o);
-
-static void node_range_any(const cs_fem *fem, int q0, int q1, int b0, int after,
-                           const node_out *o)
+static void node_range_any(const cs_fem *fem, int q0, int q1, int b0, int after, double *out,
+                           double sign)
 {
     for (int q = q0; q < q1; q++)
         if ((fem->nminb[q] < b0) == after)
-            node_sum(fem, o->fe, fem->norder[q], o->out, o->sign);
+            node_sum(fem, fem->norder[q], out, sign);
 }
 
 /* The same with AVX-512VL: a node sums its corner results as masked 3-double vectors (one
@@ -1081,15 +1052,14 @@ static void node_range_any(const cs_fem *fem, int q0, int q1, int b0, int after,
  * call in the loop: with node_sum's scalar branch inlined or called, GCC kept fadj in a vector
  * register and moved it back before every link. */
 __attribute__((target("arch=x86-64-v4"))) static void
-node_range_avx512(const cs_fem *fem, int q0, int q1, int b0, int after, const node_out *o)
+node_range_avx512(const cs_fem *fem, int q0, int q1, int b0, int after, double *out, double sign)
 {
     const int32_t *restrict fadj = fem->fadj, *restrict as = fem->adj_start;
     const int32_t *restrict norder = fem->norder, *restrict nminb = fem->nminb;
     const int32_t *restrict adj = fem->adj;
     const uint8_t *act = fem->cell_active;
-    const double *restrict fe = o->fe;
-    double *out = o->out;
-    const __m256d sg = _mm256_set1_pd(o->sign);
+    const double *restrict fe = fem->fe;
+    const __m256d sg = _mm256_set1_pd(sign);
     for (int q = q0; q < q1; q++) {
         if ((nminb[q] < b0) != after)
             continue;
@@ -1108,16 +1078,16 @@ node_range_avx512(const cs_fem *fem, int q0, int q1, int b0, int after, const no
     }
 }
 
-static void node_range(const cs_fem *fem, int q0, int q1, int b0, int after, const void *o)
+static void node_range(const cs_fem *fem, int q0, int q1, int b0, int after, double *out,
+                       double sign)
 {
     if (__builtin_cpu_supports("x86-64-v4"))
-        node_range_avx512(fem, q0, q1, b0, after, o);
+        node_range_avx512(fem, q0, q1, b0, after, out, sign);
     else
-        node_range_any(fem, q0, q1, b0, after, o);
+        node_range_any(fem, q0, q1, b0, after, out, sign);
 }
 
-/* The element pass of batch b: its results into fb (its slot of the window), its energy added
- * to *e. */
+/* The element pass of batch b: its results into fb (24 × LANES), its energy added to *e. */
 typedef void (*batch_fn)(cs_fem *fem, int b, double *fb, const void *ctx, double *e);
 
 /*
@@ -1127,8 +1097,7 @@ typedef void (*batch_fn)(cs_fem *fem, int b, double *fb, const void *ctx, double
  * cache); after the barrier the nodes it shares with lower segments. Every node's sum has the
  * same terms in the same order for any thread count. Returns the sum of the batches' energies.
  */
-static double fused_pass_gen(cs_fem *fem, batch_fn fn, const void *ctx, double *fe, size_t slot,
-                             node_fn nf, const void *o)
+static double fused_pass(cs_fem *fem, batch_fn fn, const void *ctx, double *out, double sign)
 {
     const int nb = n_batches(fem->n_cells);
     double e_sum = 0;
@@ -1140,30 +1109,24 @@ static double fused_pass_gen(cs_fem *fem, batch_fn fn, const void *ctx, double *
             for (int j0 = b0; j0 < b1; j0 += FEM_CHUNK) {
                 const int j1 = j0 + FEM_CHUNK < b1 ? j0 + FEM_CHUNK : b1;
                 for (int b = j0; b < j1; b++)
-                    fn(fem, b, fe + slot * (size_t)fem->bslot[b], ctx, &e_sum);
-                nf(fem, fem->nfirst[j0], fem->nfirst[j1], b0, 0, o);
+                    fn(fem, b, fem->fe + 24 * LANES * (size_t)fem->bslot[b], ctx, &e_sum);
+                node_range(fem, fem->nfirst[j0], fem->nfirst[j1], b0, 0, out, sign);
             }
         }
         /* nodes without cells (sorted to batch 0): when there are no batches at all */
         if (nb == 0 && t == 0)
-            nf(fem, 0, fem->n_nodes, 0, 0, o);
+            for (int q = 0; q < fem->n_nodes; q++)
+                node_sum(fem, fem->norder[q], out, sign);
 #pragma omp barrier
         for (int sg = t; sg < fem->nseg; sg += nt) {
             const int b0 = seg_start(fem, nb, sg), b1 = seg_start(fem, nb, sg + 1);
             /* a node whose first batch is below b0 has its last within span of it */
             const int bs = b0 + fem->span + 1 < b1 ? b0 + fem->span + 1 : b1;
             if (b0 > 0)
-                nf(fem, fem->nfirst[b0], fem->nfirst[bs], b0, 1, o);
+                node_range(fem, fem->nfirst[b0], fem->nfirst[bs], b0, 1, out, sign);
         }
     }
     return e_sum;
-}
-
-/* A single product's fused pass, in the window fem->fe. */
-static double fused_pass(cs_fem *fem, batch_fn fn, const void *ctx, double *out, double sign)
-{
-    const node_out o = {fem->fe, out, sign};
-    return fused_pass_gen(fem, fn, ctx, fem->fe, 24 * LANES, node_range, &o);
 }
 
 typedef struct force_ctx {
@@ -1215,154 +1178,6 @@ void cs_fem_apply_Kw(cs_fem *fem, const double *kf, const double *p, double *y)
 {
     const kw_ctx kc = {kf, p};
     fused_pass(fem, kw_batch, &kc, y, 1.0);
-}
-
-/* ------------------------------------------------------------------ several products at once
- *
- * cs_fem_apply_K_multi: up to MULTI_W (4) vectors side by side, one per SIMD lane, interleaved
- * per node and component (pi[(3n + i)·4 + j] = P[j][3n + i]): a cell's corner component is one
- * 4-vector load for all of them, its rotation and Lamé factors are broadcast, and its 24 results
- * are 24 whole 4-vectors in the window (96 doubles per cell: slot = 4 × the single product's,
- * at 4 × fadj) — no transposes in the element or the node pass. Per lane the arithmetic is
- * modal_core's on the same values in the same order as the single product's, and the node sums
- * have the same terms in the same order, so each Y[j] is bit for bit cs_fem_apply_K's. */
-#define MULTI_W 4
-typedef double vd4u __attribute__((vector_size(32), aligned(8))); /* unaligned loads/stores */
-
-typedef struct multi_ctx {
-    const double *kf;
-    const double *pi;        /* the interleaved vectors */
-    const double *const *P;  /* the originals (graded cells) */
-    int nv;
-} multi_ctx;
-
-/* A graded cell of the interleaved products: graded_cell per vector, into the lanes. */
-static __attribute__((noinline)) void multi_graded(const cs_fem *fem, const multi_ctx *mc, int c,
-                                                   double *o)
-{
-    const double *Rc = fem->corotational ? fem->R + 9 * (size_t)c : NULL;
-    for (int j = 0; j < mc->nv; j++) {
-        double t[24];
-        graded_cell(fem, mc->kf + 8 * (size_t)c, fem->cell_nodes + 8 * (size_t)c, Rc, mc->P[j],
-                    0.0, t, NULL);
-        for (int m = 0; m < 24; m++)
-            o[MULTI_W * m + j] = t[m];
-    }
-}
-
-__attribute__((optimize("fp-contract=fast"), target_clones("arch=x86-64-v4", "arch=x86-64-v3",
-                                                             "default"))) static void
-multi_batch(cs_fem *fem, int b, double *fb, const void *ctx, double *e_sum)
-{
-    (void)e_sum;
-    const int c0 = b * LANES;
-    if (!batch_active(fem, c0))
-        return;
-    const multi_ctx *mc = ctx;
-    const double c16 = fem->h / 16.0;
-    for (int l = 0; l < LANES && c0 + l < fem->n_cells; l++) {
-        const int c = c0 + l;
-        const int32_t *nd = fem->cell_nodes + 8 * (size_t)c;
-        const double *Rc = fem->corotational ? fem->R + 9 * (size_t)c : NULL;
-        double *o = fb + MULTI_W * 24 * l, f;
-        if (uniform_factor(mc->kf, c, &f)) {
-            vd4 u[24], y[24], R[9];
-            for (int k = 0; k < 8; k++) {
-                const vd4u *pk = (const vd4u *)(mc->pi + 12 * (size_t)nd[k]);
-                u[3 * k] = pk[0];
-                u[3 * k + 1] = pk[1];
-                u[3 * k + 2] = pk[2];
-            }
-            for (int j = 0; Rc && j < 9; j++)
-                R[j] = (vd4){Rc[j], Rc[j], Rc[j], Rc[j]};
-            const double lam = c16 * fem->lambda * f, mu = c16 * fem->mu * f;
-            const vd4 L = {lam, lam, lam, lam}, M = {mu, mu, mu, mu};
-            if (Rc)
-                modal_core4(u, R, 0.0, &L, &M, NULL, y);
-            else
-                modal_core4(u, NULL, 0.0, &L, &M, NULL, y);
-            for (int m = 0; m < 24; m++)
-                ((vd4u *)o)[m] = y[m];
-        } else {
-            multi_graded(fem, mc, c, o);
-        }
-    }
-}
-
-/* The node pass of the interleaved products: Y[j] = Σ of lane j, node_sum's terms in its order
- * (its sign is 1: no product by it). */
-typedef struct multi_out {
-    const double *fe;
-    double *const *out;
-    int nv;
-} multi_out;
-
-__attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) static void
-multi_nodes(const cs_fem *fem, int q0, int q1, int b0, int after, const void *ov)
-{
-    const multi_out *o = ov;
-    const int32_t *restrict fadj = fem->fadj, *restrict as = fem->adj_start;
-    const uint8_t *act = fem->cell_active;
-    for (int q = q0; q < q1; q++) {
-        if ((fem->nminb[q] < b0) != after)
-            continue;
-        const int n = fem->norder[q];
-        vd4 s[3] = {{0, 0, 0, 0}, {0, 0, 0, 0}, {0, 0, 0, 0}};
-        for (int a = as[n]; a < as[n + 1]; a++) {
-            if (act && !act[fem->adj[a] >> 3])
-                continue;
-            vd4 v[3];
-            memcpy(v, o->fe + MULTI_W * (size_t)fadj[a], sizeof v);
-            s[0] += v[0];
-            s[1] += v[1];
-            s[2] += v[2];
-        }
-        for (int j = 0; j < o->nv; j++) {
-            double *y = o->out[j] + 3 * (size_t)n;
-            y[0] = s[0][j];
-            y[1] = s[1][j];
-            y[2] = s[2][j];
-        }
-    }
-}
-
-/* Up to MULTI_W products in one fused pass (the buffers allocated); 0, or -1 out of memory. */
-static int apply_multi(cs_fem *fem, int nv, const double *const *P, double *const *Y)
-{
-    const size_t nn = (size_t)fem->n_nodes, win = (size_t)MULTI_W * 24 * LANES * fem->nslot;
-    const size_t need = MULTI_W * 3 * nn + win + 1;
-    if (fem->fe_multi_len < need) {
-        free(fem->fe_multi);
-        fem->fe_multi = malloc(need * sizeof *fem->fe_multi);
-        fem->fe_multi_len = fem->fe_multi ? need : 0;
-        if (!fem->fe_multi)
-            return -1;
-    }
-    double *pi = fem->fe_multi, *fe = pi + MULTI_W * 3 * nn;
-#pragma omp parallel for num_threads(fem->threads) schedule(static)
-    for (size_t d = 0; d < 3 * nn; d++)
-        for (int j = 0; j < MULTI_W; j++)
-            pi[MULTI_W * d + j] = j < nv ? P[j][d] : 0.0;
-    const multi_ctx mc = {fem->kf, pi, P, nv};
-    const multi_out o = {fe, Y, nv};
-    fused_pass_gen(fem, multi_batch, &mc, fe, MULTI_W * 24 * LANES, multi_nodes, &o);
-    return 0;
-}
-
-void cs_fem_apply_K_multi(cs_fem *fem, int k, const double *const *P, double *const *Y)
-{
-    while (k > 0) {
-        const int nv = k < MULTI_W ? k : MULTI_W;
-        /* one at a time: a single vector, out of memory, or the linear model (its single
-         * product's modal_core instance has R as a run-time NULL, which GCC contracts
-         * differently from a constant one: the last bits would differ) */
-        if (nv == 1 || !fem->corotational || apply_multi(fem, nv, P, Y) != 0)
-            for (int j = 0; j < nv; j++)
-                cs_fem_apply_K(fem, P[j], Y[j]);
-        P += nv;
-        Y += nv;
-        k -= nv;
-    }
 }
 
 double cs_fem_product_flops(const cs_fem *fem)

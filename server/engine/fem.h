@@ -71,12 +71,7 @@ typedef struct cs_fem {
      * cs_fem_relink. */
     int nseg;
     int32_t *norder, *nminb, *nfirst, *bslot, *fadj;
-    int span;  /* the largest distance between a node's first and last batch */
-    int nslot; /* batches in the segments' windows together (a window of fe: 24·LANES each) */
-    /* cs_fem_apply_K_multi's buffers (interleaved vectors, window), allocated by its first
-     * call with k > 1 and kept; fe_multi_len doubles. */
-    double *fe_multi;
-    size_t fe_multi_len;
+    int span; /* the largest distance between a node's first and last batch */
 } cs_fem;
 
 int cs_fem_init(cs_fem *fem, const cs_cubemesh *cm, double young, double poisson,
@@ -104,16 +99,6 @@ double cs_fem_energy(const cs_fem *fem, const double *x);
 
 /* y = Σ R K Rᵀ p over elements (3 per node, overwritten). */
 void cs_fem_apply_K(cs_fem *fem, const double *p, double *y);
-/*
- * Y[j] = Σ R K Rᵀ P[j] for j < k (3 per node, overwritten): bit for bit k calls of
- * cs_fem_apply_K, 4 vectors per fused pass side by side in the SIMD lanes (fem.c: the same
- * arithmetic and flops per product; each cell's rotation and corner indices loaded once for
- * the 4, and no transposes). Its buffers (the 4 vectors interleaved and their window of
- * element results, 12 doubles per node + 4 × fe's window) are allocated on the first call
- * with k > 1 and kept (fe_multi); out of memory it does the k single products. Y[j] must not
- * overlap any P[i].
- */
-void cs_fem_apply_K_multi(cs_fem *fem, int k, const double *const *P, double *const *Y);
 /* The same with the factors kf (8 per cell) instead of fem->kf (damping: K_d). */
 void cs_fem_apply_Kw(cs_fem *fem, const double *kf, const double *p, double *y);
 /* Diagonal blocks of that weighted K (9 per node, overwritten). */
