@@ -1051,7 +1051,7 @@ static int32_t corner_vertex(cs_world_t *w, surf_edit *e, const families *fam, i
         sv = o->corner_vertex[node];
     }
     if (sv >= 0) {
-        /* a family's first member is the original vertex */
+        /* a family's first member is the original vertex, or the copy that replaced it */
         const int32_t f = family_of(fam, e->nv0, sv);
         const int32_t orig = f >= 0 ? fam->mcopy.a[fam->fstart.a[f]] : sv;
         return copy_for_cell(o, fam, e->nv0, orig, cell);
@@ -1384,7 +1384,8 @@ static int32_t *piece_roots(const cs_cubemesh *cm)
 
 /*
  * Split the surface along the crack: vertex groups by uncut edges, one copy per group beyond
- * the first, rebinding to a cell of the group's side. Fills fam (vertex families) and marks
+ * the first, bound to a cell of the group's side (the first group too when it is not on the
+ * vertex's side: the vertex is then left unused). Fills fam (vertex families) and marks
  * rewired triangles.
  */
 static int split_surface(cs_object *o, surf_edit *e, const int32_t *cn0, const int32_t *tris0,
@@ -1527,7 +1528,7 @@ static int split_surface(cs_object *o, surf_edit *e, const int32_t *cn0, const i
             if (cnode >= 0 && named)
                 o->corner_vertex[cnode] = -1; /* set again below for the node copy keeping v */
             for (int gi = 0; gi < n_groups; gi++) {
-                /* keep first so that the family's first member is v */
+                /* keep first so that the family's first member is v (or its copy) */
                 const int g = gi == 0 ? keep : (gi <= keep ? gi - 1 : gi);
                 /* bound cell: v's own if its side, else the group's cell nearest to v */
                 int32_t bind = -1;
