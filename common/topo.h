@@ -50,10 +50,12 @@ typedef struct cs_topo_change {
     const int32_t *tnew;      /* 3 per new triangle */
     /* Per new vertex (n_vnew of them), the vertex it is a copy of, or -1 for a new point
      * (NULL: every one is a new point). A copy starts exactly where its source is at the time
-     * of the change. The index is into the object's vertex array before this change (before
-     * step 1); for a new piece, into its parent's vertex array as it is when the piece's
-     * change is applied. So a client can compare the volume before and after a change at the
-     * same positions: the closing surfaces of a crack come in mirror pairs over copies and new
+     * of the change, unless the engine placed it where its own cell puts it, more than h/10
+     * away (a crack that had opened before: README "Fracture"). The index is into the
+     * object's vertex array before this change (before step 1); for a new piece, into its
+     * parent's vertex array as it is when the piece's change is applied. So a client can
+     * compare the volume before and after a change at the same positions (every copy at its
+     * source's): the closing surfaces of a crack come in mirror pairs over copies and new
      * points at the same positions, whose volumes cancel exactly. */
     const int32_t *vnew_src;
 } cs_topo_change;

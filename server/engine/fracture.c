@@ -560,6 +560,8 @@ typedef struct surf_edit {
     dvec rest, pos;   /* appended vertices: 3 each */
     ivec vcell;       /* appended vertices: bound cell */
     ivec vsrc;        /* appended vertices: the vertex (< nv0) each is a copy of, or -1 */
+    ivec jumped;      /* appended vertices: 1 for a copy that starts at its skinned position
+                         away from its source's (sv_append_copy) */
     dvec uvw;         /* appended vertices: 3 each */
     ivec tnew;        /* appended triangles: 3 each */
     ivec tnew_cell;   /* cell of each appended triangle */
@@ -577,7 +579,9 @@ static const double *sv_rest(const surf_edit *e, int32_t v)
 }
 
 
-/* Skin a rest position p to `cell` at current node positions x. */
+/* Skin a rest position p to `cell` at current node positions x: its local coordinates and
+ * the position cs_surface_skin will give it (trilinear, or the B-spline map of a localframe
+ * cell), bit for bit. */
 static void skin_point(const cs_object *o, int32_t cell, const double p[3], double uvw[3],
                        double out[3])
 {
@@ -585,15 +589,7 @@ static void skin_point(const cs_object *o, int32_t cell, const double p[3], doub
     const int32_t *ijk = cm->cell_ijk + 3 * (size_t)cell;
     for (int k = 0; k < 3; k++)
         uvw[k] = (p[k] - cm->origin[k]) / cm->h - ijk[k];
-    const int32_t *nd = cm->cell_nodes + 8 * (size_t)cell;
-    out[0] = out[1] = out[2] = 0;
-    for (int k = 0; k < 8; k++) {
-        double wk = (CS_CORNER[k][0] ? uvw[0] : 1 - uvw[0]) *
-                    (CS_CORNER[k][1] ? uvw[1] : 1 - uvw[1]) *
-                    (CS_CORNER[k][2] ? uvw[2] : 1 - uvw[2]);
-        for (int a = 0; a < 3; a++)
-            out[a] += wk * o->x[3 * (size_t)nd[k] + a];
-    }
+    cs_surface_skin_point(cm, o->x, cell, uvw, p, out);
 }
 
 /* Append a vertex at rest position p bound to `cell`; returns its index or -1. */
@@ -604,26 +600,49 @@ static int32_t sv_append(surf_edit *e, const double p[3], int32_t cell)
     for (int k = 0; k < 3; k++)
         if (dvec_push(&e->rest, p[k]) || dvec_push(&e->pos, x[k]) || dvec_push(&e->uvw, uvw[k]))
             return -1;
-    if (ivec_push(&e->vcell, cell) || ivec_push(&e->vsrc, -1))
+    if (ivec_push(&e->vcell, cell) || ivec_push(&e->vsrc, -1) || ivec_push(&e->jumped, 0))
         return -1;
     return e->nv0 + e->vcell.n - 1;
 }
 
-/* Append a copy of vertex v bound to `cell`. It starts where v is now (not where the new
- * binding would put it), so the surface does not jump at the fracture and the two sides'
- * closing triangles coincide at this instant too; the next skin moves it with its side. */
+/*
+ * Append a copy of vertex v bound to `cell`, and where it starts. Where its cell puts it
+ * (skinned) within JUMP_REL·h of where v is now, v's side and the copy's are still together:
+ * the crack between them is the one this event opens (its node copies coincide; the two
+ * cells' maps differ only by how far the deformation is from affine across it: measured up
+ * to 0.014 h in test_fracture_meshes' pushed icosphere). The copy then starts exactly where
+ * v is, so the surface does not jump at the fracture and the two sides' closing triangles
+ * coincide at this instant too (a client checks a change's volume there, topo.h); the next
+ * skin moves it with its side. Further away, v's side and the copy's were already apart: v
+ * lies across a crack that opened earlier and is still held elsewhere (an open crack: a
+ * piece hinged on a partially opened face, or a crack the elastic motion has opened), and
+ * v's position says nothing about where the copy's side is now. The copy then starts where
+ * its cell puts it, a jump at the fracture to its truthful position. (Starting it at v's
+ * position there left it, the closing triangles and the fans over it on the wrong side of
+ * the open crack until the next step: new pieces inside out at the instant of a fracture,
+ * the fracture storm at seed 5.) vsrc names v either way.
+ */
+#define JUMP_REL 0.1
+
 static int32_t sv_append_copy(surf_edit *e, int32_t v, int32_t cell)
 {
-    double p[3], x[3];
+    double p[3];
     memcpy(p, sv_rest(e, v), sizeof p);
-    memcpy(x, v < e->nv0 ? e->o->surf.pos + 3 * (size_t)v : e->pos.a + 3 * (size_t)(v - e->nv0),
-           sizeof x);
     int32_t c = sv_append(e, p, cell);
-    if (c >= 0) {
-        memcpy(e->pos.a + 3 * (size_t)(c - e->nv0), x, sizeof x);
-        /* a copy of a copy made in this edit names the first one's source */
-        e->vsrc.a[c - e->nv0] = v < e->nv0 ? v : e->vsrc.a[v - e->nv0];
-    }
+    if (c < 0)
+        return c;
+    /* a copy of a copy made in this edit names the first one's source */
+    e->vsrc.a[c - e->nv0] = v < e->nv0 ? v : e->vsrc.a[v - e->nv0];
+    const double *xv = v < e->nv0 ? e->o->surf.pos + 3 * (size_t)v
+                                   : e->pos.a + 3 * (size_t)(v - e->nv0);
+    double *xc = e->pos.a + 3 * (size_t)(c - e->nv0), d2 = 0;
+    for (int a = 0; a < 3; a++)
+        d2 += (xc[a] - xv[a]) * (xc[a] - xv[a]);
+    const double far = JUMP_REL * e->o->cm.h;
+    if (d2 <= far * far)
+        memcpy(xc, xv, 3 * sizeof(double));
+    else
+        e->jumped.a[c - e->nv0] = 1;
     return c;
 }
 
@@ -633,6 +652,7 @@ static void surf_edit_free(surf_edit *e)
     free(e->pos.a);
     free(e->vcell.a);
     free(e->vsrc.a);
+    free(e->jumped.a);
     free(e->uvw.a);
     free(e->tnew.a);
     free(e->tnew_cell.a);
@@ -1031,7 +1051,7 @@ static int32_t corner_vertex(cs_world_t *w, surf_edit *e, const families *fam, i
         sv = o->corner_vertex[node];
     }
     if (sv >= 0) {
-        /* a family's first member is the original vertex */
+        /* a family's first member is the original vertex, or the copy that replaced it */
         const int32_t f = family_of(fam, e->nv0, sv);
         const int32_t orig = f >= 0 ? fam->mcopy.a[fam->fstart.a[f]] : sv;
         return copy_for_cell(o, fam, e->nv0, orig, cell);
@@ -1364,7 +1384,8 @@ static int32_t *piece_roots(const cs_cubemesh *cm)
 
 /*
  * Split the surface along the crack: vertex groups by uncut edges, one copy per group beyond
- * the first, rebinding to a cell of the group's side. Fills fam (vertex families) and marks
+ * the first, bound to a cell of the group's side (the first group too when it is not on the
+ * vertex's side: the vertex is then left unused). Fills fam (vertex families) and marks
  * rewired triangles.
  */
 static int split_surface(cs_object *o, surf_edit *e, const int32_t *cn0, const int32_t *tris0,
@@ -1507,7 +1528,7 @@ static int split_surface(cs_object *o, surf_edit *e, const int32_t *cn0, const i
             if (cnode >= 0 && named)
                 o->corner_vertex[cnode] = -1; /* set again below for the node copy keeping v */
             for (int gi = 0; gi < n_groups; gi++) {
-                /* keep first so that the family's first member is v */
+                /* keep first so that the family's first member is v (or its copy) */
                 const int g = gi == 0 ? keep : (gi <= keep ? gi - 1 : gi);
                 /* bound cell: v's own if its side, else the group's cell nearest to v */
                 int32_t bind = -1;
@@ -1521,7 +1542,8 @@ static int split_surface(cs_object *o, surf_edit *e, const int32_t *cn0, const i
                     int32_t c = s->tri_cell[T[a]];
                     if (ivec_push(&fam->mcells, c))
                         goto out_p;
-                    if (cnode < 0 && (c == vc || cells_share_node(&o->cm, c, vc)))
+                    if (cnode < 0 && (c == vc || (cells_share_node(&o->cm, c, vc) &&
+                                                  (!e->piece || e->piece[c] == e->piece[vc]))))
                         own = true;
                     if (cnode >= 0 && c == vc)
                         own = true; /* a corner vertex stays bound to a cell of its node */
@@ -1532,14 +1554,13 @@ static int split_surface(cs_object *o, surf_edit *e, const int32_t *cn0, const i
                     }
                 }
                 int32_t copy = v;
-                if (gi == 0) {
-                    if (!own) { /* rebind v to its side (its position follows at the next skin) */
-                        double uvw[3], x[3];
-                        skin_point(o, bind, s->rest + 3 * (size_t)v, uvw, x);
-                        s->vert_cell[v] = bind;
-                        memcpy(s->vert_uvw + 3 * (size_t)v, uvw, sizeof uvw);
-                    }
-                } else {
+                /* A group not on v's side (no cell of it is v's cell or shares a node with
+                 * it in the same piece) gets a copy of v bound to its side, skinned there;
+                 * the first group too: v is then left unused, bound and placed as before.
+                 * (Rebinding v in place moved a vertex the clients hold, which a topology
+                 * change cannot say, or left it where its old side is until the next skin:
+                 * across an open crack, or in another piece.) */
+                if (gi > 0 || !own) {
                     copy = sv_append_copy(e, v, bind);
                     if (copy < 0)
                         goto out_p;
@@ -2235,7 +2256,11 @@ static int close_loops(cs_world_t *w, surf_edit *e, edge_map *em, const region *
         }
         /* per joined set: the apex at the mean of its rest points (each once) plus a small
          * offset that depends only on that mean (so that it is not flat); it starts at the
-         * same points' current mean plus the offset (the next skin moves it) */
+         * same points' current mean plus the offset (the next skin moves it), one point for
+         * the set, so that the fans cancel now too. If a copy in the set started away from
+         * its source (sv_append_copy: across a crack that had opened before), that mean lies
+         * between sides that are apart: each loop's apex then starts where its cell puts it
+         * (skinned, on its own side) */
         for (int i = 0; i < nlv; i++)
             stamp[i] = -1;
         for (int l = 0; l < nl; l++) {
@@ -2243,6 +2268,7 @@ static int close_loops(cs_world_t *w, surf_edit *e, edge_map *em, const region *
                 continue;
             double c[3] = {0, 0, 0}, x[3] = {0, 0, 0};
             int np = 0;
+            bool jump = false;
             for (int m = 0; m < nl; m++) {
                 if (uf_find(comp, m) != l)
                     continue;
@@ -2253,6 +2279,7 @@ static int close_loops(cs_world_t *w, surf_edit *e, edge_map *em, const region *
                     const int32_t v = lv.a[i];
                     const double *px = v < e->nv0 ? e->o->surf.pos + 3 * (size_t)v
                                                   : e->pos.a + 3 * (size_t)(v - e->nv0);
+                    jump |= v >= e->nv0 && e->jumped.a[v - e->nv0];
                     for (int a = 0; a < 3; a++) {
                         c[a] += sv_rest(e, v)[a];
                         x[a] += px[a];
@@ -2271,7 +2298,7 @@ static int close_loops(cs_world_t *w, surf_edit *e, edge_map *em, const region *
                 r = mix64(r);
                 const double d = 1e-3 * e->o->cm.h * ((double)(r >> 11) / 9007199254740992.0 - 0.5);
                 capex[6 * l + a] = c[a] + d;
-                capex[6 * l + 3 + a] = x[a] + d;
+                capex[6 * l + 3 + a] = jump ? NAN : x[a] + d;
             }
         }
     }
@@ -2295,12 +2322,11 @@ static int close_loops(cs_world_t *w, surf_edit *e, edge_map *em, const region *
                 goto out2;
             continue;
         }
-        const double *c = capex + 6 * root;
-        int32_t cv = sv_append(e, c, lcell[0]);
+        int32_t cv = sv_append(e, capex + 6 * root, lcell[0]);
         if (cv < 0)
             goto out2;
-        for (int a = 0; a < 3; a++)
-            e->pos.a[3 * (size_t)(cv - e->nv0) + a] = capex[6 * root + 3 + a];
+        if (!isnan(capex[6 * root + 3]))
+            memcpy(e->pos.a + 3 * (size_t)(cv - e->nv0), capex + 6 * root + 3, 3 * sizeof(double));
         for (int j = 0; j < k; j++)
             if (ivec_push3(tri, cv, cyc[(j + 1) % k], cyc[j]) || ivec_push(cell, lcell[j]))
                 goto out2;
@@ -2355,9 +2381,9 @@ static int commit_edit(cs_world_t *w, cs_object *o, surf_edit *e, const ivec *tr
     }
     s->n_vertices = nv1;
     s->n_triangles = nt1;
-    /* Only the new vertices get positions now. A vertex rebound to a cell of its side keeps
-     * the position it had (and clients hold) until the next step skins it, so the recorded
-     * change is exactly what the engine holds. */
+    /* Only the new vertices get positions now, each skinned in its cell (sv_append). No
+     * vertex the event found changes its binding or position (split_surface copies it
+     * instead), so the recorded change is exactly what the engine holds. */
     if (nva)
         memcpy(s->pos + 3 * (size_t)e->nv0, e->pos.a, (size_t)nva * 3 * sizeof(double));
     if (!record)
@@ -2702,7 +2728,9 @@ static int close_open_loops(cs_world_t *w, cs_object *o, bool record, int *fans)
 /*
  * A new object holding cells `cells` (n of them, indices into o) with their nodes, state and
  * surface triangles (those whose centroid cell is among them). Its surface vertices start
- * where o's are (the next skin moves the ones bound to other cells than before). If vsrc is
+ * where o's are; one bound to a cell of another piece (rare: the surface split binds the
+ * copies it makes in their piece) is bound to a cell of this one and starts where that puts
+ * it (a new object's vertices are all sent with the change that makes it). If vsrc is
  * not NULL it receives the o vertex each of the piece's vertices is (owned by the caller).
  */
 static cs_object *make_piece(cs_world_t *w, const cs_object *o, const int32_t *cells, int nc,
@@ -2846,17 +2874,6 @@ static cs_object *make_piece(cs_world_t *w, const cs_object *o, const int32_t *c
         memcpy(ps->vert_uvw + 3 * (size_t)i, s->vert_uvw + 3 * (size_t)v, 3 * sizeof(double));
         ps->vert_cell[i] = cell_map[s->vert_cell[v]];
     }
-    /* a vertex bound to a cell of another piece follows a cell of this one */
-    for (int i = 0; i < nt; i++)
-        for (int k = 0; k < 3; k++) {
-            int32_t v = ps->tris[3 * i + k];
-            if (ps->vert_cell[v] >= 0)
-                continue;
-            double x[3];
-            ps->vert_cell[v] = ps->tri_cell[i];
-            skin_point(p, ps->tri_cell[i], ps->rest + 3 * (size_t)v, ps->vert_uvw + 3 * (size_t)v,
-                       x);
-        }
     for (int i = 0; i < p->n; i++) {
         int32_t cv = o->corner_vertex ? o->corner_vertex[nl.a[i]] : -1;
         p->corner_vertex[i] = cv >= 0 ? vmap[cv] : -1;
@@ -2867,6 +2884,17 @@ static cs_object *make_piece(cs_world_t *w, const cs_object *o, const int32_t *c
         goto fail;
     if (cs_elastic_init(p, w->threads) != 0)
         goto fail;
+    /* a vertex bound to a cell of another piece follows a cell of this one (skinned after
+     * cs_elastic_init: a localframe piece's B-spline cells are known then) */
+    for (int i = 0; i < nt; i++)
+        for (int k = 0; k < 3; k++) {
+            int32_t v = ps->tris[3 * i + k];
+            if (ps->vert_cell[v] >= 0)
+                continue;
+            ps->vert_cell[v] = ps->tri_cell[i];
+            skin_point(p, ps->tri_cell[i], ps->rest + 3 * (size_t)v, ps->vert_uvw + 3 * (size_t)v,
+                       ps->pos + 3 * (size_t)v);
+        }
     for (int i = 0; i < nc; i++) {
         memcpy(p->fem.R + 9 * (size_t)i, o->fem.R + 9 * (size_t)cells[i], 9 * sizeof(double));
         memcpy(p->fem.q + 4 * (size_t)i, o->fem.q + 4 * (size_t)cells[i], 4 * sizeof(double));

@@ -242,49 +242,59 @@ int cs_surface_extend_cell_lists(cs_surface *s, const cs_cubemesh *cm, double to
     return cell_lists(s, cm, tol, first);
 }
 
+/* One vertex: rest point `rest`, local coordinates `uvw` in `cell` (the hot path of
+ * cs_surface_skin, and cs_surface_skin_point: the same arithmetic, bit for bit). */
+static inline void skin_one(const cs_cubemesh *cm, const double *node_pos, int32_t cell,
+                            const double *uvw, const double *rest, double *out)
+{
+    const double u = uvw[0], v = uvw[1], w = uvw[2];
+    const int32_t *sn = cm->spline_nodes ? cm->spline_nodes + 64 * (size_t)cell : NULL;
+    if (sn && sn[0] >= 0) {
+        /* B-spline cell: the tricubic map of the localframe model (seed 001 §3.4.1),
+         * applied to displacements so that rest positions map to themselves exactly. */
+        double bx[4], by[4], bz[4], d[3] = {0.0, 0.0, 0.0};
+        cs_bspline_basis(u, bx, NULL);
+        cs_bspline_basis(v, by, NULL);
+        cs_bspline_basis(w, bz, NULL);
+        for (int a = 0; a < 64; a++) {
+            const double wa = bx[a % 4] * by[(a / 4) % 4] * bz[a / 16];
+            const double *p = node_pos + 3 * (size_t)sn[a];
+            const double *r = cm->node_rest + 3 * (size_t)sn[a];
+            d[0] += wa * (p[0] - r[0]);
+            d[1] += wa * (p[1] - r[1]);
+            d[2] += wa * (p[2] - r[2]);
+        }
+        for (int k = 0; k < 3; k++)
+            out[k] = rest[k] + d[k];
+        return;
+    }
+    const int32_t *nodes = cm->cell_nodes + 8 * (size_t)cell;
+    const double wx[2] = {1.0 - u, u}, wy[2] = {1.0 - v, v}, wz[2] = {1.0 - w, w};
+    double x = 0.0, y = 0.0, z = 0.0;
+    for (int k = 0; k < 8; k++) {
+        const double wk = wx[CS_CORNER[k][0]] * wy[CS_CORNER[k][1]] * wz[CS_CORNER[k][2]];
+        const double *p = node_pos + 3 * (size_t)nodes[k];
+        x += wk * p[0];
+        y += wk * p[1];
+        z += wk * p[2];
+    }
+    out[0] = x;
+    out[1] = y;
+    out[2] = z;
+}
+
 void cs_surface_skin(cs_surface *s, const cs_cubemesh *cm, const double *node_pos)
 {
     const int nv = s->n_vertices;
-    const int32_t *vc = s->vert_cell;
-    const double *uvw = s->vert_uvw;
-    double *out = s->pos;
-    const int32_t *spline = cm->spline_nodes;
-    for (int i = 0; i < nv; i++) {
-        const double u = uvw[3 * i], v = uvw[3 * i + 1], w = uvw[3 * i + 2];
-        const int32_t *sn = spline ? spline + 64 * (size_t)vc[i] : NULL;
-        if (sn && sn[0] >= 0) {
-            /* B-spline cell: the tricubic map of the localframe model (seed 001 §3.4.1),
-             * applied to displacements so that rest positions map to themselves exactly. */
-            double bx[4], by[4], bz[4], d[3] = {0.0, 0.0, 0.0};
-            cs_bspline_basis(u, bx, NULL);
-            cs_bspline_basis(v, by, NULL);
-            cs_bspline_basis(w, bz, NULL);
-            for (int a = 0; a < 64; a++) {
-                const double wa = bx[a % 4] * by[(a / 4) % 4] * bz[a / 16];
-                const double *p = node_pos + 3 * (size_t)sn[a];
-                const double *r = cm->node_rest + 3 * (size_t)sn[a];
-                d[0] += wa * (p[0] - r[0]);
-                d[1] += wa * (p[1] - r[1]);
-                d[2] += wa * (p[2] - r[2]);
-            }
-            for (int k = 0; k < 3; k++)
-                out[3 * i + k] = s->rest[3 * i + k] + d[k];
-            continue;
-        }
-        const int32_t *nodes = cm->cell_nodes + 8 * (size_t)vc[i];
-        const double wx[2] = {1.0 - u, u}, wy[2] = {1.0 - v, v}, wz[2] = {1.0 - w, w};
-        double x = 0.0, y = 0.0, z = 0.0;
-        for (int k = 0; k < 8; k++) {
-            const double wk = wx[CS_CORNER[k][0]] * wy[CS_CORNER[k][1]] * wz[CS_CORNER[k][2]];
-            const double *p = node_pos + 3 * (size_t)nodes[k];
-            x += wk * p[0];
-            y += wk * p[1];
-            z += wk * p[2];
-        }
-        out[3 * i] = x;
-        out[3 * i + 1] = y;
-        out[3 * i + 2] = z;
-    }
+    for (int i = 0; i < nv; i++)
+        skin_one(cm, node_pos, s->vert_cell[i], s->vert_uvw + 3 * (size_t)i,
+                 s->rest + 3 * (size_t)i, s->pos + 3 * (size_t)i);
+}
+
+void cs_surface_skin_point(const cs_cubemesh *cm, const double *node_pos, int32_t cell,
+                           const double uvw[3], const double rest[3], double out[3])
+{
+    skin_one(cm, node_pos, cell, uvw, rest, out);
 }
 
 /* ---------------------------------------------------------------- boundary of a cell set */

@@ -54,6 +54,10 @@ int cs_surface_extend_cell_lists(cs_surface *s, const cs_cubemesh *cm, double to
 /* Recompute s->pos from node positions (3 per node) by trilinear interpolation, or by the
  * tricubic B-spline map in cells that have one (cm->spline_nodes, localframe objects). */
 void cs_surface_skin(cs_surface *s, const cs_cubemesh *cm, const double *node_pos);
+/* The position cs_surface_skin gives a vertex at rest point `rest` with local coordinates
+ * `uvw` in `cell` (bit for bit the same arithmetic): for vertices made between skins (fracture). */
+void cs_surface_skin_point(const cs_cubemesh *cm, const double *node_pos, int32_t cell,
+                           const double uvw[3], const double rest[3], double out[3]);
 
 /*
  * The boundary of a cell set as a closed triangle surface: every cell face not shared with
