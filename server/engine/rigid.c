@@ -1640,9 +1640,13 @@ typedef struct cell_face {
 /* Point p inside D's deformed cell (corners X, CS_CORNER order; inverse trilinear map), or
  * within `margin` outside it across one face only: true with the nearest exposed face of the
  * cell (in the cell's own coordinates) in *cf. False if p is elsewhere or no face of the
- * cell that it could leave by is exposed. */
+ * cell that it could leave by is exposed. pn (or NULL): the outward normal of the surface p
+ * is on (a deformable node of another object); only faces that face it (normals within
+ * ~70° of opposite) are taken, so a node on a block lying on another is pushed up, not out
+ * through the side face whose plane it happens to lie in. */
 static bool point_in_cell(const cs_object *D, int32_t cell, const double X[8][3],
-                          const double p[3], double margin, double tol, cell_face *cf)
+                          const double p[3], const double *pn, double margin, double tol,
+                          cell_face *cf)
 {
     const int32_t *cn = D->cm.cell_nodes + 8 * (size_t)cell;
     const int32_t *ijk = D->cm.cell_ijk + 3 * (size_t)cell;
@@ -1659,12 +1663,22 @@ static bool point_in_cell(const cs_object *D, int32_t cell, const double X[8][3]
         }
     if (n_out > 1)
         return false;
+    /* the cell's mean edges: with pn, the faces' directions */
+    double E[3][3] = {{0}};
+    for (int ax = 0; pn && ax < 3; ax++)
+        for (int k = 0; k < 8; k++) {
+            const double sg = CS_CORNER[k][ax] ? 0.25 : -0.25;
+            for (int a = 0; a < 3; a++)
+                E[ax][a] += sg * X[k][a];
+        }
     /* the nearest exposed face (in the cell's own coordinates); f < 0 outside */
     int bax = -1, bdir = 0;
     double bf = INFINITY;
     for (int ax = 0; ax < 3; ax++)
         for (int dir = -1; dir <= 1; dir += 2) {
             if (n_out && (ax != oax || (dir > 0) != (u[ax] > 1)))
+                continue;
+            if (pn && dir * dot3(E[ax], pn) > -0.3 * sqrt(dot3(E[ax], E[ax])))
                 continue;
             int32_t nb[3] = {ijk[0], ijk[1], ijk[2]};
             nb[ax] += dir;
@@ -1746,7 +1760,7 @@ static int cell_body(cs_world_t *w, cs_rigid_world *rw, cs_object *D, int b, int
             p[2] < lo[2] || p[2] > hi[2])
             continue;
         cell_face cf;
-        if (!point_in_cell(D, cell, X, p, margin, tol, &cf))
+        if (!point_in_cell(D, cell, X, p, NULL, margin, tol, &cf))
             continue;
         contact *c = new_contact(rw);
         if (!c)
@@ -1893,6 +1907,40 @@ static void object_box(const cs_object *D, double lo[3], double hi[3], double *v
     *vmax = sqrt(v2);
 }
 
+/* The outward normal of A's surface at node i (the sum of the directions of the exposed faces
+ * of its cells that it is a corner of, each the cell's current mean edge across it); false for
+ * a node inside A (or where they cancel). */
+static bool node_normal(const cs_object *A, int i, double n[3])
+{
+    n[0] = n[1] = n[2] = 0;
+    for (int32_t e = A->fem.adj_start[i]; e < A->fem.adj_start[i + 1]; e++) {
+        const int32_t c = A->fem.adj[e] >> 3, k = A->fem.adj[e] & 7;
+        const int32_t *ijk = A->cm.cell_ijk + 3 * (size_t)c, *cn = A->cm.cell_nodes + 8 * (size_t)c;
+        for (int ax = 0; ax < 3; ax++) {
+            const int dir = CS_CORNER[k][ax] ? 1 : -1;
+            int32_t nb[3] = {ijk[0], ijk[1], ijk[2]};
+            nb[ax] += dir;
+            if (cs_cubemesh_find(&A->cm, nb[0], nb[1], nb[2]) >= 0)
+                continue;
+            double d[3] = {0, 0, 0};
+            for (int q = 0; q < 8; q++) {
+                const double sg = CS_CORNER[q][ax] ? 0.25 : -0.25;
+                for (int a = 0; a < 3; a++)
+                    d[a] += sg * A->x[3 * (size_t)cn[q] + a];
+            }
+            const double l = sqrt(dot3(d, d));
+            for (int a = 0; l > 0 && a < 3; a++)
+                n[a] += dir * d[a] / l;
+        }
+    }
+    const double l = sqrt(dot3(n, n));
+    if (!(l > 1e-6))
+        return false;
+    for (int a = 0; a < 3; a++)
+        n[a] /= l;
+    return true;
+}
+
 /* The nodes of A in the overlap [olo, ohi] against B's cells (filed in rw->grid over B's box
  * [blo, bhi]): at most one contact per node, with the face it is least deep behind. */
 static int soft_nodes_in_cells(cs_rigid_world *rw, cs_object *A, cs_object *B,
@@ -1911,6 +1959,8 @@ static int soft_nodes_in_cells(cs_rigid_world *rw, cs_object *A, cs_object *B,
         const double qlo[3] = {p[0] - margin, p[1] - margin, p[2] - margin};
         const double qhi[3] = {p[0] + margin, p[1] + margin, p[2] + margin};
         grid_query(rw->grid, qlo, qhi);
+        double pn[3];
+        const bool surface = node_normal(A, i, pn);
         cell_face best = {.sep = -INFINITY};
         for (int e = 0; e < rw->grid->n_cand; e++) {
             const int32_t cell = rw->grid->cand[e];
@@ -1927,7 +1977,8 @@ static int soft_nodes_in_cells(cs_rigid_world *rw, cs_object *A, cs_object *B,
                 near = p[a] >= l - margin && p[a] <= h + margin;
             }
             cell_face cf;
-            if (near && point_in_cell(B, cell, X, p, margin, tol, &cf) && cf.sep > best.sep)
+            if (near && point_in_cell(B, cell, X, p, surface ? pn : NULL, margin, tol, &cf) &&
+                cf.sep > best.sep)
                 best = cf;
         }
         if (best.sep == -INFINITY)
