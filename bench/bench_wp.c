@@ -555,6 +555,8 @@ int main(int argc, char **argv)
             int nc = 0;
             for (int k = 0; k < ndt; k++)
                 cfg[nc++] = (struct cfg_t){CS_INTEGRATOR_IMPLICIT_EULER, dts[k], 1e-6};
+            for (int k = 0; k < ndt && MODELS[m] != CS_MODEL_MSS; k++) /* refused for mss */
+                cfg[nc++] = (struct cfg_t){CS_INTEGRATOR_NEWMARK, dts[k], 1e-6};
             for (int b = 0; b < ntol; b++)
                 if (tols[b] != 1e-6)
                     cfg[nc++] = (struct cfg_t){CS_INTEGRATOR_IMPLICIT_EULER, 1.0 / 60, tols[b]};

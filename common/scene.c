@@ -433,7 +433,7 @@ static int parse_world(sc_ctx *c, const cJSON *root, cs_scene *s)
         return -1;
     if (o) {
         static const char *const keys[] = {"tolerance", "max_iterations", "threads",
-                                           "preconditioner", NULL};
+                                           "preconditioner", "relative_to", NULL};
         if (check_keys(c, o, "solver", keys) ||
             get_number(c, o, "solver", "tolerance", &w->cg_tolerance,
                        (sc_range){LO_GT, 0, HI_LT, 1}, 0) ||
@@ -450,6 +450,15 @@ static int parse_world(sc_ctx *c, const cJSON *root, cs_scene *s)
                 return fail(c, "solver.preconditioner",
                             "unknown preconditioner '%s' (auto, jacobi, multigrid)",
                             show(pc->valuestring, b));
+        }
+        const cJSON *rt = cJSON_GetObjectItemCaseSensitive(o, "relative_to");
+        if (rt) {
+            char b[48];
+            if (!cJSON_IsString(rt))
+                return fail(c, "solver.relative_to", "expected a string, got %s", type_name(rt));
+            if (cs_cg_relative_from_name(rt->valuestring, &w->cg_relative_to) != 0)
+                return fail(c, "solver.relative_to", "unknown value '%s' (step, rhs)",
+                            show(rt->valuestring, b));
         }
     }
     if (get_object(c, root, "", "sleep", &o, 0))
@@ -963,7 +972,7 @@ static int parse_object(sc_ctx *c, const cJSON *o, int index, const char *base_d
         if (cs_integrator_from_name(it->valuestring, &d->integrator) != 0)
             return fail(c, p,
                         "unknown integrator '%s' (default, implicit_euler, symplectic_euler, "
-                        "verlet, central_difference)",
+                        "verlet, central_difference, newmark)",
                         show(it->valuestring, b));
     }
 

@@ -172,7 +172,10 @@ int cs_soft_prepare(cs_soft_resp *r, cs_object *D, double dt, uint64_t step)
     if (r->D == D && r->id == D->id && r->step == step && r->n == D->n)
         return 0;
     const size_t n = (size_t)D->n;
-    const bool stiff = D->integrator == CS_INTEGRATOR_IMPLICIT_EULER && D->n_fixed_nodes < D->n;
+    /* a Newmark object pushed by a contact takes its next step by implicit Euler (world.c) */
+    const bool stiff = (D->integrator == CS_INTEGRATOR_IMPLICIT_EULER ||
+                        D->integrator == CS_INTEGRATOR_NEWMARK) &&
+                       D->n_fixed_nodes < D->n;
     if (grow_f64(&r->u, &r->cap_u, 3 * n) ||
         (stiff && (grow_f64(&r->ainv, &r->cap_a, 9 * n) ||
                    grow_f64(&r->scratch, &r->cap_s, 9 * n))))

@@ -5,7 +5,7 @@
  * The contact solve runs after the deformable objects' own steps: an impulse J on a node of D
  * gives the node momentum J at once (D->v += J/m, so momentum is exact), and D's next
  * implicit Euler step, A v' = M v + dt f with A = (1 + dt α) M + (dt² + dt β) K, shares it
- * with the rest of D. The solve must see that response, not a free point mass (a heavy body
+ * with the rest of D (a Newmark object pushed by a contact takes that step too: world.c). The solve must see that response, not a free point mass (a heavy body
  * would push the nodes aside and D's step would pull them back only after the solve: a loaded
  * stack went through a soft slab that way). The response is modelled in two parts that add:
  *
@@ -45,7 +45,7 @@ typedef struct cs_soft_resp {
     double *ainv;       /* 9n: A_ii⁻¹ row-major (when stiff) */
     double *scratch;    /* 9n */
     size_t cap_u, cap_a, cap_s;
-    bool stiff;         /* implicit Euler and not every node held: local + coarse response */
+    bool stiff;         /* implicit Euler or Newmark, not every node held: local + coarse response */
     /* coarse: the rigid modes D may move in, c its centre of mass, minv the inverse mass on
      * each axis (0: a blocked translation), iinv the inverse inertia restricted to the free
      * rotations; V, W the coarse velocity the impulses gave so far */

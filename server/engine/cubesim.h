@@ -67,11 +67,16 @@ typedef enum cs_integrator {
     CS_INTEGRATOR_SYMPLECTIC_EULER = 2,  /* explicit: v += dt M⁻¹f(x, v), x += dt v (seed 004) */
     CS_INTEGRATOR_VERLET = 3,            /* explicit velocity Verlet (seed 004); both explicit
                                             ones need dt below a limit checked at add time */
-    CS_INTEGRATOR_CENTRAL_DIFFERENCE = 4 /* seed 001 Eq. (20), solved by CG; conditionally
+    CS_INTEGRATOR_CENTRAL_DIFFERENCE = 4, /* seed 001 Eq. (20), solved by CG; conditionally
                                             stable: dt above the limit is refused */
+    CS_INTEGRATOR_NEWMARK = 5            /* Newmark's average acceleration (trapezoidal rule,
+                                            β = 1/4, γ = 1/2), linearized like implicit Euler:
+                                            (M + dt/2 C + dt²/4 K) v1 = 2 M v + dt f − A v,
+                                            x1 = x + dt (v + v1)/2; second order, no numerical
+                                            damping, unconditionally stable for linear models */
 } cs_integrator;
 
-/* "default", "implicit_euler", "symplectic_euler", "verlet", "central_difference". */
+/* "default", "implicit_euler", "symplectic_euler", "verlet", "central_difference", "newmark". */
 int cs_integrator_from_name(const char *name, cs_integrator *out);
 const char *cs_integrator_name(cs_integrator i);
 
@@ -188,13 +193,24 @@ typedef enum cs_preconditioner {
 /* Parse "auto", "jacobi", "multigrid"; returns 0 and sets *out, or -1. */
 int cs_preconditioner_from_name(const char *name, cs_preconditioner *out);
 
+/* What the CG tolerance of an implicit Euler step is relative to. */
+typedef enum cs_cg_relative {
+    CS_CG_RELATIVE_STEP = 0, /* ‖b − A v‖: the Δv form of the step (what the step changes) */
+    CS_CG_RELATIVE_RHS = 1   /* ‖b‖ = ‖M v + dt f‖ (before session 13; mostly momentum at
+                                small dt) */
+} cs_cg_relative;
+
+/* Parse "step", "rhs"; returns 0 and sets *out, or -1. */
+int cs_cg_relative_from_name(const char *name, cs_cg_relative *out);
+
 typedef struct cs_world_def {
     double dt;               /* time step [s], in [1e-6, 1]; default 1/60 */
     double gravity[3];       /* [m/s²]; default (0, 0, -9.81) */
     bool has_ground;         /* default false */
     double ground_height;    /* the plane z = ground_height, solid below; default 0 */
     double ground_friction;  /* Coulomb coefficient at the ground, >= 0; default 0.5 */
-    double cg_tolerance;     /* relative residual ‖r‖/‖b‖ of every solve, in (0, 1); 1e-4 (README "Defaults (issue 6 part 3)": the evidence) */
+    double cg_tolerance;     /* relative residual of every solve, in (0, 1); 1e-4 (README "Defaults (issue 6 part 3)": the evidence); relative to ‖b‖ except in implicit Euler steps (cg_relative_to) */
+    cs_cg_relative cg_relative_to; /* implicit Euler steps: default CS_CG_RELATIVE_STEP */
     int cg_max_iterations;   /* >= 1; default 500 */
     cs_preconditioner preconditioner; /* default CS_PRECOND_AUTO */
     int threads;             /* worker threads inside a step, >= 0; 0 = all cores; default 0 */
@@ -347,6 +363,8 @@ typedef struct cs_step_stats {
                                passes (inactive cells of active regions not counted) */
     int cells_awake;        /* every cell of the stepped objects */
     bool converged;
+    int newmark_redone;     /* Newmark steps whose energy rose and were redone by implicit
+                               Euler (the energy guard, README "Newmark") */
 } cs_step_stats;
 const cs_step_stats *cs_world_last_stats(const cs_world_t *w);
 

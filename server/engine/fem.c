@@ -13,6 +13,7 @@
 #include <string.h>
 
 #include <immintrin.h>
+#include <omp.h>
 
 #include "cubesim.h"
 #include "mat3.h"
@@ -231,6 +232,8 @@ cs_extract_rotation(const double A[9], double q[4], int max_iter)
         q[j] = qv[j][0];
 }
 
+static int product_layout(cs_fem *fem);
+
 int cs_fem_relink(cs_fem *fem, const cs_cubemesh *cm)
 {
     free(fem->adj_start);
@@ -254,7 +257,7 @@ int cs_fem_relink(cs_fem *fem, const cs_cubemesh *cm)
     for (int e = 0; e < 8 * cm->n_cells; e++)
         fem->adj[fill[cm->cell_nodes[e]]++] = e;
     free(fill);
-    return 0;
+    return product_layout(fem);
 }
 
 int cs_fem_init(cs_fem *fem, const cs_cubemesh *cm, double young, double poisson,
@@ -286,7 +289,8 @@ int cs_fem_init(cs_fem *fem, const cs_cubemesh *cm, double young, double poisson
             cs_cube_stiffness_gauss(young, poisson, cm->h, g, fem->Kg + 576 * g);
     fem->R = malloc((size_t)cm->n_cells * 9 * sizeof *fem->R);
     fem->q = malloc((size_t)cm->n_cells * 4 * sizeof *fem->q);
-    fem->fe = malloc((size_t)cm->n_cells * 24 * sizeof *fem->fe);
+    /* whole batches of 8: product_layout's slots */
+    fem->fe = malloc(((size_t)cm->n_cells + 7) / 8 * 8 * 24 * sizeof *fem->fe);
     if (!fem->Kg || !fem->R || !fem->q || !fem->fe || cs_fem_relink(fem, cm) != 0) {
         cs_fem_free(fem);
         return -1;
@@ -304,6 +308,11 @@ void cs_fem_free(cs_fem *fem)
     free(fem->adj);
     free(fem->tg);
     free(fem->Kg);
+    free(fem->norder);
+    free(fem->nminb);
+    free(fem->nfirst);
+    free(fem->bslot);
+    free(fem->fadj);
     memset(fem, 0, sizeof *fem);
 }
 
@@ -440,6 +449,12 @@ typedef struct mlanes {
     double mu[LANES];         /* (h/16)·μ·factor */
     double *out[LANES];       /* 24 per lane: K u per node (global frame when rotated) */
     double e[LANES];          /* out (with energy): ½ uᵀ K u in the local frame */
+    /* A plain batch (AVX-512 path only; cn not NULL): 8 cells, each with its own inputs and
+     * outputs, rotations (if any) contiguous from R (rix unused), corner k of lane l at
+     * x + 3·cn[8l + k] (ix unused), results contiguous from ob (out unused): read and written
+     * with whole-vector loads and stores transposed in registers. */
+    const int32_t *cn;
+    double *ob;
 } mlanes;
 
 typedef double vd4 __attribute__((vector_size(32)));
@@ -482,25 +497,51 @@ static void modal_kernel_any(mlanes *restrict b, int rot, double rest, int energ
  * into x, y, z across the lanes, and back the same way into masked 3-double stores (fewer
  * instructions than element by element; 256-bit vectors with 32 registers: 512-bit vectors of
  * 8 lanes measured slower on this Zen 4, which splits them in two). */
-__attribute__((optimize("fp-contract=fast"), target("arch=x86-64-v4")))
-static void modal_kernel_avx512(mlanes *restrict b, int rot, double rest, int energy)
+/* a b c d (4 vectors) → their transpose, in place */
+#define TRANSPOSE4(a, b, c, d)                                                                \
+    do {                                                                                     \
+        const __m256d t0_ = _mm256_unpacklo_pd(a, b), t1_ = _mm256_unpackhi_pd(a, b);      \
+        const __m256d t2_ = _mm256_unpacklo_pd(c, d), t3_ = _mm256_unpackhi_pd(c, d);      \
+        a = _mm256_permute2f128_pd(t0_, t2_, 0x20);                                          \
+        b = _mm256_permute2f128_pd(t1_, t3_, 0x20);                                          \
+        c = _mm256_permute2f128_pd(t0_, t2_, 0x31);                                          \
+        d = _mm256_permute2f128_pd(t1_, t3_, 0x31);                                          \
+    } while (0)
+
+__attribute__((optimize("fp-contract=fast"), target("arch=x86-64-v4"))) static inline
+    __attribute__((always_inline)) void
+modal_avx512_body(mlanes *restrict b, int rot, double rest, int energy, const int plain)
 {
     for (int h = 0; h < LANES; h += 4) {
         vd4 u[24], R[9], y[24], e, L, M;
         const double *x = b->x;
         for (int k = 0; k < 8; k++) {
-            const int32_t *ix = b->ix[k] + h;
-            const __m256d r0 = _mm256_maskz_loadu_pd(7, x + ix[0]);
-            const __m256d r1 = _mm256_maskz_loadu_pd(7, x + ix[1]);
-            const __m256d r2 = _mm256_maskz_loadu_pd(7, x + ix[2]);
-            const __m256d r3 = _mm256_maskz_loadu_pd(7, x + ix[3]);
+            int32_t q[4];
+            for (int l = 0; l < 4; l++)
+                q[l] = plain ? 3 * b->cn[8 * (h + l) + k] : b->ix[k][h + l];
+            const __m256d r0 = _mm256_maskz_loadu_pd(7, x + q[0]);
+            const __m256d r1 = _mm256_maskz_loadu_pd(7, x + q[1]);
+            const __m256d r2 = _mm256_maskz_loadu_pd(7, x + q[2]);
+            const __m256d r3 = _mm256_maskz_loadu_pd(7, x + q[3]);
             const __m256d t0 = _mm256_unpacklo_pd(r0, r1), t1 = _mm256_unpackhi_pd(r0, r1);
             const __m256d t2 = _mm256_unpacklo_pd(r2, r3), t3 = _mm256_unpackhi_pd(r2, r3);
             u[3 * k] = (vd4)_mm256_permute2f128_pd(t0, t2, 0x20);
             u[3 * k + 1] = (vd4)_mm256_permute2f128_pd(t1, t3, 0x20);
             u[3 * k + 2] = (vd4)_mm256_permute2f128_pd(t0, t2, 0x31);
         }
-        if (rot) {
+        if (rot && plain) {
+            /* 4 cells' 9 entries: entries 0–3 and 4–7 by two 4 × 4 transposes */
+            const double *Rp = b->R + 9 * h;
+            __m256d a0 = _mm256_loadu_pd(Rp), a1 = _mm256_loadu_pd(Rp + 9),
+                    a2 = _mm256_loadu_pd(Rp + 18), a3 = _mm256_loadu_pd(Rp + 27);
+            __m256d c0 = _mm256_loadu_pd(Rp + 4), c1 = _mm256_loadu_pd(Rp + 13),
+                    c2 = _mm256_loadu_pd(Rp + 22), c3 = _mm256_loadu_pd(Rp + 31);
+            TRANSPOSE4(a0, a1, a2, a3);
+            TRANSPOSE4(c0, c1, c2, c3);
+            R[0] = (vd4)a0, R[1] = (vd4)a1, R[2] = (vd4)a2, R[3] = (vd4)a3;
+            R[4] = (vd4)c0, R[5] = (vd4)c1, R[6] = (vd4)c2, R[7] = (vd4)c3;
+            R[8] = (vd4){Rp[8], Rp[17], Rp[26], Rp[35]};
+        } else if (rot) {
             const int32_t *rix = b->rix + h;
             for (int j = 0; j < 9; j++)
                 R[j] = (vd4){b->R[rix[0] + j], b->R[rix[1] + j], b->R[rix[2] + j],
@@ -511,6 +552,20 @@ static void modal_kernel_avx512(mlanes *restrict b, int rot, double rest, int en
         modal_core4(u, rot ? R : NULL, rest, &L, &M, energy ? &e : NULL, y);
         if (energy)
             memcpy(b->e + h, &e, sizeof e);
+        if (plain) {
+            /* lane l's 24 results are contiguous: 6 transposes of 4 × 4, whole stores */
+            double *o = b->ob + 24 * h;
+            for (int m = 0; m < 6; m++) {
+                __m256d a = (__m256d)y[4 * m], bb = (__m256d)y[4 * m + 1],
+                        c = (__m256d)y[4 * m + 2], d = (__m256d)y[4 * m + 3];
+                TRANSPOSE4(a, bb, c, d);
+                _mm256_storeu_pd(o + 4 * m, a);
+                _mm256_storeu_pd(o + 24 + 4 * m, bb);
+                _mm256_storeu_pd(o + 48 + 4 * m, c);
+                _mm256_storeu_pd(o + 72 + 4 * m, d);
+            }
+            continue;
+        }
         for (int k = 0; k < 8; k++) {
             const __m256d X = (__m256d)y[3 * k], Y = (__m256d)y[3 * k + 1],
                           Z = (__m256d)y[3 * k + 2];
@@ -523,6 +578,21 @@ static void modal_kernel_avx512(mlanes *restrict b, int rot, double rest, int en
             _mm256_mask_storeu_pd(b->out[h + 3] + 3 * k, 7, _mm256_permute2f128_pd(a1, z1, 0x31));
         }
     }
+}
+
+/* The same with AVX-512VL: each corner's 4 nodal vectors by masked 3-double loads transposed
+ * into x, y, z across the lanes, and back the same way into masked 3-double stores (fewer
+ * instructions than element by element; 256-bit vectors with 32 registers: 512-bit vectors of
+ * 8 lanes measured slower on this Zen 4, which splits them in two). A plain batch (cn) reads
+ * its corner indices from the cells' node lists, its rotations and writes its results with
+ * whole vectors transposed in registers (no per-batch tables). */
+__attribute__((optimize("fp-contract=fast"), target("arch=x86-64-v4")))
+static void modal_kernel_avx512(mlanes *restrict b, int rot, double rest, int energy)
+{
+    if (b->cn)
+        modal_avx512_body(b, rot, rest, energy, 1);
+    else
+        modal_avx512_body(b, rot, rest, energy, 0);
 }
 
 static void modal_kernel(mlanes *restrict b, int rot, double rest, int energy)
@@ -605,13 +675,14 @@ static void graded_cell(const cs_fem *fem, const double *f, const int32_t *nd, c
 }
 
 /*
- * One batch of cells [c0, c0 + LANES) ∩ [0, n_cells): fe[24c..] = R_c K_c (R_cᵀ x − rest)
- * (Rb: the rotations of the batch's cells, 9 each from c0, NULL: none; fe NULL: not stored)
+ * One batch of cells [c0, c0 + LANES) ∩ [0, n_cells): fb[24l..] = R_c K_c (R_cᵀ x − rest) for
+ * cell c = c0 + l (Rb: the rotations of the batch's cells, 9 each from c0, NULL: none; fb: the
+ * batch's 24 × LANES results, NULL: not stored)
  * and, if e, the energies per lane (0 past the end). Uniform cells go through the modal
  * kernel together, graded ones point by point.
  */
 static void batch_product(const cs_fem *fem, const double *kf, int c0, const double *Rb,
-                          const double *x, double rest, double *fe, double e[LANES])
+                          const double *x, double rest, double *fb, double e[LANES])
 {
     const double c16 = fem->h / 16.0;
     double sink[24];
@@ -620,6 +691,23 @@ static void batch_product(const cs_fem *fem, const double *kf, int c0, const dou
     int live = 0;
     B.x = x;
     B.R = Rb;
+    B.cn = NULL;
+    if (fb && c0 + LANES <= fem->n_cells && __builtin_cpu_supports("x86-64-v4")) {
+        /* a plain batch if every cell is uniform */
+        int l = 0;
+        for (double f; l < LANES && uniform_factor(kf, c0 + l, &f); l++) {
+            B.lam[l] = c16 * fem->lambda * f;
+            B.mu[l] = c16 * fem->mu * f;
+        }
+        if (l == LANES) {
+            B.cn = fem->cell_nodes + 8 * (size_t)c0;
+            B.ob = fb;
+            modal_kernel(&B, Rb != NULL, rest, e != NULL);
+            for (int k = 0; e && k < LANES; k++)
+                e[k] = B.e[k];
+            return;
+        }
+    }
     for (int l = 0; l < LANES; l++) {
         const int c = c0 + l;
         double f;
@@ -632,7 +720,7 @@ static void batch_product(const cs_fem *fem, const double *kf, int c0, const dou
             B.rix[l] = 9 * l;
             B.lam[l] = c16 * fem->lambda * f;
             B.mu[l] = c16 * fem->mu * f;
-            B.out[l] = fe ? fe + 24 * (size_t)c : sink;
+            B.out[l] = fb ? fb + 24 * l : sink;
             if (first < 0)
                 first = l;
             live |= 1 << l;
@@ -655,7 +743,7 @@ static void batch_product(const cs_fem *fem, const double *kf, int c0, const dou
         const int c = c0 + l;
         if (graded & (1 << l))
             graded_cell(fem, kf + 8 * (size_t)c, fem->cell_nodes + 8 * (size_t)c,
-                        Rb ? Rb + 9 * l : NULL, x, rest, fe ? fe + 24 * (size_t)c : NULL,
+                        Rb ? Rb + 9 * l : NULL, x, rest, fb ? fb + 24 * l : NULL,
                         e ? e + l : NULL);
         else if (e)
             e[l] = B.e[l];
@@ -678,6 +766,7 @@ static void batch_local(const cs_fem *fem, const double *kf, int c0, const doubl
     int graded = 0, live = 0;
     B.x = us;
     B.R = NULL;
+    B.cn = NULL;
     for (int l = 0; l < LANES; l++) {
         const int c = c0 + l;
         double f;
@@ -726,6 +815,7 @@ void cs_cube_cells_product(const double K[24 * 24], int n_cells, const int32_t *
         mlanes B;
         B.x = x;
         B.R = R + 9 * (size_t)b * LANES;
+        B.cn = NULL;
         for (int l = 0; l < LANES; l++) {
             const int c = b * LANES + l, cc = c < n_cells ? c : b * LANES;
             const double sc = c < n_cells ? s[c] / 16.0 : 0.0;
@@ -740,10 +830,17 @@ void cs_cube_cells_product(const double K[24 * 24], int n_cells, const int32_t *
     }
 }
 
-double cs_fem_energy(const cs_fem *fem, const double *x)
+/* Energy batches per block of the parallel sum: blocks are summed in order, so the result does
+ * not depend on the thread count. */
+#define ENERGY_BLOCK 64
+
+/* The energy of batches [b0, b1): exact rotations at x (not the cached ones), then the batch
+ * product's energies. */
+static double energy_batches(const cs_fem *fem, const double *x, int b0, int b1)
 {
-    double e_sum = 0;
-    for (int c0 = 0; c0 < fem->n_cells; c0 += LANES) {
+    double s = 0;
+    for (int b = b0; b < b1; b++) {
+        const int c0 = b * LANES;
         double Rb[9 * LANES], e[LANES];
         for (int l = 0; fem->corotational && l < LANES && c0 + l < fem->n_cells; l++) {
             double F[9], q[4];
@@ -754,8 +851,29 @@ double cs_fem_energy(const cs_fem *fem, const double *x)
         }
         batch_product(fem, fem->kf, c0, fem->corotational ? Rb : NULL, x, fem->h, NULL, e);
         for (int l = 0; l < LANES; l++)
-            e_sum += e[l];
+            s += e[l];
     }
+    return s;
+}
+
+double cs_fem_energy(const cs_fem *fem, const double *x)
+{
+    const int nb = (fem->n_cells + LANES - 1) / LANES;
+    const int nblk = (nb + ENERGY_BLOCK - 1) / ENERGY_BLOCK;
+    double stack[16], *part = nblk <= 16 ? stack : malloc(sizeof(double) * (size_t)nblk);
+    double e_sum = 0;
+    if (!part) { /* out of memory: the same blocks in the same order, on this thread */
+        for (int k = 0; k < nblk; k++)
+            e_sum += energy_batches(fem, x, k * ENERGY_BLOCK, (nb < (k + 1) * ENERGY_BLOCK ? nb : (k + 1) * ENERGY_BLOCK));
+        return e_sum;
+    }
+#pragma omp parallel for num_threads(fem->threads) schedule(static) if (nblk > 1 && fem->threads > 1)
+    for (int k = 0; k < nblk; k++)
+        part[k] = energy_batches(fem, x, k * ENERGY_BLOCK, (nb < (k + 1) * ENERGY_BLOCK ? nb : (k + 1) * ENERGY_BLOCK));
+    for (int k = 0; k < nblk; k++)
+        e_sum += part[k];
+    if (part != stack)
+        free(part);
     return e_sum;
 }
 
@@ -771,60 +889,180 @@ static bool batch_active(const cs_fem *fem, int c0)
     return false;
 }
 
-/* Node pass: out[n] = sign · Σ fe over the node's (cell, corner) slots, in a fixed order.
- * A node with all 8 cells (every interior node of a block) sums them unrolled, in the same
- * order: its 8 slots are loaded at once instead of one per trip of a loop whose length
- * varies from node to node (measured 20–30 % faster on 32³–64³ blocks). */
-static void gather(cs_fem *fem, double *out, double sign)
+/* Where the fused passes keep the element pass's results (the fields after tg in fem.h): the
+ * nodes ordered by the batch of their last cell, each segment's batches in a window of fe.
+ * A chunk's node pass reads results back up to `span` batches old (the largest distance
+ * between a node's first and last batch: about one layer of cells on a box), so a segment
+ * keeps its first `span` batches (the nodes it shares with the previous segment read them
+ * after the barrier) and then cycles through a ring of span + FEM_CHUNK batches; a shorter
+ * segment is stored whole. On a 32³ block that is about 2 × 200 KB of results live instead
+ * of 6.3 MB written to memory and read back. The layout depends on fem->threads only, the
+ * values on nothing of it. Returns -1 on out of memory. */
+#define FEM_CHUNK 64 /* batches per chunk of a fused pass (512 cells, 96 KiB of results) */
+
+static int seg_start(const cs_fem *fem, int nb, int s)
 {
-    const int32_t *restrict as = fem->adj_start, *restrict adj = fem->adj;
+    return (int)((int64_t)nb * s / fem->nseg);
+}
+
+static int product_layout(cs_fem *fem)
+{
+    free(fem->norder);
+    free(fem->nminb);
+    free(fem->nfirst);
+    free(fem->bslot);
+    free(fem->fadj);
+    const int nb = n_batches(fem->n_cells), nn = fem->n_nodes;
+    const size_t nn1 = nn ? (size_t)nn : 1;
+    fem->nseg = fem->threads > 1 ? fem->threads : 1;
+    fem->norder = malloc(nn1 * sizeof(int32_t));
+    fem->nminb = malloc(nn1 * sizeof(int32_t));
+    fem->nfirst = calloc((size_t)nb + 2, sizeof(int32_t));
+    fem->bslot = malloc(((size_t)nb + 1) * sizeof(int32_t));
+    fem->fadj = malloc(((size_t)fem->n_cells * 8 + 1) * sizeof(int32_t));
+    int32_t *fill = malloc(((size_t)nb + 1) * sizeof(int32_t));
+    if (!fem->norder || !fem->nminb || !fem->nfirst || !fem->bslot || !fem->fadj || !fill) {
+        free(fill);
+        return -1;
+    }
+    const int32_t *as = fem->adj_start, *adj = fem->adj;
+    /* counting sort of the nodes by the batch of their last cell (adj: cells increasing);
+     * nodes without cells with batch 0 */
+    int span = 0;
+    for (int n = 0; n < nn; n++) {
+        const int a0 = as[n], a1 = as[n + 1];
+        const int lo = a1 > a0 ? adj[a0] / 8 / LANES : 0, hi = a1 > a0 ? adj[a1 - 1] / 8 / LANES : 0;
+        fem->nfirst[hi + 1]++;
+        span = hi - lo > span ? hi - lo : span;
+    }
+    for (int b = 0; b <= nb; b++)
+        fem->nfirst[b + 1] += fem->nfirst[b];
+    memcpy(fill, fem->nfirst, ((size_t)nb + 1) * sizeof(int32_t));
+    for (int n = 0; n < nn; n++) {
+        const int a0 = as[n], a1 = as[n + 1];
+        const int q = fill[a1 > a0 ? adj[a1 - 1] / 8 / LANES : 0]++;
+        fem->norder[q] = n;
+        fem->nminb[q] = a1 > a0 ? adj[a0] / 8 / LANES : 0;
+    }
+    free(fill);
+    const int64_t head = span, ring = (int64_t)span + FEM_CHUNK;
+    int64_t total = 0;
+    for (int sg = 0; sg < fem->nseg; sg++) {
+        const int b0 = seg_start(fem, nb, sg), b1 = seg_start(fem, nb, sg + 1);
+        for (int b = b0; b < b1; b++) {
+            const int64_t o = b - b0;
+            fem->bslot[b] = (int32_t)(total + (o < head ? o : head + (o - head) % ring));
+        }
+        total += b1 - b0 < head + ring ? b1 - b0 : head + ring;
+    }
+    for (int a = 0; a < 8 * fem->n_cells; a++) {
+        const int c = adj[a] / 8, k = adj[a] % 8;
+        fem->fadj[a] = 24 * (LANES * fem->bslot[c / LANES] + c % LANES) + 3 * k;
+    }
+    return 0;
+}
+
+/* Node n's row: out[n] = sign · Σ of its (cell, corner) results, in the node→cell list's order
+ * (increasing cells, whatever the thread count). A node with all 8 cells (every interior node
+ * of a block) sums them unrolled, in the same order: its 8 slots are loaded at once instead of
+ * one per trip of a loop whose length varies from node to node (measured 20–30 % faster on
+ * 32³–64³ blocks). */
+static inline __attribute__((always_inline)) void node_sum(const cs_fem *fem, int n,
+                                                           double *out, double sign)
+{
+    const int32_t *restrict fadj = fem->fadj;
     const double *restrict fe = fem->fe;
     const uint8_t *act = fem->cell_active;
-#pragma omp parallel for num_threads(fem->threads) schedule(static)
-    for (int n = 0; n < fem->n_nodes; n++) {
-        const int a0 = as[n], a1 = as[n + 1];
-        double s0 = 0, s1 = 0, s2 = 0;
-        if (a1 - a0 == 8 && !act) {
-            const double *v[8];
-            for (int k = 0; k < 8; k++)
-                v[k] = fe + 3 * (size_t)adj[a0 + k];
-            for (int k = 0; k < 8; k++) {
-                s0 += v[k][0];
-                s1 += v[k][1];
-                s2 += v[k][2];
-            }
-        } else {
-            for (int a = a0; a < a1; a++) {
-                if (act && !act[adj[a] >> 3])
-                    continue;
-                const double *v = fe + 3 * (size_t)adj[a];
-                s0 += v[0];
-                s1 += v[1];
-                s2 += v[2];
+    const int a0 = fem->adj_start[n], a1 = fem->adj_start[n + 1];
+    double s0 = 0, s1 = 0, s2 = 0;
+    if (a1 - a0 == 8 && !act) {
+        const double *v[8];
+        for (int k = 0; k < 8; k++)
+            v[k] = fe + fadj[a0 + k];
+        for (int k = 0; k < 8; k++) {
+            s0 += v[k][0];
+            s1 += v[k][1];
+            s2 += v[k][2];
+        }
+    } else {
+        for (int a = a0; a < a1; a++) {
+            if (act && !act[fem->adj[a] >> 3])
+                continue;
+            const double *v = fe + fadj[a];
+            s0 += v[0];
+            s1 += v[1];
+            s2 += v[2];
+        }
+    }
+    out[3 * (size_t)n] = sign * s0;
+    out[3 * (size_t)n + 1] = sign * s1;
+    out[3 * (size_t)n + 2] = sign * s2;
+}
+
+/* The element pass of batch b: its results into fb (24 × LANES), its energy added to *e. */
+typedef void (*batch_fn)(cs_fem *fem, int b, double *fb, const void *ctx, double *e);
+
+/*
+ * A product's element pass (fn on every batch) fused with its node pass (out = sign · Σ):
+ * each segment's batches chunk by chunk, each chunk's element pass followed by the node pass
+ * of the nodes whose cells are all done and all in the segment (their results still in
+ * cache); after the barrier the nodes it shares with lower segments. Every node's sum has the
+ * same terms in the same order for any thread count. Returns the sum of the batches' energies.
+ */
+static double fused_pass(cs_fem *fem, batch_fn fn, const void *ctx, double *out, double sign)
+{
+    const int nb = n_batches(fem->n_cells);
+    double e_sum = 0;
+#pragma omp parallel num_threads(fem->threads) reduction(+ : e_sum)
+    {
+        const int nt = omp_get_num_threads(), t = omp_get_thread_num();
+        for (int sg = t; sg < fem->nseg; sg += nt) {
+            const int b0 = seg_start(fem, nb, sg), b1 = seg_start(fem, nb, sg + 1);
+            for (int j0 = b0; j0 < b1; j0 += FEM_CHUNK) {
+                const int j1 = j0 + FEM_CHUNK < b1 ? j0 + FEM_CHUNK : b1;
+                for (int b = j0; b < j1; b++)
+                    fn(fem, b, fem->fe + 24 * LANES * (size_t)fem->bslot[b], ctx, &e_sum);
+                for (int q = fem->nfirst[j0]; q < fem->nfirst[j1]; q++)
+                    if (fem->nminb[q] >= b0)
+                        node_sum(fem, fem->norder[q], out, sign);
             }
         }
-        out[3 * (size_t)n] = sign * s0;
-        out[3 * (size_t)n + 1] = sign * s1;
-        out[3 * (size_t)n + 2] = sign * s2;
+        /* nodes without cells (sorted to batch 0): when there are no batches at all */
+        if (nb == 0 && t == 0)
+            for (int q = 0; q < fem->n_nodes; q++)
+                node_sum(fem, fem->norder[q], out, sign);
+#pragma omp barrier
+        for (int sg = t; sg < fem->nseg; sg += nt) {
+            const int b0 = seg_start(fem, nb, sg), b1 = seg_start(fem, nb, sg + 1);
+            for (int q = fem->nfirst[b0]; q < fem->nfirst[b1]; q++)
+                if (fem->nminb[q] < b0)
+                    node_sum(fem, fem->norder[q], out, sign);
+        }
     }
+    return e_sum;
+}
+
+typedef struct force_ctx {
+    const double *x;
+} force_ctx;
+
+static void force_batch(cs_fem *fem, int b, double *fb, const void *ctx, double *e_sum)
+{
+    const int c0 = b * LANES;
+    if (!batch_active(fem, c0))
+        return;
+    const force_ctx *fc = ctx;
+    double e[LANES];
+    batch_product(fem, fem->kf, c0, fem->corotational ? fem->R + 9 * (size_t)c0 : NULL, fc->x,
+                  fem->h, fb, e);
+    for (int l = 0; l < LANES; l++)
+        *e_sum += e[l];
 }
 
 void cs_fem_elastic_force(cs_fem *fem, const double *x, double *f, double *energy)
 {
-    double e_sum = 0;
-    const int nb = n_batches(fem->n_cells);
-#pragma omp parallel for num_threads(fem->threads) schedule(static) reduction(+ : e_sum)
-    for (int b = 0; b < nb; b++) {
-        const int c0 = b * LANES;
-        if (!batch_active(fem, c0))
-            continue;
-        double e[LANES];
-        batch_product(fem, fem->kf, c0, fem->corotational ? fem->R + 9 * (size_t)c0 : NULL, x,
-                      fem->h, fem->fe, e);
-        for (int l = 0; l < LANES; l++)
-            e_sum += e[l];
-    }
-    gather(fem, f, -1.0);
+    const force_ctx fc = {x};
+    const double e_sum = fused_pass(fem, force_batch, &fc, f, -1.0);
     if (energy)
         *energy = e_sum;
 }
@@ -834,18 +1072,25 @@ void cs_fem_apply_K(cs_fem *fem, const double *p, double *y)
     cs_fem_apply_Kw(fem, fem->kf, p, y);
 }
 
+typedef struct kw_ctx {
+    const double *kf, *p;
+} kw_ctx;
+
+static void kw_batch(cs_fem *fem, int b, double *fb, const void *ctx, double *e_sum)
+{
+    (void)e_sum;
+    const int c0 = b * LANES;
+    if (!batch_active(fem, c0))
+        return;
+    const kw_ctx *kc = ctx;
+    batch_product(fem, kc->kf, c0, fem->corotational ? fem->R + 9 * (size_t)c0 : NULL, kc->p,
+                  0.0, fb, NULL);
+}
+
 void cs_fem_apply_Kw(cs_fem *fem, const double *kf, const double *p, double *y)
 {
-    const int nb = n_batches(fem->n_cells);
-#pragma omp parallel for num_threads(fem->threads) schedule(static)
-    for (int b = 0; b < nb; b++) {
-        const int c0 = b * LANES;
-        if (!batch_active(fem, c0))
-            continue;
-        batch_product(fem, kf, c0, fem->corotational ? fem->R + 9 * (size_t)c0 : NULL, p, 0.0,
-                      fem->fe, NULL);
-    }
-    gather(fem, y, 1.0);
+    const kw_ctx kc = {kf, p};
+    fused_pass(fem, kw_batch, &kc, y, 1.0);
 }
 
 double cs_fem_product_flops(const cs_fem *fem)
@@ -1028,12 +1273,15 @@ void cs_fem_release_tangent(cs_fem *fem)
     fem->tg = NULL;
 }
 
-void cs_fem_apply_tangent(cs_fem *fem, const double *p, double *y)
+typedef struct tangent_ctx {
+    const double *p;
+} tangent_ctx;
+
+static void tangent_batch(cs_fem *fem, int bt, double *fb, const void *ctx, double *e_sum)
 {
-    const double inv4h = 1.0 / (4.0 * fem->h);
-    const int nb = n_batches(fem->n_cells);
-#pragma omp parallel for num_threads(fem->threads) schedule(static)
-    for (int bt = 0; bt < nb; bt++) {
+      (void)e_sum;
+      const double *p = ((const tangent_ctx *)ctx)->p;
+      const double inv4h = 1.0 / (4.0 * fem->h);
       const int c0 = bt * LANES;
       double qs[24 * LANES], kqs[24 * LANES], as[LANES][3], bs[LANES][3];
       for (int l = 0; l < LANES && c0 + l < fem->n_cells; l++) {
@@ -1067,7 +1315,7 @@ void cs_fem_apply_tangent(cs_fem *fem, const double *p, double *y)
             w1[i] = G[3 * i] * a[0] + G[3 * i + 1] * a[1] + G[3 * i + 2] * a[2];
             w2[i] = G[3 * i] * b[0] + G[3 * i + 1] * b[1] + G[3 * i + 2] * b[2];
         }
-        double *out = fem->fe + 24 * c;
+        double *out = fb + 24 * l;
         for (int k = 0; k < 8; k++) {
             double g1[3], g2[3], l3[3];
             cross3(w1, ku + 3 * k, g1);
@@ -1078,6 +1326,10 @@ void cs_fem_apply_tangent(cs_fem *fem, const double *p, double *y)
                 out[3 * k + i] = R[3 * i] * l3[0] + R[3 * i + 1] * l3[1] + R[3 * i + 2] * l3[2];
         }
       }
-    }
-    gather(fem, y, 1.0);
+}
+
+void cs_fem_apply_tangent(cs_fem *fem, const double *p, double *y)
+{
+    const tangent_ctx tc = {p};
+    fused_pass(fem, tangent_batch, &tc, y, 1.0);
 }

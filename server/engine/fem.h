@@ -9,7 +9,9 @@
  *
  * Products are matrix-free and race-free: an element pass writes each cell's 24 results to its
  * own slot, a node pass gathers them through a node→(cell,corner) list in a fixed order, so
- * results are identical for any number of threads. (Adding each cell straight into the output
+ * results are identical for any number of threads. The two passes run fused, chunk by chunk,
+ * with the slots in a window per thread's segment of cells that stays in L2 (fem.c,
+ * fused_pass). (Adding each cell straight into the output
  * by colours — the 8 lattice parities, or slabs of alternate layers — measured slower on a 32³
  * block: 42–49 ns per cube and product against 37 with the gather.) The element product does
  * not use K: it is modal (fem.c), a Walsh–Hadamard transform of the nodal values to the 7
@@ -60,6 +62,15 @@ typedef struct cs_fem {
     int32_t *adj_start; /* n_nodes + 1 */
     int32_t *adj;       /* cell*8 + corner, grouped by node */
     double *tg;         /* 33 per cell while a static solve runs (see cs_fem_prepare_tangent) */
+    /* The products' element and node passes run fused, chunk by chunk (fem.c, fused_pass): the
+     * cells in batches of 8, split into `nseg` segments (one per thread); the node pass
+     * follows the element pass through the nodes ordered by the batch of their last cell
+     * (norder; nminb: the batch of the node's first cell; nfirst[b]: the first position whose
+     * last batch is >= b), and the element pass's results live in a window of fe per segment
+     * (bslot: a batch's slot of 8 × 24 doubles; fadj: where link a of adj reads them). Built by
+     * cs_fem_relink. */
+    int nseg;
+    int32_t *norder, *nminb, *nfirst, *bslot, *fadj;
 } cs_fem;
 
 int cs_fem_init(cs_fem *fem, const cs_cubemesh *cm, double young, double poisson,

@@ -40,13 +40,16 @@
  *      (merge_cavity_corners, only where no edge is then used twice one way). A face's pair
  *      t, t' that would make an edge used twice in one direction, or that is degenerate, is
  *      dropped; where boundary loops pass a vertex twice the vertex is split so that every
- *      loop is simple; every loop left is closed by one triangle or a fan around a new vertex
- *      placed by the loop alone (the two sides of a crack close twin loops identically, so
- *      their volumes cancel). The surface is then closed and consistently oriented by
+ *      loop is simple; every loop left is closed by a fan (or a single triangle), the fans of
+ *      loops joined by an edge at rest around one apex point, so that their volumes cancel
+ *      exactly at rest (close_loops). The surface is then closed and consistently oriented by
  *      construction; the event reports the fans. Where a face opens partially without partial
  *      closing, its rim is left to such fans, and when the face opens fully one of its pairs
  *      can meet a fan of the earlier opening and be dropped: the two sides' loops then differ
- *      and their fans do not cancel (the volume errors of test_fracture_meshes' cut runs);
+ *      (with an apex per loop that lost volume: up to 1.2 % in test_fracture_meshes' cut
+ *      runs). The surface also separates here between cells that step 6 will put in
+ *      different pieces (cells touching only along an edge or at a corner, which still share
+ *      nodes), so that no piece is left with open loops to close on its own;
  *   6. pieces (§2.4): cells are grouped by shared nodes (face connectivity after step 2); the
  *      largest group stays the object, every other one becomes a new object with its own cube
  *      mesh, surface, state (positions, velocities, inputs) and id.
@@ -550,6 +553,9 @@ typedef struct surf_edit {
     /* this event closes partially opened faces too (fracture_event: the cut path on an object
      * whose mesh lies in lattice planes) */
     bool partial;
+    /* per cell: the piece it will be in (split_pieces' rule, after the nodes split), so that
+     * the surface separates between pieces in this event and its loops close together */
+    int32_t *piece;
     int nv0, nt0;     /* counts before the event */
     dvec rest, pos;   /* appended vertices: 3 each */
     ivec vcell;       /* appended vertices: bound cell */
@@ -631,6 +637,7 @@ static void surf_edit_free(surf_edit *e)
     free(e->tnew.a);
     free(e->tnew_cell.a);
     free(e->rewired);
+    free(e->piece);
     free(e->vstart);
     free(e->vtris);
 }
@@ -1323,6 +1330,38 @@ static double dist2_cell(const cs_cubemesh *cm, int32_t c, const double p[3])
     return d;
 }
 
+/* parent[c] (union-find over the cells): face neighbours still sharing a node of their face
+ * joined (what split_pieces and piece_roots call one piece). */
+static void union_face_neighbours(const cs_cubemesh *cm, int32_t *parent)
+{
+    const int nc = cm->n_cells;
+    for (int c = 0; c < nc; c++)
+        parent[c] = c;
+    for (int c = 0; c < nc; c++) {
+        const int32_t *q = cm->cell_ijk + 3 * (size_t)c;
+        for (int axis = 0; axis < 3; axis++) {
+            int32_t nb[3] = {q[0], q[1], q[2]};
+            nb[axis]++;
+            int32_t d = cs_cubemesh_find(cm, nb[0], nb[1], nb[2]);
+            if (d >= 0 && cells_share_node(cm, c, d))
+                uf_union(parent, c, d);
+        }
+    }
+}
+
+/* Per cell, the root of its piece as split_pieces will find it. NULL if out of memory. */
+static int32_t *piece_roots(const cs_cubemesh *cm)
+{
+    const int nc = cm->n_cells;
+    int32_t *parent = malloc((size_t)(nc ? nc : 1) * sizeof *parent);
+    if (!parent)
+        return NULL;
+    union_face_neighbours(cm, parent);
+    for (int c = 0; c < nc; c++)
+        parent[c] = uf_find(parent, c);
+    return parent;
+}
+
 /*
  * Split the surface along the crack: vertex groups by uncut edges, one copy per group beyond
  * the first, rebinding to a cell of the group's side. Fills fam (vertex families) and marks
@@ -1421,9 +1460,10 @@ static int split_surface(cs_object *o, surf_edit *e, const int32_t *cn0, const i
                                 other = ta[i];
                                 break;
                             }
-                    if (other >= 0 && !tri_cut(o, cn0, s->tri_cell[T[a]], s->tri_cell[T[b]],
-                                               s->rest + 3 * (size_t)v,
-                                               s->rest + 3 * (size_t)other, e->partial))
+                    const int32_t ca = s->tri_cell[T[a]], cb = s->tri_cell[T[b]];
+                    if (other >= 0 && !tri_cut(o, cn0, ca, cb, s->rest + 3 * (size_t)v,
+                                               s->rest + 3 * (size_t)other, e->partial) &&
+                        (!e->piece || e->piece[ca] == e->piece[cb]))
                         uf_union(parent, a, b);
                 }
             /* groups in order of their root; the group whose cells hold the vertex's binding
@@ -2024,16 +2064,42 @@ static int split_pinches(surf_edit *e, edge_map *em, const region *rg, ivec *tri
     return 0;
 }
 
+/* vertex ids ordered by their rest positions (qsort_r, the edit as context) */
+static int cmp_rest(const void *x, const void *y, void *ctx)
+{
+    const double *p = sv_rest(ctx, *(const int32_t *)x), *q = sv_rest(ctx, *(const int32_t *)y);
+    for (int a = 0; a < 3; a++)
+        if (p[a] != q[a])
+            return p[a] < q[a] ? -1 : 1;
+    return 0;
+}
+
 /*
  * Close the boundary loops of the edit's triangles (directed edges used once whose reverse is
- * unused; simple after split_pinches): one triangle for three edges, else a fan around a new
- * vertex; each closing triangle takes the cell of the triangle across its boundary edge.
+ * unused; simple after split_pinches): a fan around a new vertex, or one triangle for a loop
+ * of three joined to nothing but its mirror image; each closing triangle takes the cell of
+ * the triangle across its boundary edge. Loops that share an edge at rest (in either
+ * direction, through copies of its vertices) form a joined set, and every fan of a set has
+ * its apex at one point (one new vertex per loop, all at that point). Why: at rest, the
+ * loops' edges cancel over the whole event — the surface was closed before it, the split
+ * only makes copies at the same rest points, and the closing pairs t, t' are mirror images —
+ * so they cancel over each joined set (an edge is shared within its set), and cones from one
+ * point over a set add up to the cone over nothing: the fans' volumes cancel exactly at rest
+ * (and at the positions of the moment, where copies still coincide). The twin loops of the
+ * two sides of a crack are the simplest such set; with an apex per loop at its own mean,
+ * whatever the two sides' loops did not share (an out-and-back to a point, a mesh triangle
+ * held by one side only, a loop running along both sides at a crack's rim) moved volume.
  * Appends to e (vertices) and tri/cell. Returns the number of fans, or -1.
  */
+
 static int close_loops(cs_world_t *w, surf_edit *e, edge_map *em, const region *rg, ivec *tri,
                        ivec *cell, int32_t *n_loops)
 {
     ivec bsrc = {0}, bdst = {0}, bcell = {0}, walk = {0}, walk_e = {0};
+    ivec lstart = {0}, lv = {0}, lc = {0}; /* the loops: starts in lv, vertices, edge cells */
+    int32_t *ord = NULL, *rid = NULL, *comp = NULL, *stamp = NULL;
+    int64_t *ekey = NULL;
+    double *capex = NULL; /* per joined set of loops: apex rest and current position */
     int fans = 0, rc = -1;
     *n_loops = 0;
     const int nt = region_count(rg, e, cell);
@@ -2101,45 +2167,142 @@ static int close_loops(cs_world_t *w, surf_edit *e, edge_map *em, const region *
         const int k = walk.n;
         if (!ok || k < 3)
             continue; /* cannot happen for oriented triangles without pinches */
-        const int32_t *cyc = walk.a;
+        /* kept: its vertices and the cell of each of its edges; closed below */
+        if (ivec_push(&lstart, lv.n))
+            goto out2;
+        for (int j = 0; j < k; j++)
+            if (ivec_push(&lv, walk.a[j]) || ivec_push(&lc, bcell.a[walk_e.a[j]]))
+                goto out2;
+    }
+    const int nl = lstart.n;
+    if (ivec_push(&lstart, lv.n))
+        goto out2;
+    /* Loops joined by an edge at rest (in either direction) close with one apex point: over
+     * all loops of an event the edges cancel at rest (the surface before the event was
+     * closed; the split only copies vertices; closing pairs t, t' are mirror images at rest),
+     * so over each joined set they cancel too, and the cones from one point over them sum
+     * to the cone over nothing: their volumes cancel exactly. Twin loops on the two sides of
+     * a crack are the common case; an apex per loop at its own mean left the volume of
+     * whatever the two sides' loops did not share. */
+    const int nlv = lv.n;
+    if (nl > 0) {
+        ord = malloc((size_t)nlv * sizeof *ord);
+        rid = malloc((size_t)nlv * sizeof *rid);
+        comp = malloc((size_t)nl * sizeof *comp);
+        ekey = malloc((size_t)(nlv ? nlv : 1) * sizeof *ekey);
+        stamp = malloc((size_t)nlv * sizeof *stamp);
+        capex = malloc((size_t)nl * 6 * sizeof *capex);
+        if (!ord || !rid || !comp || !ekey || !stamp || !capex)
+            goto out2;
+        for (int i = 0; i < nlv; i++)
+            ord[i] = lv.a[i];
+        qsort_r(ord, (size_t)nlv, sizeof *ord, cmp_rest, (void *)e);
+        /* rid: the rank of a loop vertex's rest point */
+        for (int i = 0; i < nlv; i++) {
+            int lo = 0, hi = nlv;
+            while (lo < hi) { /* first entry of ord at lv.a[i]'s rest point */
+                const int mid = (lo + hi) / 2;
+                int32_t tmp = lv.a[i];
+                if (cmp_rest(&ord[mid], &tmp, (void *)e) < 0)
+                    lo = mid + 1;
+                else
+                    hi = mid;
+            }
+            rid[i] = lo;
+        }
+        for (int l = 0; l < nl; l++)
+            comp[l] = l;
+        int ne = 0;
+        for (int l = 0; l < nl; l++) {
+            const int st = lstart.a[l], k = lstart.a[l + 1] - st;
+            for (int j = 0; j < k; j++) {
+                int32_t ra = rid[st + j], rb = rid[st + (j + 1) % k];
+                if (ra == rb)
+                    continue;
+                if (ra > rb) {
+                    const int32_t t = ra;
+                    ra = rb;
+                    rb = t;
+                }
+                ekey[ne++] = (((int64_t)ra * nlv + rb) << 20) | l; /* nl < 2^20 below */
+            }
+        }
+        if (nl < (1 << 20)) {
+            qsort(ekey, (size_t)ne, sizeof *ekey, cmp64);
+            for (int i = 1; i < ne; i++)
+                if ((ekey[i] >> 20) == (ekey[i - 1] >> 20))
+                    uf_union(comp, (int32_t)(ekey[i] & 0xfffff), (int32_t)(ekey[i - 1] & 0xfffff));
+        }
+        /* per joined set: the apex at the mean of its rest points (each once) plus a small
+         * offset that depends only on that mean (so that it is not flat); it starts at the
+         * same points' current mean plus the offset (the next skin moves it) */
+        for (int i = 0; i < nlv; i++)
+            stamp[i] = -1;
+        for (int l = 0; l < nl; l++) {
+            if (uf_find(comp, l) != l)
+                continue;
+            double c[3] = {0, 0, 0}, x[3] = {0, 0, 0};
+            int np = 0;
+            for (int m = 0; m < nl; m++) {
+                if (uf_find(comp, m) != l)
+                    continue;
+                for (int i = lstart.a[m]; i < lstart.a[m + 1]; i++) {
+                    if (stamp[rid[i]] == l)
+                        continue;
+                    stamp[rid[i]] = l;
+                    const int32_t v = lv.a[i];
+                    const double *px = v < e->nv0 ? e->o->surf.pos + 3 * (size_t)v
+                                                  : e->pos.a + 3 * (size_t)(v - e->nv0);
+                    for (int a = 0; a < 3; a++) {
+                        c[a] += sv_rest(e, v)[a];
+                        x[a] += px[a];
+                    }
+                    np++;
+                }
+            }
+            for (int a = 0; a < 3; a++) {
+                c[a] /= np;
+                x[a] /= np;
+            }
+            uint64_t r = w->def.seed;
+            for (int a = 0; a < 3; a++)
+                r = mix64(r ^ (uint64_t)llround(c[a] / e->o->cm.h * 1e6));
+            for (int a = 0; a < 3; a++) {
+                r = mix64(r);
+                const double d = 1e-3 * e->o->cm.h * ((double)(r >> 11) / 9007199254740992.0 - 0.5);
+                capex[6 * l + a] = c[a] + d;
+                capex[6 * l + 3 + a] = x[a] + d;
+            }
+        }
+    }
+    for (int l = 0; l < nl; l++) {
+        const int32_t *cyc = lv.a + lstart.a[l], *lcell = lc.a + lstart.a[l];
+        const int k = lstart.a[l + 1] - lstart.a[l];
+        const int root = uf_find(comp, l);
         (*n_loops)++;
-        if (k == 3 && !tri_degenerate(sv_rest(e, cyc[0]), sv_rest(e, cyc[2]), sv_rest(e, cyc[1]))) {
-            if (ivec_push3(tri, cyc[0], cyc[2], cyc[1]) ||
-                ivec_push(cell, bcell.a[walk_e.a[0]]))
+        /* a triangle alone closes a loop of three that is joined to nothing but, at most, its
+         * mirror image (closed the same way: they cancel) */
+        int others = 0;
+        bool threes = true;
+        for (int m = 0; m < nl; m++)
+            if (m != l && uf_find(comp, m) == root) {
+                others++;
+                threes &= lstart.a[m + 1] - lstart.a[m] == 3;
+            }
+        if (k == 3 && others <= 1 && threes &&
+            !tri_degenerate(sv_rest(e, cyc[0]), sv_rest(e, cyc[2]), sv_rest(e, cyc[1]))) {
+            if (ivec_push3(tri, cyc[0], cyc[2], cyc[1]) || ivec_push(cell, lcell[0]))
                 goto out2;
             continue;
         }
-        double c[3] = {0, 0, 0};
-        for (int j = 0; j < k; j++)
-            for (int a = 0; a < 3; a++)
-                c[a] += sv_rest(e, cyc[j])[a] / k;
-        /* a small offset off the loop's mean keeps the fan from being flat; it depends only
-         * on where the loop is, so the two sides of a crack that close twin loops get the
-         * same apex and their volumes cancel */
-        uint64_t r = w->def.seed;
-        for (int a = 0; a < 3; a++)
-            r = mix64(r ^ (uint64_t)llround(c[a] / e->o->cm.h * 1e6));
-        double d[3], x[3] = {0, 0, 0};
-        for (int a = 0; a < 3; a++) {
-            r = mix64(r);
-            d[a] = 1e-3 * e->o->cm.h * ((double)(r >> 11) / 9007199254740992.0 - 0.5);
-            c[a] += d[a];
-        }
-        int32_t cv = sv_append(e, c, bcell.a[walk_e.a[0]]);
+        const double *c = capex + 6 * root;
+        int32_t cv = sv_append(e, c, lcell[0]);
         if (cv < 0)
             goto out2;
-        /* It starts at the loop's current mean plus the same offset (not where its binding
-         * puts it; the next skin moves it): twin loops lie over copies at the same positions,
-         * so their fans coincide now too and cancel in a client's volume check. */
-        for (int j = 0; j < k; j++)
-            for (int a = 0; a < 3; a++)
-                x[a] += (cyc[j] < e->nv0 ? e->o->surf.pos + 3 * (size_t)cyc[j]
-                                         : e->pos.a + 3 * (size_t)(cyc[j] - e->nv0))[a] / k;
         for (int a = 0; a < 3; a++)
-            e->pos.a[3 * (size_t)(cv - e->nv0) + a] = x[a] + d[a];
+            e->pos.a[3 * (size_t)(cv - e->nv0) + a] = capex[6 * root + 3 + a];
         for (int j = 0; j < k; j++)
-            if (ivec_push3(tri, cv, cyc[(j + 1) % k], cyc[j]) ||
-                ivec_push(cell, bcell.a[walk_e.a[j]]))
+            if (ivec_push3(tri, cv, cyc[(j + 1) % k], cyc[j]) || ivec_push(cell, lcell[j]))
                 goto out2;
         fans++;
     }
@@ -2153,6 +2316,15 @@ out:
     free(bcell.a);
     free(walk.a);
     free(walk_e.a);
+    free(lstart.a);
+    free(lv.a);
+    free(lc.a);
+    free(ord);
+    free(rid);
+    free(comp);
+    free(stamp);
+    free(ekey);
+    free(capex);
     return rc;
 }
 
@@ -2984,18 +3156,7 @@ static int split_pieces(cs_world_t *w, cs_object *o, int *n_rebuilt, int *n_drop
     /* face-connected: face neighbours still sharing a node of their face (cells that touch
      * only along an edge or at a corner become pieces of their own; each keeps a copy of the
      * nodes they shared) */
-    for (int c = 0; c < nc; c++)
-        parent[c] = c;
-    for (int c = 0; c < nc; c++) {
-        const int32_t *q = cm->cell_ijk + 3 * (size_t)c;
-        for (int axis = 0; axis < 3; axis++) {
-            int32_t nb[3] = {q[0], q[1], q[2]};
-            nb[axis]++;
-            int32_t d = cs_cubemesh_find(cm, nb[0], nb[1], nb[2]);
-            if (d >= 0 && cells_share_node(cm, c, d))
-                uf_union(parent, c, d);
-        }
-    }
+    union_face_neighbours(cm, parent);
     /* components numbered by their first cell */
     int ncomp = 0;
     int32_t *root_comp = malloc((size_t)nc * sizeof *root_comp);
@@ -3424,6 +3585,8 @@ static int fracture_event(cs_world_t *w, cs_object *o, const int8_t *label, bool
     O = (crack_face *)Ov.a; /* 4 int32 per face, laid out as crack_face */
     e.o = o;
     e.partial = partial;
+    if (!(e.piece = piece_roots(cm)))
+        goto out_f;
     e.nv0 = o->surf.n_vertices;
     e.nt0 = o->surf.n_triangles;
     e.rewired = calloc((size_t)(e.nt0 ? e.nt0 : 1), 1);

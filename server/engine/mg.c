@@ -14,14 +14,26 @@
 
 #define MG_NU 1           /* smoothing sweeps before and after the coarse correction */
 #ifndef MG_CHEB
-#define MG_CHEB 2         /* Chebyshev smoother degree (0: damped Jacobi, MG_NU sweeps) */
+#define MG_CHEB 2         /* Chebyshev degree on the finest level (0: damped Jacobi, MG_NU sweeps) */
 #endif
+#ifndef MG_CHEB_COARSE
+#define MG_CHEB_COARSE 3  /* ... and on the coarse levels (an eighth of the cost each) */
+#endif
+/* The smoothed interval is [λ/MG_CHEB_RATIO, λ] with λ = MG_LAMBDA_SAFETY × the power estimate of
+ * λmax(D⁻¹A). Any Chebyshev error polynomial on [a, b] stays at most 1 in modulus up to
+ * a + b = λ (1 + 1/ratio), so B stays positive definite while λmax ≤ 1.1 (1 + 1/4) = 1.375×
+ * the estimate. A wider interval (ratio 6, factor 1.18: the same margin) took 5–10 % fewer
+ * iterations in the first steps from rest but 25–33 % more in long warm-started runs, at the
+ * default tolerance and at 1e-6 (README "Multigrid against block Jacobi"): not kept. */
 #ifndef MG_CHEB_RATIO
 #define MG_CHEB_RATIO 4.0
 #endif
+#ifndef MG_LAMBDA_SAFETY
+#define MG_LAMBDA_SAFETY 1.1
+#endif
 #define MG_COARSE_SWEEPS 8 /* Jacobi sweeps on a coarsest level too large for Cholesky */
 #define MG_POWER_ITERS 10
-#define MG_CHUNK 64        /* batches per chunk of apply_ex (1024 cells, 96 KiB of fe) */
+#define MG_CHUNK 64        /* batches per chunk of apply_ex (1024 cells, 128 KiB of results) */
 #define MG_LANES 16        /* cells per batch of the element pass (one float SIMD lane each) */
 #define VF_LANES 8         /* lanes per vector of the element pass's arithmetic */
 typedef float vf __attribute__((vector_size(4 * VF_LANES)));
@@ -61,8 +73,14 @@ typedef struct mg_level {
     int32_t *bidx;                    /* per batch 8 × MG_LANES: 3·node of corner k per lane */
     float *bR;                        /* per batch 9 × MG_LANES: R_c (cs_mg_setup) */
     float *bL, *bM;                   /* per batch MG_LANES: s_c·hλ/16, s_c·hμ/16 (cs_mg_setup) */
-    float *fe;                        /* per batch 24 × MG_LANES: the cells' products */
+    /* The cells' products, 8 corners × (x, y, z, ·) per cell (32 floats), in a window per
+     * segment of batches
+     * (product_layout): a node's links are read back soon after they are written, and the
+     * window stays in L2 instead of going out to memory. */
+    float *fe;
+    int32_t *bslot;                   /* per batch: its slot in fe */
     int32_t *fadj;                    /* per adj link: its corner's x component in fe */
+    int nseg;                         /* segments of batches: l->threads */
     /* the node pass follows the element pass chunk by chunk (apply_ex): the nodes ordered by
      * the batch of their last cell (nodes without cells: batch 0), then by index */
     int32_t *norder;                  /* n_nodes */
@@ -70,6 +88,7 @@ typedef struct mg_level {
     int32_t *nfirst;                  /* n_batches + 1: first position whose last batch >= b */
     double lam;
     float omega;
+    int cheb_deg;                     /* Chebyshev degree of this level's smoother */
 } mg_level;
 
 struct cs_mg {
@@ -89,6 +108,8 @@ struct cs_mg {
     int setups;
     double key[3];
 };
+
+static bool corner_blocks_ok(const double *K);
 
 /* ------------------------------------------------------------------ building */
 
@@ -340,10 +361,63 @@ out:
     return rc;
 }
 
+/* The segments of batches of a level: segment s is [seg_start(l, s), seg_start(l, s + 1)). */
+static int seg_start(const mg_level *l, int s)
+{
+    return (int)((int64_t)l->n_batches * s / l->nseg);
+}
+
+/*
+ * Where the element pass stores each batch (bslot) and where the node pass reads each link
+ * (fadj). The node pass of a chunk reads back batches up to `span` batches old (span: the
+ * largest distance between a node's first and last batch; about one layer of cells on a
+ * box), so each segment keeps its first `span` batches (its nodes shared with the previous
+ * segment read them after the barrier) and then cycles through a ring of span + MG_CHUNK
+ * batches: on a box only about two layers of cells' results are ever live, and they stay
+ * in L2 instead of being written to memory and read back from it (10.6 MB per product on
+ * 48³). A segment shorter than that is stored whole. The layout depends on l->threads only,
+ * and the values on nothing of it. Returns -1 on out of memory.
+ */
+static int product_layout(mg_level *l)
+{
+    l->nseg = l->threads;
+    int span = 0;
+    for (int n = 0; n < l->n_nodes; n++) {
+        int lo = INT32_MAX, hi = -1;
+        for (int a = l->adj_start[n]; a < l->adj_start[n + 1]; a++) {
+            const int b = l->adj[a] / 8 / MG_LANES;
+            lo = b < lo ? b : lo;
+            hi = b > hi ? b : hi;
+        }
+        if (hi >= 0 && hi - lo > span)
+            span = hi - lo;
+    }
+    const int64_t head = span, ring = (int64_t)span + MG_CHUNK;
+    int64_t total = 0;
+    for (int s = 0; s < l->nseg; s++) {
+        const int b0 = seg_start(l, s), b1 = seg_start(l, s + 1);
+        for (int b = b0; b < b1; b++) {
+            const int64_t o = b - b0;
+            l->bslot[b] = (int32_t)(total + (o < head ? o : head + (o - head) % ring));
+        }
+        total += b1 - b0 < head + ring ? b1 - b0 : head + ring;
+    }
+    l->fe = aligned_alloc(64, (size_t)(total ? total : 1) * 32 * MG_LANES * sizeof(float));
+    if (!l->fe)
+        return -1;
+    for (int n = 0; n < l->n_nodes; n++)
+        for (int a = l->adj_start[n]; a < l->adj_start[n + 1]; a++) {
+            const int c = l->adj[a] / 8, k = l->adj[a] % 8;
+            l->fadj[a] = 32 * (MG_LANES * l->bslot[c / MG_LANES] + c % MG_LANES) + 4 * k;
+        }
+    return 0;
+}
+
 static int alloc_level_state(mg_level *l, int level, int threads)
 {
     const size_t n3 = 3 * (size_t)l->n_nodes, nc = l->n_cells ? (size_t)l->n_cells : 1;
     l->threads = threads > 1 && l->n_cells >= CS_FEM_PARALLEL_CELLS ? threads : 1;
+    l->cheb_deg = level == 0 ? MG_CHEB : MG_CHEB_COARSE;
     l->s = malloc(nc * sizeof(double));
     l->dg = malloc((size_t)(l->n_nodes ? l->n_nodes : 1) * sizeof(double));
     l->dgf = malloc((size_t)(l->n_nodes ? l->n_nodes : 1) * sizeof(float));
@@ -354,7 +428,7 @@ static int alloc_level_state(mg_level *l, int level, int threads)
     l->bR = aligned_alloc(64, nb * 9 * vb);
     l->bL = aligned_alloc(64, nb * vb);
     l->bM = aligned_alloc(64, nb * vb);
-    l->fe = aligned_alloc(64, nb * 24 * vb);
+    l->bslot = malloc(nb * sizeof(int32_t));
     l->fadj = malloc(nc * 8 * sizeof(int32_t));
     l->norder = malloc((size_t)(l->n_nodes ? l->n_nodes : 1) * sizeof(int32_t));
     l->nminb = malloc((size_t)(l->n_nodes ? l->n_nodes : 1) * sizeof(int32_t));
@@ -363,7 +437,7 @@ static int alloc_level_state(mg_level *l, int level, int threads)
     l->b = malloc((n3 ? n3 : 1) * sizeof(float));
     l->t = malloc((n3 ? n3 : 1) * sizeof(float));
     l->d = malloc((n3 ? n3 : 1) * sizeof(float));
-    if (!l->d || !l->s || !l->dg || !l->dgf || !l->invf || !l->fe || !l->x || !l->b || !l->t ||
+    if (!l->d || !l->s || !l->dg || !l->dgf || !l->invf || !l->bslot || !l->x || !l->b || !l->t ||
         !l->bidx || !l->bR || !l->bL || !l->bM || !l->fadj || !l->norder || !l->nminb ||
         !l->nfirst)
         return -1;
@@ -393,11 +467,8 @@ static int alloc_level_state(mg_level *l, int level, int threads)
             for (int k = 0; k < 8; k++)
                 l->bidx[(8 * b + k) * MG_LANES + p] = 3 * l->cell_nodes[8 * c + k];
         }
-    for (int n = 0; n < l->n_nodes; n++)
-        for (int a = l->adj_start[n]; a < l->adj_start[n + 1]; a++) {
-            const int c = l->adj[a] / 8, k = l->adj[a] % 8;
-            l->fadj[a] = (24 * (c / MG_LANES) + 3 * k) * MG_LANES + c % MG_LANES;
-        }
+    if (product_layout(l) != 0)
+        return -1;
     if (level == 0)
         return 0;
     l->own_R = malloc((size_t)l->n_cells * 9 * sizeof(double));
@@ -450,6 +521,7 @@ static void free_level(mg_level *l)
     free(l->dgf);
     free(l->invf);
     free(l->fe);
+    free(l->bslot);
     free(l->x);
     free(l->b);
     free(l->t);
@@ -483,6 +555,8 @@ cs_mg *cs_mg_build(const cs_cubemesh *cm, const cs_fem *fem, uint32_t version)
     mg->fine_links = cm->cell_nodes;
     memcpy(mg->K, fem->K, sizeof mg->K);
     cs_cube_lame_h(fem->K, &mg->hl, &mg->hm);
+    if (!corner_blocks_ok(mg->K))
+        goto fail;
     mg->avx512 = __builtin_cpu_supports("x86-64-v4");
     mg_level *l0 = &mg->lv[0];
     l0->n_cells = cm->n_cells;
@@ -566,6 +640,7 @@ double *cs_mg_node_diag(cs_mg *mg)
 /* The element pass of half h (lanes 8h..8h+7) of batch b: fe = s R K Rᵀ x per lane, by the
  * modal kernel (fem.c, modal_core.h) in single precision, 8 lanes in 256-bit vectors (512-bit
  * vectors of 16 lanes with gathers measured slower on this Zen 4, which splits them in two). */
+typedef int vi8 __attribute__((vector_size(32)));
 static inline __attribute__((always_inline)) void half_rest(const mg_level *l, int b, int h,
                                                             const vf u[24])
 {
@@ -576,9 +651,26 @@ static inline __attribute__((always_inline)) void half_rest(const mg_level *l, i
     memcpy(&L, l->bL + o, sizeof L);
     memcpy(&M, l->bM + o, sizeof M);
     modal_core_f(u, R, 0.0f, &L, &M, NULL, y);
-    float *out = l->fe + 24 * MG_LANES * (size_t)b + VF_LANES * h;
-    for (int k = 0; k < 24; k++)
-        memcpy(out + MG_LANES * k, &y[k], sizeof(vf));
+    /* lane p's corner k at out + 32 p + 4 k as (x, y, z, z): the components transposed across
+     * lanes in registers (lanes j and j + 4 per 256-bit vector), whole 16-byte stores */
+    float *out = l->fe + 32 * ((size_t)MG_LANES * l->bslot[b] + VF_LANES * h);
+    for (int k = 0; k < 8; k++) {
+        const vf X = y[3 * k], Y = y[3 * k + 1], Z = y[3 * k + 2];
+        const vf t0 = __builtin_shuffle(X, Y, (vi8){0, 8, 1, 9, 4, 12, 5, 13});
+        const vf t1 = __builtin_shuffle(X, Y, (vi8){2, 10, 3, 11, 6, 14, 7, 15});
+        const vf t2 = __builtin_shuffle(Z, (vi8){0, 0, 1, 1, 4, 4, 5, 5});
+        const vf t3 = __builtin_shuffle(Z, (vi8){2, 2, 3, 3, 6, 6, 7, 7});
+        vf r[4];
+        r[0] = __builtin_shuffle(t0, t2, (vi8){0, 1, 8, 9, 4, 5, 12, 13});
+        r[1] = __builtin_shuffle(t0, t2, (vi8){2, 3, 10, 11, 6, 7, 14, 15});
+        r[2] = __builtin_shuffle(t1, t3, (vi8){0, 1, 8, 9, 4, 5, 12, 13});
+        r[3] = __builtin_shuffle(t1, t3, (vi8){2, 3, 10, 11, 6, 7, 14, 15});
+        for (int j = 0; j < 4; j++) {
+            memcpy(out + 32 * j + 4 * k, (const char *)&r[j], 4 * sizeof(float));
+            memcpy(out + 32 * (j + 4) + 4 * k, (const char *)&r[j] + 4 * sizeof(float),
+                   4 * sizeof(float));
+        }
+    }
 }
 
 /* Inputs lane by lane. */
@@ -641,12 +733,24 @@ static inline __attribute__((always_inline)) void node_out(const mg_level *l, in
                                                            const float *x, const float *b,
                                                            float *y, const cheb_step *cs)
 {
-    float s[3] = {0, 0, 0};
-    for (int a = l->adj_start[n]; a < l->adj_start[n + 1]; a++) {
-        const float *v = l->fe + l->fadj[a];
-        s[0] += v[0];
-        s[1] += v[MG_LANES];
-        s[2] += v[2 * MG_LANES];
+    /* (x, y, z, ·) per link: one 16-byte load and add each, the same sums per component */
+    typedef float vf4 __attribute__((vector_size(16)));
+    vf4 s = {0, 0, 0, 0};
+    const int a0 = l->adj_start[n], a1 = l->adj_start[n + 1];
+    const float *fe = __builtin_assume_aligned(l->fe, 16);
+    if (a1 - a0 == 8) {
+        /* an interior node: its 8 links loaded at once, summed in the same order */
+        vf4 v[8];
+        for (int a = 0; a < 8; a++)
+            memcpy(&v[a], fe + l->fadj[a0 + a], sizeof v[a]);
+        for (int a = 0; a < 8; a++)
+            s += v[a];
+    } else {
+        for (int a = a0; a < a1; a++) {
+            vf4 v;
+            memcpy(&v, fe + l->fadj[a], sizeof v);
+            s += v;
+        }
     }
     float r[3];
     for (int k = 0; k < 3; k++) {
@@ -683,26 +787,31 @@ static void apply_path(const cs_mg *mg, int level, bool avx512, const float *x, 
     }
 #pragma omp parallel num_threads(l->threads)
     {
-        /* Each thread: a contiguous range of batches, chunk by chunk, each chunk's element pass
-         * followed by the node pass of the nodes whose cells are all done and all its own (fe
-         * still in cache); after the barrier the nodes it shares with lower threads. */
+        /* Each segment (product_layout; one per thread when the team is complete): its
+         * batches chunk by chunk, each chunk's element pass followed by the node pass of the
+         * nodes whose cells are all done and all in the segment (their results still in
+         * cache); after the barrier the nodes it shares with lower segments. */
         const int nt = omp_get_num_threads(), t = omp_get_thread_num();
-        const int b0 = (int)((int64_t)l->n_batches * t / nt);
-        const int b1 = (int)((int64_t)l->n_batches * (t + 1) / nt);
-        for (int j0 = b0; j0 < b1; j0 += MG_CHUNK) {
-            const int j1 = j0 + MG_CHUNK < b1 ? j0 + MG_CHUNK : b1;
-            if (avx512)
-                batches_avx512(l, x, j0, j1);
-            else
-                batches_generic(l, x, j0, j1);
-            for (int q = l->nfirst[j0]; q < l->nfirst[j1]; q++)
-                if (l->nminb[q] >= b0)
-                    node_out(l, l->norder[q], x, b, y, cs);
+        for (int sg = t; sg < l->nseg; sg += nt) {
+            const int b0 = seg_start(l, sg), b1 = seg_start(l, sg + 1);
+            for (int j0 = b0; j0 < b1; j0 += MG_CHUNK) {
+                const int j1 = j0 + MG_CHUNK < b1 ? j0 + MG_CHUNK : b1;
+                if (avx512)
+                    batches_avx512(l, x, j0, j1);
+                else
+                    batches_generic(l, x, j0, j1);
+                for (int q = l->nfirst[j0]; q < l->nfirst[j1]; q++)
+                    if (l->nminb[q] >= b0)
+                        node_out(l, l->norder[q], x, b, y, cs);
+            }
         }
 #pragma omp barrier
-        for (int q = l->nfirst[b0]; q < l->nfirst[b1]; q++)
-            if (l->nminb[q] < b0)
-                node_out(l, l->norder[q], x, b, y, cs);
+        for (int sg = t; sg < l->nseg; sg += nt) {
+            const int b0 = seg_start(l, sg), b1 = seg_start(l, sg + 1);
+            for (int q = l->nfirst[b0]; q < l->nfirst[b1]; q++)
+                if (l->nminb[q] < b0)
+                    node_out(l, l->norder[q], x, b, y, cs);
+        }
     }
 }
 
@@ -763,7 +872,8 @@ static void cheb_update(const mg_level *l, const float *t, float *d, float *x, f
 }
 
 /*
- * Chebyshev smoothing of degree MG_CHEB: x += p(D⁻¹A) D⁻¹ (b − A x), p the polynomial that
+ * Chebyshev smoothing of the level's degree (MG_CHEB on the finest, MG_CHEB_COARSE below):
+ * x += p(D⁻¹A) D⁻¹ (b − A x), p the polynomial that
  * minimises max |1 − λ p(λ)| over [λmax/MG_CHEB_RATIO, λmax] (the upper part of the spectrum,
  * which the coarse levels do not reach); from x = 0 if zero (one product less). The same
  * polynomial before and after the coarse correction keeps the V-cycle symmetric, and
@@ -782,7 +892,7 @@ static void cheb(const cs_mg *mg, int level, const float *b, float *x, bool zero
         const cheb_step cs = {l->d, x, 0.0f, (float)(1.0 / theta), true};
         apply_path(mg, level, mg->avx512, x, b, NULL, &cs);
     }
-    for (int k = 1; k < MG_CHEB; k++) {
+    for (int k = 1; k < l->cheb_deg; k++) {
         const double rn = 1.0 / (2.0 * sigma - rho);
         const cheb_step cs = {l->d, x, (float)(rn * rho), (float)(2.0 * rn / delta), false};
         apply_path(mg, level, mg->avx512, x, b, NULL, &cs);
@@ -846,16 +956,48 @@ static void setup_coarse(cs_mg *mg, int level, bool corotational)
         for (int k = 0; k < 3; k++)
             c->own_mask[3 * J + k] = held[k] ? 1 : 0;
     }
-    /* diagonal blocks */
-    memset(c->own_inv, 0, 9 * (size_t)c->n_nodes * sizeof(double));
-    for (int C = 0; C < c->n_cells; C++)
-        for (int k = 0; k < 8; k++)
-            add_rotated_block(mg->K, c->R + 9 * C, c->s[C], k, k,
-                              c->own_inv + 9 * c->cell_nodes[8 * C + k], 3);
-    for (int J = 0; J < c->n_nodes; J++)
+    /* D⁻¹: node by node (the cells of a node in adj order, so any thread count gives the same
+     * sums), each corner block by R K_kk Rᵀ = (K00 − K01) I + K01 (R σ)(R σ)ᵀ, σ the corner's
+     * signs (2·CS_CORNER − 1): the cube's corner block is K00 on the diagonal and K01 σ_a σ_b
+     * off it (cs_mg_build checks that on the model's K) */
+    const double kd = mg->K[0] - mg->K[1], ko = mg->K[1];
+#pragma omp parallel for num_threads(c->threads) schedule(static)
+    for (int J = 0; J < c->n_nodes; J++) {
+        double m[9] = {0};
+        for (int a = c->adj_start[J]; a < c->adj_start[J + 1]; a++) {
+            const int C = c->adj[a] / 8, k = c->adj[a] % 8;
+            const double *R = c->R + 9 * C, sc = c->s[C];
+            double v[3];
+            for (int i = 0; i < 3; i++)
+                v[i] = R[3 * i] * (2 * CS_CORNER[k][0] - 1) +
+                       R[3 * i + 1] * (2 * CS_CORNER[k][1] - 1) +
+                       R[3 * i + 2] * (2 * CS_CORNER[k][2] - 1);
+            for (int i = 0; i < 3; i++) {
+                for (int j = 0; j < 3; j++)
+                    m[3 * i + j] += sc * ko * v[i] * v[j];
+                m[4 * i] += sc * kd;
+            }
+        }
+        for (int i = 0; i < 3; i++)
+            m[4 * i] += c->dg[J];
+        cs_invert_block(m);
+        memcpy(c->own_inv + 9 * J, m, sizeof m);
+    }
+}
+
+/* Does the model's K have the corner-block form setup_coarse's D⁻¹ assumes? */
+static bool corner_blocks_ok(const double *K)
+{
+    const double kd = K[0] - K[1], ko = K[1], tol = 1e-12 * fabs(K[0]);
+    for (int k = 0; k < 8; k++)
         for (int a = 0; a < 3; a++)
-            c->own_inv[9 * J + 4 * a] += c->dg[J];
-    cs_invert_blocks(c->own_inv, c->n_nodes);
+            for (int b = 0; b < 3; b++) {
+                const double want = (a == b ? kd : 0.0) + ko * (2 * CS_CORNER[k][a] - 1) *
+                                                           (2 * CS_CORNER[k][b] - 1);
+                if (fabs(K[(3 * k + a) * 24 + 3 * k + b] - want) > tol)
+                    return false;
+            }
+    return true;
 }
 
 /* Dense Cholesky of the coarsest operator (held dofs: identity rows). */
@@ -990,7 +1132,7 @@ int cs_mg_setup(cs_mg *mg, const cs_fem *fem, cs_matvec_fn A, void *ctx, const d
     if (mg->setups % MG_LAMBDA_EVERY == 0 || memcmp(key, mg->key, sizeof key) != 0) {
         memcpy(mg->key, key, sizeof key);
         for (int l = 0; l < mg->n_levels; l++) {
-            mg->lv[l].lam = 1.1 * estimate_lambda(mg, l);
+            mg->lv[l].lam = MG_LAMBDA_SAFETY * estimate_lambda(mg, l);
             mg->lv[l].omega = (float)(4.0 / (3.0 * mg->lv[l].lam));
         }
     }
@@ -1037,7 +1179,7 @@ static void vcycle(cs_mg *mg, int level, const float *b, float *x)
         return;
     }
     mg_level *f = &mg->lv[level], *c = &mg->lv[level + 1];
-    if (MG_CHEB) {
+    if (f->cheb_deg) {
         cheb(mg, level, b, x, true);
     } else {
         jacobi(f, b, x, f->omega, false);
@@ -1072,7 +1214,7 @@ static void vcycle(cs_mg *mg, int level, const float *b, float *x)
             if (!f->mask[3 * n + k])
                 x[3 * n + k] += s[k];
     }
-    if (MG_CHEB)
+    if (f->cheb_deg)
         cheb(mg, level, b, x, false);
     else
         for (int s = 0; s < MG_NU; s++)
@@ -1091,4 +1233,34 @@ void cs_mg_vcycle(void *ctx, const double *r, double *z)
 #pragma omp parallel for num_threads(l0->threads) schedule(static)
     for (int d = 0; d < n3; d++)
         z[d] = l0->x[d];
+}
+
+/* ------------------------------------------------------------------ transfers (for tests) */
+
+void cs_mg_prolong(const cs_mg *mg, int level, const float *xc, float *xf)
+{
+    if (level < 0 || level + 1 >= mg->n_levels)
+        return;
+    const mg_level *f = &mg->lv[level];
+    for (int n = 0; n < f->n_nodes; n++)
+        for (int k = 0; k < 3; k++) {
+            float s = 0;
+            for (int a = f->p_start[n]; a < f->p_start[n + 1]; a++)
+                s += (float)f->p_w[a] * xc[3 * f->p_node[a] + k];
+            xf[3 * n + k] = s;
+        }
+}
+
+void cs_mg_restrict(const cs_mg *mg, int level, const float *xf, float *xc)
+{
+    if (level < 0 || level + 1 >= mg->n_levels)
+        return;
+    const mg_level *f = &mg->lv[level], *c = &mg->lv[level + 1];
+    for (int J = 0; J < c->n_nodes; J++)
+        for (int k = 0; k < 3; k++) {
+            float s = 0;
+            for (int a = f->r_start[J]; a < f->r_start[J + 1]; a++)
+                s += (float)f->r_w[a] * xf[3 * f->r_node[a] + k];
+            xc[3 * J + k] = s;
+        }
 }

@@ -31,10 +31,11 @@
  * stopping rule and the solution's accuracy are unchanged; B is symmetric only up to float
  * rounding, which cs_pcg_ex's flexible (Polak–Ribière) β absorbs.
  *
- * Smoother: Chebyshev of degree 2 on D⁻¹A over [λ/4, λ], λ ≥ λmax(D⁻¹A) (1.1× a power-
- * iteration estimate), before (from zero: one product) and after (two products) the coarse
+ * Smoother: Chebyshev on D⁻¹A over [λ/6, λ], λ ≥ λmax(D⁻¹A) (1.18× a power-iteration
+ * estimate), of degree 2 on the finest level and 3 on the coarse ones (an eighth of the cost
+ * each, fewer iterations), before (from zero: one product less) and after the coarse
  * correction with the same polynomial, so the V-cycle B is symmetric; it is positive definite
- * because the polynomial's error factor stays below 1 in modulus up to 1.25 λ, and the
+ * because the polynomial's error factor stays below 1 in modulus up to (1 + 1/6) λ, and the
  * coarsest level is solved exactly (dense Cholesky) or, if coarsening stalls above
  * CS_MG_DENSE_NODES nodes, by a fixed number of damped Jacobi sweeps (ω = 4/(3λ), a symmetric
  * polynomial). Products run on the object's threads in fixed-order element and node passes,
@@ -88,5 +89,10 @@ void cs_mg_vcycle(void *ctx, const double *r, double *z);
  * the level; portable: with the gathers of CPUs without AVX-512 even where it is present. For
  * tests: the V-cycle's own products. */
 void cs_mg_apply_level(const cs_mg *mg, int level, bool portable, const float *x, float *y);
+
+/* The transfers between level `level` and the next coarser one, without masks (for tests):
+ * xf = P xc (prolongation, trilinear) and xc = Pᵀ xf (restriction); nothing on the coarsest. */
+void cs_mg_prolong(const cs_mg *mg, int level, const float *xc, float *xf);
+void cs_mg_restrict(const cs_mg *mg, int level, const float *xf, float *xc);
 
 #endif

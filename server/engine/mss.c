@@ -4,6 +4,8 @@
  */
 #include "mss.h"
 
+#include "mat3.h"
+
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -22,9 +24,13 @@ static const int SPRING[16][2] = {
     {0, 6}, {1, 7}, {2, 4}, {3, 5}, /* inner diagonals */
 };
 
-/* Offsets into a cell's state. */
+/* Offsets into a cell's state: per spring (n, g), the axes, K_s·S, the corners relative to
+ * their centroid r_a and the inverse of Σ_a (|r_a|² I − r_a r_aᵀ) (implicit steps: the
+ * projection of the transverse term, below). */
 #define ST_AXES 64
 #define ST_KSS 73
+#define ST_R 145
+#define ST_IINV 169
 
 double cs_mss_edge_constant(double young, double poisson, double h)
 {
@@ -147,10 +153,44 @@ static double element_force(const cs_mss *m, const double *pos, double *f)
     return energy;
 }
 
-/* y (24) = K_s p (24) with the springs' Jacobian stored in st. */
+/* p (24) with the cube's infinitesimal rigid rotation removed: p_a − α × r_a, α = I⁻¹ Σ_a
+ * r_a × p_a (the orthogonal projection off the three rotation modes ω × r_a; translations are
+ * kept, and the spring terms ignore them). */
+static void project_rotation(const double *st, const double *p, double *out)
+{
+    const double *r = st + ST_R, *Ii = st + ST_IINV;
+    double l[3] = {0, 0, 0}, al[3];
+    for (int a = 0; a < 8; a++) {
+        const double *ra = r + 3 * a, *pa = p + 3 * a;
+        l[0] += ra[1] * pa[2] - ra[2] * pa[1];
+        l[1] += ra[2] * pa[0] - ra[0] * pa[2];
+        l[2] += ra[0] * pa[1] - ra[1] * pa[0];
+    }
+    for (int i = 0; i < 3; i++)
+        al[i] = Ii[3 * i] * l[0] + Ii[3 * i + 1] * l[1] + Ii[3 * i + 2] * l[2];
+    for (int a = 0; a < 8; a++) {
+        const double *ra = r + 3 * a;
+        out[3 * a] = p[3 * a] - (al[1] * ra[2] - al[2] * ra[1]);
+        out[3 * a + 1] = p[3 * a + 1] - (al[2] * ra[0] - al[0] * ra[2]);
+        out[3 * a + 2] = p[3 * a + 2] - (al[0] * ra[1] - al[1] * ra[0]);
+    }
+}
+
+/* y (24) = K_s p (24) with the springs' Jacobian stored in st: the axial part k n nᵀ plus the
+ * transverse part k g (I − n nᵀ), g = max(0, 1 − L0/L). Statics (`geometric`) take it as it
+ * is; implicit steps take Pᵀ (transverse) P with P the projection off the cube's rigid
+ * rotation (project_rotation), see mss.h. */
 static void spring_apply(const cs_mss *m, const double *st, const double *p, double *y)
 {
+    double pp[24], yt[24];
+    const bool project = !m->geometric;
+    if (project)
+        project_rotation(st, p, pp);
+    const double *pt = project ? pp : p;
+    double *yo = project ? yt : y;
     memset(y, 0, 24 * sizeof *y);
+    if (project)
+        memset(yt, 0, sizeof yt);
     for (int s = 0; s < 16; s++) {
         const int a = SPRING[s][0], b = SPRING[s][1];
         const double *n = st + 4 * s, g = st[4 * s + 3];
@@ -159,11 +199,55 @@ static void spring_apply(const cs_mss *m, const double *st, const double *p, dou
                              p[3 * a + 2] - p[3 * b + 2]};
         const double nr = n[0] * r[0] + n[1] * r[1] + n[2] * r[2];
         for (int i = 0; i < 3; i++) {
-            const double t = k * (nr * n[i] + g * (r[i] - nr * n[i]));
+            const double t = k * nr * n[i];
             y[3 * a + i] += t;
             y[3 * b + i] -= t;
         }
+        if (g == 0)
+            continue;
+        const double q[3] = {pt[3 * a] - pt[3 * b], pt[3 * a + 1] - pt[3 * b + 1],
+                             pt[3 * a + 2] - pt[3 * b + 2]};
+        const double nq = n[0] * q[0] + n[1] * q[1] + n[2] * q[2];
+        for (int i = 0; i < 3; i++) {
+            const double t = k * g * (q[i] - nq * n[i]);
+            yo[3 * a + i] += t;
+            yo[3 * b + i] -= t;
+        }
     }
+    if (project) {
+        project_rotation(st, yt, pp);
+        for (int i = 0; i < 24; i++)
+            y[i] += pp[i];
+    }
+}
+
+/* r_a = x_a − centroid and the inverse of Σ_a (|r_a|² I − r_a r_aᵀ) into st (zero inverse for
+ * a collapsed cube: no projection there). */
+static void rotation_frame(const double *pos, double *st)
+{
+    double c[3] = {0, 0, 0}, J[9] = {0};
+    for (int a = 0; a < 8; a++)
+        for (int k = 0; k < 3; k++)
+            c[k] += pos[3 * a + k] / 8;
+    double *r = st + ST_R;
+    for (int a = 0; a < 8; a++) {
+        double *ra = r + 3 * a;
+        for (int k = 0; k < 3; k++)
+            ra[k] = pos[3 * a + k] - c[k];
+        const double rr = ra[0] * ra[0] + ra[1] * ra[1] + ra[2] * ra[2];
+        for (int i = 0; i < 3; i++)
+            for (int j = 0; j < 3; j++)
+                J[3 * i + j] += (i == j ? rr : 0.0) - ra[i] * ra[j];
+    }
+    double *Ii = st + ST_IINV;
+    const double det = cs_mat3_adjugate(J, Ii);
+    const double tr = J[0] + J[4] + J[8];
+    if (!(fabs(det) > 1e-12 * tr * tr * tr)) {
+        memset(Ii, 0, 9 * sizeof *Ii);
+        return;
+    }
+    for (int i = 0; i < 9; i++)
+        Ii[i] /= det;
 }
 
 static void element_state(const cs_mss *m, const double *pos, double *st)
@@ -178,8 +262,9 @@ static void element_state(const cs_mss *m, const double *pos, double *st)
         const double inv = L > 0 ? 1.0 / L : 0.0;
         for (int i = 0; i < 3; i++)
             st[4 * s + i] = d[i] * inv;
-        st[4 * s + 3] = m->geometric && L > L0 ? 1 - L0 / L : 0.0;
+        st[4 * s + 3] = L > L0 ? 1 - L0 / L : 0.0;
     }
+    rotation_frame(pos, st);
     double len[3];
     element_axes(pos, st + ST_AXES, len);
     const double *e = st + ST_AXES;

@@ -31,14 +31,21 @@
  *
  * Stiffness (cs_mss_apply_K): at the state of the last cs_mss_update, the springs' Jacobian
  * plus the correction's Jacobian with the axes frozen, symmetrized (it is symmetric at rest).
- * Matrix-free: per cell 145 numbers. The springs' Jacobian is k n nᵀ for implicit steps: the
- * analogue of corotational FEM's warped stiffness R K Rᵀ, whose null space holds the
- * infinitesimal rotations of the current state, so that implicit Euler does not brake a
- * rotating object (a free tumbling block, 10 000 steps of 1/60 s: angular momentum kept to
- * 4e-9 and energy to 0.3 %, where the full Jacobian lost 90 % and 99 %). Static Newton solves
- * set `geometric` (cs_elastic_prepare_tangent) and get the full Jacobian
- * k[n nᵀ + max(0, 1 − L0/L)(I − n nᵀ)], the transverse term clamped at zero so that
- * compressed springs never make it indefinite.
+ * Matrix-free: per cell 178 numbers. The springs' Jacobian is k[n nᵀ + g (I − n nᵀ)], g =
+ * max(0, 1 − L0/L): the transverse term clamped at zero so that compressed springs never make
+ * it indefinite. Static Newton solves (`geometric`, cs_elastic_prepare_tangent) take it as it
+ * is. Implicit steps take k n nᵀ + Pᵀ k g (I − n nᵀ) P, P the orthogonal projection off the
+ * cube's three infinitesimal rigid rotations ω × (x_a − c) (k n nᵀ has them in its null space
+ * already): the analogue of corotational FEM's warped stiffness R K Rᵀ, whose null space holds
+ * the rotations of the current state, so implicit Euler does not brake a rotating object (a
+ * free tumbling block, 10 000 steps of 1/60 s: angular momentum kept to 9e-10 and energy to
+ * 0.3 %; with the transverse term unprojected it lost 90 % and 99 %). The projected term must
+ * stay: without it (session 12) the cubes' zero-energy modes (three per cube, not rigid, and
+ * not stretching any spring to first order) had no stiffness in the implicit operator, so
+ * implicit Euler integrated them explicitly and the correction forces, which are not a
+ * potential's gradient, pumped them: an undamped block on frictionless ground, at rest after
+ * 1 s, reached 1 m/s node speeds after 20 (test_mss). The diagonal blocks (the Jacobi
+ * preconditioner) take the transverse term unprojected.
  *
  * Products are race-free like fem.c's: an element pass writes 24 numbers per cell, a node
  * pass gathers them through the node→(cell,corner) list.
@@ -54,7 +61,7 @@
 #include "cubemesh.h"
 #include "fem.h"
 
-#define CS_MSS_STATE 145 /* per cell: 16 springs × (n, g), 3 axes, K_s·S (3 × 24) */
+#define CS_MSS_STATE 178 /* per cell: 16 springs × (n, g), 3 axes, K_s·S (3 × 24), r_a (24), I⁻¹ (9) */
 
 typedef struct cs_mss {
     int n_cells, n_nodes;
@@ -74,7 +81,7 @@ typedef struct cs_mss {
      * element's forces, energy and K are linear in its spring constants, so this scales the
      * whole element, correction forces included, and a uniform factor equals E·factor. */
     const double *ky;
-    bool geometric; /* the transverse (geometric) spring term in K: static solves only */
+    bool geometric; /* statics: the transverse spring term unprojected (the full Jacobian) */
 } cs_mss;
 
 /* Spring constants of seed 004 §3.2 for a cube of edge h. */

@@ -1834,6 +1834,7 @@ static void cell_contacts_done(cs_rigid_world *rw)
             D->elastic_energy_valid = false;
             D->sleeping = false;
             D->still_steps = 0;
+            D->contact_pushed = true;
             if (D != last)
                 cs_surface_skin(&D->surf, &D->cm, D->x);
             last = D;
@@ -2587,6 +2588,18 @@ int cs_rigid_step(cs_world_t *w, cs_step_stats *st)
     }
     cs_rigid_world *rw = w->rigid;
     rw->step++; /* soft_resp records of earlier steps are stale */
+    /* and those of objects no contact reached last step are dropped (removed objects, pieces
+     * that broke off: their memory does not pile up) */
+    int kept_soft = 0;
+    for (int i = 0; i < rw->n_soft; i++) {
+        if (rw->soft[i]->step + 1 >= rw->step) {
+            rw->soft[kept_soft++] = rw->soft[i];
+            continue;
+        }
+        cs_soft_free(rw->soft[i]);
+        free(rw->soft[i]);
+    }
+    rw->n_soft = kept_soft;
     if (cs_rigid_sync(w) != CS_OK)
         return CS_ERR_NOMEM;
     const double dt = w->def.dt, gn = sqrt(dot3(w->def.gravity, w->def.gravity));

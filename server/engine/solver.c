@@ -250,7 +250,7 @@ static cs_cg_result pcg(cs_cg_work *w, cs_matvec_fn A, void *ctx, cs_precond_fn 
 {
     const int n = w->n;
     double *r = w->r, *z = w->z, *p = w->p, *q = w->q, *zo = w->zo;
-    cs_cg_result res = {0, 0, 0};
+    cs_cg_result res = {0, 0, 0, 0};
     const bool use_dir = w->dir_ready; /* armed by cs_cg_guess for this solve only */
     w->dir_ready = false;
 
@@ -269,7 +269,15 @@ static cs_cg_result pcg(cs_cg_work *w, cs_matvec_fn A, void *ctx, cs_precond_fn 
         res.converged = 1;
         return res;
     }
-    const double stop = tol * bnorm;
+    double ref = bnorm;
+    if (w->stop == CS_CG_STOP_START)
+        ref = rnorm;
+    else if (w->stop == CS_CG_STOP_GIVEN)
+        ref = w->stop_ref;
+    double stop = tol * ref;
+    if (w->stop != CS_CG_STOP_RHS && !(stop >= 1e-12 * bnorm))
+        stop = 1e-12 * bnorm; /* also a NaN reference */
+    res.ref = stop / tol;
     if (use_dir && rnorm > stop) {
         /* warm start (cs_cg_guess): x += α d with α = dᵀr / dᵀAd, the A-norm minimiser */
 #pragma omp parallel for num_threads(threads) schedule(static)
@@ -317,7 +325,7 @@ static cs_cg_result pcg(cs_cg_work *w, cs_matvec_fn A, void *ctx, cs_precond_fn 
             p[i] = z[i] + beta * p[i];
     }
     res.iterations = it;
-    res.relres = rnorm / bnorm;
+    res.relres = rnorm / res.ref;
     res.converged = rnorm <= stop;
     return res;
 }

@@ -17,8 +17,23 @@
 
 typedef void (*cs_matvec_fn)(void *ctx, const double *x, double *y);
 
+/*
+ * What a solve's tolerance is relative to (cs_cg_work.stop, read by every cs_pcg / cs_pcg_ex):
+ * RHS    ‖r‖ ≤ tol·‖b‖ (the default of a zeroed work);
+ * START  ‖r‖ ≤ tol·‖b − A x0‖, x0 the initial guess as passed (before the warm-start line
+ *        search). For implicit Euler, x0 = v makes this the right-hand side of the Δv form of
+ *        the step (Baraff–Witkin): the solve removes the same fraction of what the step
+ *        changes at any dt, where ‖b‖ = ‖M v + dt f‖ is mostly momentum at small dt;
+ * GIVEN  ‖r‖ ≤ tol·stop_ref (a re-solve of the same step keeps its first reference).
+ * START and GIVEN never ask for less than 1e-12·‖b‖ (round-off: a free body's uniform
+ * velocity leaves b − A v = 0).
+ */
+typedef enum cs_cg_stop { CS_CG_STOP_RHS = 0, CS_CG_STOP_START, CS_CG_STOP_GIVEN } cs_cg_stop;
+
 typedef struct cs_cg_work {
     int n;        /* degrees of freedom (3 per node) */
+    cs_cg_stop stop; /* what tol is relative to (above); RHS after cs_cg_work_init */
+    double stop_ref; /* GIVEN: the norm */
     double *r, *z, *p, *q, *zo, *partial;
     /* warm-start history of a sequence of solves (cs_cg_guess); allocated on first use */
     double *hist_prev, *hist_end, *dir;
@@ -53,13 +68,14 @@ void cs_invert_block(double m[9]);
 
 typedef struct cs_cg_result {
     int iterations;
-    double relres;   /* ‖r‖/‖b‖ at exit (b projected) */
+    double relres;   /* ‖r‖/ref at exit: the relative residual the solve stopped on */
+    double ref;      /* the norm tol was relative to (‖b‖ projected, ‖b − A x0‖, or given) */
     int converged;
 } cs_cg_result;
 
 /*
  * Solve A x = b for the unconstrained dofs, x holding the initial guess (warm start).
- * Stops when ‖r‖ <= tol·‖b‖ or after max_iter. A must be symmetric positive definite on
+ * Stops when ‖r‖ <= tol·‖b‖ (or the reference w->stop asks for) or after max_iter. A must be symmetric positive definite on
  * the free dofs. Returns the result; x is finite on exit unless A or b were not.
  */
 cs_cg_result cs_pcg(cs_cg_work *w, cs_matvec_fn A, void *ctx, const double *inv_blocks,

@@ -88,6 +88,17 @@ int cs_model_from_name(const char *name, cs_model *out)
 
 static const char *const PRECOND_NAMES[] = {"auto", "jacobi", "multigrid"};
 
+int cs_cg_relative_from_name(const char *name, cs_cg_relative *out)
+{
+    static const char *const names[] = {"step", "rhs"};
+    for (int i = 0; i < 2; i++)
+        if (name && strcmp(name, names[i]) == 0) {
+            *out = (cs_cg_relative)i;
+            return 0;
+        }
+    return -1;
+}
+
 int cs_preconditioner_from_name(const char *name, cs_preconditioner *out)
 {
     for (int i = 0; i < 3; i++)
@@ -99,7 +110,7 @@ int cs_preconditioner_from_name(const char *name, cs_preconditioner *out)
 }
 
 static const char *const INTEGRATOR_NAMES[] = {"default", "implicit_euler", "symplectic_euler",
-                                               "verlet", "central_difference"};
+                                               "verlet", "central_difference", "newmark"};
 
 int cs_integrator_from_name(const char *name, cs_integrator *out)
 {
@@ -182,6 +193,9 @@ int cs_world_create(const cs_world_def *def, cs_world_t **out, char *err, size_t
     if ((int)def->preconditioner < 0 || (int)def->preconditioner > CS_PRECOND_MULTIGRID)
         return cs_engine_fail(err, errlen, CS_ERR_INVALID, "preconditioner: unknown value %d",
                               (int)def->preconditioner);
+    if ((int)def->cg_relative_to < 0 || (int)def->cg_relative_to > CS_CG_RELATIVE_RHS)
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "solver relative_to: unknown value %d",
+                              (int)def->cg_relative_to);
     if (def->cg_max_iterations < 1 || def->cg_max_iterations > 1000000)
         return cs_engine_fail(err, errlen, CS_ERR_INVALID, "solver max_iterations must be in [1, 1e6]");
     if (def->threads < 0 || def->threads > 256)
@@ -543,9 +557,15 @@ int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *i
     const bool explicit_integ =
         integ == CS_INTEGRATOR_SYMPLECTIC_EULER || integ == CS_INTEGRATOR_VERLET;
     if (integ != CS_INTEGRATOR_IMPLICIT_EULER && integ != CS_INTEGRATOR_CENTRAL_DIFFERENCE &&
-        !explicit_integ)
+        integ != CS_INTEGRATOR_NEWMARK && !explicit_integ)
         return cs_engine_fail(err, errlen, CS_ERR_INVALID,
                               "integrator '%s' is not implemented yet", cs_integrator_name(integ));
+    if (integ == CS_INTEGRATOR_NEWMARK && def->model == CS_MODEL_MSS)
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID,
+                              "integrator 'newmark' is not offered for model 'mss': its "
+                              "correction forces are not conservative and the midpoint rule "
+                              "pumps energy into a spinning mss block; use implicit_euler, "
+                              "symplectic_euler or verlet");
     if (!(def->cube_size > 0 && isfinite(def->cube_size)))
         return cs_engine_fail(err, errlen, CS_ERR_INVALID, "cube_size must be > 0 m, got %g",
                     def->cube_size);
@@ -1132,16 +1152,14 @@ static void add_spring_blocks(cs_object *o, double coef)
     }
 }
 
-/* y = mcoef·M p + kcoef·K_R p + dcoef·Σ drags k w (w·p): the implicit Euler operator. */
-static void step_operator(void *ctx, const double *p, double *y)
+/* The operator below with K p already computed (kp; kp may be y): y = kcoef·kp + the rest. */
+static void step_operator_kp(cs_object *o, const double *p, const double *kp, double *y)
 {
-    cs_object *o = ctx;
-    cs_elastic_apply_K(o, p, y);
     const double mc = o->mcoef, kc = o->kcoef;
 #pragma omp parallel for num_threads(cs_elastic_threads(o)) schedule(static)
     for (int i = 0; i < o->n; i++)
         for (int a = 0; a < 3; a++)
-            y[3 * i + a] = kc * y[3 * i + a] + mc * o->m[i] * p[3 * i + a];
+            y[3 * i + a] = kc * kp[3 * i + a] + mc * o->m[i] * p[3 * i + a];
     if (o->fld.has_damping && (o->cmcoef != 0 || o->ckcoef != 0)) {
         /* the damping field: + dt·α M_d p + dt·β K_d p */
         double *t = o->fld.tmp;
@@ -1156,6 +1174,14 @@ static void step_operator(void *ctx, const double *p, double *y)
     }
     add_penalty_operator(o, o->pcoef, p, y);
     add_spring_operator(o, o->dcoef, p, y);
+}
+
+/* y = mcoef·M p + kcoef·K_R p + dcoef·Σ drags k w (w·p): the implicit Euler operator. */
+static void step_operator(void *ctx, const double *p, double *y)
+{
+    cs_object *o = ctx;
+    cs_elastic_apply_K(o, p, y);
+    step_operator_kp(o, p, y, y);
 }
 
 /* The Newton operator of corotational statics: warped stiffness plus geometric stiffness. */
@@ -1323,11 +1349,13 @@ static void ground_after_solve(const cs_world_t *w, cs_object *o, int contacts)
     }
 }
 
-static void ground_project(const cs_world_t *w, cs_object *o)
+/* Returns how many nodes it moved. */
+static int ground_project(const cs_world_t *w, cs_object *o)
 {
     if (!w->def.has_ground)
-        return;
+        return 0;
     const double g = w->def.ground_height;
+    int moved = 0;
     for (int i = 0; i < o->n; i++) {
         double *x = o->x + 3 * i, *v = o->v + 3 * i;
         if (x[2] >= g || o->mask[3 * i + 2])
@@ -1335,7 +1363,9 @@ static void ground_project(const cs_world_t *w, cs_object *o)
         x[2] = g;
         if (v[2] < 0)
             v[2] = 0;
+        moved++;
     }
+    return moved;
 }
 
 static bool all_finite(const double *a, size_t n)
@@ -1347,21 +1377,23 @@ static bool all_finite(const double *a, size_t n)
 }
 
 /* The implicit Euler operator (M + dt C + dt² K [+ dt² springs]) with Rayleigh damping
- * C = α M + β K, or α M_d + β K_d where a damping field is painted. */
-static void set_implicit_coefs(cs_object *o, double dt)
+ * C = α M + β K, or α M_d + β K_d where a damping field is painted; Newmark's (trap) is
+ * M + dt/2 C + dt²/4 K [+ dt²/4 springs]. */
+static void set_implicit_coefs(cs_object *o, double dt, bool trap)
 {
+    const double c = trap ? dt / 2 : dt, k = trap ? dt * dt / 4 : dt * dt;
     if (o->fld.has_damping) {
         o->mcoef = 1;
-        o->kcoef = dt * dt;
-        o->cmcoef = dt * o->mat.damping[0];
-        o->ckcoef = dt * o->mat.damping[1];
+        o->kcoef = k;
+        o->cmcoef = c * o->mat.damping[0];
+        o->ckcoef = c * o->mat.damping[1];
     } else {
-        o->mcoef = 1 + dt * o->mat.damping[0];
-        o->kcoef = dt * o->mat.damping[1] + dt * dt;
+        o->mcoef = 1 + c * o->mat.damping[0];
+        o->kcoef = c * o->mat.damping[1] + k;
         o->cmcoef = o->ckcoef = 0;
     }
-    o->dcoef = dt * dt;
-    o->pcoef = dt * dt;
+    o->dcoef = k;
+    o->pcoef = k;
 }
 
 /*
@@ -1402,19 +1434,25 @@ static void add_solve_stats(cs_step_stats *st, cs_cg_result r)
         st->converged = false;
 }
 
-/* The end of a step that solved for the new velocities v1 (implicit Euler, central
- * differences): positions, ground projection, finish_step, and the stage times t[0..4]
- * (inputs, rotations, right-hand side, solve) and solve statistics into st. */
+/* The end of a step that solved for the new velocities v1 (implicit Euler, Newmark, central
+ * differences): positions (x += dt v1, or x_end when the step computed them: Newmark), ground
+ * projection, finish_step, and the stage times t[0..4] (inputs, rotations, right-hand side,
+ * solve) and solve statistics into st. el_end, if finite, is the elastic energy at x_end,
+ * kept as the object's cached energy unless the ground projection moved a node. */
 static void end_solved_step(const cs_world_t *w, cs_object *o, cs_step_stats *st,
-                            const double t[5], cs_cg_result r)
+                            const double t[5], cs_cg_result r, const double *x_end, double el_end)
 {
     const size_t n3 = (size_t)o->n * 3;
     const double dt = w->def.dt;
+    if (x_end)
+        memcpy(o->x, x_end, n3 * sizeof(double));
+    else
+        for (size_t d = 0; d < n3; d++)
+            o->x[d] += dt * o->v1[d];
     memcpy(o->v, o->v1, n3 * sizeof(double));
-    for (size_t d = 0; d < n3; d++)
-        o->x[d] += dt * o->v[d];
-    ground_project(w, o);
-    o->elastic_energy_valid = false;
+    const int moved = ground_project(w, o);
+    o->elastic_energy = el_end;
+    o->elastic_energy_valid = x_end && isfinite(el_end) && moved == 0;
     const double t5 = now_ms();
     st->ms_skin += finish_step(w, o);
     st->ms_inputs += t[1] - t[0];
@@ -1714,26 +1752,85 @@ static void active_end(const cs_world_t *w, cs_object *o, const double *av)
     }
 }
 
-/* Implicit Euler (seed 000 §2.2): one linear solve per step for the new velocities. */
-static int step_implicit_euler(cs_world_t *w, cs_object *o, cs_step_stats *st)
+/*
+ * Implicit Euler (seed 000 §2.2): one linear solve per step for the new velocities. With trap,
+ * Newmark's average acceleration instead (β = 1/4, γ = 1/2: the trapezoidal rule, which for
+ * forces linear in x is the implicit midpoint rule): x1 = x + dt (v + v1)/2 and
+ *     M (v1 − v) = dt [f_el(x_m) + f(x) − C (v + v1)/2 − S (x1 − x)/2],  x_m = (x + x1)/2,
+ * S the drag and penalty springs. The elastic force is linearized about the predicted
+ * midpoint x̃ = x + dt v/2, where the element rotations are taken: x_m − x̃ = dt (v1 − v)/4,
+ * f_el(x_m) ≈ f_el(x̃) − K̃ dt (v1 − v)/4. With A = M + dt/2 C + dt²/4 (K̃ + S):
+ *     A v1 = 2 M v − A v + dt (f + f_el(x̃)) + dt²/2 K̃ v.
+ * For a linear model this is the trapezoidal rule exactly (a linear undamped object keeps its
+ * energy); for the corotational ones, rotations at x rather than x̃ pump energy into a
+ * tumbling body (+4 %/s at 1/60 s, measured).
+ */
+static double kinetic_energy(const cs_object *o, const double *v)
 {
+    double e = 0;
+    for (int i = 0; i < o->n; i++) {
+        const double *u = v + 3 * i;
+        e += 0.5 * o->m[i] * (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]);
+    }
+    return e;
+}
+
+/* Newmark's energy guard: the relative rise of kinetic + elastic energy over a step, beyond
+ * the work of the external forces, at which the step is redone by implicit Euler. */
+#define CS_NEWMARK_GUARD 1e-2
+
+static int step_implicit(cs_world_t *w, cs_object *o, cs_step_stats *st, bool trap)
+{
+    /* Newmark: a step after a rigid contact pushed the object is implicit Euler's (the
+     * contact solve modelled that step's response, and it damps the contact's jolt) */
+    if (trap && o->contact_pushed)
+        trap = false;
+    o->contact_pushed = false;
     const double dt = w->def.dt;
     const size_t n3 = (size_t)o->n * 3;
     double t0 = now_ms();
     active_begin(w, o);
     gather_forces(o);
+    double e_start = 0;
+    if (trap) {
+        if (!o->elastic_energy_valid) {
+            o->elastic_energy = cs_elastic_energy(o, o->x);
+            o->elastic_energy_valid = true;
+        }
+        e_start = kinetic_energy(o, o->v) + o->elastic_energy;
+    }
     double t1 = now_ms();
-    cs_elastic_update(o, o->x);
+    /* Newmark: the elastic state and force at the predicted midpoint x̃ = x + dt v/2 */
+    const double *xe = o->x;
+    if (trap) {
+        double *xt = o->cg.zo; /* scratch until the solve */
+        for (size_t d = 0; d < n3; d++)
+            xt[d] = o->x[d] + 0.5 * dt * o->v[d];
+        xe = xt;
+    }
+    cs_elastic_update(o, xe);
     double t2 = now_ms();
     /* b = M v + dt (f + f_el(x)); the solve is for v1 (implicit Euler, Rayleigh damping). */
-    cs_elastic_force(o, o->x, o->b, NULL);
+    cs_elastic_force(o, xe, o->b, NULL);
 #pragma omp parallel for num_threads(cs_elastic_threads(o)) schedule(static)
     for (int i = 0; i < o->n; i++)
         for (int a = 0; a < 3; a++) {
             size_t d = 3 * (size_t)i + a;
             o->b[d] = o->m[i] * o->v[d] + dt * (o->f[d] + o->b[d]);
         }
-    set_implicit_coefs(o, dt);
+    set_implicit_coefs(o, dt, trap);
+    if (trap) {
+        double *av = o->cg.q, *kv = o->cg.z; /* scratch until the solve */
+        cs_elastic_apply_K(o, o->v, kv);
+        step_operator_kp(o, o->v, kv, av);
+        const double c = 0.5 * dt * dt;
+#pragma omp parallel for num_threads(cs_elastic_threads(o)) schedule(static)
+        for (int i = 0; i < o->n; i++)
+            for (int a = 0; a < 3; a++) {
+                const size_t d = 3 * (size_t)i + a;
+                o->b[d] += o->m[i] * o->v[d] - av[d] + c * kv[d];
+            }
+    }
     build_preconditioner(o);
     /* Initial guess: v, improved inside the solve along the last step's change (cs_cg_guess);
      * held dofs 0, ground contacts their lift (constrain_ground). */
@@ -1744,7 +1841,10 @@ static int step_implicit_euler(cs_world_t *w, cs_object *o, cs_step_stats *st)
     int contacts = constrain_ground(w, o);
     active_hold(o);
     double t3 = now_ms(), t4 = t3, *av = NULL;
-    cs_cg_result r = {0, 0, 1};
+    cs_cg_result r = {0, 0, 1, 0};
+    /* The tolerance is relative to ‖b − A v1‖ at the guess above (w->def.cg_relative_to):
+     * the Δv form's right-hand side; a re-solve of this step keeps that reference. */
+    o->cg.stop = w->def.cg_relative_to == CS_CG_RELATIVE_STEP ? CS_CG_STOP_START : CS_CG_STOP_RHS;
     /* With frozen nodes: solve, and while the reactions wake some, solve again with them free
      * (warm start), so the step ends with every frozen node near balance. */
     for (int round = 0;; round++) {
@@ -1756,9 +1856,14 @@ static int step_implicit_euler(cs_world_t *w, cs_object *o, cs_step_stats *st)
         r.iterations += rr.iterations;
         r.relres = rr.relres;
         r.converged = rr.converged;
+        if (o->cg.stop == CS_CG_STOP_START) {
+            o->cg.stop = CS_CG_STOP_GIVEN;
+            o->cg.stop_ref = rr.ref;
+        }
         t4 = now_ms();
         if (!all_finite(o->v1, n3)) {
             o->fem.cell_active = NULL;
+            o->cg.stop = CS_CG_STOP_RHS;
             return CS_ERR_DIVERGED;
         }
         if (!active_needs_av(w, o, contacts))
@@ -1778,10 +1883,32 @@ static int step_implicit_euler(cs_world_t *w, cs_object *o, cs_step_stats *st)
         build_preconditioner(o);
         active_hold(o);
     }
+    o->cg.stop = CS_CG_STOP_RHS; /* the other solves on this work (statics, impacts) */
     ground_after_solve(w, o, contacts);
     active_end(w, o, av);
     o->fem.cell_active = NULL;
-    end_solved_step(w, o, st, (const double[5]){t0, t1, t2, t3, t4}, r);
+    double el_end = NAN;
+    if (trap) {
+        /* The guard: without damping nothing takes out what a poorly linearized step puts in
+         * (a strain increment v dt / h of order 1 in a nonlinear model: the 6×2×2 beam of
+         * stab_implicit_any_dt at dt 0.1 s grew 1e4-fold). A step whose kinetic + elastic
+         * energy rises by more than CS_NEWMARK_GUARD of it beyond the external forces' work
+         * f·(x1 − x) is redone by implicit Euler, which dissipates. */
+        double *x1 = o->cg.zo, work = 0;
+        for (size_t d = 0; d < n3; d++) {
+            x1[d] = o->x[d] + (o->smask[d] ? dt * o->v1[d] : 0.5 * dt * (o->v[d] + o->v1[d]));
+            work += o->f[d] * (x1[d] - o->x[d]);
+        }
+        el_end = cs_elastic_energy(o, x1);
+        const double e_end = kinetic_energy(o, o->v1) + el_end;
+        if (!(e_end <= e_start + work + CS_NEWMARK_GUARD * e_start + 1e-300)) {
+            add_solve_stats(st, r);
+            st->newmark_redone++;
+            return step_implicit(w, o, st, false);
+        }
+    }
+    end_solved_step(w, o, st, (const double[5]){t0, t1, t2, t3, t4}, r, trap ? o->cg.zo : NULL,
+                    el_end);
     if (!o->sleeping)
         cs_cg_record(&o->cg, o->v);
     return CS_OK;
@@ -1927,7 +2054,7 @@ static int step_central_difference(cs_world_t *w, cs_object *o, cs_step_stats *s
             v[1] *= sc;
         }
     }
-    end_solved_step(w, o, st, (const double[5]){t0, t1, t2, t3, t4}, r);
+    end_solved_step(w, o, st, (const double[5]){t0, t1, t2, t3, t4}, r, NULL, NAN);
     return CS_OK;
 }
 
@@ -2068,7 +2195,9 @@ static int step_object(cs_world_t *w, cs_object *o, cs_step_stats *st)
 {
     switch (o->integrator) {
     case CS_INTEGRATOR_IMPLICIT_EULER:
-        return step_implicit_euler(w, o, st);
+        return step_implicit(w, o, st, false);
+    case CS_INTEGRATOR_NEWMARK:
+        return step_implicit(w, o, st, true);
     case CS_INTEGRATOR_CENTRAL_DIFFERENCE:
         return step_central_difference(w, o, st);
     case CS_INTEGRATOR_SYMPLECTIC_EULER:
@@ -2205,7 +2334,7 @@ static int solve_static_object(cs_world_t *w, cs_object *o, cs_step_stats *st)
             /* Newton with the geometric stiffness where it is positive definite; where CG
              * meets a direction of negative curvature (compression, near buckling), the
              * warped stiffness alone, which always is. */
-            cs_cg_result r = {0, 1, 0};
+            cs_cg_result r = {0, 1, 0, 0};
             bool geometric = cs_elastic_prepare_tangent(o, o->x) == 0;
             if (geometric) {
                 const bool use_mg = setup_multigrid(w, o, tangent_operator, o->mask);
@@ -2443,10 +2572,9 @@ int cs_object_energy(const cs_world_t *w, cs_object_id id, cs_energy *e)
     const cs_object *o = cs_world_find_internal(w, id);
     if (!o || !e)
         return CS_ERR_UNKNOWN_OBJECT;
-    double ek = 0, eg = 0;
+    double ek = kinetic_energy(o, o->v), eg = 0;
     for (int i = 0; i < o->n; i++) {
-        const double *v = o->v + 3 * i, *x = o->x + 3 * i;
-        ek += 0.5 * o->m[i] * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+        const double *x = o->x + 3 * i;
         eg -= o->m[i] * (w->def.gravity[0] * x[0] + w->def.gravity[1] * x[1] +
                          w->def.gravity[2] * x[2]);
     }

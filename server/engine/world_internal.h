@@ -134,6 +134,9 @@ typedef struct cs_object {
     cs_input inputs[CS_MAX_INPUTS];
     int n_inputs;
     int still_steps;
+    bool contact_pushed; /* a rigid contact pushed its nodes in the last solve: a Newmark
+                            object's next step is implicit Euler's, whose response the contact
+                            solve modelled (contact_soft.h) */
     bool sleeping;
     /* Active regions (world.c "active regions", seed 000 §2.2): NULL/0 until first used.
      * A frozen node is held where it is with v = 0 outside the solve; a cell whose 8 nodes are

@@ -14,8 +14,9 @@
 #include "world_internal.h"
 
 /* A box of nx×ny×nz cubes of edge h with its lower corner at `at`. */
-static cs_object_id add_box(cs_world_t *w, const char *name, int nx, int ny, int nz, double h,
-                            const double at[3], cs_material mat, cs_model model)
+static cs_object_id add_box_i(cs_world_t *w, const char *name, int nx, int ny, int nz,
+                              double h, const double at[3], cs_material mat, cs_model model,
+                              cs_integrator integ)
 {
     int32_t *ijk = cs_box_cells(nx, ny, nz);
     if (!ijk)
@@ -23,6 +24,7 @@ static cs_object_id add_box(cs_world_t *w, const char *name, int nx, int ny, int
     cs_object_def d = cs_object_def_default();
     d.name = name;
     d.model = model;
+    d.integrator = integ;
     d.material = mat;
     d.cube_size = h;
     d.geometry = CS_GEOMETRY_CELLS;
@@ -37,6 +39,12 @@ static cs_object_id add_box(cs_world_t *w, const char *name, int nx, int ny, int
     }
     free(ijk);
     return id;
+}
+
+static cs_object_id add_box(cs_world_t *w, const char *name, int nx, int ny, int nz, double h,
+                            const double at[3], cs_material mat, cs_model model)
+{
+    return add_box_i(w, name, nx, ny, nz, h, at, mat, model, CS_INTEGRATOR_DEFAULT);
 }
 
 static cs_world_t *ground_world(void)
@@ -128,7 +136,7 @@ static double box_penetration(const cs_world_t *w, cs_object_id slab, cs_object_
     return pen;
 }
 
-static int slab_scene(double bar_density, slab_result *r)
+static int slab_scene(double bar_density, cs_integrator slab_integ, slab_result *r)
 {
     memset(r, 0, sizeof *r);
     r->box_low = INFINITY;
@@ -139,8 +147,9 @@ static int slab_scene(double bar_density, slab_result *r)
     cs_material soft = cs_material_default();
     soft.young = 2e5;
     soft.damping[0] = 1;
-    const cs_object_id slab = add_box(w, "slab", SLAB_N, SLAB_N, 2, SLAB_H,
-                                      (double[3]){0, 0, 0}, soft, CS_MODEL_COROTATIONAL);
+    const cs_object_id slab = add_box_i(w, "slab", SLAB_N, SLAB_N, 2, SLAB_H,
+                                        (double[3]){0, 0, 0}, soft, CS_MODEL_COROTATIONAL,
+                                        slab_integ);
     /* boxes over x ∈ [0.13, 0.21] and [0.37, 0.45], y ∈ [0.26, 0.34]: off the slab's node
      * lines, so their corners press into its cells' faces */
     const double y0 = 0.26, xb[2] = {0.13, 0.37};
@@ -203,20 +212,24 @@ static double spread_estimate(double F)
     return F / E * (1 / a - 1 / (a + t));
 }
 
+/* The slab stepped by implicit Euler (the default) and by Newmark, whose next step the
+ * contact response models with its own coefficients (contact_soft.h). */
 TEST(contact_loaded_stack_stays_on_soft_slab)
 {
+  for (int k = 0; k < 2; k++) {
+    const cs_integrator integ = k ? CS_INTEGRATOR_NEWMARK : CS_INTEGRATOR_DEFAULT;
     slab_result r;
-    ENSURE(slab_scene(1000, &r) == 0);
+    ENSURE(slab_scene(1000, integ, &r) == 0);
     const double g = 9.81, m_box = 8 * BOX_H * BOX_H * BOX_H * 1000, m_bar = 2.5 * m_box;
     const double est_box = spread_estimate(m_box * g);
     const double est = spread_estimate((m_box + 0.5 * m_bar) * g);
     const double d_box = r.defl_box - r.defl_far, d = r.defl_loaded - r.defl_far;
-    printf("    bar (%.2f kg) dropped 30 mm on two boxes (%.3f kg) on a soft slab: deepest box "
+    printf("    [%s] bar (%.2f kg) dropped 30 mm on two boxes (%.3f kg) on a soft slab: deepest box "
            "corner %.2f mm inside the slab's surface (%.2f mm at rest), lowest box node %.4f m "
            "(slab top 0.1); the slab under a box %.3f mm lower (estimate %.3f), %.3f mm under "
            "the box alone (estimate %.3f), ratio %.2f (loads %.2f); own weight %.3f mm; bar at "
            "%.2e m/s\n",
-           m_bar, m_box, 1e3 * r.pen_max, 1e3 * r.pen_end, r.box_low, 1e3 * d, 1e3 * est,
+           k ? "newmark" : "implicit_euler", m_bar, m_box, 1e3 * r.pen_max, 1e3 * r.pen_end, r.box_low, 1e3 * d, 1e3 * est,
            1e3 * d_box, 1e3 * est_box, d / d_box, (m_box + 0.5 * m_bar) / m_box,
            1e3 * r.defl_far, r.bar_speed);
     /* on the slab, never through it (it went to the ground within 60 steps) */
@@ -233,6 +246,7 @@ TEST(contact_loaded_stack_stays_on_soft_slab)
                "deflection %.3f mm with the bar, %.3f mm without: not in proportion to the load",
                1e3 * d, 1e3 * d_box);
     ENSURE_MSG(r.bar_speed < 1e-3, "the bar still moves at %.2e m/s", r.bar_speed);
+  }
 }
 
 /* Σ m v of a deformable object's nodes (or m v of a rigid one) and its kinetic energy. */

@@ -419,9 +419,10 @@ TEST(mg_iterations_independent_of_size)
            m20);
     ENSURE(j8 > 0 && j20 > 0 && m8 > 0 && m20 > 0);
     ENSURE(j20 > 1.8 * j8); /* the problem does get harder */
-    /* Jacobi's grow about as the edge (2.5×); multigrid's less (measured 1.8× here, 1.2× from
-     * 8³ to 32³ over 60 steps in bench_blocks) */
-    ENSURE(m20 <= 2.0 * m8);
+    /* Jacobi's grow about as the edge (2.5×); multigrid's barely (measured 6.0 → 6.3 here
+     * with the smoother over [λ/6, λ] and degree 3 on the coarse levels; 5.0 → 6.7 with
+     * degree 2 over [λ/4, λ]) */
+    ENSURE(m20 <= 1.5 * m8);
     ENSURE(m20 < 0.5 * j20);
 }
 
@@ -611,4 +612,158 @@ TEST(mg_float_product_matches_dense)
     ENSURE(e1 < 2e-6 && e2 < 2e-6);
     ENSURE_MSG(same, "the product differs between 1 and 2 threads");
     ENSURE_MSG(same1 && same2, "the portable gathers give another product");
+}
+
+/* ---------------------------------------------------------------- coarse operators */
+
+/* Level 1's operator against the Galerkin product Pᵀ A₀ P on an nx×ny×nz block turned
+ * rigidly (every cell the same rotation), uniform stiffness scale, no diagonal part: the
+ * largest |A₁x − PᵀA₀Px| over the largest |A₁x| for a random coarse x; INFINITY on failure. */
+static double galerkin_gap(int nx, int ny, int nz)
+{
+    char err[256];
+    const int nc = nx * ny * nz;
+    int32_t *ijk = malloc(sizeof(int32_t) * 3 * (size_t)nc);
+    for (int c = 0, k = 0; k < nz; k++)
+        for (int j = 0; j < ny; j++)
+            for (int i = 0; i < nx; i++, c++) {
+                ijk[3 * c] = i;
+                ijk[3 * c + 1] = j;
+                ijk[3 * c + 2] = k;
+            }
+    cs_cubemesh cm;
+    const double origin[3] = {0, 0, 0};
+    double gap = INFINITY;
+    const int built = cs_cubemesh_build(&cm, 0.1, origin, ijk, nc, err, sizeof err);
+    free(ijk);
+    if (built != 0)
+        return gap;
+    cs_fem fem;
+    if (cs_fem_init(&fem, &cm, 3e5, 0.3, true, 1) != 0) {
+        cs_cubemesh_free(&cm);
+        return gap;
+    }
+    const int nn = cm.n_nodes;
+    cs_mg *mg = cs_mg_build(&cm, &fem, 1);
+    const int n1 = mg && cs_mg_levels(mg) > 1 ? cs_mg_level_nodes(mg, 1) : 0;
+    double *x = malloc(sizeof(double) * 3 * nn), *inv = malloc(sizeof(double) * 9 * nn);
+    uint8_t *mask = calloc(3 * (size_t)nn, 1);
+    float *xc = malloc(sizeof(float) * 3 * (n1 + 1)), *yc = malloc(sizeof(float) * 3 * (n1 + 1));
+    float *gc = malloc(sizeof(float) * 3 * (n1 + 1));
+    float *xf = malloc(sizeof(float) * 3 * nn), *yf = malloc(sizeof(float) * 3 * nn);
+    uint64_t seed = 7;
+    if (n1 > 0 && x && inv && mask && xc && yc && gc && xf && yf) {
+        const double c = cos(0.6), s = sin(0.6); /* a rigid turn about (1, 1, 0)/√2 ... */
+        for (int a = 0; a < nn; a++) {           /* ... about z then x, every cell alike */
+            const double *X = cm.node_rest + 3 * a;
+            const double p0 = c * X[0] - s * X[1], p1 = s * X[0] + c * X[1], p2 = X[2];
+            x[3 * a] = p0;
+            x[3 * a + 1] = c * p1 - s * p2;
+            x[3 * a + 2] = s * p1 + c * p2;
+        }
+        cs_fem_update_rotations(&fem, x);
+        double *sc = cs_mg_cell_scale(mg), *dg = cs_mg_node_diag(mg);
+        for (int e = 0; e < nc; e++)
+            sc[e] = 1.3;
+        for (int a = 0; a < nn; a++) {
+            dg[a] = 0;
+            for (int k = 0; k < 9; k++)
+                inv[9 * a + k] = k % 4 == 0;
+        }
+        if (cs_mg_setup(mg, &fem, NULL, NULL, inv, mask) == 0) {
+            for (int d = 0; d < 3 * n1; d++)
+                xc[d] = (float)urand(&seed);
+            cs_mg_apply_level(mg, 1, false, xc, yc);
+            cs_mg_prolong(mg, 0, xc, xf);
+            cs_mg_apply_level(mg, 0, false, xf, yf);
+            cs_mg_restrict(mg, 0, yf, gc);
+            double big = 0, diff = 0;
+            for (int d = 0; d < 3 * n1; d++) {
+                big = fmax(big, fabs(yc[d]));
+                diff = fmax(diff, fabs(yc[d] - gc[d]));
+            }
+            gap = big > 0 ? diff / big : INFINITY;
+        }
+    }
+    cs_mg_free(mg);
+    free(x);
+    free(inv);
+    free(mask);
+    free(xc);
+    free(yc);
+    free(gc);
+    free(xf);
+    free(yf);
+    cs_fem_free(&fem);
+    cs_cubemesh_free(&cm);
+    return gap;
+}
+
+/* The rediscretized coarse operator (2·K(h) per full 2×2×2 block) is the Galerkin one PᵀAP
+ * where the children fill the block and turn alike: trilinear coarse functions are fine ones,
+ * and 2×2×2 Gauss points integrate their energy exactly on either level. So Galerkin coarse
+ * operators could only change partly filled blocks (and blocks whose children turn
+ * differently) — where the rediscretization does differ. */
+TEST(mg_coarse_operator_is_galerkin_on_full_blocks)
+{
+    const double full = galerkin_gap(4, 4, 6), part = galerkin_gap(5, 4, 3);
+    printf("    |A1 - PᵀA0P| / |A1|: full blocks %.2g, partly filled %.2g\n", full, part);
+    ENSURE(full < 1e-5);
+    ENSURE(part > 1e-2 && part < INFINITY);
+}
+
+/* A stiff cantilever (E = 1e8 Pa: the implicit system is K, barely the mass): CG iterations
+ * per step over its first 6 steps with multigrid, tolerance 1e-6 as in the targets. The
+ * smoother's wider interval and degree 3 on the coarse levels measured 8.33 here (degree 2
+ * everywhere over [λ/4, λ], λ = 1.1× the estimate: 9.50); the bound fails if that is lost. */
+TEST(mg_stiff_beam_iterations)
+{
+    cs_world_def wd = cs_world_def_default();
+    wd.preconditioner = CS_PRECOND_MULTIGRID;
+    wd.cg_tolerance = 1e-6;
+    wd.sleep_steps = 0;
+    wd.threads = 1;
+    char err[256];
+    cs_world_t *w;
+    ENSURE(cs_world_create(&wd, &w, err, sizeof err) == CS_OK);
+    const int nx = 32, ny = 8, nz = 8;
+    int32_t *ijk = malloc(sizeof(int32_t) * 3 * nx * ny * nz);
+    ENSURE(ijk);
+    int n = 0;
+    for (int k = 0; k < nz; k++)
+        for (int j = 0; j < ny; j++)
+            for (int i = 0; i < nx; i++, n++) {
+                ijk[3 * n] = i;
+                ijk[3 * n + 1] = j;
+                ijk[3 * n + 2] = k;
+            }
+    cs_object_def d = cs_object_def_default();
+    d.name = "stiff";
+    d.model = CS_MODEL_COROTATIONAL;
+    d.material.young = 1e8;
+    d.material.density = 1000;
+    d.cube_size = 0.05;
+    d.geometry = CS_GEOMETRY_CELLS;
+    d.cells_ijk = ijk;
+    d.n_cells = n;
+    cs_aabb box = {{-1e-5, -1, -1}, {1e-5, 1, 1}};
+    d.fixed = &box;
+    d.n_fixed = 1;
+    cs_object_id id;
+    const int rc = cs_world_add_object(w, &d, &id, err, sizeof err);
+    free(ijk);
+    ENSURE_MSG(rc == CS_OK, "add: %s", err);
+    double it = 0;
+    bool conv = true;
+    const int steps = 6;
+    for (int k = 0; k < steps; k++) {
+        cs_world_step(w);
+        const cs_step_stats *st = cs_world_last_stats(w);
+        it += st->cg_iterations / (double)steps;
+        conv = conv && st->converged && st->cg_residual <= 1e-6;
+    }
+    cs_world_destroy(w);
+    printf("    32×8×8 cantilever, E = 1e8: CG it/step %.2f\n", it);
+    ENSURE(conv);
+    ENSURE(it > 1 && it < 8.9);
 }

@@ -12,6 +12,7 @@
 #include "cubemesh.h"
 #include "fem.h"
 #include "lattice.h"
+#include "mat3.h"
 
 static double urand(unsigned *seed)
 {
@@ -40,20 +41,11 @@ static void polar(const double A[9], double R[9])
 {
     memcpy(R, A, 9 * sizeof *R);
     for (int it = 0; it < 60; it++) {
-        const double *F = R;
-        double c[9];
-        c[0] = F[4] * F[8] - F[5] * F[7];
-        c[1] = F[5] * F[6] - F[3] * F[8];
-        c[2] = F[3] * F[7] - F[4] * F[6];
-        c[3] = F[2] * F[7] - F[1] * F[8];
-        c[4] = F[0] * F[8] - F[2] * F[6];
-        c[5] = F[1] * F[6] - F[0] * F[7];
-        c[6] = F[1] * F[5] - F[2] * F[4];
-        c[7] = F[2] * F[3] - F[0] * F[5];
-        c[8] = F[0] * F[4] - F[1] * F[3];
-        const double det = F[0] * c[0] + F[1] * c[1] + F[2] * c[2];
-        for (int i = 0; i < 9; i++) /* c holds the cofactors: X⁻ᵀ = c / det */
-            R[i] = 0.5 * (R[i] + c[i] / det);
+        double adj[9];
+        const double det = cs_mat3_adjugate(R, adj);
+        for (int i = 0; i < 3; i++) /* X⁻ᵀ = adjᵀ / det */
+            for (int j = 0; j < 3; j++)
+                R[3 * i + j] = 0.5 * (R[3 * i + j] + adj[3 * j + i] / det);
     }
 }
 

@@ -97,6 +97,7 @@ TEST(scene_cantilever_fields)
     ENSURE_NEAR(s.world.cg_tolerance, 1e-4, 1e-19);
     ENSURE(s.world.cg_max_iterations == 500);
     ENSURE(s.world.preconditioner == CS_PRECOND_AUTO);
+    ENSURE(s.world.cg_relative_to == CS_CG_RELATIVE_STEP);
     ENSURE(s.n_objects == 1);
     const cs_object_def *o = &s.objects[0];
     ENSURE(!strcmp(o->name, "beam"));
@@ -137,7 +138,7 @@ TEST(scene_every_field_round_trip)
         "  \"max_fractures\": 9,\n"
         "  \"ground\": { \"height\": -0.25, \"friction\": 0.8 },\n"
         "  \"solver\": { \"tolerance\": 1e-8, \"max_iterations\": 77, \"threads\": 2,\n"
-        "              \"preconditioner\": \"multigrid\" },\n"
+        "              \"preconditioner\": \"multigrid\", \"relative_to\": \"rhs\" },\n"
         "  \"materials\": { \"a\": { \"young\": 2e5, \"poisson\": 0.45, \"density\": 900,\n"
         "                          \"damping\": [0.1, 0.02], \"strength\": 3e4 },\n"
         "                 \"b\": { \"young\": 5 } },\n"
@@ -178,6 +179,7 @@ TEST(scene_every_field_round_trip)
     ENSURE(s.world.cg_max_iterations == 77);
     ENSURE(s.world.threads == 2);
     ENSURE(s.world.preconditioner == CS_PRECOND_MULTIGRID);
+    ENSURE(s.world.cg_relative_to == CS_CG_RELATIVE_RHS);
     ENSURE(s.n_objects == 5);
 
     const cs_object_def *o = &s.objects[0];
@@ -312,6 +314,10 @@ static const bad_case BAD[] = {
     {"{\"solver\": {\"tolerence\": 1e-6}, \"objects\": []}", "solver.tolerence: unknown field"},
     {"{\"solver\": {\"preconditioner\": \"ilu\"}, \"objects\": []}",
      "solver.preconditioner: unknown preconditioner 'ilu' (auto, jacobi, multigrid)"},
+    {"{\"solver\": {\"relative_to\": \"b\"}, \"objects\": []}",
+     "solver.relative_to: unknown value 'b' (step, rhs)"},
+    {"{\"solver\": {\"relative_to\": 1}, \"objects\": []}",
+     "solver.relative_to: expected a string, got a number"},
     {"{\"ground\": {\"h\": 1}, \"objects\": []}", "ground.h: unknown field"},
     {"{\"sleep\": {\"speeed\": 1}, \"objects\": []}", "sleep.speeed: unknown field"},
     {"{\"materials\": {\"soft\": {\"youngs\": 1}}, \"objects\": []}",
