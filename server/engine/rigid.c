@@ -1888,6 +1888,19 @@ static void soft_impulse(soft_contact *c, const double J[3])
     cs_soft_impulse(c->SB, c->bn, c->bw, 4, c->rb, mJ);
 }
 
+/* The normal relative velocity the two sides have now (D->v: after their steps). */
+static double soft_now_normal(const soft_contact *c)
+{
+    const cs_object *A = c->SA->D, *B = c->SB->D;
+    double v[3];
+    for (int a = 0; a < 3; a++) {
+        v[a] = A->v[3 * (size_t)c->node + a];
+        for (int k = 0; k < 4; k++)
+            v[a] -= c->bw[k] * B->v[3 * (size_t)c->bn[k] + a];
+    }
+    return dot3(v, c->n);
+}
+
 /* D's box (of its nodes) and its fastest node's speed. */
 static void object_box(const cs_object *D, double lo[3], double hi[3], double *vmax)
 {
@@ -2063,6 +2076,7 @@ static int soft_contacts(cs_world_t *w, cs_rigid_world *rw, cs_step_stats *st)
             if (soft_prepare(w, rw, B) != 0)
                 return CS_ERR_NOMEM;
             cs_soft_resp *SB = rw->cur;
+            SA->two_level = SB->two_level = true;
             if (soft_nodes_in_cells(rw, A, B, SA, SB, olo, ohi, blo, bhi, margin) != 0 ||
                 soft_nodes_in_cells(rw, B, A, SB, SA, olo, ohi, alo, ahi, margin) != 0)
                 return CS_ERR_NOMEM;
@@ -2087,8 +2101,12 @@ static int soft_contacts(cs_world_t *w, cs_rigid_world *rw, cs_step_stats *st)
         const double vn0 = dot3(vr, c->n), slop = 0.01 * c->hB;
         c->target = c->sep > 0 ? -c->sep / dt
                                : BAUMGARTE * fmin(fmax(0, -c->sep - slop), 0.1 * c->hB) / dt;
-        if (vn0 < -v_bounce && vn0 * dt < -c->sep)
-            c->target = fmax(c->target, -e * vn0);
+        /* restitution reverses the approach the objects have now (their velocities after
+         * their steps), not the predicted one: a compressed block's nodes springing up in
+         * the prediction under a block resting on it are no impact */
+        const double vn_now = soft_now_normal(c);
+        if (vn_now < -v_bounce && vn0 * dt < -c->sep)
+            c->target = fmax(c->target, -e * vn_now);
     }
     for (int it = 0; it < PGS_ITERATIONS; it++)
         for (int k = 0; k < rw->nsc; k++) {
@@ -2128,6 +2146,7 @@ static int soft_contacts(cs_world_t *w, cs_rigid_world *rw, cs_step_stats *st)
             o[s]->sleeping = false;
             o[s]->still_steps = 0;
             o[s]->elastic_energy_valid = false;
+            o[s]->contact_pushed = true; /* Newmark: the next step is the one modelled */
         }
     }
     st->ms_solve += now_ms() - t0;
