@@ -110,7 +110,13 @@ static void prepare_stiff(cs_soft_resp *r, cs_object *D, double dt)
         for (int a = 0; a < 3; a++)
             B[4 * a] += mc * D->m[i] + (fld ? dt * al * D->fld.md[i] : 0.0) +
                         (D->pin[i] ? dt * dt * D->penalty : 0.0);
-        cs_invert_block(B);
+        if (r->iso) {
+            const double a = 3.0 / (B[0] + B[4] + B[8]);
+            for (int k = 0; k < 9; k++)
+                B[k] = k % 4 == 0 ? a : 0.0;
+        } else {
+            cs_invert_block(B);
+        }
     }
     /* the residual res (into f), then the mass A gives each node */
     cs_elastic_force(D, D->x, f, NULL);
@@ -167,7 +173,7 @@ static void prepare_stiff(cs_soft_resp *r, cs_object *D, double dt)
     }
 }
 
-int cs_soft_prepare(cs_soft_resp *r, cs_object *D, double dt, uint64_t step)
+int cs_soft_prepare(cs_soft_resp *r, cs_object *D, double dt, uint64_t step, bool iso)
 {
     if (r->D == D && r->id == D->id && r->step == step && r->n == D->n)
         return 0;
@@ -187,7 +193,8 @@ int cs_soft_prepare(cs_soft_resp *r, cs_object *D, double dt, uint64_t step)
     r->n = D->n;
     r->stiff = stiff;
     r->coarse = false;
-    r->two_level = false;
+    r->two_level = iso;
+    r->iso = iso;
     memset(r->V, 0, sizeof r->V);
     memset(r->W, 0, sizeof r->W);
     memset(r->minv, 0, sizeof r->minv);

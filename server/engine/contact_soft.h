@@ -57,11 +57,16 @@ typedef struct cs_soft_resp {
      * (false: local and coarse responses added, the model of the rigid bodies' contacts). Set
      * by the deformable–deformable pass (rigid.c) after the rigid bodies' contacts. */
     bool two_level;
+    /* the local part isotropic, (3 / tr A_ii) I instead of A_ii⁻¹, in u0 and the responses
+     * alike (cs_soft_prepare's iso) */
+    bool iso;
 } cs_soft_resp;
 
 /* Make r (whose arrays may be from an earlier use) D's response for step `step` of world
- * step dt: nothing is done if it already is. Returns 0 or -1 (out of memory). */
-int cs_soft_prepare(cs_soft_resp *r, cs_object *D, double dt, uint64_t step);
+ * step dt: nothing is done if it already is (whatever iso asks). iso: the model of the
+ * deformable–deformable contacts (rigid.c): an isotropic local part and the two-level
+ * response from the start. Returns 0 or -1 (out of memory). */
+int cs_soft_prepare(cs_soft_resp *r, cs_object *D, double dt, uint64_t step, bool iso);
 void cs_soft_free(cs_soft_resp *r);
 
 /* A point of D given by k nodes and weights (Σ w = 1): its arm from the centre of mass. */

@@ -1432,7 +1432,7 @@ static void bounce_positions(const cs_world_t *w, cs_rigid_world *rw)
 /* D's response to this step's impulses (contact_soft.h), made on the first contact search
  * of the step that reaches D and kept through the step's substeps, into rw->cur for the
  * contacts about to be made. Returns 0 or -1 (out of memory). */
-static int soft_prepare(const cs_world_t *w, cs_rigid_world *rw, cs_object *D)
+static int soft_prepare(const cs_world_t *w, cs_rigid_world *rw, cs_object *D, bool iso)
 {
     cs_soft_resp *r = NULL;
     for (int i = 0; i < rw->n_soft && !r; i++)
@@ -1451,7 +1451,7 @@ static int soft_prepare(const cs_world_t *w, cs_rigid_world *rw, cs_object *D)
             return -1;
         rw->soft[rw->n_soft++] = r;
     }
-    if (cs_soft_prepare(r, D, w->def.dt, rw->step) != 0)
+    if (cs_soft_prepare(r, D, w->def.dt, rw->step, iso) != 0)
         return -1;
     rw->cur = r;
     return 0;
@@ -1560,7 +1560,7 @@ static int deformable_contacts(cs_world_t *w, cs_rigid_world *rw, int n_objects)
         const int over = bodies_over(rw, D, 0.0, lo, hi);
         if (over == 0)
             continue;
-        if (soft_prepare(w, rw, D) != 0)
+        if (soft_prepare(w, rw, D, false) != 0)
             return -1;
         const bool grid = over >= w->broadphase_min_bodies;
         if (grid && grid_build(rw, D, false, lo, hi) != 0)
@@ -1791,7 +1791,7 @@ static int cell_contacts(cs_world_t *w, cs_rigid_world *rw, int n_objects)
         const int over = bodies_over(rw, D, -1.0, lo, hi);
         if (over == 0)
             continue;
-        if (soft_prepare(w, rw, D) != 0)
+        if (soft_prepare(w, rw, D, false) != 0)
             return -1;
         const bool grid = over >= w->broadphase_min_bodies;
         if (grid && grid_build(rw, D, true, lo, hi) != 0)
@@ -2070,10 +2070,10 @@ static int soft_contacts(cs_world_t *w, cs_rigid_world *rw, cs_step_stats *st)
             }
             if (!over)
                 continue;
-            if (soft_prepare(w, rw, A) != 0)
+            if (soft_prepare(w, rw, A, true) != 0)
                 return CS_ERR_NOMEM;
             cs_soft_resp *SA = rw->cur;
-            if (soft_prepare(w, rw, B) != 0)
+            if (soft_prepare(w, rw, B, true) != 0)
                 return CS_ERR_NOMEM;
             cs_soft_resp *SB = rw->cur;
             SA->two_level = SB->two_level = true;
