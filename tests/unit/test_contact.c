@@ -487,19 +487,21 @@ static double deepest_inside(const cs_object *P, const cs_object *Q)
 
 /*
  * Without gravity, two soft blocks (2×2×2 cubes of 0.1 m, E 1e5 Pa, 8 kg each) thrown at each
- * other at V each from 0.15 m apart, offset by half a cube in y and z (so the hit is off-centre
- * and turns them).
+ * other at V each from 0.15 m apart along x, either centred or offset by half a cube in y and
+ * z (so the hit is off-centre and turns them), stepped by implicit Euler or Newmark.
  * They passed through each other. Now no node of either may be more than 0.05 h inside a cell
- * of the other at any step; the total momentum is kept (zero; the solves to 1e-10, the contact
- * impulses exactly), the kinetic energy of the two centres' motion never grows (the nodes'
+ * of the other at any step; the total momentum is kept (zero; the solves to 1e-10, 1e-9 of a
+ * block's momentum, the contact impulses exactly); the kinetic energy of the two centres' motion never grows (the nodes'
  * own velocities right after a contact carry its impulse on a few nodes, before the step
- * shares it out), and at the end they are moving apart. Returns 0 or -1, with the figures.
+ * shares it out); and at the end they are apart (a gap between their boxes along x, or for
+ * the off-centre hit a distance between the centres growing), a centred pair moving back
+ * along x with a gap between them. Returns 0 or -1, with the figures.
  */
 typedef struct pair_result {
-    double deep, dp, e0, emax, dist0, dist1, vrel;
+    double deep, dp, e0, emax, dist0, dist1, vrel, va_end, gap;
 } pair_result;
 
-static int soft_pair(double V, pair_result *r)
+static int soft_pair(double V, bool centred, cs_integrator integ, pair_result *r)
 {
     cs_world_def wd = cs_world_def_default();
     wd.gravity[2] = 0;
@@ -511,10 +513,11 @@ static int soft_pair(double V, pair_result *r)
         return -1;
     cs_material soft = cs_material_default();
     soft.young = 1e5;
-    const cs_object_id a =
-        add_box(w, "a", 2, 2, 2, 0.1, (double[3]){0, 0, 0}, soft, CS_MODEL_COROTATIONAL);
-    const cs_object_id b =
-        add_box(w, "b", 2, 2, 2, 0.1, (double[3]){0.35, 0.05, 0.05}, soft, CS_MODEL_COROTATIONAL);
+    const double off = centred ? 0 : 0.05;
+    const cs_object_id a = add_box_i(w, "a", 2, 2, 2, 0.1, (double[3]){0, 0, 0}, soft,
+                                     CS_MODEL_COROTATIONAL, integ);
+    const cs_object_id b = add_box_i(w, "b", 2, 2, 2, 0.1, (double[3]){0.35, off, off}, soft,
+                                     CS_MODEL_COROTATIONAL, integ);
     if (a == CS_NULL_OBJECT || b == CS_NULL_OBJECT) {
         cs_world_destroy(w);
         return -1;
@@ -569,7 +572,15 @@ static int soft_pair(double V, pair_result *r)
             r->dist0 = sqrt(dd);
         r->dist1 = sqrt(dd);
         r->vrel = dv / sqrt(dd); /* > 0: moving apart */
+        r->va_end = va[0];
     }
+    /* the gap between their boxes along x */
+    double amax = -INFINITY, bmin = INFINITY;
+    for (int i = 0; i < A->n; i++)
+        amax = fmax(amax, A->x[3 * i]);
+    for (int i = 0; i < B->n; i++)
+        bmin = fmin(bmin, B->x[3 * i]);
+    r->gap = bmin - amax;
     cs_world_destroy(w);
     return 0;
 }
@@ -577,34 +588,91 @@ static int soft_pair(double V, pair_result *r)
 TEST(contact_soft_blocks_collide_and_separate)
 {
     const double V[3] = {0.5, 1.0, 2.0};
-    for (int k = 0; k < 3; k++) {
+    for (int k = 0; k < 8; k++) {
+        const bool centred = k % 2 == 0, newmark = k >= 6;
+        const double v = V[newmark ? 1 : k / 2];
         pair_result r;
-        ENSURE(soft_pair(V[k], &r) == 0);
-        printf("    two soft blocks at ±%.1f m/s, off-centre: deepest node %.2f mm inside the "
-               "other, momentum kept to %.1e kg m/s, kinetic energy of the centres %.3f J, at most "
-               "%.3f J; "
-               "centres %.3f m apart after the first step, %.3f m at the end, parting at %.3f "
-               "m/s\n", V[k], 1e3 * r.deep, r.dp, r.e0, r.emax, r.dist0, r.dist1, r.vrel);
+        ENSURE(soft_pair(v, centred, newmark ? CS_INTEGRATOR_NEWMARK : CS_INTEGRATOR_DEFAULT,
+                         &r) == 0);
+        printf("    [%s] two soft blocks at ±%.1f m/s, %s: deepest node %.2f mm inside the "
+               "other, momentum kept to %.1e kg m/s, kinetic energy of the centres %.3f J, at "
+               "most %.3f J; centres %.3f m apart after the first step, %.3f m at the end, "
+               "parting at %.3f m/s, block a at %+.3f m/s along x, gap along x %.3f m\n",
+               newmark ? "newmark" : "implicit_euler", v, centred ? "centred" : "off-centre",
+               1e3 * r.deep, r.dp, r.e0, r.emax, r.dist0, r.dist1, r.vrel, r.va_end, r.gap);
         ENSURE_MSG(r.deep < 0.05 * 0.1, "a node went %.4f m into the other block", r.deep);
-        ENSURE_MSG(r.dp < 1e-8, "momentum changed by %.2e kg m/s", r.dp);
+        /* (the solves' share, relative to one block's momentum 8 V; the contacts' is exact) */
+        ENSURE_MSG(r.dp < 1e-9 * 8 * v, "momentum changed by %.2e kg m/s", r.dp);
         ENSURE_MSG(r.emax <= r.e0 * (1 + 1e-6), "kinetic energy grew from %.4f to %.4f J",
                    r.e0, r.emax);
-        ENSURE_MSG(r.vrel > 0 && r.dist1 > r.dist0, "not parting: %.4f m/s, %.3f m", r.vrel,
-                   r.dist1);
+        ENSURE_MSG(r.vrel > 0, "not parting: %.4f m/s", r.vrel);
+        if (centred) {
+            ENSURE_MSG(r.va_end < 0 && r.gap > 0, "not bounced back: a at %.4f m/s, gap %.4f m",
+                       r.va_end, r.gap);
+        }
     }
 }
 
 /*
- * A soft block (2×2×2 cubes of 0.1 m, E 1e5 Pa, 8 kg) dropped 50 mm onto a soft block of n×n×2
- * cubes (same material) lying on the ground, offset by `off` in x and y. It must come to rest
- * on it (it fell through to the ground), its lowest node within 0.05 h of the lower block's
- * top, and press the lower block in under it.
+ * A soft block T (2×2×2 cubes of 0.1 m, E 1e5 Pa, 8 kg) dropped 50 mm onto a soft block L of
+ * n×n×2 cubes (same material, mass damping 1/s) lying on the ground, offset by (ox, oy), for
+ * 4 s (240 steps). It must come to rest on L: no node of either more than 0.05 h inside the
+ * other over the last second, T's bottom nodes over L not more than 0.02 h below or above
+ * L's top under them (no sinking, no levitation), T's centre still over L and within 25 mm of where it
+ * came to lie after 1 s (no sliding off), its centre's speed over the last second below 1
+ * mm/s and its rattle below 0.5 mm, and the total energy (kinetic, elastic, gravity) of the
+ * last 3 s never above its value at 1 s by more than 0.05 J (it bounced: 0.55 J a cycle).
+ * And L's top under T lower than elsewhere, for a wide L; for L of T's size, lower by about
+ * the uniaxial estimate (m_T g / a + ρ g H / 2) H / E (its own weight's and T's), a = its top's
+ * area, H = 0.2 m.
  */
+/* The largest distance along z of T's bottom nodes over L's top from that top (the bilinear
+ * surface of L's top cells' upper faces, located by their current corners in x and y). */
+static double bottom_gap(const cs_object *T, const cs_object *L, double z_bottom,
+                         double z_top)
+{
+    double gap = 0;
+    for (int i = 0; i < T->n; i++) {
+        if (fabs(T->cm.node_rest[3 * i + 2] - z_bottom) > 1e-9)
+            continue;
+        const double *p = T->x + 3 * i;
+        for (int32_t c = 0; c < L->cm.n_cells; c++) {
+            const int32_t *cn = L->cm.cell_nodes + 8 * (size_t)c;
+            double X[4][3], lo[2] = {INFINITY, INFINITY}, hi[2] = {-INFINITY, -INFINITY};
+            int q = 0;
+            for (int k = 0; k < 8; k++) {
+                if (!CS_CORNER[k][2])
+                    continue;
+                if (fabs(L->cm.node_rest[3 * (size_t)cn[k] + 2] - z_top) > 1e-9)
+                    break; /* not a top cell */
+                memcpy(X[q], L->x + 3 * (size_t)cn[k], sizeof X[q]);
+                for (int a = 0; a < 2; a++) {
+                    lo[a] = fmin(lo[a], X[q][a]);
+                    hi[a] = fmax(hi[a], X[q][a]);
+                }
+                q++;
+            }
+            if (q != 4 || p[0] < lo[0] || p[0] > hi[0] || p[1] < lo[1] || p[1] > hi[1])
+                continue;
+            const double u = (p[0] - lo[0]) / (hi[0] - lo[0]), v = (p[1] - lo[1]) / (hi[1] - lo[1]);
+            double z = 0;
+            for (int k = 0; k < 4; k++) {
+                const double wu = X[k][0] - lo[0] > 0.5 * (hi[0] - lo[0]) ? u : 1 - u;
+                const double wv = X[k][1] - lo[1] > 0.5 * (hi[1] - lo[1]) ? v : 1 - v;
+                z += wu * wv * X[k][2];
+            }
+            gap = fmax(gap, fabs(p[2] - z));
+            break;
+        }
+    }
+    return gap;
+}
+
 typedef struct rest_result {
-    double lowest, pen, press, speed, rattle;
+    double deep, gap, press, drop, speed, rattle, slide, cx, de;
 } rest_result;
 
-static int soft_on_soft(int nlow, double off, rest_result *r)
+static int soft_on_soft(int nlow, double ox, double oy, cs_integrator integ, rest_result *r)
 {
     cs_world_t *w = ground_world();
     if (!w)
@@ -612,36 +680,37 @@ static int soft_on_soft(int nlow, double off, rest_result *r)
     cs_material soft = cs_material_default();
     soft.young = 1e5;
     soft.damping[0] = 1;
-    const cs_object_id low =
-        add_box(w, "low", nlow, nlow, 2, 0.1, (double[3]){0, 0, 0}, soft, CS_MODEL_COROTATIONAL);
-    const cs_object_id top = add_box(w, "top", 2, 2, 2, 0.1, (double[3]){off, off, 0.25}, soft,
-                                     CS_MODEL_COROTATIONAL);
+    const cs_object_id low = add_box_i(w, "low", nlow, nlow, 2, 0.1, (double[3]){0, 0, 0}, soft,
+                                       CS_MODEL_COROTATIONAL, integ);
+    const cs_object_id top = add_box_i(w, "top", 2, 2, 2, 0.1, (double[3]){ox, oy, 0.25}, soft,
+                                       CS_MODEL_COROTATIONAL, integ);
     if (low == CS_NULL_OBJECT || top == CS_NULL_OBJECT) {
         cs_world_destroy(w);
         return -1;
     }
     const cs_object *L = cs_world_find_internal(w, low), *T = cs_world_find_internal(w, top);
-    double cz[240], under = 0, far = 0;
-    r->lowest = INFINITY;
+    double cz[240], under = 0, far = 0, cx60 = 0, e60 = 0;
+    memset(r, 0, sizeof *r);
+    r->de = -INFINITY;
     for (int s = 0; s < 240; s++) {
         if (cs_world_step(w) != CS_OK) {
             cs_world_destroy(w);
             return -1;
         }
-        double zt = INFINITY, ztop = -INFINITY, zu = 0, zf = 0;
+        double zu = 0, zf = 0, cx = 0;
         int nu = 0, nf = 0;
         cz[s] = 0;
         for (int i = 0; i < T->n; i++) {
-            zt = fmin(zt, T->x[3 * i + 2]);
             cz[s] += T->m[i] * T->x[3 * i + 2] / T->mass;
+            cx += T->m[i] * T->x[3 * i] / T->mass;
         }
-        /* the lower block's top nodes under the upper one's footprint, and the others */
+        /* L's top nodes under T's footprint, and the others */
         for (int i = 0; i < L->n; i++) {
-            const double *x = L->x + 3 * i;
-            if (x[2] < 0.15)
+            const double *x = L->x + 3 * i, *x0 = L->cm.node_rest + 3 * i;
+            if (x0[2] < 0.15)
                 continue;
-            if (x[0] > off + 0.01 && x[0] < off + 0.19 && x[1] > off + 0.01 && x[1] < off + 0.19) {
-                ztop = fmax(ztop, x[2]);
+            if (x0[0] > ox - 0.01 && x0[0] < ox + 0.21 && x0[1] > oy - 0.01 &&
+                x0[1] < oy + 0.21) {
                 zu += x[2];
                 nu++;
             } else {
@@ -649,8 +718,24 @@ static int soft_on_soft(int nlow, double off, rest_result *r)
                 nf++;
             }
         }
-        r->lowest = fmin(r->lowest, zt);
-        r->pen = ztop - zt;
+        cs_energy el, et;
+        cs_object_energy(w, low, &el);
+        cs_object_energy(w, top, &et);
+        const double e = el.kinetic + el.elastic + el.gravity + et.kinetic + et.elastic +
+                         et.gravity;
+        if (s == 59) {
+            cx60 = cx;
+            e60 = e;
+        }
+        if (s > 59) {
+            r->slide = fmax(r->slide, fabs(cx - cx60));
+            r->de = fmax(r->de, e - e60);
+        }
+        if (s >= 180) {
+            r->deep = fmax(r->deep, fmax(deepest_inside(T, L), deepest_inside(L, T)));
+            r->gap = fmax(r->gap, bottom_gap(T, L, 0.25, 0.2));
+        }
+        r->cx = cx;
         under = zu / nu;
         far = nf ? zf / nf : 0.2;
     }
@@ -663,6 +748,7 @@ static int soft_on_soft(int nlow, double off, rest_result *r)
     r->speed = fabs(cz[239] - cz[179]) / (60 * cs_world_get_def(w)->dt);
     r->rattle = hi - lo;
     r->press = far - under;
+    r->drop = 0.2 - under;
     cs_world_destroy(w);
     return 0;
 }
@@ -671,23 +757,39 @@ TEST(contact_soft_block_rests_on_soft_block)
 {
     /* on a wider block, half a cube off its lattice; on one of its own size, lattice on
      * lattice (its nodes lie in the lower block's side planes: they were pushed out sideways
-     * and it sank 22 mm into it) */
-    const int nlow[2] = {4, 2};
-    const double off[2] = {0.05, 0.0};
-    for (int k = 0; k < 2; k++) {
+     * and it sank 22 mm into it; then it levitated up to 7 mm and dropped back every ~30
+     * steps); overhanging one of its size by half a cube (it slid off); and the same-size
+     * stack stepped by Newmark */
+    const int nlow[4] = {4, 2, 2, 2};
+    const double ox[4] = {0.05, 0, 0.05, 0}, oy[4] = {0.05, 0, 0, 0};
+    const double h = 0.1, g = 9.81, E = 1e5, rho = 1000, H = 0.2;
+    const double est = (8 * g / (4 * h * h) + rho * g * H / 2) * H / E;
+    for (int k = 0; k < 4; k++) {
+        const bool newmark = k == 3;
         rest_result r;
-        ENSURE(soft_on_soft(nlow[k], off[k], &r) == 0);
-        printf("    soft block dropped on a %dx%dx2 soft block, offset %.2f m: lowest node %.4f "
-               "m (top of the lower 0.2), at rest %.2f mm inside it, its top %.2f mm lower "
-               "under it than elsewhere; over the last second the centre moved %.1e m/s on "
-               "average and rattled %.2f mm\n", nlow[k], nlow[k], off[k], r.lowest,
-               1e3 * r.pen, 1e3 * r.press, r.speed, 1e3 * r.rattle);
-        ENSURE_MSG(r.lowest > 0.15, "the block went down to %.4f m", r.lowest);
-        ENSURE_MSG(r.pen < 0.05 * 0.1, "the block rests %.4f m inside the other", r.pen);
+        ENSURE(soft_on_soft(nlow[k], ox[k], oy[k],
+                            newmark ? CS_INTEGRATOR_NEWMARK : CS_INTEGRATOR_DEFAULT, &r) == 0);
+        printf("    [%s] soft block dropped on a %dx%dx2 soft block, offset (%.2f, %.2f) m: "
+               "deepest node %.2f mm inside the other, bottom nodes at most %.2f mm off the "
+               "lower block's top under them (last second); that top %.2f mm down (%.2f mm lower than "
+               "elsewhere; uniaxial estimate for the same size %.2f mm); centre at x = %.4f m, "
+               "slid %.2f mm after 1 s; last second: centre moved %.1e m/s on average, "
+               "rattled %.2f mm; energy at most %+.3f J over its value at 1 s\n",
+               newmark ? "newmark" : "implicit_euler", nlow[k], nlow[k], ox[k], oy[k],
+               1e3 * r.deep, 1e3 * r.gap, 1e3 * r.drop, 1e3 * r.press, 1e3 * est, r.cx,
+               1e3 * r.slide, r.speed, 1e3 * r.rattle, r.de);
+        ENSURE_MSG(r.deep < 0.05 * h, "a node rests %.4f m inside the other block", r.deep);
+        ENSURE_MSG(r.gap < 0.02 * h, "the block rests %.4f m off the other's top", r.gap);
+        ENSURE_MSG(r.cx < 0.1 * nlow[k] && r.slide < 0.025, "slid %.4f m, to x = %.4f m",
+                   r.slide, r.cx);
         ENSURE_MSG(r.speed < 1e-3, "still moving at %.2e m/s", r.speed);
-        ENSURE_MSG(r.rattle < 2e-3, "its centre rattles over %.2f mm", 1e3 * r.rattle);
+        ENSURE_MSG(r.rattle < 5e-4, "its centre rattles over %.2f mm", 1e3 * r.rattle);
+        ENSURE_MSG(r.de < 0.05, "the energy rose %.3f J above its value at 1 s", r.de);
         if (nlow[k] > 2)
             ENSURE_MSG(r.press > 1e-4, "the lower block is not pressed (%.2e m)", r.press);
+        else if (ox[k] == 0)
+            ENSURE_MSG(fabs(r.drop / est - 1) < 0.25, "the lower block's top went down %.2f mm "
+                       "(estimate %.2f mm)", 1e3 * r.drop, 1e3 * est);
     }
 }
 
