@@ -624,7 +624,7 @@ TEST(contact_soft_blocks_collide_and_separate)
  * last 3 s never above its value at 1 s by more than 0.05 J (it bounced: 0.55 J a cycle).
  * And L's top under T lower than elsewhere, for a wide L; for L of T's size, lower by about
  * the uniaxial estimate (m_T g / a + ρ g H / 2) H / E (its own weight's and T's), a = its top's
- * area, H = 0.2 m.
+ * area, H = 0.2 m, T not tilted; overhanging, T tilted as on a Winkler foundation (below).
  */
 /* The largest distance along z of T's bottom nodes over L's top from that top (the bilinear
  * surface of L's top cells' upper faces, located by their current corners in x and y). */
@@ -669,7 +669,7 @@ static double bottom_gap(const cs_object *T, const cs_object *L, double z_bottom
 }
 
 typedef struct rest_result {
-    double deep, gap, press, drop, speed, rattle, slide, cx, de;
+    double deep, gap, press, drop, speed, rattle, slide, cx, de, tilt;
 } rest_result;
 
 static int soft_on_soft(int nlow, double ox, double oy, cs_integrator integ, rest_result *r)
@@ -745,6 +745,19 @@ static int soft_on_soft(int nlow, double ox, double oy, cs_integrator integ, res
         lo = fmin(lo, cz[s]);
         hi = fmax(hi, cz[s]);
     }
+    /* T's bottom: the least-squares slope dz/dx of its nodes */
+    double sx = 0, sz = 0, sxx = 0, sxz = 0;
+    int nb = 0;
+    for (int i = 0; i < T->n; i++)
+        if (fabs(T->cm.node_rest[3 * i + 2] - 0.25) < 1e-9) {
+            const double px = T->x[3 * i], pz = T->x[3 * i + 2];
+            sx += px;
+            sz += pz;
+            sxx += px * px;
+            sxz += px * pz;
+            nb++;
+        }
+    r->tilt = (nb * sxz - sx * sz) / (nb * sxx - sx * sx);
     r->speed = fabs(cz[239] - cz[179]) / (60 * cs_world_get_def(w)->dt);
     r->rattle = hi - lo;
     r->press = far - under;
@@ -790,6 +803,19 @@ TEST(contact_soft_block_rests_on_soft_block)
         else if (ox[k] == 0)
             ENSURE_MSG(fabs(r.drop / est - 1) < 0.25, "the lower block's top went down %.2f mm "
                        "(estimate %.2f mm)", 1e3 * r.drop, 1e3 * est);
+        else {
+            /* overhanging: T tilts on L's top as on a Winkler foundation of modulus E/H over
+             * the patch x ∈ [ox, 2h] (width 2h − ox, depth 2h), its weight ox/2 off the
+             * patch's centre: θ = m g (ox/2) / ((E/H) 2h (2h − ox)³ / 12) */
+            const double wx = 2 * h - ox[k];
+            const double th = 8 * g * ox[k] / 2 / (E / H * 2 * h * wx * wx * wx / 12);
+            printf("    overhanging block tilted %.4f rad, Winkler estimate %.4f rad\n", -r.tilt,
+                   th);
+            ENSURE_MSG(fabs(-r.tilt / th - 1) < 0.35, "tilted %.4f rad (estimate %.4f)", -r.tilt,
+                       th);
+        }
+        if (nlow[k] == 2 && ox[k] == 0)
+            ENSURE_MSG(fabs(r.tilt) < 0.005, "tilted %.4f rad on a block of its size", r.tilt);
     }
 }
 
