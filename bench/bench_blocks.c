@@ -64,7 +64,8 @@ static double cpu_s(void)
 typedef struct shape {
     int nx, ny, nz;
     double h, young;
-    char held; /* 'z' or 'x' */
+    char held;      /* 'z' or 'x' */
+    double poisson; /* ν; 0: the default 0.3 */
 } shape;
 
 static cs_world_t *make_world(const shape *sh, int threads, field_kind field,
@@ -91,6 +92,8 @@ static cs_world_t *make_world(const shape *sh, int threads, field_kind field,
     d.name = "block";
     d.model = CS_MODEL_COROTATIONAL;
     d.material.young = sh->young;
+    if (sh->poisson > 0)
+        d.material.poisson = sh->poisson;
     d.material.density = 1000;
     d.cube_size = sh->h;
     d.cells_ijk = ijk;
@@ -461,8 +464,9 @@ static void usage(void)
             "usage: bench_blocks [--sizes 8,16,32,48] [--runs 5] [--threads 1,2] [--csv FILE]\n"
             "         [--field none|cubes|gradient] [--precond jacobi,multigrid,auto]\n"
             "         [--big-runs 3] [--big-steps 3]     (sizes of 200 000 cubes or more)\n"
-            "       bench_blocks --box 75x15x15 [--h 0.04] [--young 1e5] [--steps 30] [--runs 5]\n"
-            "         [--threads 1,2] [--precond auto] [--csv FILE] [--append]\n"
+            "       bench_blocks --box 75x15x15 [--h 0.04] [--young 1e5] [--poisson 0.3] [--steps 30]\n"
+            "         [--runs 5] [--threads 1,2] [--precond auto] [--csv FILE] [--append]\n"
+            "       (--poisson: every mode that builds a body; default 0.3)\n"
             "       bench_blocks --peak [--kernel 32] [--calls 40] [--runs 5] [--threads 1,2]\n"
             "       bench_blocks --vcycle 48 [--calls 40] [--runs 5] [--threads 1,2]\n"
             "       bench_blocks --static 32x8x8 [--h 0.04] [--young 1e7] [--runs 3] [--threads 1,2]\n");
@@ -475,8 +479,8 @@ int main(int argc, char **argv)
     const char *csv = NULL;
     bool append = false, peak = false;
     enum { MODE_BLOCKS, MODE_BOX, MODE_PEAK, MODE_STATIC } mode = MODE_BLOCKS;
-    shape box = {0, 0, 0, 0.04, 0, 'x'};
-    double young = NAN;
+    shape box = {0, 0, 0, 0.04, 0, 'x', 0};
+    double young = NAN, poisson = 0;
     field_kind field = FIELD_NONE;
     cs_preconditioner pcs[3] = {CS_PRECOND_JACOBI};
     int npc = 1;
@@ -505,6 +509,8 @@ int main(int argc, char **argv)
             box.h = atof(argv[++i]);
         else if (!strcmp(argv[i], "--young") && i + 1 < argc)
             young = atof(argv[++i]);
+        else if (!strcmp(argv[i], "--poisson") && i + 1 < argc)
+            poisson = atof(argv[++i]);
         else if (!strcmp(argv[i], "--peak"))
             peak = true, mode = MODE_PEAK;
         else if (!strcmp(argv[i], "--kernel") && i + 1 < argc)
@@ -544,7 +550,8 @@ int main(int argc, char **argv)
         big_steps = 3;
     if (calls < 1)
         calls = 40;
-    if (!(box.h > 0) || !(isnan(young) || young > 0)) {
+    box.poisson = poisson;
+    if (!(box.h > 0) || !(isnan(young) || young > 0) || !(poisson >= 0 && poisson < 0.5)) {
         usage();
         return 2;
     }
@@ -657,7 +664,7 @@ int main(int argc, char **argv)
             sh.young = isnan(young) ? 1e5 : young;
         } else {
             int n = sizes[si];
-            sh = (shape){n, n, n, 1.0 / n, isnan(young) ? 1e5 : young, 'z'};
+            sh = (shape){n, n, n, 1.0 / n, isnan(young) ? 1e5 : young, 'z', poisson};
         }
         long cells = (long)sh.nx * sh.ny * sh.nz;
         char label[96];

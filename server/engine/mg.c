@@ -19,12 +19,20 @@
 #ifndef MG_CHEB_COARSE
 #define MG_CHEB_COARSE 3  /* ... and on the coarse levels (an eighth of the cost each) */
 #endif
-/* The smoothed interval is [λ/MG_CHEB_RATIO, λ] with λ = MG_LAMBDA_SAFETY × the power estimate of
- * λmax(D⁻¹A). Any Chebyshev error polynomial on [a, b] stays at most 1 in modulus up to
- * a + b = λ (1 + 1/ratio), so B stays positive definite while λmax ≤ 1.1 (1 + 1/4) = 1.375×
- * the estimate. A wider interval (ratio 6, factor 1.18: the same margin) took 5–10 % fewer
- * iterations in the first steps from rest but 25–33 % more in long warm-started runs, at the
- * default tolerance and at 1e-6 (README "Multigrid against block Jacobi"): not kept. */
+/* The smoothing polynomial's kind. 4 (default): Lottes' optimised fourth kind over [0, λ]
+ * (cs_mg_smoother_steps), λ = MG_LAMBDA_SAFETY × the power estimate of λmax(D⁻¹A); |1 − t p|
+ * stays below 1 up to 1.17 λ (degree 2) and 1.11 λ (degree 3), i.e. to 1.29× and 1.22× the
+ * estimate (test_mg_smoother.c). Session 14: 5–13 % fewer CG iterations per step than kind 1
+ * on the bench beams, blocks and ν = 0.3–0.49, for the same products per cycle (README
+ * "Multigrid against block Jacobi"). 1: the first kind over [λ/MG_CHEB_RATIO, λ] (sessions
+ * 11–13), at most 1 in modulus up to λ (1 + 1/ratio) = 1.375× the estimate; a wider interval
+ * (ratio 6) took 5–10 % fewer iterations in the first steps from rest but 25–33 % more in
+ * long warm-started runs: not kept. */
+#ifndef MG_CHEB_KIND
+#define MG_CHEB_KIND 4
+#endif
+_Static_assert(MG_CHEB_KIND != 4 || (MG_CHEB <= 3 && MG_CHEB_COARSE <= 3),
+               "the fourth-kind degrees above 3 leave under 1.1 λ of room (test_mg_smoother)");
 #ifndef MG_CHEB_RATIO
 #define MG_CHEB_RATIO 4.0
 #endif
@@ -89,6 +97,7 @@ typedef struct mg_level {
     double lam;
     float omega;
     int cheb_deg;                     /* Chebyshev degree of this level's smoother */
+    double cheb_c[CS_MG_CHEB_MAX];    /* fourth kind: the steps' weights × λ (cs_mg_smoother_steps) */
 } mg_level;
 
 struct cs_mg {
@@ -413,11 +422,84 @@ static int product_layout(mg_level *l)
     return 0;
 }
 
+/* The optimised fourth-kind polynomials' weights β (Lottes, "Optimal polynomial smoothers for
+ * multigrid V-cycles", 2023, arXiv:2202.08830, Table 5), degrees 1–4. */
+static const double opt4_beta[CS_MG_CHEB_MAX][CS_MG_CHEB_MAX] = {
+    {1.12500000000000},
+    {1.02387287570313, 1.26408905371085},
+    {1.00842544782028, 1.08867839208730, 1.33753125909618},
+    {1.00391310427285, 1.04035811188593, 1.14863498546254, 1.38268869241000},
+};
+
+void cs_mg_smoother_poly(int deg, double *e)
+{
+    /* the paper's recurrence on polynomials in λ (λ(D⁻¹A) over its estimate ρ = 1): z_1 =
+     * 4/3 r_0, y_i = y_{i−1} + z_i, r_i = λ (1 − y_i), z_{i+1} = (2i−1)/(2i+3) z_i +
+     * (8i+4)/(2i+3) r_i; the correction Σ β_i z_i, the error 1 − that (r_0 = λ) */
+    double z[CS_MG_CHEB_MAX + 1] = {0}, y[CS_MG_CHEB_MAX + 1] = {0}, out[CS_MG_CHEB_MAX + 1] = {0};
+    z[1] = 4.0 / 3.0;
+    for (int i = 1; i <= deg; i++) {
+        for (int j = 0; j <= deg; j++) {
+            y[j] += z[j];
+            out[j] += opt4_beta[deg - 1][i - 1] * z[j];
+        }
+        if (i == deg)
+            break;
+        const double a = (2.0 * i - 1) / (2.0 * i + 3), c = (8.0 * i + 4) / (2.0 * i + 3);
+        for (int j = deg; j >= 1; j--) /* r_i = λ (1 − y_i) */
+            z[j] = a * z[j] + c * ((j == 1 ? 1.0 : 0.0) - y[j - 1]);
+        z[0] = a * z[0];
+    }
+    for (int j = 0; j <= deg; j++)
+        e[j] = (j == 0 ? 1.0 : 0.0) - out[j];
+}
+
+static double poly_at(const double *e, int deg, double t)
+{
+    double v = 0;
+    for (int j = deg; j >= 0; j--)
+        v = v * t + e[j];
+    return v;
+}
+
+int cs_mg_smoother_steps(int deg, double *c)
+{
+    if (deg < 1 || deg > CS_MG_CHEB_MAX)
+        return -1;
+    double e[CS_MG_CHEB_MAX + 1];
+    cs_mg_smoother_poly(deg, e);
+    /* its roots are real, simple and in (0, 1): bracket them on a grid, then bisect; the step
+     * weights are their reciprocals, the mildest first */
+    int found = 0;
+    const int N = 4096;
+    double t0 = 0, v0 = poly_at(e, deg, 0);
+    for (int g = 1; g <= N && found < deg; g++) {
+        const double t1 = (double)g / N, v1 = poly_at(e, deg, t1);
+        if ((v0 > 0) != (v1 > 0)) {
+            double lo = t0, hi = t1;
+            for (int it = 0; it < 60; it++) {
+                const double mid = 0.5 * (lo + hi);
+                if ((poly_at(e, deg, mid) > 0) == (v0 > 0))
+                    lo = mid;
+                else
+                    hi = mid;
+            }
+            c[deg - 1 - found++] = 2.0 / (lo + hi);
+        }
+        t0 = t1;
+        v0 = v1;
+    }
+    return found == deg ? 0 : -1;
+}
+
 static int alloc_level_state(mg_level *l, int level, int threads)
 {
     const size_t n3 = 3 * (size_t)l->n_nodes, nc = l->n_cells ? (size_t)l->n_cells : 1;
     l->threads = threads > 1 && l->n_cells >= CS_FEM_PARALLEL_CELLS ? threads : 1;
     l->cheb_deg = level == 0 ? MG_CHEB : MG_CHEB_COARSE;
+    if (MG_CHEB_KIND == 4 && l->cheb_deg > 0 &&
+        cs_mg_smoother_steps(l->cheb_deg, l->cheb_c) != 0)
+        return -1;
     l->s = malloc(nc * sizeof(double));
     l->dg = malloc((size_t)(l->n_nodes ? l->n_nodes : 1) * sizeof(double));
     l->dgf = malloc((size_t)(l->n_nodes ? l->n_nodes : 1) * sizeof(float));
@@ -873,15 +955,30 @@ static void cheb_update(const mg_level *l, const float *t, float *d, float *x, f
 
 /*
  * Chebyshev smoothing of the level's degree (MG_CHEB on the finest, MG_CHEB_COARSE below):
- * x += p(D⁻¹A) D⁻¹ (b − A x), p the polynomial that
- * minimises max |1 − λ p(λ)| over [λmax/MG_CHEB_RATIO, λmax] (the upper part of the spectrum,
- * which the coarse levels do not reach); from x = 0 if zero (one product less). The same
- * polynomial before and after the coarse correction keeps the V-cycle symmetric, and
- * |1 − λ p(λ)| < 1 on (0, λmax] keeps it positive definite.
+ * x += p(D⁻¹A) D⁻¹ (b − A x); from x = 0 if zero (one product less). Kind 4 (MG_CHEB_KIND):
+ * Lottes' optimised fourth-kind polynomial on [0, λ], applied as its root factors, one
+ * Richardson step x += (c_i/λ) D⁻¹ (b − A x) each (the factors commute; c_i ≥ 1, the mildest
+ * first). Kind 1: the polynomial that minimises max |1 − λ p(λ)| over [λ/MG_CHEB_RATIO, λ],
+ * by its three-term recurrence. Either way the same polynomial before and after the coarse
+ * correction keeps the V-cycle symmetric, and |1 − λ p(λ)| < 1 on (0, λmax] keeps it positive
+ * definite.
  */
 static void cheb(const cs_mg *mg, int level, const float *b, float *x, bool zero)
 {
     mg_level *l = &mg->lv[level];
+    if (MG_CHEB_KIND == 4) {
+        /* the polynomial as a product of its root factors: x += (c_i/λ) D⁻¹ (b − A x) */
+        for (int k = 0; k < l->cheb_deg; k++) {
+            const float c = (float)(l->cheb_c[k] / l->lam);
+            if (k == 0 && zero) {
+                cheb_update(l, b, l->d, x, 0.0f, c, true, true);
+            } else {
+                const cheb_step cs = {l->d, x, 0.0f, c, true};
+                apply_path(mg, level, mg->avx512, x, b, NULL, &cs);
+            }
+        }
+        return;
+    }
     const double lmax = l->lam, lmin = lmax / MG_CHEB_RATIO;
     const double theta = 0.5 * (lmax + lmin), delta = 0.5 * (lmax - lmin), sigma = theta / delta;
     double rho = 1.0 / sigma;

@@ -84,6 +84,16 @@ int cs_mg_setup(cs_mg *mg, const cs_fem *fem, cs_matvec_fn A, void *ctx, const d
 /* z = B r, one V-cycle (a cs_precond_fn; ctx is the cs_mg). */
 void cs_mg_vcycle(void *ctx, const double *r, double *z);
 
+/* The smoother: Chebyshev polynomials of the fourth kind with Lottes' optimised weights, of
+ * degree 2 on the finest level and 3 on the coarse ones, over [0, λ] (λ = 1.1 × the power
+ * estimate of λmax(D⁻¹A)). cs_mg_smoother_poly: the error polynomial e(t) = 1 − t p(t) in
+ * t = λ(D⁻¹A)/λ, coefficients e[0..deg]; cs_mg_smoother_steps: the weights c_i (the
+ * reciprocals of its roots, mildest first) of the product form e(t) = Π (1 − c_i t) the
+ * V-cycle applies as x += (c_i/λ) D⁻¹ (b − A x); −1 if deg is not 1..CS_MG_CHEB_MAX. */
+#define CS_MG_CHEB_MAX 4
+void cs_mg_smoother_poly(int deg, double *e);
+int cs_mg_smoother_steps(int deg, double *c);
+
 /* y = A x with level `level`'s operator in the V-cycle's single precision (level 0: Σ_c s_c
  * R_c K R_cᵀ x + dg x over the finest cells, as cs_mg_setup left them), x and y 3 per node of
  * the level; portable: with the gathers of CPUs without AVX-512 even where it is present. For

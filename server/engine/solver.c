@@ -39,37 +39,66 @@ void cs_cg_work_free(cs_cg_work *w)
     free(w->partial);
     free(w->hist_prev);
     free(w->hist_end);
-    free(w->dir);
+    for (int k = 0; k < CS_CG_DIRS; k++) {
+        free(w->dirs[k]);
+        free(w->adirs[k]);
+    }
+    free(w->gpartial);
     memset(w, 0, sizeof *w);
+}
+
+static void free_history(cs_cg_work *w)
+{
+    free(w->hist_prev);
+    free(w->hist_end);
+    free(w->gpartial);
+    w->hist_prev = w->hist_end = w->gpartial = w->dir = NULL;
+    for (int k = 0; k < CS_CG_DIRS; k++) {
+        free(w->dirs[k]);
+        free(w->adirs[k]);
+        w->dirs[k] = w->adirs[k] = NULL;
+    }
 }
 
 int cs_cg_guess(cs_cg_work *w, const double *v, double *x)
 {
-    const size_t n = (size_t)w->n;
+    const size_t n = (size_t)w->n, sz = (n ? n : 1) * sizeof(double);
     memcpy(x, v, n * sizeof(double));
     w->dir_ready = false;
     if (!w->hist_prev) {
-        w->hist_prev = malloc((n ? n : 1) * sizeof(double));
-        w->hist_end = malloc((n ? n : 1) * sizeof(double));
-        w->dir = malloc((n ? n : 1) * sizeof(double));
+        w->hist_prev = malloc(sz);
+        w->hist_end = malloc(sz);
+        const size_t nb = n / CS_DOT_BLOCK + 1, ne = CS_CG_DIRS * (CS_CG_DIRS + 1);
+        w->gpartial = malloc(nb * ne * sizeof(double));
+        bool ok = w->hist_prev && w->hist_end && w->gpartial;
+        for (int k = 0; k < CS_CG_DIRS; k++) {
+            w->dirs[k] = malloc(sz);
+            w->adirs[k] = malloc(sz);
+            ok = ok && w->dirs[k] && w->adirs[k];
+        }
         w->hist_valid = false;
-        if (!w->hist_prev || !w->hist_end || !w->dir) {
-            free(w->hist_prev);
-            free(w->hist_end);
-            free(w->dir);
-            w->hist_prev = w->hist_end = w->dir = NULL;
+        w->ndirs = 0;
+        if (!ok) {
+            free_history(w);
             return -1;
         }
     }
+    /* the oldest direction's slot takes the new one */
+    double *d = w->dirs[CS_CG_DIRS - 1];
+    for (int k = CS_CG_DIRS - 1; k > 0; k--)
+        w->dirs[k] = w->dirs[k - 1];
+    w->dirs[0] = w->dir = d;
     /* One pass: d = v − v_prev (used only if v is bit for bit where the last step ended) and
      * v_prev = v. */
     bool same = w->hist_valid;
     for (size_t i = 0; i < n; i++) {
         const double vi = v[i];
         same = same && memcmp(&vi, &w->hist_end[i], sizeof vi) == 0;
-        w->dir[i] = vi - w->hist_prev[i];
+        d[i] = vi - w->hist_prev[i];
         w->hist_prev[i] = vi;
     }
+    const int m = w->max_dirs >= 1 && w->max_dirs < CS_CG_DIRS ? w->max_dirs : CS_CG_DIRS;
+    w->ndirs = same ? (w->ndirs < m ? w->ndirs + 1 : m) : 0;
     w->dir_ready = same;
     w->hist_valid = false;
     return w->dir_ready ? 1 : 0;
@@ -225,6 +254,103 @@ static void dot2(cs_cg_work *w, const double *r, const double *z, const double *
     *rzo = b;
 }
 
+/*
+ * The warm start's Galerkin step: x += D α with D the nd directions of the last steps
+ * (cs_cg_guess; masked here), α minimising the A-norm of the error over their span, i.e.
+ * (Dᵀ A D) α = Dᵀ r, and r −= A D α. The small system in fixed blocks (bit-identical on any
+ * thread count), factored by Cholesky over the newest directions that are independent to
+ * 1e-10 (older ones that depend on them are dropped). Returns ‖r‖ after (rnorm if no step).
+ */
+static double warm_subspace(cs_cg_work *w, cs_matvec_fn A, void *ctx, const uint8_t *mask,
+                            int nd, double *x, double *r, double rnorm, int threads)
+{
+    if (nd > CS_CG_DIRS)
+        nd = CS_CG_DIRS;
+    const int n = w->n, nb = (n + CS_DOT_BLOCK - 1) / CS_DOT_BLOCK, ne = nd * (nd + 1);
+    double **D = w->dirs, **Q = w->adirs;
+    for (int k = 0; k < nd; k++) {
+        double *dk = D[k];
+#pragma omp parallel for num_threads(threads) schedule(static)
+        for (int i = 0; i < n; i++)
+            if (mask[i])
+                dk[i] = 0.0;
+        A(ctx, dk, Q[k]);
+    }
+    /* G = Dᵀ Q (nd × nd) and g = Dᵀ r, one pass */
+#pragma omp parallel for num_threads(threads) schedule(static) if (nb > 1)
+    for (int k = 0; k < nb; k++) {
+        const int lo = k * CS_DOT_BLOCK, hi = lo + CS_DOT_BLOCK < n ? lo + CS_DOT_BLOCK : n;
+        double acc[CS_CG_DIRS * (CS_CG_DIRS + 1)] = {0};
+        for (int i = lo; i < hi; i++)
+            for (int a = 0; a < nd; a++) {
+                const double da = D[a][i];
+                acc[nd * nd + a] += da * r[i];
+                for (int c = 0; c < nd; c++)
+                    acc[a * nd + c] += da * Q[c][i];
+            }
+        memcpy(w->gpartial + (size_t)k * ne, acc, (size_t)ne * sizeof(double));
+    }
+    double G[CS_CG_DIRS * (CS_CG_DIRS + 1)] = {0}, L[CS_CG_DIRS * CS_CG_DIRS] = {0};
+    for (int k = 0; k < nb; k++)
+        for (int e = 0; e < ne; e++)
+            G[e] += w->gpartial[(size_t)k * ne + e];
+    const double *g = G + nd * nd;
+    int m = 0; /* Cholesky of the symmetrised G, as far as the pivots stay positive */
+    for (int i = 0; i < nd; i++) {
+        bool ok = isfinite(g[i]);
+        for (int j = 0; j <= i && ok; j++) {
+            double s = 0.5 * (G[i * nd + j] + G[j * nd + i]);
+            for (int k = 0; k < j; k++)
+                s -= L[i * nd + k] * L[j * nd + k];
+            if (j < i)
+                L[i * nd + j] = s / L[j * nd + j];
+            else if (s > 1e-10 * G[i * nd + i] && isfinite(s))
+                L[i * nd + i] = sqrt(s);
+            else
+                ok = false;
+        }
+        if (!ok)
+            break;
+        m = i + 1;
+    }
+    if (m == 0)
+        return rnorm;
+    double al[CS_CG_DIRS];
+    for (int i = 0; i < m; i++) {
+        double s = g[i];
+        for (int k = 0; k < i; k++)
+            s -= L[i * nd + k] * al[k];
+        al[i] = s / L[i * nd + i];
+    }
+    for (int i = m - 1; i >= 0; i--) {
+        double s = al[i];
+        for (int k = i + 1; k < m; k++)
+            s -= L[k * nd + i] * al[k];
+        al[i] = s / L[i * nd + i];
+    }
+#pragma omp parallel for num_threads(threads) schedule(static) if (nb > 1)
+    for (int k = 0; k < nb; k++) {
+        const int lo = k * CS_DOT_BLOCK, hi = lo + CS_DOT_BLOCK < n ? lo + CS_DOT_BLOCK : n;
+        double s = 0;
+        for (int i = lo; i < hi; i++) {
+            double dx = 0, dq = 0;
+            for (int a = 0; a < m; a++) {
+                dx += al[a] * D[a][i];
+                dq += al[a] * Q[a][i];
+            }
+            x[i] += dx;
+            const double ri = mask[i] ? 0.0 : r[i] - dq;
+            r[i] = ri;
+            s += ri * ri;
+        }
+        w->partial[k] = s;
+    }
+    double s = 0;
+    for (int k = 0; k < nb; k++)
+        s += w->partial[k];
+    return sqrt(s);
+}
+
 static cs_cg_result pcg(cs_cg_work *w, cs_matvec_fn A, void *ctx, cs_precond_fn B, void *bctx,
                         const uint8_t *mask, const double *b, double *x, double tol,
                         int max_iter, int threads, bool flexible);
@@ -251,7 +377,7 @@ static cs_cg_result pcg(cs_cg_work *w, cs_matvec_fn A, void *ctx, cs_precond_fn 
     const int n = w->n;
     double *r = w->r, *z = w->z, *p = w->p, *q = w->q, *zo = w->zo;
     cs_cg_result res = {0, 0, 0, 0};
-    const bool use_dir = w->dir_ready; /* armed by cs_cg_guess for this solve only */
+    const int nd = w->dir_ready ? w->ndirs : 0; /* armed by cs_cg_guess for this solve only */
     w->dir_ready = false;
 
     /* ‖b‖ over the free dofs; r = b - A x. */
@@ -278,16 +404,8 @@ static cs_cg_result pcg(cs_cg_work *w, cs_matvec_fn A, void *ctx, cs_precond_fn 
     if (w->stop != CS_CG_STOP_RHS && !(stop >= 1e-12 * bnorm))
         stop = 1e-12 * bnorm; /* also a NaN reference */
     res.ref = stop / tol;
-    if (use_dir && rnorm > stop) {
-        /* warm start (cs_cg_guess): x += α d with α = dᵀr / dᵀAd, the A-norm minimiser */
-#pragma omp parallel for num_threads(threads) schedule(static)
-        for (int i = 0; i < n; i++)
-            p[i] = mask[i] ? 0.0 : w->dir[i];
-        A(ctx, p, q);
-        const double pq = cs_dot(w, p, q, n, threads), pr = cs_dot(w, p, r, n, threads);
-        if (pq > 0 && isfinite(pr))
-            rnorm = sqrt(update_xr(w, mask, pr / pq, p, q, x, r, n, threads));
-    }
+    if (nd > 0 && rnorm > stop) /* warm start (cs_cg_guess) */
+        rnorm = warm_subspace(w, A, ctx, mask, nd, x, r, rnorm, threads);
     B(bctx, r, z);
     memcpy(p, z, (size_t)n * sizeof *p);
     double rz = cs_dot(w, r, z, n, threads);

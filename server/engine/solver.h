@@ -30,13 +30,25 @@ typedef void (*cs_matvec_fn)(void *ctx, const double *x, double *y);
  */
 typedef enum cs_cg_stop { CS_CG_STOP_RHS = 0, CS_CG_STOP_START, CS_CG_STOP_GIVEN } cs_cg_stop;
 
+/* Directions of the warm start's subspace (cs_cg_guess); 1 is a line search along the last
+ * change. */
+#ifndef CS_CG_DIRS
+#define CS_CG_DIRS 4
+#endif
+
 typedef struct cs_cg_work {
     int n;        /* degrees of freedom (3 per node) */
     cs_cg_stop stop; /* what tol is relative to (above); RHS after cs_cg_work_init */
     double stop_ref; /* GIVEN: the norm */
     double *r, *z, *p, *q, *zo, *partial;
     /* warm-start history of a sequence of solves (cs_cg_guess); allocated on first use */
-    double *hist_prev, *hist_end, *dir;
+    double *hist_prev, *hist_end;
+    double *dirs[CS_CG_DIRS];  /* the last steps' velocity changes, newest first (a ring) */
+    double *adirs[CS_CG_DIRS]; /* their products in the solve that uses them (scratch) */
+    double *gpartial;          /* per block partial sums of the Galerkin system */
+    double *dir;               /* the newest direction: dirs[0] */
+    int ndirs;                 /* how many consecutive directions dirs holds */
+    int max_dirs;              /* how many to use (1..CS_CG_DIRS; 0 = CS_CG_DIRS) */
     bool hist_valid, dir_ready;
 } cs_cg_work;
 
@@ -47,14 +59,17 @@ void cs_cg_work_free(cs_cg_work *w);
  * Warm start for a sequence of solves whose solutions change smoothly (the velocities of
  * implicit steps). cs_cg_guess sets the initial guess x = v (the state the step starts from)
  * and, when the previous step started from v_prev and ended exactly at v (cs_cg_record), arms
- * the direction d = v − v_prev for the next cs_pcg / cs_pcg_ex on this work: that solve first
- * moves x along d by the step that minimises the A-norm of the error (a Galerkin line search,
- * one extra product; never worse than x = v, and better than the plain extrapolation 2v −
- * v_prev, whose step length is 1). It remembers v as the next v_prev and forgets the history
- * until cs_cg_record(v_end) is called after the step: a state changed between steps (reset,
- * sleep, a set velocity) no longer matches and starts afresh, and a re-initialised work
- * (fracture changes the node count) has no history. d is masked inside the solve, so held and
- * contact dofs keep their initial value. Returns 1 if armed, 0 if not, -1 if out of memory.
+ * the changes of the last steps, d_1 = v − v_prev, d_2 = v_prev − v_prev2, … (up to
+ * max_dirs ≤ CS_CG_DIRS, as many as were consecutive), for the next cs_pcg / cs_pcg_ex on this
+ * work: that solve first moves x by the combination of them that minimises the A-norm of the
+ * error (a Galerkin step on their span: one product per direction and a small dense system;
+ * never worse than x = v; with one direction a line search along the last change, which is
+ * better than the plain extrapolation 2v − v_prev). It remembers v as the next v_prev and
+ * forgets the history until cs_cg_record(v_end) is called after the step: a state changed
+ * between steps (reset, sleep, a set velocity) no longer matches and starts afresh, and a
+ * re-initialised work (fracture changes the node count) has no history. The directions are
+ * masked inside the solve, so held and contact dofs keep their initial value. Returns 1 if
+ * armed, 0 if not, -1 if out of memory (then x = v).
  */
 int cs_cg_guess(cs_cg_work *w, const double *v, double *x);
 void cs_cg_record(cs_cg_work *w, const double *v_end);

@@ -7,6 +7,7 @@
  * the history as they should.
  */
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -143,6 +144,89 @@ TEST(warmstart_same_solution_fewer_iterations)
     free(vw);
     free(r);
     free(mask);
+}
+
+/*
+ * The warm start's subspace (CS_CG_DIRS directions): solutions that move along a fixed
+ * three-dimensional family, x_k = Σ f_i(k) u_i (a quadratic, a sine and a linear drift in k),
+ * change each step by a vector of span{u_i}. Once three consecutive changes are in the history,
+ * the Galerkin step over them finds the next solution exactly (to the round-off of their
+ * nearly parallel directions, 1e-8 here), so a solve to 1e-7 needs no CG iteration; a line
+ * search along the last change alone (one direction) still needs several.
+ * The solutions match the exact ones either way.
+ */
+/* Solves along the family of the test below with the warm start's subspace limited to
+ * `dirs` directions: CG iterations summed over the solves after the fourth. */
+static int family_iterations(int dirs, double tol)
+{
+    const int nodes = 100, n = 3 * nodes;
+    chain c = {n, 1.0, 30.0};
+    cs_cg_work w;
+    if (cs_cg_work_init(&w, n) != 0)
+        return -1;
+    w.max_dirs = dirs;
+    double *inv = calloc(9 * (size_t)nodes, sizeof(double)), *u = malloc(sizeof(double) * 3 * n);
+    double *xs = malloc(sizeof(double) * n), *b = malloc(sizeof(double) * n);
+    double *x = calloc((size_t)n, sizeof(double)), *v = calloc((size_t)n, sizeof(double));
+    uint8_t *mask = calloc((size_t)n, 1);
+    int late = 0;
+    if (!inv || !u || !xs || !b || !x || !v || !mask)
+        late = -1;
+    for (int i = 0; late == 0 && i < nodes; i++)
+        for (int a = 0; a < 3; a++)
+            inv[9 * i + 4 * a] = 1.0 / (c.m + 2 * c.k);
+    for (int i = 0; late == 0 && i < n; i++) {
+        u[i] = sin(0.05 * i);
+        u[n + i] = cos(0.13 * i) * (i % 7);
+        u[2 * n + i] = 1.0 + 0.01 * i;
+    }
+    for (int k = 1; late >= 0 && k <= 12; k++) {
+        const double f[3] = {0.1 * k * k, sin(0.3 * k), 0.5 * k};
+        for (int i = 0; i < n; i++)
+            xs[i] = f[0] * u[i] + f[1] * u[n + i] + f[2] * u[2 * n + i];
+        chain_apply(&c, xs, b);
+        cs_cg_guess(&w, v, x);
+        const cs_cg_result r = cs_pcg(&w, chain_apply, &c, inv, mask, b, x, tol, 1000, 1);
+        double e = 0, s = 0;
+        for (int i = 0; i < n; i++) {
+            e += (x[i] - xs[i]) * (x[i] - xs[i]);
+            s += xs[i] * xs[i];
+        }
+        if (!r.converged || !(sqrt(e / s) < 1e3 * tol))
+            late = -1;
+        else if (k >= 5) /* three changes armed from here on */
+            late += r.iterations;
+        memcpy(v, x, sizeof(double) * n);
+        cs_cg_record(&w, v);
+    }
+    cs_cg_work_free(&w);
+    free(inv);
+    free(u);
+    free(xs);
+    free(b);
+    free(x);
+    free(v);
+    free(mask);
+    return late;
+}
+
+/*
+ * The warm start's subspace: solutions that move along a fixed three-dimensional family,
+ * x_k = Σ f_i(k) u_i (a quadratic, a sine and a linear drift in k), change each step by a
+ * vector of span{u_i}. With three or more of the last changes in the history the Galerkin
+ * step over them lands on the next solution up to the previous solves' errors (the tolerance)
+ * and the round-off of nearly parallel directions; the line search along the last change
+ * alone (one direction) cannot. Each solve still reaches its tolerance and the exact solution.
+ */
+TEST(warmstart_subspace_reproduces_a_low_dimensional_motion)
+{
+    const int one = family_iterations(1, 1e-8), two = family_iterations(2, 1e-8);
+    const int three = family_iterations(3, 1e-8), all = family_iterations(CS_CG_DIRS, 1e-8);
+    printf("    CG iterations in the 8 solves after the 4th: 1 direction %d, 2: %d, 3: %d, "
+           "%d: %d\n", one, two, three, CS_CG_DIRS, all);
+    ENSURE(one > 0 && two > 0 && three >= 0 && all >= 0);
+    ENSURE(3 * three < one && 3 * all < one);
+    ENSURE(three <= two && all <= three);
 }
 
 /* Implicit steps record their end state; a reset, and falling asleep, forget it. */
