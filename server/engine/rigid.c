@@ -2021,6 +2021,29 @@ static int soft_nodes_in_cells(cs_rigid_world *rw, cs_object *A, cs_object *B,
     return 0;
 }
 
+/* Whether o's box has been apart from kin id's (o->apart). */
+static int kin_apart(const cs_object *o, cs_object_id id)
+{
+    for (int i = 0; i < o->n_apart; i++)
+        if (o->apart[i] == id)
+            return 1;
+    return 0;
+}
+
+static int kin_add(cs_object *o, cs_object_id id)
+{
+    if (o->n_apart == o->cap_apart) {
+        const int cap = o->cap_apart ? 2 * o->cap_apart : 4;
+        cs_object_id *g = realloc(o->apart, (size_t)cap * sizeof *g);
+        if (!g)
+            return -1;
+        o->apart = g;
+        o->cap_apart = cap;
+    }
+    o->apart[o->n_apart++] = id;
+    return 0;
+}
+
 /*
  * Contacts between deformable objects, once per step after the rigid bodies' (the same
  * sequential impulses, their own solve): only pairs whose boxes, grown by the distance they can
@@ -2067,6 +2090,19 @@ static int soft_contacts(cs_world_t *w, cs_rigid_world *rw, cs_step_stats *st)
                 olo[a] = fmax(alo[a], blo[a]) - margin;
                 ohi[a] = fmin(ahi[a], bhi[a]) + margin;
                 over = over && olo[a] <= ohi[a];
+            }
+            if (A->kin == B->kin) {
+                /* pieces of one object: born touching across their crack (each crack node
+                 * on the other's cell face), so they take contacts only once their boxes
+                 * have been apart */
+                const int ka = kin_apart(A, B->id), kb = kin_apart(B, A->id);
+                if (!over) {
+                    if ((!ka && kin_add(A, B->id) != 0) || (!kb && kin_add(B, A->id) != 0))
+                        return CS_ERR_NOMEM;
+                    continue;
+                }
+                if (!ka || !kb)
+                    continue;
             }
             if (!over)
                 continue;
