@@ -1995,7 +1995,11 @@ static int soft_nodes_in_cells(cs_rigid_world *rw, cs_object *A, cs_object *B,
                 cf.sep > best.sep)
                 best = cf;
         }
-        if (best.sep == -INFINITY)
+        /* a node more than half a cell behind the face did not get there by a step's
+         * approach (the speculative reach is half a cell): objects that met inside each
+         * other (a tumbling linear-model piece grows) are not pushed apart from within, which
+         * crushed and inverted small pieces in the fracture storm */
+        if (best.sep == -INFINITY || best.sep < -0.5 * B->cm.h)
             continue;
         if (rw->nsc == rw->cap_sc) {
             const int cap = rw->cap_sc ? 2 * rw->cap_sc : 256;
