@@ -110,7 +110,13 @@ static void prepare_stiff(cs_soft_resp *r, cs_object *D, double dt)
         for (int a = 0; a < 3; a++)
             B[4 * a] += mc * D->m[i] + (fld ? dt * al * D->fld.md[i] : 0.0) +
                         (D->pin[i] ? dt * dt * D->penalty : 0.0);
-        cs_invert_block(B);
+        if (r->iso) {
+            const double a = 3.0 / (B[0] + B[4] + B[8]);
+            for (int k = 0; k < 9; k++)
+                B[k] = k % 4 == 0 ? a : 0.0;
+        } else {
+            cs_invert_block(B);
+        }
     }
     /* the residual res (into f), then the mass A gives each node */
     cs_elastic_force(D, D->x, f, NULL);
@@ -131,7 +137,7 @@ static void prepare_stiff(cs_soft_resp *r, cs_object *D, double dt)
             f[d] = D->mask[d] ? 0.0 : D->m[i] * v[d] + dt * F - Av;
         }
     }
-    double *mass = av; /* (done with av) */
+    double *mass = r->mass;
     for (size_t i = 0; i < n; i++)
         mass[i] = mc * D->m[i] + (fld ? dt * al * D->fld.md[i] : 0.0);
     coarse_modes(r, D, mass);
@@ -167,7 +173,7 @@ static void prepare_stiff(cs_soft_resp *r, cs_object *D, double dt)
     }
 }
 
-int cs_soft_prepare(cs_soft_resp *r, cs_object *D, double dt, uint64_t step)
+int cs_soft_prepare(cs_soft_resp *r, cs_object *D, double dt, uint64_t step, bool iso)
 {
     if (r->D == D && r->id == D->id && r->step == step && r->n == D->n)
         return 0;
@@ -178,7 +184,8 @@ int cs_soft_prepare(cs_soft_resp *r, cs_object *D, double dt, uint64_t step)
                        D->n_fixed_nodes < D->n;
     if (grow_f64(&r->u, &r->cap_u, 3 * n) ||
         (stiff && (grow_f64(&r->ainv, &r->cap_a, 9 * n) ||
-                   grow_f64(&r->scratch, &r->cap_s, 9 * n))))
+                   grow_f64(&r->scratch, &r->cap_s, 9 * n) ||
+                   grow_f64(&r->mass, &r->cap_m, n))))
         return -1;
     r->D = D;
     r->id = D->id;
@@ -186,6 +193,8 @@ int cs_soft_prepare(cs_soft_resp *r, cs_object *D, double dt, uint64_t step)
     r->n = D->n;
     r->stiff = stiff;
     r->coarse = false;
+    r->two_level = iso;
+    r->iso = iso;
     memset(r->V, 0, sizeof r->V);
     memset(r->W, 0, sizeof r->W);
     memset(r->minv, 0, sizeof r->minv);
@@ -202,6 +211,7 @@ void cs_soft_free(cs_soft_resp *r)
     free(r->u);
     free(r->ainv);
     free(r->scratch);
+    free(r->mass);
     memset(r, 0, sizeof *r);
 }
 
@@ -209,6 +219,34 @@ void cs_soft_free(cs_soft_resp *r)
 static bool movable(const cs_object *D, size_t i)
 {
     return !D->mask[3 * i] && D->m[i] > 0;
+}
+
+/*
+ * The coarse velocity V + W × (x_i − c) as node i sees it. In the two-level response
+ * (r->two_level) the block-Jacobi pass after the coarse correction takes back A_ii⁻¹ mass_i
+ * of it: the same iteration as u0, on the impulses, so the response is consistent with u0 (a
+ * block resting on another: the impulse that holds it is seen as doing so), a free object
+ * pushed in proportion to its masses moves as a whole and a very soft one tends to free point
+ * masses; adding the local and the full coarse response counts that mass twice. Zero without
+ * coarse modes.
+ */
+static void coarse_at(const cs_soft_resp *r, size_t i, const double V[3], const double W[3],
+                      double out[3])
+{
+    out[0] = out[1] = out[2] = 0;
+    if (!r->coarse)
+        return;
+    double d[3], wd[3], t[3];
+    for (int a = 0; a < 3; a++)
+        d[a] = r->D->x[3 * i + a] - r->c[a];
+    cross(W, d, wd);
+    for (int a = 0; a < 3; a++)
+        out[a] = V[a] + wd[a];
+    if (!r->two_level || !r->stiff || !movable(r->D, i))
+        return;
+    mul3(r->ainv + 9 * i, out, t);
+    for (int a = 0; a < 3; a++)
+        out[a] -= r->mass[i] * t[a];
 }
 
 void cs_soft_arm(const cs_soft_resp *r, const int32_t *nodes, const double *w, int k,
@@ -225,16 +263,15 @@ void cs_soft_arm(const cs_soft_resp *r, const int32_t *nodes, const double *w, i
 void cs_soft_velocity(const cs_soft_resp *r, const int32_t *nodes, const double *w, int k,
                       const double arm[3], double v[3])
 {
+    (void)arm;
     v[0] = v[1] = v[2] = 0;
-    if (r->coarse) {
-        double wr[3];
-        cross(r->W, arm, wr);
+    for (int j = 0; j < k; j++) {
+        const size_t i = (size_t)nodes[j];
+        double c[3];
+        coarse_at(r, i, r->V, r->W, c);
         for (int a = 0; a < 3; a++)
-            v[a] = r->V[a] + wr[a];
+            v[a] += w[j] * (r->u[3 * i + a] + c[a]);
     }
-    for (int j = 0; j < k; j++)
-        for (int a = 0; a < 3; a++)
-            v[a] += w[j] * r->u[3 * (size_t)nodes[j] + a];
 }
 
 double cs_soft_compliance(const cs_soft_resp *r, const int32_t *nodes, const double *w, int k,
@@ -254,11 +291,17 @@ double cs_soft_compliance(const cs_soft_resp *r, const int32_t *nodes, const dou
         }
     }
     if (r->coarse) {
-        double rd[3], t[3];
+        /* the coarse velocity the impulse d gives, seen at the point's nodes */
+        double rd[3], dV[3], dW[3];
         cross(arm, d, rd);
-        mul3(r->iinv, rd, t);
+        mul3(r->iinv, rd, dW);
         for (int a = 0; a < 3; a++)
-            s += r->minv[a] * d[a] * d[a] + rd[a] * t[a];
+            dV[a] = r->minv[a] * d[a];
+        for (int j = 0; j < k; j++) {
+            double c[3];
+            coarse_at(r, (size_t)nodes[j], dV, dW, c);
+            s += w[j] * (d[0] * c[0] + d[1] * c[1] + d[2] * c[2]);
+        }
     }
     return s;
 }

@@ -44,18 +44,29 @@ typedef struct cs_soft_resp {
     double *u;          /* 3n: u0 plus the local responses A_ii⁻¹ J of the impulses since */
     double *ainv;       /* 9n: A_ii⁻¹ row-major (when stiff) */
     double *scratch;    /* 9n */
-    size_t cap_u, cap_a, cap_s;
+    double *mass;       /* n: the mass A gives each node ((1 + dt α) m) */
+    size_t cap_u, cap_a, cap_s, cap_m;
     bool stiff;         /* implicit Euler or Newmark, not every node held: local + coarse response */
     /* coarse: the rigid modes D may move in, c its centre of mass, minv the inverse mass on
      * each axis (0: a blocked translation), iinv the inverse inertia restricted to the free
      * rotations; V, W the coarse velocity the impulses gave so far */
     double c[3], minv[3], iinv[9], V[3], W[3];
     bool coarse;        /* D has free rigid modes (else the coarse terms are all zero) */
+    /* the response as one two-level iteration on the impulses, like u0: the block-Jacobi
+     * pass after the coarse one takes back A_ii⁻¹ mass_i of the coarse velocity at node i
+     * (false: local and coarse responses added, the model of the rigid bodies' contacts). Set
+     * by the deformable–deformable pass (rigid.c) after the rigid bodies' contacts. */
+    bool two_level;
+    /* the local part isotropic, (3 / tr A_ii) I instead of A_ii⁻¹, in u0 and the responses
+     * alike (cs_soft_prepare's iso) */
+    bool iso;
 } cs_soft_resp;
 
 /* Make r (whose arrays may be from an earlier use) D's response for step `step` of world
- * step dt: nothing is done if it already is. Returns 0 or -1 (out of memory). */
-int cs_soft_prepare(cs_soft_resp *r, cs_object *D, double dt, uint64_t step);
+ * step dt: nothing is done if it already is (whatever iso asks). iso: the model of the
+ * deformable–deformable contacts (rigid.c): an isotropic local part and the two-level
+ * response from the start. Returns 0 or -1 (out of memory). */
+int cs_soft_prepare(cs_soft_resp *r, cs_object *D, double dt, uint64_t step, bool iso);
 void cs_soft_free(cs_soft_resp *r);
 
 /* A point of D given by k nodes and weights (Σ w = 1): its arm from the centre of mass. */

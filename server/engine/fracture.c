@@ -2749,6 +2749,7 @@ static cs_object *make_piece(cs_world_t *w, const cs_object *o, const int32_t *c
     for (int i = 0; i < s->n_vertices; i++)
         vmap[i] = -1;
     p->model = o->model;
+    p->kin = o->kin;
     p->integrator = o->integrator;
     p->mat = o->mat;
     p->omega2_plain = o->omega2_plain;
@@ -3033,6 +3034,11 @@ static int keep_cells(cs_world_t *w, cs_object *o, const int32_t *kept, int nk,
         uint8_t *kind_o = o->tri_kind;
         *o = *p;
         o->id = tmp.id;
+        o->kin = tmp.kin;
+        o->apart = tmp.apart;
+        o->n_apart = tmp.n_apart;
+        o->cap_apart = tmp.cap_apart;
+        tmp.apart = NULL;
         o->name = tmp.name;
         o->topology_version = tmp.topology_version;
         o->surf = surf_o;

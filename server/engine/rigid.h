@@ -61,7 +61,8 @@ void cs_rigid_reset(cs_object *o);
 /* Kinetic energy ½ m v² + ½ ωᵀ I ω. */
 double cs_rigid_kinetic_energy(const cs_object *o);
 
-/* Step every rigid object of w by one dt (with its contacts against deformable objects).
+/* Step every rigid object of w by one dt (with its contacts against deformable objects), then
+ * the contacts between deformable objects (the deformable objects have stepped already).
  * Adds timings and counts to st. Returns CS_OK or the first error. */
 int cs_rigid_step(cs_world_t *w, cs_step_stats *st);
 void cs_rigid_world_free(cs_world_t *w);

@@ -234,6 +234,7 @@ void cs_object_free_internal(cs_object *o)
     if (!o)
         return;
     free(o->name);
+    free(o->apart);
     free(o->corner_vertex);
     free(o->tri_kind);
     free(o->cell_cut);
@@ -717,6 +718,8 @@ int cs_world_append_object(cs_world_t *w, cs_object *o)
         w->cap_objects = cap;
     }
     o->id = w->next_id++;
+    if (!o->kin)
+        o->kin = o->id;
     w->objects[w->n_objects++] = o;
     return 0;
 }

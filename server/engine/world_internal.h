@@ -138,6 +138,14 @@ typedef struct cs_object {
                             object's next step is implicit Euler's, whose response the contact
                             solve modelled (contact_soft.h) */
     bool sleeping;
+    /* Deformable–deformable contacts (rigid.c soft_contacts) between pieces of one fractured
+     * object: kin is the id of the object all of them came from (its own id otherwise); a
+     * piece is born touching its kin across the crack, so a pair of kin takes no contacts
+     * until their boxes have once been apart; apart lists the kin this object's box has been
+     * apart from (owned, n_apart of cap_apart). */
+    cs_object_id kin;
+    cs_object_id *apart;
+    int n_apart, cap_apart;
     /* Active regions (world.c "active regions", seed 000 §2.2): NULL/0 until first used.
      * A frozen node is held where it is with v = 0 outside the solve; a cell whose 8 nodes are
      * frozen is inactive and skipped by the element passes (fem.cell_active during a step). */
