@@ -18,7 +18,9 @@
  * FMA throughput (16 independent AVX2 / AVX-512 chains per thread, OpenMP threads), and with
  * --kernel N the GFLOP/s of cs_fem_apply_K on an N³ corotational block (flops from
  * cs_fem_product_flops) as a fraction of that peak, in the same run. Sizes of 200 000 cubes
- * or more get --big-steps steps × --big-runs runs (default 3 × 3). --vcycle N: the time of one
+ * or more get --big-runs runs (default 3) of --big-steps steps (default: 3 with Jacobi, 12 with
+ * multigrid, which, like every multigrid size above 5000 cubes, gets 12 so that the warm
+ * start's four directions are built for most of the counted steps). --vcycle N: the time of one
  * multigrid V-cycle (cs_mg_vcycle) on the implicit step's operator of an N³ block, and the CPU
  * time of its finest-level product alone (cs_mg_apply_level 0).
  *
@@ -468,7 +470,8 @@ static void usage(void)
     fprintf(stderr,
             "usage: bench_blocks [--sizes 8,16,32,48] [--runs 5] [--threads 1,2] [--csv FILE]\n"
             "         [--field none|cubes|gradient] [--precond jacobi,multigrid,auto]\n"
-            "         [--big-runs 3] [--big-steps 3]     (sizes of 200 000 cubes or more)\n"
+            "         [--big-runs 3] [--big-steps N]     (sizes of 200 000 cubes or more; default\n"
+            "         3 steps for jacobi, 12 for multigrid)\n"
             "       bench_blocks --box 75x15x15 [--h 0.04] [--young 1e5] [--poisson 0.3] [--steps 30]\n"
             "         [--runs 5] [--threads 1,2] [--precond auto] [--csv FILE] [--append]\n"
             "       (--poisson: every mode that builds a body; default 0.3)\n"
@@ -480,6 +483,7 @@ static void usage(void)
 int main(int argc, char **argv)
 {
     int sizes[16] = {8, 16, 32, 48}, ns = 4, threads[8] = {1, 2}, nt = 2, runs = 5;
+    bool big_steps_set = false;
     int big_runs = 3, big_steps = 3, fixed_steps = 0, kernel_n = 0, calls = 40, vcycle_n = 0;
     const char *csv = NULL;
     bool append = false, peak = false;
@@ -498,8 +502,10 @@ int main(int argc, char **argv)
             runs = atoi(argv[++i]);
         else if (!strcmp(argv[i], "--big-runs") && i + 1 < argc)
             big_runs = atoi(argv[++i]);
-        else if (!strcmp(argv[i], "--big-steps") && i + 1 < argc)
+        else if (!strcmp(argv[i], "--big-steps") && i + 1 < argc) {
             big_steps = atoi(argv[++i]);
+            big_steps_set = true;
+        }
         else if (!strcmp(argv[i], "--steps") && i + 1 < argc)
             fixed_steps = atoi(argv[++i]);
         else if (!strcmp(argv[i], "--csv") && i + 1 < argc)
@@ -681,14 +687,20 @@ int main(int argc, char **argv)
                      sh.young);
         else
             snprintf(label, sizeof label, "%d³ = %ld", sh.nx, cells);
-        /* About two seconds of stepping per run at most, at least 3 steps; the largest sizes
-         * few steps and few runs. */
-        int steps = cells <= 5000 ? 60 : cells <= 40000 ? 12 : cells < 200000 ? 4 : big_steps;
         int nruns = cells < 200000 ? runs : big_runs < runs ? big_runs : runs;
-        if (fixed_steps > 0)
-            steps = fixed_steps;
         for (int pi = 0; pi < npc; pi++)
         for (int ti = 0; ti < nt; ti++) {
+            /* About two seconds of stepping per run at most, at least 3 steps. Multigrid
+             * (pcs 0 = auto is multigrid from 2048 cubes) gets 12 steps at every size above
+             * 5000 cubes: the warm start needs 4 steps to have its four directions, so fewer
+             * steps would count mostly the steps after rest; Jacobi's large sizes cost seconds
+             * a step and get 4 (below 200 000 cubes) or --big-steps. */
+            int steps = cells <= 5000 ? 60 : cells <= 40000 || pcs[pi] != 1 ? 12
+                      : cells < 200000 ? 4 : big_steps;
+            if (cells >= 200000 && big_steps_set)
+                steps = big_steps;
+            if (fixed_steps > 0)
+                steps = fixed_steps;
             result rs[100];
             for (int r = 0; r < nruns; r++)
                 if (run_once(&sh, threads[ti], steps, field, pcs[pi], &rs[r]) != 0)

@@ -7,7 +7,8 @@
 # the machine's FMA peak and the element product's share of it (peak.md), the 32×8×8 static
 # solve (static.md) and the two-thread speed-ups (blocks.speedup.txt).
 # BENCH_SIZES / BENCH_RUNS override the defaults (8,16,32,48,64 and 5 runs; medians are
-# reported; 64³ gets BENCH_BIG_STEPS steps × BENCH_BIG_RUNS runs, default 3 × 3).
+# reported; 64³ gets BENCH_BIG_RUNS runs, default 3, of 3 steps with Jacobi and 12 with
+# multigrid; BENCH_BIG_STEPS sets both).
 # BENCH_SKIP_64=1 leaves out 64³ (the longest part: ~2 min idle); BENCH_ONLY_BLOCKS=1 stops
 # after the blocks part (skips fracture, localframe, mss, rigid and the work-precision sweep).
 set -euo pipefail
@@ -16,7 +17,7 @@ out=bench/results
 mkdir -p "$out"
 if [ "${BENCH_SKIP_64:-0}" = 1 ]; then sizes=${BENCH_SIZES:-8,16,32,48}; else sizes=${BENCH_SIZES:-8,16,32,48,64}; fi
 runs=${BENCH_RUNS:-5}
-big="--big-runs ${BENCH_BIG_RUNS:-3} --big-steps ${BENCH_BIG_STEPS:-3}"
+big="--big-runs ${BENCH_BIG_RUNS:-3}${BENCH_BIG_STEPS:+ --big-steps $BENCH_BIG_STEPS}"
 echo "machine: $(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | xargs), load $(cut -d' ' -f1-3 /proc/loadavg)" | tee "$out/machine.txt"
 echo "bench_blocks: peak FMA rate and the element product on 32³, threads 1 and 2"
 build/bin/bench_blocks --peak --kernel 32 --runs "$runs" --threads 1,2 \
