@@ -71,6 +71,7 @@ typedef struct cs_fem {
      * cs_fem_relink. */
     int nseg;
     int32_t *norder, *nminb, *nfirst, *bslot, *fadj;
+    int span; /* the largest distance between a node's first and last batch */
 } cs_fem;
 
 int cs_fem_init(cs_fem *fem, const cs_cubemesh *cm, double young, double poisson,

@@ -16,6 +16,16 @@
 #ifndef MG_CHEB
 #define MG_CHEB 2         /* Chebyshev degree on the finest level (0: damped Jacobi, MG_NU sweeps) */
 #endif
+/* ... and on the finest level of a nearly incompressible material, Poisson ratio ν ≥ MG_CHEB_NU
+ * (λ ≥ 4μ): there degree 3 took 14–28 % fewer CG iterations per step than 2 (75×15×15 beam,
+ * 32³ block; ν = 0.4, 0.45, 0.49), for about 20 % more instructions per iteration: the same
+ * instructions per step, 6–12 % less CPU time (fewer passes over CG's double vectors). At
+ * ν = 0.3 it saved 8–10 % of the iterations, which did not pay (README "Multigrid against
+ * block Jacobi"). */
+#ifndef MG_CHEB_NEAR_INCOMPRESSIBLE
+#define MG_CHEB_NEAR_INCOMPRESSIBLE 3
+#endif
+#define MG_CHEB_NU 0.4
 #ifndef MG_CHEB_COARSE
 #define MG_CHEB_COARSE 3  /* ... and on the coarse levels (an eighth of the cost each) */
 #endif
@@ -31,7 +41,8 @@
 #ifndef MG_CHEB_KIND
 #define MG_CHEB_KIND 4
 #endif
-_Static_assert(MG_CHEB_KIND != 4 || (MG_CHEB <= 3 && MG_CHEB_COARSE <= 3),
+_Static_assert(MG_CHEB_KIND != 4 ||
+                   (MG_CHEB <= 3 && MG_CHEB_COARSE <= 3 && MG_CHEB_NEAR_INCOMPRESSIBLE <= 3),
                "the fourth-kind degrees above 3 leave under 1.1 λ of room (test_mg_smoother)");
 #ifndef MG_CHEB_RATIO
 #define MG_CHEB_RATIO 4.0
@@ -39,6 +50,15 @@ _Static_assert(MG_CHEB_KIND != 4 || (MG_CHEB <= 3 && MG_CHEB_COARSE <= 3),
 #ifndef MG_LAMBDA_SAFETY
 #define MG_LAMBDA_SAFETY 1.1
 #endif
+/* W-cycle: a coarse level with at least this many nodes per cell is solved by two cycles
+ * instead of one (cs_mg_build). Such a level is thin or small (a box: 1.1 nodes per cell at
+ * 32³, 1.3 at 38×8×8, 1.6 at 19×4×4 or 32×32×2, 2 at 4³), its coarser levels are thinner
+ * still, and coarse trilinear cubes a cell or two thick lock in bending: their correction is
+ * poor for a stiff thin body's bending modes, and a second cycle recovers most of an exact
+ * solve (README "Multigrid against block Jacobi"). A cycle on a thick level costs more and
+ * helped less: one on 38×8×8 (level 1 of the 75×15×15 beam) took its iterations from 5.3 to
+ * 4.9 for +19 % per V-cycle (48³). */
+#define MG_W_NODES_PER_CELL 1.5
 #define MG_COARSE_SWEEPS 8 /* Jacobi sweeps on a coarsest level too large for Cholesky */
 #define MG_POWER_ITERS 10
 #define MG_ROT_BATCH 16    /* coarse cells per batch of setup_coarse's rotation extraction */
@@ -102,6 +122,11 @@ typedef struct mg_level {
     double lam;
     float omega;
     int cheb_deg;                     /* Chebyshev degree of this level's smoother */
+    /* cycles that solve this level's problem for the next finer one: 2 (W) on levels with at
+     * least MG_W_NODES_PER_CELL nodes per cell (cs_mg_build), 1 elsewhere; gb, gx: the
+     * second cycle's residual and correction (NULL with one cycle) */
+    int cycles;
+    float *gb, *gx;
     double cheb_c[CS_MG_CHEB_MAX];    /* fourth kind: the steps' weights × λ (cs_mg_smoother_steps) */
 } mg_level;
 
@@ -519,11 +544,12 @@ int cs_mg_smoother_steps(int deg, double *c)
     return found == deg ? 0 : -1;
 }
 
-static int alloc_level_state(mg_level *l, int level, int threads)
+/* cheb_deg: the level's smoother degree */
+static int alloc_level_state(mg_level *l, int level, int threads, int cheb_deg)
 {
     const size_t n3 = 3 * (size_t)l->n_nodes, nc = l->n_cells ? (size_t)l->n_cells : 1;
     l->threads = threads > 1 && l->n_cells >= CS_FEM_PARALLEL_CELLS ? threads : 1;
-    l->cheb_deg = level == 0 ? MG_CHEB : MG_CHEB_COARSE;
+    l->cheb_deg = cheb_deg;
     if (MG_CHEB_KIND == 4 && l->cheb_deg > 0 &&
         cs_mg_smoother_steps(l->cheb_deg, l->cheb_c) != 0)
         return -1;
@@ -639,6 +665,8 @@ static void free_level(mg_level *l)
     free(l->b);
     free(l->t);
     free(l->d);
+    free(l->gb);
+    free(l->gx);
 }
 
 void cs_mg_free(cs_mg *mg)
@@ -679,7 +707,11 @@ cs_mg *cs_mg_build(const cs_cubemesh *cm, const cs_fem *fem, uint32_t version)
     l0->adj_start = fem->adj_start;
     l0->adj = fem->adj;
     mg->n_levels = 1;
-    if (alloc_level_state(l0, 0, fem->threads))
+    /* ν = λ / (2 (λ + μ)) from the model's hλ, hμ (a field scales both alike); "≥" up to
+     * the rounding of K */
+    const double nu = mg->hl / (2.0 * (mg->hl + mg->hm));
+    const int deg0 = MG_CHEB && nu >= MG_CHEB_NU - 1e-9 ? MG_CHEB_NEAR_INCOMPRESSIBLE : MG_CHEB;
+    if (alloc_level_state(l0, 0, fem->threads, deg0))
         goto fail;
     while (mg->n_levels < max_levels && mg->lv[mg->n_levels - 1].n_nodes > CS_MG_COARSEST_NODES) {
         mg_level *f = &mg->lv[mg->n_levels - 1], *c = &mg->lv[mg->n_levels];
@@ -688,7 +720,7 @@ cs_mg *cs_mg_build(const cs_cubemesh *cm, const cs_fem *fem, uint32_t version)
             goto fail;
         }
         mg->n_levels++;
-        if (alloc_level_state(c, mg->n_levels - 1, fem->threads))
+        if (alloc_level_state(c, mg->n_levels - 1, fem->threads, MG_CHEB_COARSE))
             goto fail;
         if (c->n_nodes > 0.8 * f->n_nodes) {
             /* coarsening stalls: drop that level, the finer one is the coarsest */
@@ -705,6 +737,20 @@ cs_mg *cs_mg_build(const cs_cubemesh *cm, const cs_fem *fem, uint32_t version)
             f->parent = f->p_start = f->p_node = f->r_start = f->r_node = NULL;
             f->p_w = f->r_w = NULL;
             break;
+        }
+    }
+    for (int l = 0; l < mg->n_levels; l++) {
+        mg_level *c = &mg->lv[l];
+        c->cycles = l > 0 && l < mg->n_levels - 1 &&
+                            c->n_nodes >= MG_W_NODES_PER_CELL * c->n_cells
+                        ? 2
+                        : 1;
+        if (c->cycles > 1) {
+            const size_t n3 = 3 * (size_t)c->n_nodes + 1;
+            c->gb = malloc(n3 * sizeof(float));
+            c->gx = malloc(n3 * sizeof(float));
+            if (!c->gb || !c->gx)
+                goto fail;
         }
     }
     mg_level *last = &mg->lv[mg->n_levels - 1];
@@ -736,6 +782,16 @@ int cs_mg_levels(const cs_mg *mg)
 int cs_mg_level_nodes(const cs_mg *mg, int level)
 {
     return level >= 0 && level < mg->n_levels ? mg->lv[level].n_nodes : 0;
+}
+
+int cs_mg_level_cycles(const cs_mg *mg, int level)
+{
+    return level >= 0 && level < mg->n_levels ? mg->lv[level].cycles : 0;
+}
+
+int cs_mg_level_degree(const cs_mg *mg, int level)
+{
+    return level >= 0 && level < mg->n_levels ? mg->lv[level].cheb_deg : 0;
 }
 
 double *cs_mg_cell_scale(cs_mg *mg)
@@ -1512,6 +1568,15 @@ static void vcycle(cs_mg *mg, int level, const float *b, float *x, const double 
         store3(c->b + 3 * J, and4(s, free_mask(c, J)));
     }
     vcycle(mg, level + 1, c->b, c->x, NULL, NULL);
+    for (int g = 1; g < c->cycles; g++) {
+        /* W: one more cycle on the level's residual, x_c += B_c (b_c − A_c x_c); with B_c
+         * symmetric, the two together (2 B_c − B_c A_c B_c) are too */
+        apply_ex(mg, level + 1, c->x, c->b, c->gb);
+        vcycle(mg, level + 1, c->gb, c->gx, NULL, NULL);
+#pragma omp parallel for num_threads(c->threads) schedule(static)
+        for (int d = 0; d < 3 * c->n_nodes; d++)
+            c->x[d] += c->gx[d]; /* 0 at held dofs */
+    }
 #pragma omp parallel for num_threads(f->threads) schedule(static)
     for (int n = 0; n < f->n_nodes; n++) {
         vf4 s = {0, 0, 0, 0};

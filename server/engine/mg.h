@@ -31,15 +31,19 @@
  * stopping rule and the solution's accuracy are unchanged; B is symmetric only up to float
  * rounding, which cs_pcg_ex's flexible (Polak–Ribière) β absorbs.
  *
- * Smoother: Chebyshev on D⁻¹A over [λ/6, λ], λ ≥ λmax(D⁻¹A) (1.18× a power-iteration
- * estimate), of degree 2 on the finest level and 3 on the coarse ones (an eighth of the cost
- * each, fewer iterations), before (from zero: one product less) and after the coarse
+ * Smoother: Chebyshev polynomials of the fourth kind (Lottes' optimised weights) in D⁻¹A over
+ * [0, λ], λ = 1.1× a power-iteration estimate of λmax(D⁻¹A), of degree 2 on the finest level
+ * (3 if the material's Poisson ratio is 0.4 or more) and 3 on the coarse ones (an eighth of
+ * the cost each, fewer iterations), before (from zero: one product less) and after the coarse
  * correction with the same polynomial, so the V-cycle B is symmetric; it is positive definite
- * because the polynomial's error factor stays below 1 in modulus up to (1 + 1/6) λ, and the
- * coarsest level is solved exactly (dense Cholesky) or, if coarsening stalls above
- * CS_MG_DENSE_NODES nodes, by a fixed number of damped Jacobi sweeps (ω = 4/(3λ), a symmetric
- * polynomial). Products run on the object's threads in fixed-order element and node passes,
- * so the result is independent of the thread count.
+ * because the polynomial's error factor stays below 1 in modulus up to 1.17 λ (degree 2) and
+ * 1.11 λ (degree 3), and the coarsest level is solved exactly (dense Cholesky) or, if
+ * coarsening stalls above CS_MG_DENSE_NODES nodes, by a fixed number of damped Jacobi sweeps
+ * (ω = 4/(3λ), a symmetric polynomial). A coarse level with at least 1.5 nodes per cell (thin
+ * or small: where coarse cubes lock in bending) is solved by two cycles instead of one (a
+ * W-cycle below it; two cycles of a symmetric B are 2B − BAB, symmetric too). Products run on
+ * the object's threads in fixed-order element and node passes, so the result is independent
+ * of the thread count.
  *
  * Owns: every array of every coarse level and the scratch vectors. Borrows: the finest level's
  * cell links and lattice indices (the object's cube mesh), its adjacency and rotations (fem).
@@ -67,6 +71,12 @@ void cs_mg_free(cs_mg *mg);
 bool cs_mg_matches(const cs_mg *mg, const cs_cubemesh *cm, const cs_fem *fem, uint32_t version);
 int cs_mg_levels(const cs_mg *mg);
 int cs_mg_level_nodes(const cs_mg *mg, int level);
+/* Cycles that solve level `level`'s problem per visit from the next finer level: 1, or 2
+ * where the level is thin (W-cycle below it); 1 on level 0 and the coarsest. */
+int cs_mg_level_cycles(const cs_mg *mg, int level);
+/* The Chebyshev degree of level `level`'s smoother: 2 on the finest (3 for a Poisson ratio of
+ * 0.4 or more), 3 on the coarse levels; 0 for a level that does not exist. */
+int cs_mg_level_degree(const cs_mg *mg, int level);
 
 /* Per-fine-cell stiffness multipliers (K_e = scale·R K Rᵀ approximately) and per-fine-node
  * diagonal part of the operator, filled by the caller before cs_mg_setup. */
@@ -85,11 +95,12 @@ int cs_mg_setup(cs_mg *mg, const cs_fem *fem, cs_matvec_fn A, void *ctx, const d
 void cs_mg_vcycle(void *ctx, const double *r, double *z);
 
 /* The smoother: Chebyshev polynomials of the fourth kind with Lottes' optimised weights, of
- * degree 2 on the finest level and 3 on the coarse ones, over [0, λ] (λ = 1.1 × the power
- * estimate of λmax(D⁻¹A)). cs_mg_smoother_poly: the error polynomial e(t) = 1 − t p(t) in
- * t = λ(D⁻¹A)/λ, coefficients e[0..deg]; cs_mg_smoother_steps: the weights c_i (the
- * reciprocals of its roots, mildest first) of the product form e(t) = Π (1 − c_i t) the
- * V-cycle applies as x += (c_i/λ) D⁻¹ (b − A x); −1 if deg is not 1..CS_MG_CHEB_MAX. */
+ * degree 2 on the finest level (3 at ν ≥ 0.4) and 3 on the coarse ones, over [0, λ]
+ * (λ = 1.1 × the power estimate of λmax(D⁻¹A)). cs_mg_smoother_poly: the error polynomial
+ * e(t) = 1 − t p(t) in t = λ(D⁻¹A)/λ, coefficients e[0..deg]; cs_mg_smoother_steps: the
+ * weights c_i (the reciprocals of its roots, mildest first) of the product form
+ * e(t) = Π (1 − c_i t) the V-cycle applies as x += (c_i/λ) D⁻¹ (b − A x); −1 if deg is not
+ * 1..CS_MG_CHEB_MAX. */
 #define CS_MG_CHEB_MAX 4
 void cs_mg_smoother_poly(int deg, double *e);
 int cs_mg_smoother_steps(int deg, double *c);
