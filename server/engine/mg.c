@@ -888,16 +888,19 @@ static void batches_avx512(const mg_level *l, const float *restrict x, int b0, i
 }
 
 /* A Chebyshev step fused into a residual's node pass: d = a d + c D⁻¹ r (d = c D⁻¹ r if
- * first), x += d at free dofs, 0 at held ones (cheb_update's arithmetic, node by node). */
+ * first), x += d at free dofs, 0 at held ones (cheb_update's arithmetic, node by node); with
+ * out, the new x also converted to double into out (the V-cycle's last step: its result). */
 typedef struct cheb_step {
     float *d, *x;
     float a, c;
     bool first;
+    double *out;
 } cheb_step;
 
 /* The node pass's variants, compile-time in node_out: y = A x; y = b − A x (0 at held dofs);
- * that residual's Chebyshev step, the first (d = c D⁻¹ r) or a later one. */
-enum { NP_APPLY, NP_RESID, NP_CHEB_FIRST, NP_CHEB };
+ * that residual's Chebyshev step, the first (d = c D⁻¹ r) or a later one; and those two
+ * writing x in double as well (cheb_step.out). */
+enum { NP_APPLY, NP_RESID, NP_CHEB_FIRST, NP_CHEB, NP_CHEB_FIRST_OUT, NP_CHEB_OUT };
 
 /* A node's 3-vector as (x, y, z, 0) and back: 8 + 4 bytes, never past the node's own dofs (the
  * vectors are 3 per node, and other threads write their neighbours' dofs). */
@@ -982,10 +985,14 @@ static inline __attribute__((always_inline)) void node_out(const mg_level *l, in
         return;
     }
     const vf4 z = dinv(l, n, r);
-    const vf4 dj = and4(mode == NP_CHEB_FIRST ? cs->c * z : cs->a * load3(cs->d + 3 * n) + cs->c * z,
-                        fr);
+    const bool first = mode == NP_CHEB_FIRST || mode == NP_CHEB_FIRST_OUT;
+    const vf4 dj = and4(first ? cs->c * z : cs->a * load3(cs->d + 3 * n) + cs->c * z, fr);
     store3(cs->d + 3 * n, dj);
-    store3(cs->x + 3 * n, and4(load3(cs->x + 3 * n) + dj, fr));
+    const vf4 xn = and4(load3(cs->x + 3 * n) + dj, fr);
+    store3(cs->x + 3 * n, xn);
+    if (mode == NP_CHEB_FIRST_OUT || mode == NP_CHEB_OUT)
+        for (int k = 0; k < 3; k++)
+            cs->out[3 * (size_t)n + k] = xn[k];
 }
 
 /* One thread's share of apply_path (mode compile-time once inlined): its segments' element
@@ -997,7 +1004,7 @@ static inline __attribute__((always_inline)) void path_share(const mg_level *l, 
                                                              const int mode)
 {
     /* a private copy: the node pass's stores cannot change it (no reloads of d, x, a, c) */
-    const cheb_step c = csp ? *csp : (cheb_step){NULL, NULL, 0.0f, 0.0f, false}, *cs = &c;
+    const cheb_step c = csp ? *csp : (cheb_step){NULL, NULL, 0.0f, 0.0f, false, NULL}, *cs = &c;
     const int nt = omp_get_num_threads(), t = omp_get_thread_num();
     for (int sg = t; sg < l->nseg; sg += nt) {
         const int b0 = seg_start(l, sg), b1 = seg_start(l, sg + 1);
@@ -1028,7 +1035,9 @@ static void apply_path(const cs_mg *mg, int level, bool avx512, const float *x, 
                        float *y, const cheb_step *cs)
 {
     const mg_level *l = &mg->lv[level];
-    const int mode = !b ? NP_APPLY : !cs ? NP_RESID : cs->first ? NP_CHEB_FIRST : NP_CHEB;
+    const int mode = !b    ? NP_APPLY
+                     : !cs ? NP_RESID
+                           : (cs->first ? NP_CHEB_FIRST : NP_CHEB) + (cs->out ? 2 : 0);
     if (l->n_batches == 0) {
         for (int n = 0; n < l->n_nodes; n++)
             node_out(l, n, x, b, y, cs, mode);
@@ -1049,8 +1058,14 @@ static void apply_path(const cs_mg *mg, int level, bool avx512, const float *x, 
     case NP_CHEB_FIRST:
         path_share(l, avx512, x, b, y, cs, NP_CHEB_FIRST);
         break;
-    default:
+    case NP_CHEB:
         path_share(l, avx512, x, b, y, cs, NP_CHEB);
+        break;
+    case NP_CHEB_FIRST_OUT:
+        path_share(l, avx512, x, b, y, cs, NP_CHEB_FIRST_OUT);
+        break;
+    default:
+        path_share(l, avx512, x, b, y, cs, NP_CHEB_OUT);
         break;
     }
 }
@@ -1082,7 +1097,7 @@ void cs_mg_cheb_step_level(const cs_mg *mg, int level, const float *b, float *x,
 {
     if (level < 0 || level >= mg->n_levels)
         return;
-    const cheb_step cs = {d, x, a, c, first};
+    const cheb_step cs = {d, x, a, c, first, NULL};
     apply_path(mg, level, mg->avx512, x, b, NULL, &cs);
 }
 
@@ -1131,6 +1146,22 @@ static void cheb_update(const mg_level *l, const float *t, float *d, float *x, f
     }
 }
 
+/* cheb_update's first step from x = 0 on a right-hand side still in double (the V-cycle's
+ * input): each node's b converted to single precision, stored into t and used, in one pass. */
+static void cheb_update_in(const mg_level *l, const double *in, float *t, float *d, float *x,
+                           float c)
+{
+#pragma omp parallel for num_threads(l->threads) schedule(static)
+    for (int i = 0; i < l->n_nodes; i++) {
+        const double *v = in + 3 * (size_t)i;
+        const vf4 tv = {(float)v[0], (float)v[1], (float)v[2], 0.0f};
+        store3(t + 3 * i, tv);
+        const vf4 z = dinv(l, i, tv), dj = and4(c * z, free_mask(l, i));
+        store3(d + 3 * i, dj);
+        store3(x + 3 * i, dj);
+    }
+}
+
 /*
  * Chebyshev smoothing of the level's degree (MG_CHEB on the finest, MG_CHEB_COARSE below):
  * x += p(D⁻¹A) D⁻¹ (b − A x); from x = 0 if zero (one product less). Kind 4 (MG_CHEB_KIND):
@@ -1141,17 +1172,23 @@ static void cheb_update(const mg_level *l, const float *t, float *d, float *x, f
  * correction keeps the V-cycle symmetric, and |1 − λ p(λ)| < 1 on (0, λmax] keeps it positive
  * definite.
  */
-static void cheb(const cs_mg *mg, int level, const float *b, float *x, bool zero)
+static void cheb(const cs_mg *mg, int level, const float *b, float *x, bool zero,
+                 const double *in, double *out)
 {
     mg_level *l = &mg->lv[level];
+    /* in (with zero): b is yet to be converted from it, by the first step (into l->b: the
+     * V-cycle's finest right-hand side); out: the last step writes x in double there too */
     if (MG_CHEB_KIND == 4) {
         /* the polynomial as a product of its root factors: x += (c_i/λ) D⁻¹ (b − A x) */
         for (int k = 0; k < l->cheb_deg; k++) {
             const float c = (float)(l->cheb_c[k] / l->lam);
-            if (k == 0 && zero) {
+            if (k == 0 && zero && in) {
+                cheb_update_in(l, in, l->b, l->d, x, c);
+            } else if (k == 0 && zero) {
                 cheb_update(l, b, l->d, x, 0.0f, c, true, true);
             } else {
-                const cheb_step cs = {l->d, x, 0.0f, c, true};
+                const cheb_step cs = {l->d, x, 0.0f, c, true,
+                                      k == l->cheb_deg - 1 ? out : NULL};
                 apply_path(mg, level, mg->avx512, x, b, NULL, &cs);
             }
         }
@@ -1160,16 +1197,20 @@ static void cheb(const cs_mg *mg, int level, const float *b, float *x, bool zero
     const double lmax = l->lam, lmin = lmax / MG_CHEB_RATIO;
     const double theta = 0.5 * (lmax + lmin), delta = 0.5 * (lmax - lmin), sigma = theta / delta;
     double rho = 1.0 / sigma;
-    if (zero) {
+    if (zero && in) {
+        cheb_update_in(l, in, l->b, l->d, x, (float)(1.0 / theta));
+    } else if (zero) {
         cheb_update(l, b, l->d, x, 0.0f, (float)(1.0 / theta), true, true);
     } else {
         /* apply_ex into l->t, then cheb_update: fused */
-        const cheb_step cs = {l->d, x, 0.0f, (float)(1.0 / theta), true};
+        const cheb_step cs = {l->d, x, 0.0f, (float)(1.0 / theta), true,
+                              l->cheb_deg == 1 ? out : NULL};
         apply_path(mg, level, mg->avx512, x, b, NULL, &cs);
     }
     for (int k = 1; k < l->cheb_deg; k++) {
         const double rn = 1.0 / (2.0 * sigma - rho);
-        const cheb_step cs = {l->d, x, (float)(rn * rho), (float)(2.0 * rn / delta), false};
+        const cheb_step cs = {l->d, x, (float)(rn * rho), (float)(2.0 * rn / delta), false,
+                              k == l->cheb_deg - 1 ? out : NULL};
         apply_path(mg, level, mg->avx512, x, b, NULL, &cs);
         rho = rn;
     }
@@ -1473,15 +1514,44 @@ static void coarsest(cs_mg *mg, const float *b, float *x)
         x[i] = l->mask[i] ? 0.0f : (float)y[i];
 }
 
-static void vcycle(cs_mg *mg, int level, const float *b, float *x)
+/* l->b = in and out = l->x, for the paths that cannot fuse these conversions into a pass */
+static void from_double(const mg_level *l, const double *in, float *b)
 {
+    const int n3 = 3 * l->n_nodes;
+#pragma omp parallel for num_threads(l->threads) schedule(static)
+    for (int d = 0; d < n3; d++)
+        b[d] = (float)in[d];
+}
+
+static void to_double(const mg_level *l, const float *x, double *out)
+{
+    const int n3 = 3 * l->n_nodes;
+#pragma omp parallel for num_threads(l->threads) schedule(static)
+    for (int d = 0; d < n3; d++)
+        out[d] = x[d];
+}
+
+/* The V-cycle from `level` down. On the finest level (cs_mg_vcycle) b is l->b, still to be
+ * converted from in (double), and the result also goes to out in double: the first and the
+ * last smoothing steps do that in their passes (a pass and a parallel region fewer each). */
+static void vcycle(cs_mg *mg, int level, const float *b, float *x, const double *in,
+                   double *out)
+{
+    mg_level *f = &mg->lv[level];
+    if (level == mg->n_levels - 1 || !f->cheb_deg) {
+        if (in)
+            from_double(f, in, f->b);
+        in = NULL;
+    }
     if (level == mg->n_levels - 1) {
         coarsest(mg, b, x);
+        if (out)
+            to_double(f, x, out);
         return;
     }
-    mg_level *f = &mg->lv[level], *c = &mg->lv[level + 1];
+    mg_level *c = &mg->lv[level + 1];
     if (f->cheb_deg) {
-        cheb(mg, level, b, x, true);
+        cheb(mg, level, b, x, true, in, NULL);
     } else {
         jacobi(f, b, x, f->omega, false);
         for (int s = 1; s < MG_NU; s++)
@@ -1497,12 +1567,12 @@ static void vcycle(cs_mg *mg, int level, const float *b, float *x)
             s += (float)f->r_w[a] * load3(f->t + 3 * f->r_node[a]);
         store3(c->b + 3 * J, and4(s, free_mask(c, J)));
     }
-    vcycle(mg, level + 1, c->b, c->x);
+    vcycle(mg, level + 1, c->b, c->x, NULL, NULL);
     for (int g = 1; g < c->cycles; g++) {
         /* W: one more cycle on the level's residual, x_c += B_c (b_c − A_c x_c); with B_c
          * symmetric, the two together (2 B_c − B_c A_c B_c) are too */
         apply_ex(mg, level + 1, c->x, c->b, c->gb);
-        vcycle(mg, level + 1, c->gb, c->gx);
+        vcycle(mg, level + 1, c->gb, c->gx, NULL, NULL);
 #pragma omp parallel for num_threads(c->threads) schedule(static)
         for (int d = 0; d < 3 * c->n_nodes; d++)
             c->x[d] += c->gx[d]; /* 0 at held dofs */
@@ -1516,25 +1586,21 @@ static void vcycle(cs_mg *mg, int level, const float *b, float *x)
         const vf4 fr = free_mask(f, n), xn = load3(x + 3 * n);
         store3(x + 3 * n, (vf4)(((vi4)(xn + s) & (vi4)fr) | ((vi4)xn & ~(vi4)fr)));
     }
-    if (f->cheb_deg)
-        cheb(mg, level, b, x, false);
-    else
+    if (f->cheb_deg) {
+        cheb(mg, level, b, x, false, NULL, out);
+    } else {
         for (int s = 0; s < MG_NU; s++)
             smooth(mg, level, b, x);
+        if (out)
+            to_double(f, x, out);
+    }
 }
 
 void cs_mg_vcycle(void *ctx, const double *r, double *z)
 {
     cs_mg *mg = ctx;
     mg_level *l0 = &mg->lv[0];
-    const int n3 = 3 * l0->n_nodes;
-#pragma omp parallel for num_threads(l0->threads) schedule(static)
-    for (int d = 0; d < n3; d++)
-        l0->b[d] = (float)r[d];
-    vcycle(mg, 0, l0->b, l0->x);
-#pragma omp parallel for num_threads(l0->threads) schedule(static)
-    for (int d = 0; d < n3; d++)
-        z[d] = l0->x[d];
+    vcycle(mg, 0, l0->b, l0->x, r, z);
 }
 
 /* ------------------------------------------------------------------ transfers (for tests) */

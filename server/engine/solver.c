@@ -11,6 +11,12 @@
 
 #define CS_DOT_BLOCK 4096
 
+/* The threads of cs_cg_guess's and cs_cg_record's passes (w->threads; 0: one). */
+static int cg_threads(const cs_cg_work *w)
+{
+    return w->threads > 1 ? w->threads : 1;
+}
+
 int cs_cg_work_init(cs_cg_work *w, int n)
 {
     memset(w, 0, sizeof *w);
@@ -57,7 +63,6 @@ void cs_cg_work_free(cs_cg_work *w)
 int cs_cg_guess(cs_cg_work *w, const double *v, double *x)
 {
     const size_t n = (size_t)w->n, sz = (n ? n : 1) * sizeof(double);
-    memcpy(x, v, n * sizeof(double));
     w->dir_ready = false;
     if (!w->hist_prev) {
         w->hist_prev = malloc(sz);
@@ -74,6 +79,7 @@ int cs_cg_guess(cs_cg_work *w, const double *v, double *x)
         w->ndirs = 0;
         if (!ok) {
             free_history(w);
+            memcpy(x, v, n * sizeof(double));
             return -1;
         }
     }
@@ -82,15 +88,23 @@ int cs_cg_guess(cs_cg_work *w, const double *v, double *x)
     for (int k = CS_CG_DIRS - 1; k > 0; k--)
         w->dirs[k] = w->dirs[k - 1];
     w->dirs[0] = d;
-    /* One pass: d = v − v_prev (used only if v is bit for bit where the last step ended) and
-     * v_prev = v. */
+    /* One pass (w->threads): x = v, d = v − v_prev (used only if v is bit for bit where the
+     * last step ended) and v_prev = v. */
     bool same = w->hist_valid;
+    double *hp = w->hist_prev;
+    const double *he = w->hist_end;
+    const bool check = same;
+    int differ = 0;
+#pragma omp parallel for num_threads(cg_threads(w)) schedule(static) reduction(| : differ) \
+    if (n >= CS_DOT_BLOCK)
     for (size_t i = 0; i < n; i++) {
         const double vi = v[i];
-        same = same && memcmp(&vi, &w->hist_end[i], sizeof vi) == 0;
-        d[i] = vi - w->hist_prev[i];
-        w->hist_prev[i] = vi;
+        differ |= check && memcmp(&vi, &he[i], sizeof vi) != 0;
+        x[i] = vi;
+        d[i] = vi - hp[i];
+        hp[i] = vi;
     }
+    same = same && !differ;
     const int m = w->max_dirs >= 1 && w->max_dirs < CS_CG_DIRS ? w->max_dirs : CS_CG_DIRS;
     w->ndirs = same ? (w->ndirs < m ? w->ndirs + 1 : m) : 0;
     w->dir_ready = same;
@@ -102,7 +116,11 @@ void cs_cg_record(cs_cg_work *w, const double *v_end)
 {
     if (!w->hist_end)
         return;
-    memcpy(w->hist_end, v_end, (size_t)w->n * sizeof(double));
+    double *he = w->hist_end;
+    const int n = w->n;
+#pragma omp parallel for num_threads(cg_threads(w)) schedule(static) if (n >= CS_DOT_BLOCK)
+    for (int i = 0; i < n; i++)
+        he[i] = v_end[i];
     w->hist_valid = true;
 }
 
@@ -201,9 +219,39 @@ static double update_xr(cs_cg_work *w, const uint8_t *mask, double alpha, const 
     return s;
 }
 
-/* Σ b_i² over the free dofs (fixed blocks, as cs_dot). */
-static double masked_norm2(cs_cg_work *w, const uint8_t *mask, const double *b, int n,
-                           int threads)
+/* The solve's first pass, after q = A x: r = b − q at free dofs (0 at held ones), returning
+ * ‖r‖² and *bb = Σ b_i² over the free dofs, each summed in the fixed blocks of cs_dot. */
+static double start_residual(cs_cg_work *w, const uint8_t *mask, const double *b,
+                             const double *q, double *r, int n, int threads, double *bb)
+{
+    const int nb = (n + CS_DOT_BLOCK - 1) / CS_DOT_BLOCK;
+    double *pr = w->partial, *pb = w->partial + nb;
+#pragma omp parallel for num_threads(threads) schedule(static) if (nb > 1)
+    for (int k = 0; k < nb; k++) {
+        const int lo = k * CS_DOT_BLOCK, hi = lo + CS_DOT_BLOCK < n ? lo + CS_DOT_BLOCK : n;
+        double sr = 0, sb = 0;
+        for (int i = lo; i < hi; i++) {
+            const double bi = mask[i] ? 0.0 : b[i];
+            const double ri = mask[i] ? 0.0 : b[i] - q[i];
+            r[i] = ri;
+            sb += bi * bi;
+            sr += ri * ri;
+        }
+        pr[k] = sr;
+        pb[k] = sb;
+    }
+    double sr = 0, sb = 0;
+    for (int k = 0; k < nb; k++) {
+        sr += pr[k];
+        sb += pb[k];
+    }
+    *bb = sb;
+    return sr;
+}
+
+/* p = z and rᵀz (fixed blocks), one pass. */
+static double copy_dot(cs_cg_work *w, const double *r, const double *z, double *p, int n,
+                       int threads)
 {
     const int nb = (n + CS_DOT_BLOCK - 1) / CS_DOT_BLOCK;
 #pragma omp parallel for num_threads(threads) schedule(static) if (nb > 1)
@@ -211,8 +259,8 @@ static double masked_norm2(cs_cg_work *w, const uint8_t *mask, const double *b, 
         const int lo = k * CS_DOT_BLOCK, hi = lo + CS_DOT_BLOCK < n ? lo + CS_DOT_BLOCK : n;
         double s = 0;
         for (int i = lo; i < hi; i++) {
-            const double bi = mask[i] ? 0.0 : b[i];
-            s += bi * bi;
+            p[i] = z[i];
+            s += r[i] * z[i];
         }
         w->partial[k] = s;
     }
@@ -262,14 +310,13 @@ static double warm_subspace(cs_cg_work *w, cs_matvec_fn A, void *ctx, const uint
         nd = CS_CG_DIRS;
     const int n = w->n, nb = (n + CS_DOT_BLOCK - 1) / CS_DOT_BLOCK, ne = nd * (nd + 1);
     double **D = w->dirs, **Q = w->adirs;
-    for (int k = 0; k < nd; k++) {
-        double *dk = D[k];
 #pragma omp parallel for num_threads(threads) schedule(static)
-        for (int i = 0; i < n; i++)
-            if (mask[i])
-                dk[i] = 0.0;
-        A(ctx, dk, Q[k]);
-    }
+    for (int i = 0; i < n; i++)
+        if (mask[i])
+            for (int k = 0; k < nd; k++)
+                D[k][i] = 0.0;
+    for (int k = 0; k < nd; k++)
+        A(ctx, D[k], Q[k]);
     /* G = Dᵀ Q (nd × nd) and g = Dᵀ r, one pass */
 #pragma omp parallel for num_threads(threads) schedule(static) if (nb > 1)
     for (int k = 0; k < nb; k++) {
@@ -322,19 +369,29 @@ static double warm_subspace(cs_cg_work *w, cs_matvec_fn A, void *ctx, const uint
             s -= L[k * nd + i] * al[k];
         al[i] = s / L[i * nd + i];
     }
-    /* p = D α, q = Q α; then x += p, r −= q (update_xr: x + 1·p is x + p exactly) */
-    double *p = w->p, *q = w->q;
-#pragma omp parallel for num_threads(threads) schedule(static)
-    for (int i = 0; i < n; i++) {
-        double dx = 0, dq = 0;
-        for (int a = 0; a < m; a++) {
-            dx += al[a] * D[a][i];
-            dq += al[a] * Q[a][i];
+    /* x += D α and r −= Q α at free dofs (0 at held ones), ‖r‖² in the fixed blocks: one
+     * pass (update_xr's arithmetic with α = 1 on p = D α, q = Q α) */
+#pragma omp parallel for num_threads(threads) schedule(static) if (nb > 1)
+    for (int k = 0; k < nb; k++) {
+        const int lo = k * CS_DOT_BLOCK, hi = lo + CS_DOT_BLOCK < n ? lo + CS_DOT_BLOCK : n;
+        double s = 0;
+        for (int i = lo; i < hi; i++) {
+            double dx = 0, dq = 0;
+            for (int a = 0; a < m; a++) {
+                dx += al[a] * D[a][i];
+                dq += al[a] * Q[a][i];
+            }
+            x[i] += 1.0 * dx;
+            const double ri = mask[i] ? 0.0 : r[i] - 1.0 * dq;
+            r[i] = ri;
+            s += ri * ri;
         }
-        p[i] = dx;
-        q[i] = dq;
+        w->partial[k] = s;
     }
-    return sqrt(update_xr(w, mask, 1.0, p, q, x, r, n, threads));
+    double s = 0;
+    for (int k = 0; k < nb; k++)
+        s += w->partial[k];
+    return sqrt(s);
 }
 
 static cs_cg_result pcg(cs_cg_work *w, cs_matvec_fn A, void *ctx, cs_precond_fn B, void *bctx,
@@ -366,13 +423,11 @@ static cs_cg_result pcg(cs_cg_work *w, cs_matvec_fn A, void *ctx, cs_precond_fn 
     const int nd = w->dir_ready ? w->ndirs : 0; /* armed by cs_cg_guess for this solve only */
     w->dir_ready = false;
 
-    /* ‖b‖ over the free dofs; r = b - A x. */
-    const double bnorm = sqrt(masked_norm2(w, mask, b, n, threads));
+    /* r = b - A x; ‖r‖ and ‖b‖ over the free dofs in the same pass. */
     A(ctx, x, q);
-#pragma omp parallel for num_threads(threads) schedule(static)
-    for (int i = 0; i < n; i++)
-        r[i] = mask[i] ? 0.0 : b[i] - q[i];
-    double rnorm = sqrt(cs_dot(w, r, r, n, threads));
+    double bb;
+    double rnorm = sqrt(start_residual(w, mask, b, q, r, n, threads, &bb));
+    const double bnorm = sqrt(bb);
     if (bnorm == 0.0) {
         /* b = 0: x = 0 on the free dofs is the solution. */
         for (int i = 0; i < n; i++)
@@ -393,8 +448,7 @@ static cs_cg_result pcg(cs_cg_work *w, cs_matvec_fn A, void *ctx, cs_precond_fn 
     if (nd > 0 && rnorm > stop) /* warm start (cs_cg_guess) */
         rnorm = warm_subspace(w, A, ctx, mask, nd, x, r, rnorm, threads);
     B(bctx, r, z);
-    memcpy(p, z, (size_t)n * sizeof *p);
-    double rz = cs_dot(w, r, z, n, threads);
+    double rz = copy_dot(w, r, z, p, n, threads);
     int it = 0;
     /* p and z are zero at held dofs (B's contract), so pᵀq needs no masking of q and
      * update_xr keeps r zero there. */

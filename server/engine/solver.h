@@ -49,6 +49,8 @@ typedef struct cs_cg_work {
     int ndirs;                 /* how many consecutive directions dirs holds */
     int max_dirs;              /* how many to use (1..CS_CG_DIRS; 0 = CS_CG_DIRS) */
     bool hist_valid, dir_ready;
+    int threads;               /* threads of cs_cg_guess's and cs_cg_record's passes (0: one;
+                                  the solves take theirs as an argument) */
 } cs_cg_work;
 
 int cs_cg_work_init(cs_cg_work *w, int n);

@@ -1851,6 +1851,7 @@ static int step_implicit(cs_world_t *w, cs_object *o, cs_step_stats *st, bool tr
     build_preconditioner(o);
     /* Initial guess: v, improved inside the solve along the last step's change (cs_cg_guess);
      * held dofs 0, ground contacts their lift (constrain_ground). */
+    o->cg.threads = cs_elastic_threads(o); /* cs_cg_guess's and cs_cg_record's passes */
     cs_cg_guess(&o->cg, o->v, o->v1);
     for (size_t d = 0; d < n3; d++)
         if (o->mask[d])
