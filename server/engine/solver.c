@@ -195,6 +195,17 @@ static void jacobi_apply(void *ctx, const double *r, double *z)
     precondition(j->inv, j->mask, r, z, j->n_nodes, j->threads);
 }
 
+/* One element of the x/r update: x_i += α dx, r_i −= α dq at a free dof (r_i = 0 at a held
+ * one); returns r_i². Shared by update_xr and warm_subspace so both do the same arithmetic. */
+static inline double update_xr_at(const uint8_t *mask, int i, double alpha, double dx, double dq,
+                                  double *x, double *r)
+{
+    x[i] += alpha * dx;
+    const double ri = mask[i] ? 0.0 : r[i] - alpha * dq;
+    r[i] = ri;
+    return ri * ri;
+}
+
 /* x += α p and r = r − α q at free dofs (0 at held ones), returning ‖r‖² summed in the fixed
  * blocks of cs_dot: one pass instead of two. */
 static double update_xr(cs_cg_work *w, const uint8_t *mask, double alpha, const double *p,
@@ -205,12 +216,8 @@ static double update_xr(cs_cg_work *w, const uint8_t *mask, double alpha, const 
     for (int k = 0; k < nb; k++) {
         const int lo = k * CS_DOT_BLOCK, hi = lo + CS_DOT_BLOCK < n ? lo + CS_DOT_BLOCK : n;
         double s = 0;
-        for (int i = lo; i < hi; i++) {
-            x[i] += alpha * p[i];
-            const double ri = mask[i] ? 0.0 : r[i] - alpha * q[i];
-            r[i] = ri;
-            s += ri * ri;
-        }
+        for (int i = lo; i < hi; i++)
+            s += update_xr_at(mask, i, alpha, p[i], q[i], x, r);
         w->partial[k] = s;
     }
     double s = 0;
@@ -370,7 +377,7 @@ static double warm_subspace(cs_cg_work *w, cs_matvec_fn A, void *ctx, const uint
         al[i] = s / L[i * nd + i];
     }
     /* x += D α and r −= Q α at free dofs (0 at held ones), ‖r‖² in the fixed blocks: one
-     * pass (update_xr's arithmetic with α = 1 on p = D α, q = Q α) */
+     * pass (update_xr_at with α = 1 on dx = (D α)_i, dq = (Q α)_i; 1·v is v exactly) */
 #pragma omp parallel for num_threads(threads) schedule(static) if (nb > 1)
     for (int k = 0; k < nb; k++) {
         const int lo = k * CS_DOT_BLOCK, hi = lo + CS_DOT_BLOCK < n ? lo + CS_DOT_BLOCK : n;
@@ -381,10 +388,7 @@ static double warm_subspace(cs_cg_work *w, cs_matvec_fn A, void *ctx, const uint
                 dx += al[a] * D[a][i];
                 dq += al[a] * Q[a][i];
             }
-            x[i] += 1.0 * dx;
-            const double ri = mask[i] ? 0.0 : r[i] - 1.0 * dq;
-            r[i] = ri;
-            s += ri * ri;
+            s += update_xr_at(mask, i, 1.0, dx, dq, x, r);
         }
         w->partial[k] = s;
     }
