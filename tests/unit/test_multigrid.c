@@ -15,6 +15,7 @@
 #include "fem.h"
 #include "lattice.h"
 #include "mg.h"
+#include "mk_op.h"
 #include "solver.h"
 #include "world_internal.h"
 
@@ -75,20 +76,6 @@ static int make(scene *s, cs_world_def wd, cs_model model, shape sh, int nx, int
 
 /* ---------------------------------------------------------------- the V-cycle itself */
 
-typedef struct opctx {
-    cs_object *o;
-    double kc;
-} opctx;
-
-static void op(void *ctx, const double *p, double *y)
-{
-    opctx *c = ctx;
-    cs_fem_apply_K(&c->o->fem, p, y);
-    for (int i = 0; i < c->o->n; i++)
-        for (int a = 0; a < 3; a++)
-            y[3 * i + a] = c->kc * y[3 * i + a] + c->o->m[i] * p[3 * i + a];
-}
-
 static double urand(uint64_t *s)
 {
     *s ^= *s << 13;
@@ -102,7 +89,7 @@ static int check_spd(cs_object *o, int *levels)
 {
     const int n3 = 3 * o->n;
     const double dt = 1.0 / 60;
-    opctx c = {o, dt * dt};
+    mk_opctx c = {o, dt * dt};
     double *inv = malloc(sizeof(double) * 9 * o->n);
     double *x = malloc(sizeof(double) * n3), *y = malloc(sizeof(double) * n3);
     double *bx = malloc(sizeof(double) * n3), *by = malloc(sizeof(double) * n3);
@@ -127,7 +114,7 @@ static int check_spd(cs_object *o, int *levels)
             s[e] = c.kc;
         for (int i = 0; i < o->n; i++)
             dg[i] = o->m[i];
-        bad = cs_mg_setup(mg, &o->fem, op, &c, inv, mask) != 0;
+        bad = cs_mg_setup(mg, &o->fem, mk_op, &c, inv, mask) != 0;
     }
     for (int trial = 0; trial < 8 && !bad; trial++) {
         for (int d = 0; d < n3; d++) {
@@ -891,7 +878,7 @@ static long node_pass_mismatches(int threads, int *patterns)
         cs_world_step(s.w);
     cs_object *o = cs_world_find_internal(s.w, s.id);
     const int n3 = 3 * o->n;
-    opctx c = {o, 1.0 / 3600};
+    mk_opctx c = {o, 1.0 / 3600};
     double *inv = malloc(sizeof(double) * 9 * o->n);
     uint8_t *mask = malloc(n3);
     cs_mg *mg = cs_mg_build(&o->cm, &o->fem, o->topology_version);
@@ -915,7 +902,7 @@ static long node_pass_mismatches(int threads, int *patterns)
         sc[e] = c.kc * (1 + 0.5 * urand(&seed));
     for (int i = 0; i < o->n; i++)
         dg[i] = o->m[i] * (1 + 0.5 * urand(&seed));
-    if (cs_mg_setup(mg, &o->fem, op, &c, inv, mask) != 0)
+    if (cs_mg_setup(mg, &o->fem, mk_op, &c, inv, mask) != 0)
         goto out;
     bad = 0;
     *patterns = 0;

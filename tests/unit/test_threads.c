@@ -21,6 +21,7 @@
 #include "fem.h"
 #include "lattice.h"
 #include "mg.h"
+#include "mk_op.h"
 #include "solver.h"
 #include "world_internal.h"
 
@@ -181,20 +182,6 @@ TEST(threads_warm_started_solves_bit_identical)
 
 /* ---------------------------------------------------------------- the V-cycle */
 
-typedef struct opctx {
-    cs_object *o;
-    double kc;
-} opctx;
-
-static void op(void *ctx, const double *p, double *y)
-{
-    opctx *c = ctx;
-    cs_fem_apply_K(&c->o->fem, p, y);
-    for (int i = 0; i < c->o->n; i++)
-        for (int a = 0; a < 3; a++)
-            y[3 * i + a] = c->kc * y[3 * i + a] + c->o->m[i] * p[3 * i + a];
-}
-
 /* The V-cycle of a 42×20×20 cantilever (16800 cubes: levels 0 and 1 at 2048 cubes or more run
  * on the world's threads) applied to r, 2r and float(r) into z[0..2]. 0 on success. */
 static int vcycles(int threads, double *z[3], int *n3_out, uint8_t **mask_out, int *lv1_nodes)
@@ -232,7 +219,7 @@ static int vcycles(int threads, double *z[3], int *n3_out, uint8_t **mask_out, i
             goto out;
     cs_object *o = cs_world_find_internal(w, id);
     const int n3 = 3 * o->n;
-    opctx c = {o, 1.0 / 3600};
+    mk_opctx c = {o, 1.0 / 3600};
     inv = malloc(sizeof(double) * 9 * o->n);
     r = malloc(sizeof(double) * n3);
     mask = malloc(n3);
@@ -256,7 +243,7 @@ static int vcycles(int threads, double *z[3], int *n3_out, uint8_t **mask_out, i
         s[e] = c.kc;
     for (int i = 0; i < o->n; i++)
         dg[i] = o->m[i];
-    if (cs_mg_setup(mg, &o->fem, op, &c, inv, mask) != 0)
+    if (cs_mg_setup(mg, &o->fem, mk_op, &c, inv, mask) != 0)
         goto out;
     for (int q = 0; q < n3; q++)
         r[q] = mask[q] ? 0.0 : urand(&seed) * (1.0 + 1e-3 * q); /* not floats */
