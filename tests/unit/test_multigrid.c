@@ -99,14 +99,7 @@ static int check_spd(cs_object *o, int *levels)
     uint64_t seed = 12345;
     if (!bad) {
         *levels = cs_mg_levels(mg);
-        cs_fem_diag_blocks(&o->fem, inv);
-        for (int i = 0; i < o->n; i++) {
-            for (int k = 0; k < 9; k++)
-                inv[9 * i + k] *= c.kc;
-            for (int a = 0; a < 3; a++)
-                inv[9 * i + 4 * a] += o->m[i];
-        }
-        cs_invert_blocks(inv, o->n);
+        mk_op_inv_diag(&c, inv);
         for (int d = 0; d < n3; d++) /* the object's held dofs and 5 % more at random */
             mask[d] = o->mask[d] || urand(&seed) > 0.45;
         double *s = cs_mg_cell_scale(mg), *dg = cs_mg_node_diag(mg);
@@ -885,14 +878,7 @@ static long node_pass_mismatches(int threads, int *patterns)
     long bad = -1;
     if (!inv || !mask || !mg)
         goto out;
-    cs_fem_diag_blocks(&o->fem, inv);
-    for (int i = 0; i < o->n; i++) {
-        for (int k = 0; k < 9; k++)
-            inv[9 * i + k] *= c.kc;
-        for (int a = 0; a < 3; a++)
-            inv[9 * i + 4 * a] += o->m[i];
-    }
-    cs_invert_blocks(inv, o->n);
+    mk_op_inv_diag(&c, inv);
     uint64_t seed = 99;
     for (int i = 0; i < o->n; i++) /* the object's held dofs, and every pattern 0..7 */
         for (int k = 0; k < 3; k++)

@@ -227,14 +227,7 @@ static int vcycles(int threads, double *z[3], int *n3_out, uint8_t **mask_out, i
     if (!inv || !r || !mask || !mg || cs_mg_levels(mg) < 3)
         goto out;
     *lv1_nodes = cs_mg_level_nodes(mg, 1);
-    cs_fem_diag_blocks(&o->fem, inv);
-    for (int i = 0; i < o->n; i++) {
-        for (int k = 0; k < 9; k++)
-            inv[9 * i + k] *= c.kc;
-        for (int a = 0; a < 3; a++)
-            inv[9 * i + 4 * a] += o->m[i];
-    }
-    cs_invert_blocks(inv, o->n);
+    mk_op_inv_diag(&c, inv);
     uint64_t seed = 99;
     for (int q = 0; q < n3; q++) /* the held dofs and 5 % more */
         mask[q] = o->mask[q] || urand(&seed) > 0.45;
