@@ -186,6 +186,10 @@ typedef struct mirror {
      * its source is up to round-off); 0: not checked (deformed: a copy is skinned on its own
      * side, topo.h) */
     double copy_tol;
+    double jump_min; /* with copy_tol 0 and this > 0: a copy made by the split of an object
+                        (not in a new piece: make_piece skins a vertex bound to another
+                        piece's cell wherever that puts it) is exactly at its source or more
+                        than this away (topo.h; fracture.c sv_append_copy, JUMP_REL h) */
 } mirror;
 
 static void mirror_free(mirror *m)
@@ -303,10 +307,12 @@ static int mirror_apply(mirror *m, const cs_topo_change *ch, int n, char *err, s
             double d = 0;
             for (int a = 0; from && sv < from->nv && a < 3; a++)
                 d = fmax(d, fabs(from->v[3 * (size_t)sv + a] - c->vnew_xyz[3 * (size_t)k + a]));
-            if (!from || sv >= from->nv || (m->copy_tol > 0 && !(d <= m->copy_tol))) {
+            if (!from || sv >= from->nv || (m->copy_tol > 0 && !(d <= m->copy_tol)) ||
+                (m->copy_tol == 0 && m->jump_min > 0 && c->from_version && d != 0 &&
+                 !(d > m->jump_min))) {
                 snprintf(err, errlen, "change %d (object %u): new vertex %d names vertex %d "
-                         "as its source but lies %.3g m from it", i, (unsigned)id, k, (int)sv,
-                         from && sv < from->nv ? d : NAN);
+                         "as its source but lies %.3g m from it (from_version %u)", i, (unsigned)id, k, (int)sv,
+                         from && sv < from->nv ? d : NAN, (unsigned)c->from_version);
                 return -1;
             }
         }
@@ -1107,6 +1113,7 @@ static int volume_run(int steps, double rel[N_VOLUME_CALLS], int sig[N_VOLUME_CA
         /* the mirror holds every object as it is now */
         mirror_free(&mir);
         mir.copy_tol = steps == 0 ? 1e-12 : 0; /* pushed: copies skinned on their side */
+        mir.jump_min = 0.1 * 0.025 / 1.7320508075688772; /* max-norm of h/10 along a diagonal */
         if (mirror_from_world(&mir, s.w, ids, n) != 0) {
             rc = -1;
             break;
