@@ -49,9 +49,12 @@ typedef struct cs_topo_change {
     int32_t n_tnew;
     const int32_t *tnew;      /* 3 per new triangle */
     /* Per new vertex (n_vnew of them), the vertex it is a copy of, or -1 for a new point
-     * (NULL: every one is a new point). A copy starts exactly where its source is at the time
-     * of the change, unless the engine placed it where its own cell puts it, more than h/10
-     * away (a crack that had opened before: README "Fracture"). The index is into the
+     * (NULL: every one is a new point). In a split, a copy starts exactly where its source is
+     * at the time of the change, unless the engine placed it where its own cell puts it, more
+     * than h/10 away (a crack that had opened before: README "Fracture"). A new piece's vertex
+     * that was bound to a cell now in another piece starts where the piece's own cell puts it
+     * (near its source, by rounding or the crack's opening; 4e-6 m in the tests' pushed
+     * icosphere). The index is into the
      * object's vertex array before this change (before step 1); for a new piece, into its
      * parent's vertex array as it is when the piece's change is applied. So a client can
      * compare the volume before and after a change at the same positions (every copy at its
