@@ -57,6 +57,19 @@ static cs_world_t *ground_world(void)
     return cs_world_create(&wd, &w, err, sizeof err) == CS_OK ? w : NULL;
 }
 
+/* A world without gravity or ground on one thread; tol > 0 sets the CG tolerance. */
+static cs_world_t *free_world(double tol)
+{
+    cs_world_def wd = cs_world_def_default();
+    wd.gravity[2] = 0;
+    wd.threads = 1;
+    if (tol > 0)
+        wd.cg_tolerance = tol;
+    cs_world_t *w = NULL;
+    char err[256];
+    return cs_world_create(&wd, &w, err, sizeof err) == CS_OK ? w : NULL;
+}
+
 /*
  * The slab scene. A soft slab of SLAB_N×SLAB_N×2 cubes of 50 mm (E 2e5 Pa, ν 0.3, 1000 kg/m³,
  * corotational, implicit Euler) lies on the ground, its top at z = 0.1 m. Two rigid boxes of
@@ -503,13 +516,8 @@ typedef struct pair_result {
 
 static int soft_pair(double V, bool centred, cs_integrator integ, pair_result *r)
 {
-    cs_world_def wd = cs_world_def_default();
-    wd.gravity[2] = 0;
-    wd.threads = 1;
-    wd.cg_tolerance = 1e-10;
-    cs_world_t *w = NULL;
-    char err[256];
-    if (cs_world_create(&wd, &w, err, sizeof err) != CS_OK)
+    cs_world_t *w = free_world(1e-10);
+    if (!w)
         return -1;
     cs_material soft = cs_material_default();
     soft.young = 1e5;
@@ -867,12 +875,9 @@ TEST(contact_soft_block_far_away_changes_nothing)
  */
 TEST(contact_fracture_pieces_born_touching_stay_put)
 {
-    cs_world_def wd = cs_world_def_default();
-    wd.gravity[2] = 0;
-    wd.threads = 1;
-    cs_world_t *w = NULL;
+    cs_world_t *w = free_world(0);
+    ENSURE(w);
     char err[256];
-    ENSURE(cs_world_create(&wd, &w, err, sizeof err) == CS_OK);
     cs_material soft = cs_material_default();
     soft.young = 1e5;
     const cs_object_id a = add_box(w, "a", 4, 2, 2, 0.1, (double[3]){0, 0, 0}, soft,
