@@ -40,18 +40,11 @@ static void free_history(cs_cg_work *w)
     free(w->hist_prev);
     free(w->hist_end);
     free(w->gpartial);
-    free(w->pend_d);
-    free(w->pend_q);
-    free(w->hist_mask);
-    w->hist_prev = w->hist_end = w->gpartial = w->pend_d = w->pend_q = NULL;
-    w->hist_mask = NULL;
-    w->pend_valid = w->capture = w->mask_set = false;
-    w->stale_left = 0;
+    w->hist_prev = w->hist_end = w->gpartial = NULL;
     for (int k = 0; k < CS_CG_DIRS; k++) {
         free(w->dirs[k]);
         free(w->adirs[k]);
-        free(w->fdirs[k]);
-        w->dirs[k] = w->adirs[k] = w->fdirs[k] = NULL;
+        w->dirs[k] = w->adirs[k] = NULL;
     }
 }
 
@@ -74,21 +67,15 @@ int cs_cg_guess(cs_cg_work *w, const double *v, double *x)
     if (!w->hist_prev) {
         w->hist_prev = malloc(sz);
         w->hist_end = malloc(sz);
-        const size_t nb = n / CS_DOT_BLOCK + 1, ne = (CS_CG_DIRS + 1) * (CS_CG_DIRS + 2) + CS_CG_DIRS * CS_CG_DIRS;
+        const size_t nb = n / CS_DOT_BLOCK + 1, ne = CS_CG_DIRS * (CS_CG_DIRS + 1);
         w->gpartial = malloc(nb * ne * sizeof(double));
-        w->pend_d = malloc(sz);
-        w->pend_q = malloc(sz);
-        w->hist_mask = calloc(n ? n : 1, 1);
-        bool ok = w->hist_prev && w->hist_end && w->gpartial && w->pend_d && w->pend_q &&
-                  w->hist_mask;
+        bool ok = w->hist_prev && w->hist_end && w->gpartial;
         for (int k = 0; k < CS_CG_DIRS; k++) {
             w->dirs[k] = malloc(sz);
             w->adirs[k] = malloc(sz);
-            w->fdirs[k] = malloc(sz);
-            w->qok[k] = false;
-            ok = ok && w->dirs[k] && w->adirs[k] && w->fdirs[k];
+            ok = ok && w->dirs[k] && w->adirs[k];
         }
-        w->hist_valid = w->pend_valid = w->mask_set = false;
+        w->hist_valid = false;
         w->ndirs = 0;
         if (!ok) {
             free_history(w);
@@ -96,20 +83,11 @@ int cs_cg_guess(cs_cg_work *w, const double *v, double *x)
             return -1;
         }
     }
-    /* the oldest direction's slot takes the new one; its product is the last solve's free
-     * one (pend_q, checked against the direction in the next solve: warm_prepare) */
-    double *d = w->dirs[CS_CG_DIRS - 1], *oq = w->adirs[CS_CG_DIRS - 1];
-    for (int k = CS_CG_DIRS - 1; k > 0; k--) {
+    /* the oldest direction's slot takes the new one */
+    double *d = w->dirs[CS_CG_DIRS - 1];
+    for (int k = CS_CG_DIRS - 1; k > 0; k--)
         w->dirs[k] = w->dirs[k - 1];
-        w->adirs[k] = w->adirs[k - 1];
-        w->qok[k] = w->qok[k - 1];
-    }
     w->dirs[0] = d;
-    w->adirs[0] = w->pend_q;
-    w->pend_q = oq;
-    w->qok[0] = w->pend_valid;
-    w->pend_valid = false;
-    w->capture = true;
     /* One pass (w->threads): x = v, d = v − v_prev (used only if v is bit for bit where the
      * last step ended) and v_prev = v. */
     bool same = w->hist_valid;
@@ -134,23 +112,6 @@ int cs_cg_guess(cs_cg_work *w, const double *v, double *x)
     return w->dir_ready ? 1 : 0;
 }
 
-void cs_cg_operator(cs_cg_work *w, const double *key, int n)
-{
-    if (n > 8)
-        n = 8;
-    bool same = n == w->op_key_n;
-    for (int k = 0; k < n && same; k++)
-        same = memcmp(&key[k], &w->op_key[k], sizeof key[k]) == 0;
-    if (same)
-        return;
-    for (int k = 0; k < CS_CG_DIRS; k++)
-        w->qok[k] = false;
-    w->pend_valid = false;
-    w->stale_left = 0;
-    memcpy(w->op_key, key, (size_t)n * sizeof *key);
-    w->op_key_n = n;
-}
-
 void cs_cg_record(cs_cg_work *w, const double *v_end)
 {
     if (!w->hist_end)
@@ -165,10 +126,7 @@ void cs_cg_record(cs_cg_work *w, const double *v_end)
 
 void cs_cg_forget(cs_cg_work *w)
 {
-    w->hist_valid = w->dir_ready = w->capture = w->pend_valid = false;
-    w->stale_left = 0;
-    for (int k = 0; k < CS_CG_DIRS; k++)
-        w->qok[k] = false;
+    w->hist_valid = w->dir_ready = false;
 }
 
 void cs_invert_block(double m[9])
@@ -268,12 +226,10 @@ static double update_xr(cs_cg_work *w, const uint8_t *mask, double alpha, const 
     return s;
 }
 
-/* The solve's first pass, after q = A x: r = b − q at free dofs (0 at held ones), also into
- * r0 if not NULL, returning ‖r‖² and *bb = Σ b_i² over the free dofs, each summed in the fixed
- * blocks of cs_dot. */
+/* The solve's first pass, after q = A x: r = b − q at free dofs (0 at held ones), returning
+ * ‖r‖² and *bb = Σ b_i² over the free dofs, each summed in the fixed blocks of cs_dot. */
 static double start_residual(cs_cg_work *w, const uint8_t *mask, const double *b,
-                             const double *q, double *r, double *r0, int n, int threads,
-                             double *bb)
+                             const double *q, double *r, int n, int threads, double *bb)
 {
     const int nb = (n + CS_DOT_BLOCK - 1) / CS_DOT_BLOCK;
     double *pr = w->partial, *pb = w->partial + nb;
@@ -285,8 +241,6 @@ static double start_residual(cs_cg_work *w, const uint8_t *mask, const double *b
             const double bi = mask[i] ? 0.0 : b[i];
             const double ri = mask[i] ? 0.0 : b[i] - q[i];
             r[i] = ri;
-            if (r0)
-                r0[i] = ri;
             sb += bi * bi;
             sr += ri * ri;
         }
@@ -350,82 +304,46 @@ static void dot2(cs_cg_work *w, const double *r, const double *z, const double *
 }
 
 /*
- * The first pass of the solve after cs_cg_guess (w->capture), before its start product: the
- * nd directions are masked; a stored product stays usable only if the mask is the one of the
- * last such solve (else all are dropped) and, for the newest direction, if it is bit for bit
- * that solve's x_end − x0 (pend_d; the product is its r0 − r_end); then pend_d = x0 and the
- * mask is remembered.
+ * The warm start's Galerkin step: x += D α with D the nd directions of the last steps
+ * (cs_cg_guess; masked here), α minimising the A-norm of the error over their span, i.e.
+ * (Dᵀ A D) α = Dᵀ r, and r −= A D α. The small system in fixed blocks (bit-identical on any
+ * thread count), factored by Cholesky over the newest directions that are independent to
+ * 1e-10 (older ones that depend on them are dropped). Returns ‖r‖ after (rnorm if no step).
  */
-static void warm_prepare(cs_cg_work *w, const uint8_t *mask, int nd, const double *x,
-                         int threads)
+static double warm_subspace(cs_cg_work *w, cs_matvec_fn A, void *ctx, const uint8_t *mask,
+                            int nd, double *x, double *r, double rnorm, int threads)
 {
-    const int n = w->n;
-    double **D = w->dirs, *e = w->pend_d;
-    uint8_t *hm = w->hist_mask;
-    const bool check0 = nd > 0 && w->qok[0];
-    int bad = w->mask_set ? 0 : 1; /* bit 0: the mask changed; bit 1: dirs[0] is not pend_d */
-#pragma omp parallel for num_threads(threads) schedule(static) reduction(| : bad) \
-    if (n >= CS_DOT_BLOCK)
-    for (int i = 0; i < n; i++) {
-        const uint8_t mi = mask[i] != 0;
-        bad |= mi != hm[i];
-        hm[i] = mi;
-        if (mi)
+    if (nd > CS_CG_DIRS)
+        nd = CS_CG_DIRS;
+    const int n = w->n, nb = (n + CS_DOT_BLOCK - 1) / CS_DOT_BLOCK, ne = nd * (nd + 1);
+    double **D = w->dirs, **Q = w->adirs;
+#pragma omp parallel for num_threads(threads) schedule(static)
+    for (int i = 0; i < n; i++)
+        if (mask[i])
             for (int k = 0; k < nd; k++)
                 D[k][i] = 0.0;
-        if (check0)
-            bad |= (D[0][i] != e[i]) << 1;
-        e[i] = x[i];
-    }
-    w->mask_set = true;
-    for (int k = 0; k < CS_CG_DIRS; k++)
-        if ((bad & 1) || (k == 0 && (bad & 2)))
-            w->qok[k] = false;
-}
-
-#define CS_WARM_G ((CS_CG_DIRS + 1) * (CS_CG_DIRS + 2))
-
-/* The Galerkin systems of nd directions D against r: G = Dᵀ Q and, if Q2, G2 = Dᵀ Q2 (nd × nd
- * each), and g = Dᵀ r after G, in the fixed blocks of cs_dot (one pass; bit-identical on any
- * thread count). */
-static void galerkin_sums(cs_cg_work *w, int nd, double *const *D, double *const *Q,
-                          double *const *Q2, const double *r, double *G, double *G2,
-                          int threads)
-{
-    const int n = w->n, nb = (n + CS_DOT_BLOCK - 1) / CS_DOT_BLOCK, n2 = nd * nd;
-    const int ne = n2 + nd + (Q2 ? n2 : 0);
+    for (int k = 0; k < nd; k++)
+        A(ctx, D[k], Q[k]);
+    /* G = Dᵀ Q (nd × nd) and g = Dᵀ r, one pass */
 #pragma omp parallel for num_threads(threads) schedule(static) if (nb > 1)
     for (int k = 0; k < nb; k++) {
         const int lo = k * CS_DOT_BLOCK, hi = lo + CS_DOT_BLOCK < n ? lo + CS_DOT_BLOCK : n;
-        double acc[CS_WARM_G + CS_CG_DIRS * CS_CG_DIRS] = {0};
+        double acc[CS_CG_DIRS * (CS_CG_DIRS + 1)] = {0};
         for (int i = lo; i < hi; i++)
             for (int a = 0; a < nd; a++) {
                 const double da = D[a][i];
-                acc[n2 + a] += da * r[i];
+                acc[nd * nd + a] += da * r[i];
                 for (int c = 0; c < nd; c++)
                     acc[a * nd + c] += da * Q[c][i];
-                if (Q2)
-                    for (int c = 0; c < nd; c++)
-                        acc[n2 + nd + a * nd + c] += da * Q2[c][i];
             }
         memcpy(w->gpartial + (size_t)k * ne, acc, (size_t)ne * sizeof(double));
     }
-    double acc[CS_WARM_G + CS_CG_DIRS * CS_CG_DIRS] = {0};
+    double G[CS_CG_DIRS * (CS_CG_DIRS + 1)] = {0}, L[CS_CG_DIRS * CS_CG_DIRS] = {0};
     for (int k = 0; k < nb; k++)
         for (int e = 0; e < ne; e++)
-            acc[e] += w->gpartial[(size_t)k * ne + e];
-    memcpy(G, acc, (size_t)(n2 + nd) * sizeof(double));
-    if (Q2)
-        memcpy(G2, acc + n2 + nd, (size_t)n2 * sizeof(double));
-}
-
-/* α = G⁻¹ g (G nd × nd, symmetrised) by Cholesky over the leading directions whose pivots stay
- * above 1e-10 of their diagonal (later ones that depend on them are dropped). Returns how many
- * (0: no step). */
-static int galerkin_solve(const double *G, const double *g, int nd, double *al)
-{
-    double L[(CS_CG_DIRS + 1) * (CS_CG_DIRS + 1)] = {0};
-    int m = 0;
+            G[e] += w->gpartial[(size_t)k * ne + e];
+    const double *g = G + nd * nd;
+    int m = 0; /* Cholesky of the symmetrised G, as far as the pivots stay positive */
     for (int i = 0; i < nd; i++) {
         bool ok = isfinite(g[i]);
         for (int j = 0; j <= i && ok; j++) {
@@ -443,6 +361,9 @@ static int galerkin_solve(const double *G, const double *g, int nd, double *al)
             break;
         m = i + 1;
     }
+    if (m == 0)
+        return rnorm;
+    double al[CS_CG_DIRS];
     for (int i = 0; i < m; i++) {
         double s = g[i];
         for (int k = 0; k < i; k++)
@@ -455,29 +376,8 @@ static int galerkin_solve(const double *G, const double *g, int nd, double *al)
             s -= L[k * nd + i] * al[k];
         al[i] = s / L[i * nd + i];
     }
-    for (int i = 0; i < m; i++)
-        if (!isfinite(al[i]))
-            return 0;
-    return m;
-}
-
-/* aᵀ G b over the leading m of nd (symmetrised G) */
-static double gram_form(const double *G, int nd, int m, const double *a, const double *b)
-{
-    double s = 0;
-    for (int i = 0; i < m; i++)
-        for (int j = 0; j < m; j++)
-            s += a[i] * 0.5 * (G[i * nd + j] + G[j * nd + i]) * b[j];
-    return s;
-}
-
-/* x += D α and r −= Q α at free dofs (0 at held ones), ‖r‖² in the fixed blocks: one pass
- * (update_xr_at with α = 1 on dx = (D α)_i, dq = (Q α)_i; 1·v is v exactly). */
-static double galerkin_update(cs_cg_work *w, const uint8_t *mask, int m, double *const *D,
-                              double *const *Q, const double *al, double *x, double *r,
-                              int threads)
-{
-    const int n = w->n, nb = (n + CS_DOT_BLOCK - 1) / CS_DOT_BLOCK;
+    /* x += D α and r −= Q α at free dofs (0 at held ones), ‖r‖² in the fixed blocks: one
+     * pass (update_xr_at with α = 1 on dx = (D α)_i, dq = (Q α)_i; 1·v is v exactly) */
 #pragma omp parallel for num_threads(threads) schedule(static) if (nb > 1)
     for (int k = 0; k < nb; k++) {
         const int lo = k * CS_DOT_BLOCK, hi = lo + CS_DOT_BLOCK < n ? lo + CS_DOT_BLOCK : n;
@@ -495,143 +395,7 @@ static double galerkin_update(cs_cg_work *w, const uint8_t *mask, int m, double 
     double s = 0;
     for (int k = 0; k < nb; k++)
         s += w->partial[k];
-    return s;
-}
-
-/*
- * The warm start's Galerkin step: x += D α with D the nd directions of the last steps
- * (cs_cg_guess; masked by warm_prepare), α minimising the A-norm of the error over their
- * span, i.e. (Dᵀ A D) α = Dᵀ r, and r −= A D α (r is b − A x to rounding before and after).
- *
- * Exact (the default): A D computed in the solve (nd products; the stored products of an
- * earlier operator are replaced, and kept for the next step). With all nd stored products
- * usable (w->qok) the same pass also sums their Gram matrix G_s, so the step knows what the
- * stale one would have gained: α_s = G_s⁻¹ g, u = D α_s, and with the exact products the
- * A-norm gain of the line search along u, E_s = (uᵀr)² / uᵀA u, against the exact E* = gᵀα
- * (w->ws_gain, ws_gain_stale; warm_capture_end decides from them).
- *
- * Stale (w->stale_left > 0, decided by warm_capture_end): α from G_s, then one exact product
- * A u and x += γ u, r −= γ A u with γ = uᵀr / uᵀA u, the minimum of the A-norm error along u
- * (never above the start's; no step if uᵀA u is not positive): 2 products per step with the
- * start residual's instead of nd + 1. A γ far from 1 (the stored products were far from this
- * operator's) ends the stale steps.
- *
- * Returns ‖r‖ after (rnorm if no step).
- */
-static double warm_subspace(cs_cg_work *w, cs_matvec_fn A, void *ctx, const uint8_t *mask,
-                            int nd, double *x, double *r, double rnorm, int threads)
-{
-    if (nd > CS_CG_DIRS)
-        nd = CS_CG_DIRS;
-    const int n = w->n;
-    double **D = w->dirs, **Q = w->adirs, **F = w->fdirs;
-    bool all = nd >= 2 && !w->exact_products;
-    for (int k = 0; k < nd; k++)
-        all = all && w->qok[k];
-    double G[CS_WARM_G], Gs[CS_CG_DIRS * CS_CG_DIRS], al[CS_CG_DIRS + 1];
-    w->ws_gain = w->ws_gain_stale = -1;
-    w->ws_stale = false;
-    if (all && w->stale_left > 0) {
-        w->stale_left--;
-        w->ws_stale = true;
-        galerkin_sums(w, nd, D, Q, NULL, r, G, NULL, threads);
-        const int m = galerkin_solve(G, G + nd * nd, nd, al);
-        if (m == 0)
-            return rnorm;
-        const double pred = gram_form(G, nd, m, al, al);
-        /* u = D α (z) and A u (q), both free until the loop (A x0 is in r already) */
-        double *u = w->z, *au = w->q;
-#pragma omp parallel for num_threads(threads) schedule(static)
-        for (int i = 0; i < n; i++) {
-            double s = 0;
-            for (int a = 0; a < m; a++)
-                s += al[a] * D[a][i];
-            u[i] = s;
-        }
-        A(ctx, u, au);
-        double *S[1] = {u}, *AS[1] = {au};
-        galerkin_sums(w, 1, S, AS, NULL, r, G, NULL, threads);
-        const double uau = G[0], gamma = G[1] / uau;
-        if (!(uau > 0) || !isfinite(gamma))
-            return rnorm;
-        if (!(fabs(uau / pred - 1) < 0.1))
-            w->stale_left = 0; /* the stored products no longer describe the operator */
-        w->ws_gain = G[1] * gamma;
-        return sqrt(galerkin_update(w, mask, 1, S, AS, &gamma, x, r, threads));
-    }
-    /* exact: fresh products into F, then F and the ring's stored ones trade places */
-    for (int k = 0; k < nd; k++)
-        A(ctx, D[k], F[k]);
-    galerkin_sums(w, nd, D, F, all ? Q : NULL, r, G, Gs, threads);
-    for (int k = 0; k < nd; k++) {
-        double *t = Q[k];
-        Q[k] = F[k];
-        F[k] = t;
-        w->qok[k] = true;
-    }
-    const double *g = G + nd * nd;
-    const int m = galerkin_solve(G, g, nd, al);
-    if (m == 0)
-        return rnorm;
-    w->ws_gain = gram_form(G, nd, m, al, al);
-    double as[CS_CG_DIRS];
-    const int ms = all ? galerkin_solve(Gs, g, nd, as) : 0;
-    if (ms > 0) {
-        double ug = 0;
-        for (int i = 0; i < ms; i++)
-            ug += as[i] * g[i];
-        const double uau = gram_form(G, nd, ms, as, as);
-        w->ws_gain_stale = uau > 0 ? ug * ug / uau : 0;
-    }
-    return sqrt(galerkin_update(w, mask, m, D, Q, al, x, r, threads));
-}
-
-/* Steps that may use the stored products after an exact one found them good enough: one, so
- * an exact step re-checks after each (3 kept the stale products while they aged and cost the
- * 75×15×15 beam at E = 1e5 0.4 iterations per step; 2 cost it 0.3). */
-#define CS_WARM_STALE_STEPS 1
-
-/*
- * The end of the solve after cs_cg_guess: pend_d = x_end − x0 and pend_q = r0 − r_end =
- * A (x_end − x0) (to rounding: CG's r is b − A x), and E0 = ‖x_end − x0‖²_A, one pass. After
- * an exact warm start that also knew what the stale one would have gained (warm_subspace),
- * the next CS_WARM_STALE_STEPS steps use the stored products if that costs less than it
- * saves: the error left after the warm start, E0 − E* exact against E0 − E_s stale, at the
- * solve's measured rate c per iteration (of ‖r‖) costs ½ ln((E0 − E_s)/(E0 − E*)) / ln(1/c)
- * more iterations, each about `cost` products (a V-cycle and a product: 5; block Jacobi and
- * a product: 1.5), against the nd − 1 products saved; taken only below half of that.
- */
-static void warm_capture_end(cs_cg_work *w, const double *x, const double *r, int nd, int it,
-                             double rnorm_ws, double rnorm_end, bool flexible, int threads)
-{
-    const int n = w->n, nb = (n + CS_DOT_BLOCK - 1) / CS_DOT_BLOCK;
-    double *e = w->pend_d, *qe = w->pend_q;
-#pragma omp parallel for num_threads(threads) schedule(static) if (nb > 1)
-    for (int k = 0; k < nb; k++) {
-        const int lo = k * CS_DOT_BLOCK, hi = lo + CS_DOT_BLOCK < n ? lo + CS_DOT_BLOCK : n;
-        double s = 0;
-        for (int i = lo; i < hi; i++) {
-            const double ei = x[i] - e[i], qi = qe[i] - r[i];
-            e[i] = ei;
-            qe[i] = qi;
-            s += ei * qi;
-        }
-        w->partial[k] = s;
-    }
-    double e0 = 0;
-    for (int k = 0; k < nb; k++)
-        e0 += w->partial[k];
-    w->pend_valid = true;
-    if (w->ws_stale || !(w->ws_gain_stale >= 0) || nd < 2 || it < 1 ||
-        !(rnorm_end < rnorm_ws))
-        return;
-    const double rem = e0 - w->ws_gain, rem_s = e0 - w->ws_gain_stale;
-    if (!(rem > 1e-12 * e0) || !(rem_s >= rem))
-        return;
-    const double rate = log(rnorm_ws / rnorm_end) / it; /* ln(1/c) */
-    const double more = 0.5 * log(rem_s / rem) / rate, cost = flexible ? 5.0 : 1.5;
-    if (isfinite(more) && more * cost < 0.5 * (nd - 1))
-        w->stale_left = CS_WARM_STALE_STEPS;
+    return sqrt(s);
 }
 
 static cs_cg_result pcg(cs_cg_work *w, cs_matvec_fn A, void *ctx, cs_precond_fn B, void *bctx,
@@ -660,20 +424,13 @@ static cs_cg_result pcg(cs_cg_work *w, cs_matvec_fn A, void *ctx, cs_precond_fn 
     const int n = w->n;
     double *r = w->r, *z = w->z, *p = w->p, *q = w->q, *zo = w->zo;
     cs_cg_result res = {0, 0, 0, 0};
-    /* armed by cs_cg_guess for this solve only; the solve after it keeps its free product */
-    const bool capture = w->capture && w->pend_d;
-    const int nd = capture && w->dir_ready ? w->ndirs : 0;
-    w->dir_ready = w->capture = false;
-    w->ws_gain = w->ws_gain_stale = -1;
-    w->ws_stale = false;
-    if (capture)
-        warm_prepare(w, mask, nd, x, threads);
+    const int nd = w->dir_ready ? w->ndirs : 0; /* armed by cs_cg_guess for this solve only */
+    w->dir_ready = false;
 
     /* r = b - A x; ‖r‖ and ‖b‖ over the free dofs in the same pass. */
     A(ctx, x, q);
     double bb;
-    double rnorm = sqrt(start_residual(w, mask, b, q, r, capture ? w->pend_q : NULL, n,
-                                       threads, &bb));
+    double rnorm = sqrt(start_residual(w, mask, b, q, r, n, threads, &bb));
     const double bnorm = sqrt(bb);
     if (bnorm == 0.0) {
         /* b = 0: x = 0 on the free dofs is the solution. */
@@ -694,7 +451,6 @@ static cs_cg_result pcg(cs_cg_work *w, cs_matvec_fn A, void *ctx, cs_precond_fn 
     res.ref = stop / tol;
     if (nd > 0 && rnorm > stop) /* warm start (cs_cg_guess) */
         rnorm = warm_subspace(w, A, ctx, mask, nd, x, r, rnorm, threads);
-    const double rnorm_ws = rnorm;
     B(bctx, r, z);
     double rz = copy_dot(w, r, z, p, n, threads);
     int it = 0;
@@ -730,8 +486,6 @@ static cs_cg_result pcg(cs_cg_work *w, cs_matvec_fn A, void *ctx, cs_precond_fn 
         for (int i = 0; i < n; i++)
             p[i] = z[i] + beta * p[i];
     }
-    if (capture)
-        warm_capture_end(w, x, r, nd, it, rnorm_ws, rnorm, flexible, threads);
     res.iterations = it;
     res.relres = rnorm / res.ref;
     res.converged = rnorm <= stop;

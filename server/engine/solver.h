@@ -44,28 +44,11 @@ typedef struct cs_cg_work {
     /* warm-start history of a sequence of solves (cs_cg_guess); allocated on first use */
     double *hist_prev, *hist_end;
     double *dirs[CS_CG_DIRS];  /* the last steps' velocity changes, newest first (a ring) */
-    double *adirs[CS_CG_DIRS]; /* their products A d (a ring with dirs): from the solve that
-                                  made the change (free, below) or computed when used; under
-                                  the operator of that solve, so stale by a step or more */
-    bool qok[CS_CG_DIRS];      /* adirs[k] is A' dirs[k] for an earlier operator A' of the same
-                                  mask and coefficients (cs_cg_operator) */
+    double *adirs[CS_CG_DIRS]; /* their products in the solve that uses them (scratch) */
     double *gpartial;          /* per block partial sums of the Galerkin system */
     int ndirs;                 /* how many consecutive directions dirs holds */
     int max_dirs;              /* how many to use (1..CS_CG_DIRS; 0 = CS_CG_DIRS) */
     bool hist_valid, dir_ready;
-    /* The free product of the solve after cs_cg_guess: x_end − x0 lies in the Krylov space
-     * and A (x_end − x0) = r0 − r_end (r0 = b − A x0 before the warm start). */
-    double *pend_d, *pend_q;   /* x0 and r0 during that solve, then x_end − x0, r0 − r_end */
-    uint8_t *hist_mask;        /* that solve's mask (the one the products in adirs saw) */
-    bool capture, pend_valid, mask_set;
-    bool exact_products;       /* true: every direction's product computed in the solve that
-                                  uses it, never the stored ones (nd products per solve) */
-    double *fdirs[CS_CG_DIRS]; /* scratch: the products computed in a solve */
-    int stale_left;            /* steps that may still use the stored products (cs_cg_operator) */
-    bool ws_stale;             /* the last warm start used them */
-    double ws_gain, ws_gain_stale; /* its A-norm² gain, and what the stale one would have had */
-    double op_key[8];          /* cs_cg_operator's last key */
-    int op_key_n;
     int threads;               /* threads of cs_cg_guess's and cs_cg_record's passes (0: one;
                                   the solves take theirs as an argument) */
 } cs_cg_work;
@@ -92,20 +75,6 @@ void cs_cg_work_free(cs_cg_work *w);
 int cs_cg_guess(cs_cg_work *w, const double *v, double *x);
 void cs_cg_record(cs_cg_work *w, const double *v_end);
 void cs_cg_forget(cs_cg_work *w);
-/*
- * The products of the history (adirs) are reused across steps: the solve after cs_cg_guess
- * keeps A (x_end − x0) = r0 − r_end for free, and a direction's product computed in one solve
- * serves the next ones. They are stale (the corotated operator of an earlier step), so the
- * Galerkin step takes only the direction of its combination u = D α from them and then a
- * line search along u with one exact product A u: the start residual stays b − A x to
- * rounding and the A-norm of the error never rises. A product is used only while the solve's
- * mask is the one it was taken under and its direction is bit for bit the vector it was taken
- * of (a step changed after its solve, e.g. by ground contact, takes a fresh product).
- * cs_cg_operator(w, key, n) names the operator's coefficients (n ≤ 8 values, e.g. the mass and
- * stiffness factors of dt): a key that differs from the last drops every stored product (the
- * directions stay; their products are then computed in the solve).
- */
-void cs_cg_operator(cs_cg_work *w, const double *key, int n);
 
 /* Invert each 3×3 block in place (9 per node); a singular block becomes its diagonal inverse. */
 void cs_invert_blocks(double *blocks, int n_nodes);

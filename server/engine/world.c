@@ -1853,11 +1853,6 @@ static int step_implicit(cs_world_t *w, cs_object *o, cs_step_stats *st, bool tr
      * held dofs 0, ground contacts their lift (constrain_ground). */
     o->cg.threads = cs_elastic_threads(o); /* cs_cg_guess's and cs_cg_record's passes */
     cs_cg_guess(&o->cg, o->v, o->v1);
-    /* the warm start's stored products are dropped when the operator's coefficients change */
-    cs_cg_operator(&o->cg,
-                   (const double[]){o->mcoef, o->kcoef, o->cmcoef, o->ckcoef, o->dcoef,
-                                    o->pcoef, (double)o->n_inputs},
-                   7);
     for (size_t d = 0; d < n3; d++)
         if (o->mask[d])
             o->v1[d] = 0.0;
