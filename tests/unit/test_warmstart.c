@@ -268,3 +268,215 @@ TEST(warmstart_implicit_steps_reset_sleep)
     ENSURE(!o->cg.hist_valid);
     cs_world_destroy(w);
 }
+
+/* ------------------------------------- what the warm start's cost rests on (session 16) */
+
+/* The chain with a product counter; its stiffness may change between solves. */
+typedef struct counted {
+    chain c;
+    int products;
+} counted;
+
+static void counted_apply(void *ctx, const double *x, double *y)
+{
+    counted *k = ctx;
+    k->products++;
+    chain_apply(&k->c, x, y);
+}
+
+/* ‖x − xs‖²_A (e, y scratch): the A-norm² of an error. */
+static double anorm2(chain *c, const double *x, const double *xs, double *e, double *y)
+{
+    for (int i = 0; i < c->n; i++)
+        e[i] = x[i] - xs[i];
+    chain_apply(c, e, y);
+    double s = 0;
+    for (int i = 0; i < c->n; i++)
+        s += e[i] * y[i];
+    return s;
+}
+
+/*
+ * CG's residual stays b − A x through the warm start's update (r −= A D α) and the
+ * iterations: after each warm-started solve of a moving load with held dofs, r0 − r_end equals
+ * A (x_end − x0) to 1e-10 of its norm (r0 = b − A x0 at the guess, computed here), and r_end is
+ * 0 at held dofs. This identity would give the product of the newest direction for free (the
+ * solve's own change), but under that solve's operator: the corotated operator of the next
+ * step differs (README "Warm start of implicit steps": reusing such products did not pay).
+ */
+TEST(warmstart_residual_identity)
+{
+    const int nodes = 60, n = 3 * nodes;
+    counted k = {{n, 1.0, 40.0}, 0};
+    cs_cg_work w;
+    ENSURE(cs_cg_work_init(&w, n) == 0);
+    double *inv = calloc(9 * (size_t)nodes, sizeof(double)), *b = malloc(sizeof(double) * n);
+    double *x = calloc((size_t)n, sizeof(double)), *v = calloc((size_t)n, sizeof(double));
+    double *x0 = malloc(sizeof(double) * n), *r0 = malloc(sizeof(double) * n);
+    double *y = malloc(sizeof(double) * n);
+    uint8_t *mask = calloc((size_t)n, 1);
+    ENSURE(inv && b && x && v && x0 && r0 && y && mask);
+    for (int i = 0; i < nodes; i++)
+        for (int a = 0; a < 3; a++)
+            inv[9 * i + 4 * a] = 1.0 / (k.c.m + 2 * k.c.k);
+    mask[0] = mask[1] = 1;
+    int armed = 0;
+    for (int s = 0; s < 8; s++) {
+        for (int i = 0; i < n; i++)
+            b[i] = sin(0.03 * i + 0.2 * s) + 0.1 * s;
+        armed += cs_cg_guess(&w, v, x) == 1;
+        x[0] = 0.5;
+        x[1] = -0.25;
+        memcpy(x0, x, sizeof(double) * n);
+        chain_apply(&k.c, x0, y);
+        for (int i = 0; i < n; i++)
+            r0[i] = mask[i] ? 0.0 : b[i] - y[i];
+        const cs_cg_result r = cs_pcg(&w, counted_apply, &k, inv, mask, b, x, 1e-9, 500, 1);
+        ENSURE(r.converged && r.iterations > 0);
+        for (int i = 0; i < n; i++)
+            y[i] = x[i] - x0[i];
+        double *ay = x0; /* x0 no longer needed */
+        chain_apply(&k.c, y, ay);
+        double dd = 0, qq = 0;
+        for (int i = 0; i < n; i++) {
+            if (mask[i]) {
+                ENSURE(w.r[i] == 0.0 && y[i] == 0.0);
+                continue;
+            }
+            const double q = r0[i] - w.r[i];
+            dd += (ay[i] - q) * (ay[i] - q);
+            qq += ay[i] * ay[i];
+        }
+        ENSURE_MSG(sqrt(dd) <= 1e-10 * sqrt(qq), "solve %d: |A e − (r0 − r_end)| / |A e| %.3g", s,
+                   sqrt(dd / qq));
+        memcpy(v, x, sizeof(double) * n);
+        cs_cg_record(&w, v);
+    }
+    ENSURE(armed == 7);
+    cs_cg_work_free(&w);
+    free(inv);
+    free(b);
+    free(x);
+    free(v);
+    free(x0);
+    free(r0);
+    free(y);
+    free(mask);
+}
+
+/*
+ * The warm start itself (a solve with max_iter 0 stops right after it), on an operator that
+ * changes between solves (the chain's stiffness × 1.02, and × 3, per solve) with a held dof:
+ * it costs one product per armed direction and one for the start residual; CG's r after it is
+ * b − A x to rounding (1e-13 of ‖b‖ + ‖A x0‖ + ‖A (x − x0)‖ at × 1.02, 1e-11 at × 3, below;
+ * the stopping test is honest); it never increases the A-norm error
+ * against x = v, and it is at least as good as the best step along the newest direction alone
+ * (the Galerkin step over a span that contains it), to 1e-9 of the start's error.
+ */
+TEST(warmstart_galerkin_start_exact_and_never_worse)
+{
+    const int nodes = 80, n = 3 * nodes;
+    const double factors[2] = {1.02, 3.0};
+    /* the update r −= Σ α_k A d_k rounds on the scale of Σ |α_k| |A d_k|, which nearly
+     * parallel directions with cancelling coefficients raise above |A (x − x0)| */
+    const double rtol[2] = {1e-13, 1e-11};
+    for (int fi = 0; fi < 2; fi++) {
+        counted k = {{n, 1.0, 30.0}, 0};
+        cs_cg_work w, wx;
+        ENSURE(cs_cg_work_init(&w, n) == 0 && cs_cg_work_init(&wx, n) == 0);
+        double *inv = calloc(9 * (size_t)nodes, sizeof(double));
+        double *b = malloc(sizeof(double) * n), *x = calloc((size_t)n, sizeof(double));
+        double *v = calloc((size_t)n, sizeof(double)), *xs = calloc((size_t)n, sizeof(double));
+        double *e = malloc(sizeof(double) * n), *y = malloc(sizeof(double) * n);
+        double *x0 = malloc(sizeof(double) * n), *xl = malloc(sizeof(double) * n);
+        uint8_t *mask = calloc((size_t)n, 1);
+        ENSURE(inv && b && x && v && xs && e && y && x0 && xl && mask);
+        for (int i = 0; i < nodes; i++)
+            for (int a = 0; a < 3; a++)
+                inv[9 * i + 4 * a] = 1.0 / (k.c.m + 2 * k.c.k);
+        mask[n - 1] = 1;
+        int full = 0;
+        double worst = 0;
+        for (int s = 0; s < 10; s++) {
+            for (int i = 0; i < n; i++)
+                b[i] = sin(0.04 * i) * (1 + 0.3 * s) + cos(0.11 * i) * sin(0.5 * s);
+            const int armed = cs_cg_guess(&w, v, x);
+            ENSURE(armed == (s > 0));
+            x[n - 1] = 0.125;
+            memcpy(x0, x, sizeof(double) * n);
+            /* the exact solution (cold, to 1e-13) */
+            memcpy(xs, x0, sizeof(double) * n);
+            ENSURE(cs_pcg(&wx, chain_apply, &k.c, inv, mask, b, xs, 1e-13, 4000, 1).converged);
+            const double e0 = anorm2(&k.c, x0, xs, e, y);
+            const int nd = armed ? w.ndirs : 0, p0 = k.products;
+            cs_pcg(&w, counted_apply, &k, inv, mask, b, x, 1e-13, 0, 1);
+            ENSURE_MSG(k.products - p0 == 1 + nd, "solve %d: %d products, %d directions", s,
+                       k.products - p0, nd);
+            full += nd == CS_CG_DIRS;
+            ENSURE(x[n - 1] == 0.125);
+            /* CG's r is b − A x, to the rounding of its terms: the scale |b| + |A x0| +
+             * |A (x − x0)| (the last is the warm start's update, large when the operator
+             * stiffens × 3 per solve) */
+            for (int i = 0; i < n; i++)
+                e[i] = x[i] - x0[i];
+            chain_apply(&k.c, e, y);
+            double sc = 0;
+            for (int i = 0; i < n - 1; i++)
+                sc += y[i] * y[i];
+            chain_apply(&k.c, x0, y);
+            double bb = 0, yy = 0;
+            for (int i = 0; i < n - 1; i++) {
+                bb += b[i] * b[i];
+                yy += y[i] * y[i];
+            }
+            sc = sqrt(sc) + sqrt(bb) + sqrt(yy);
+            chain_apply(&k.c, x, y);
+            double dr = 0;
+            for (int i = 0; i < n - 1; i++)
+                dr += (b[i] - y[i] - w.r[i]) * (b[i] - y[i] - w.r[i]);
+            ENSURE_MSG(sqrt(dr) <= rtol[fi] * sc, "solve %d: |r − (b − A x)| / scale %.3g", s,
+                       sqrt(dr) / sc);
+            worst = fmax(worst, sqrt(dr) / sc);
+            const double e1 = anorm2(&k.c, x, xs, e, y);
+            ENSURE_MSG(e1 <= e0 * (1 + 1e-12), "solve %d: A-norm² error %.3g > %.3g", s, e1, e0);
+            if (nd > 0) {
+                /* the best step along d_1 alone (masked): x0 + t d, t = dᵀ(b − A x0) / dᵀA d */
+                const double *d = w.dirs[0];
+                chain_apply(&k.c, x0, y);
+                double dr0 = 0;
+                for (int i = 0; i < n; i++)
+                    dr0 += mask[i] ? 0.0 : d[i] * (b[i] - y[i]);
+                chain_apply(&k.c, d, y);
+                double dad = 0;
+                for (int i = 0; i < n; i++)
+                    dad += d[i] * y[i];
+                ENSURE(dad > 0);
+                for (int i = 0; i < n; i++)
+                    xl[i] = x0[i] + dr0 / dad * d[i];
+                const double el = anorm2(&k.c, xl, xs, e, y);
+                ENSURE_MSG(e1 <= el + 1e-9 * e0, "solve %d: subspace %.3g, line %.3g (of %.3g)",
+                           s, e1, el, e0);
+            }
+            /* finish the solve and record the step's end */
+            ENSURE(cs_pcg(&w, chain_apply, &k.c, inv, mask, b, x, 1e-12, 4000, 1).converged);
+            memcpy(v, x, sizeof(double) * n);
+            cs_cg_record(&w, v);
+            k.c.k *= factors[fi]; /* the next solve's operator */
+        }
+        ENSURE(full >= 5);
+        printf("    stiffness × %g per solve: |r − (b − A x)| / (|b| + |A x0| + |A (x − x0)|) "
+               "after the warm start ≤ %.2g\n", factors[fi], worst);
+        cs_cg_work_free(&w);
+        cs_cg_work_free(&wx);
+        free(inv);
+        free(b);
+        free(x);
+        free(v);
+        free(xs);
+        free(e);
+        free(y);
+        free(x0);
+        free(xl);
+        free(mask);
+    }
+}
