@@ -111,7 +111,10 @@ typedef struct cs_pc_lag {
 } cs_pc_lag;
 
 /* Defaults of the lag rule (cs_world pc_lag_angle, pc_lag_steps): rebuild when a cell has
- * turned by more than this many radians since the build, or after this many steps. */
+ * turned by more than this many radians since the build, or after this many reuses. 0.05 rad:
+ * measured on beams of E = 1e5 to 1e8, a swinging soft cantilever, tumbling blocks (README
+ * "The lagged multigrid hierarchy"): iterations rise from 0.02 rad at E = 1e8, from 0.05 at
+ * 1e7, from 0.1 at 1e5; 0.05 saves the most in sum and loses nowhere. */
 #define CS_PC_LAG_ANGLE 0.05
 #define CS_PC_LAG_STEPS 50
 
