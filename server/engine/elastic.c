@@ -41,6 +41,7 @@ int cs_elastic_fields_changed(cs_object *o)
 {
     const double *ky = o->fld.has_young ? o->fld.young : NULL;
     o->fem.kf = ky;
+    o->lag.valid = false; /* the fields and masses the preconditioner was built from changed */
     if (o->model == CS_MODEL_MSS)
         o->mss.ky = ky;
     if (o->lf) {

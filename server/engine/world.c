@@ -225,6 +225,8 @@ int cs_world_create(const cs_world_def *def, cs_world_t **out, char *err, size_t
         w->threads = 1;
     w->next_id = 1;
     w->broadphase_min_bodies = CS_BROADPHASE_BODIES;
+    w->pc_lag_angle = CS_PC_LAG_ANGLE;
+    w->pc_lag_steps = CS_PC_LAG_STEPS;
     *out = w;
     return CS_OK;
 }
@@ -263,6 +265,8 @@ void cs_object_free_internal(cs_object *o)
     cs_fields_free(&o->fld);
     cs_cg_work_free(&o->cg);
     cs_mg_free(o->mg);
+    free(o->lag.R);
+    free(o->lag.mask);
     free(o);
 }
 
@@ -1264,6 +1268,7 @@ static bool wants_multigrid(const cs_world_t *w, const cs_object *o)
 static bool setup_multigrid(const cs_world_t *w, cs_object *o, cs_matvec_fn A,
                             const uint8_t *mask)
 {
+    o->lag.valid = false; /* whatever the lag recorded is overwritten (pc_lag_record) */
     if (!wants_multigrid(w, o))
         return false;
     if (!cs_mg_matches(o->mg, &o->cm, &o->fem, o->topology_version)) {
@@ -1296,6 +1301,125 @@ static bool setup_multigrid(const cs_world_t *w, cs_object *o, cs_matvec_fn A,
             dg[o->cm.cell_nodes[8 * in->cell + k]] += o->dcoef * in->stiffness * in->w[k];
     }
     return cs_mg_setup(o->mg, &o->fem, A, o, o->blocks, mask) == 0;
+}
+
+/*
+ * The lagged preconditioner. The implicit step's multigrid hierarchy (and the fine level's
+ * block-Jacobi inverse it copies) is a preconditioner only: PCG solves the true operator to
+ * the same tolerance whatever it is, so it is reused from step to step while it still fits
+ * (production codes lag their preconditioners the same way). The V-cycle reads nothing but
+ * its own copies (cs_mg_setup's single-precision rotations, factors, D⁻¹ and held dofs of
+ * every level), so a reused hierarchy is consistently the operator of its build step. It is
+ * rebuilt when anything it was built from changed: the topology (cs_mg_matches), any operator
+ * coefficient (dt, Newmark against implicit Euler, penalty), the stiffness or damping field
+ * and the masses (cs_elastic_fields_changed clears valid), the drag springs, the held dofs of
+ * the solve (constraints, ground contacts, frozen nodes), a statics solve, a reset; and when
+ * some cell's rotation has turned by more than w->pc_lag_angle since the build (measured as
+ * 3 − tr(R_builtᵀ R) = 2(1 − cos θ), one pass over the cells), or after w->pc_lag_steps
+ * steps. A lagged solve that misses the tolerance within the iteration limit is redone from
+ * where it stopped with a fresh build. Block Jacobi alone (small objects) is rebuilt every
+ * step as before: its set-up is cheap next to its iterations, and o->blocks is shared scratch
+ * (the impact solve and central differences write it).
+ */
+
+/* A hash of the drag springs the operator holds (cell, weights, stiffness), FNV-1a. */
+static uint64_t pc_lag_springs(const cs_object *o)
+{
+    uint64_t h = 1469598103934665603ull;
+    for (int i = 0; i < o->n_inputs; i++) {
+        const cs_input *in = &o->inputs[i];
+        if (!cs_input_is_spring(in) || in->delay > 0)
+            continue;
+        unsigned char buf[sizeof in->cell + sizeof in->w + sizeof in->stiffness];
+        memcpy(buf, &in->cell, sizeof in->cell);
+        memcpy(buf + sizeof in->cell, in->w, sizeof in->w);
+        memcpy(buf + sizeof in->cell + sizeof in->w, &in->stiffness, sizeof in->stiffness);
+        for (size_t k = 0; k < sizeof buf; k++)
+            h = (h ^ buf[k]) * 1099511628211ull;
+    }
+    return h;
+}
+
+static void pc_lag_coefs(const cs_object *o, double c[7])
+{
+    c[0] = o->mcoef;
+    c[1] = o->kcoef;
+    c[2] = o->cmcoef;
+    c[3] = o->ckcoef;
+    c[4] = o->pcoef;
+    c[5] = o->penalty;
+    c[6] = o->dcoef;
+}
+
+/* max over cells of 3 − tr(R_builtᵀ R) = 2(1 − cos θ), θ the angle each cell has turned by
+ * since the build (+inf if a rotation is not finite). */
+static double pc_lag_drift(const cs_object *o)
+{
+    if (!o->fem.corotational)
+        return 0;
+    const float *Rb = o->lag.R;
+    const double *R = o->fem.R;
+    double dmax = 0;
+#pragma omp parallel for num_threads(cs_elastic_threads(o)) schedule(static) reduction(max : dmax)
+    for (int c = 0; c < o->cm.n_cells; c++) {
+        double t = 0;
+        for (int k = 0; k < 9; k++)
+            t += (double)Rb[9 * (size_t)c + k] * R[9 * (size_t)c + k];
+        const double d = 3.0 - t;
+        dmax = isfinite(d) ? (d > dmax ? d : dmax) : INFINITY;
+    }
+    return dmax;
+}
+
+/* Can this step's solve on step_operator with held dofs mask reuse the last build? */
+static bool pc_lag_reusable(const cs_world_t *w, cs_object *o, const uint8_t *mask)
+{
+    cs_pc_lag *L = &o->lag;
+    if (!L->valid || !(w->pc_lag_angle > 0) || L->steps >= w->pc_lag_steps)
+        return false;
+    if (!wants_multigrid(w, o) || !cs_mg_matches(o->mg, &o->cm, &o->fem, o->topology_version))
+        return false;
+    if (L->n != o->n || L->n_cells != o->cm.n_cells || L->kf != o->fem.kf ||
+        L->has_damping != o->fld.has_damping)
+        return false;
+    double c[7];
+    pc_lag_coefs(o, c);
+    if (memcmp(c, L->coef, sizeof c) != 0 || L->springs != pc_lag_springs(o))
+        return false;
+    if (memcmp(mask, L->mask, 3 * (size_t)o->n) != 0)
+        return false;
+    L->drift = pc_lag_drift(o);
+    return L->drift <= 2.0 * (1.0 - cos(w->pc_lag_angle));
+}
+
+/* After setup_multigrid built the hierarchy for step_operator with held dofs mask: the key. */
+static void pc_lag_record(const cs_world_t *w, cs_object *o, const uint8_t *mask)
+{
+    cs_pc_lag *L = &o->lag;
+    L->valid = false;
+    L->builds++;
+    if (!(w->pc_lag_angle > 0))
+        return; /* no lag: nothing to keep */
+    if (L->n != o->n || L->n_cells != o->cm.n_cells || !L->R || !L->mask) {
+        free(L->R);
+        free(L->mask);
+        L->R = malloc(9 * (size_t)(o->cm.n_cells ? o->cm.n_cells : 1) * sizeof *L->R);
+        L->mask = malloc(3 * (size_t)(o->n ? o->n : 1));
+        L->n = o->n;
+        L->n_cells = o->cm.n_cells;
+        if (!L->R || !L->mask)
+            return; /* out of memory: no lag, every step builds (as before) */
+    }
+    for (size_t k = 0; k < 9 * (size_t)o->cm.n_cells; k++)
+        L->R[k] = (float)o->fem.R[k];
+    memcpy(L->mask, mask, 3 * (size_t)o->n);
+    pc_lag_coefs(o, L->coef);
+    L->kf = o->fem.kf;
+    L->has_damping = o->fld.has_damping;
+    L->springs = pc_lag_springs(o);
+    L->steps = 0;
+    L->drift = 0;
+    L->valid = true;
 }
 
 /* CG on A x = b with multigrid (if use_mg, after setup_multigrid) or block Jacobi. */
@@ -1848,7 +1972,7 @@ static int step_implicit(cs_world_t *w, cs_object *o, cs_step_stats *st, bool tr
                 o->b[d] += o->m[i] * o->v[d] - av[d] + c * kv[d];
             }
     }
-    build_preconditioner(o);
+    /* (the preconditioner: built, or reused, in the solve loop below) */
     /* Initial guess: v, improved inside the solve along the last step's change (cs_cg_guess);
      * held dofs 0, ground contacts their lift (constrain_ground). */
     o->cg.threads = cs_elastic_threads(o); /* cs_cg_guess's and cs_cg_record's passes */
@@ -1866,11 +1990,47 @@ static int step_implicit(cs_world_t *w, cs_object *o, cs_step_stats *st, bool tr
     /* With frozen nodes: solve, and while the reactions wake some, solve again with them free
      * (warm start), so the step ends with every frozen node near balance. */
     for (int round = 0;; round++) {
-        const bool use_mg = setup_multigrid(w, o, step_operator, o->smask);
+        /* round 0: the last steps' hierarchy if it still fits (pc_lag_reusable), else a
+         * fresh one; a re-solve (woken nodes) always builds (before the loop's end) */
+        bool use_mg, lagged = false;
+        if (round == 0 && pc_lag_reusable(w, o, o->smask)) {
+            use_mg = lagged = true;
+        } else {
+            if (round == 0)
+                build_preconditioner(o);
+            use_mg = setup_multigrid(w, o, step_operator, o->smask);
+            if (use_mg && round == 0)
+                pc_lag_record(w, o, o->smask);
+        }
         if (round == 0)
             t3 = now_ms();
-        const cs_cg_result rr = solve(w, o, use_mg, step_operator, o->smask, o->b, o->v1,
-                                      w->def.cg_tolerance, w->def.cg_max_iterations);
+        cs_cg_result rr = solve(w, o, use_mg, step_operator, o->smask, o->b, o->v1,
+                                w->def.cg_tolerance, w->def.cg_max_iterations);
+        if (lagged) {
+            o->lag.steps++;
+            o->lag.reuses++;
+        }
+        if (lagged && (!rr.converged || !all_finite(o->v1, n3))) {
+            /* The lagged hierarchy did not get there: build a fresh one and go on from where
+             * the solve stopped (from v at the free dofs if it blew up; the held ones keep
+             * their values, which CG does not change), with the same stopping reference. */
+            o->lag.retries++;
+            r.iterations += rr.iterations;
+            if (o->cg.stop == CS_CG_STOP_START) {
+                o->cg.stop = CS_CG_STOP_GIVEN;
+                o->cg.stop_ref = rr.ref;
+            }
+            if (!all_finite(o->v1, n3))
+                for (size_t d = 0; d < n3; d++)
+                    if (!o->smask[d])
+                        o->v1[d] = o->v[d];
+            build_preconditioner(o);
+            use_mg = setup_multigrid(w, o, step_operator, o->smask);
+            if (use_mg)
+                pc_lag_record(w, o, o->smask);
+            rr = solve(w, o, use_mg, step_operator, o->smask, o->b, o->v1, w->def.cg_tolerance,
+                       w->def.cg_max_iterations);
+        }
         r.iterations += rr.iterations;
         r.relres = rr.relres;
         r.converged = rr.converged;
@@ -2469,6 +2629,7 @@ void cs_world_reset(cs_world_t *w)
         o->sleeping = false;
         o->still_steps = 0;
         o->act_wake_all = true;
+        o->lag.valid = false;
         memset(o->contact, 0, (size_t)o->n);
         o->elastic_energy_valid = false;
         cs_cg_forget(&o->cg);
