@@ -62,7 +62,10 @@ _Static_assert(MG_CHEB_KIND != 4 ||
 #define MG_COARSE_SWEEPS 8 /* Jacobi sweeps on a coarsest level too large for Cholesky */
 #define MG_POWER_ITERS 10
 #define MG_ROT_BATCH 16    /* coarse cells per batch of setup_coarse's rotation extraction */
-#define MG_CHUNK 64        /* batches per chunk of apply_ex (1024 cells, 128 KiB of results) */
+#ifndef MG_CHUNK
+#define MG_CHUNK 64
+#endif
+/* batches per chunk of apply_ex (1024 cells, 128 KiB of results) */
 #define MG_LANES 16        /* cells per batch of the element pass (one float SIMD lane each) */
 #define VF_LANES 8         /* lanes per vector of the element pass's arithmetic */
 typedef float vf __attribute__((vector_size(4 * VF_LANES)));
@@ -71,6 +74,11 @@ typedef float vf __attribute__((vector_size(4 * VF_LANES)));
 #define MODAL_S float
 #include "modal_core.h"
 #define MG_LAMBDA_EVERY 64 /* re-estimate λmax(D⁻¹A) after this many setups */
+
+typedef struct mg_tw {
+    int32_t node;
+    float w;
+} mg_tw;
 
 typedef struct mg_level {
     int n_cells, n_nodes, threads;
@@ -82,6 +90,9 @@ typedef struct mg_level {
     double *p_w;
     int32_t *r_start, *r_node;        /* per coarse node: its fine nodes (Pᵀ) */
     double *r_w;
+    /* the V-cycle's copies of both (transfer_layout): (node, weight in float) pairs, one
+     * 8-byte stream per transfer instead of a 4- and an 8-byte one */
+    mg_tw *p_tw, *r_tw;
     /* from the next finer level (level >= 1) */
     int32_t *ch_start, *ch;           /* children of each cell */
     int32_t *walk;                    /* the cells in the order of their first child */
@@ -104,7 +115,17 @@ typedef struct mg_level {
      * c % MG_LANES; lanes past the last cell repeat the batch's first cell with L = M = 0) */
     int n_batches;
     int32_t *bidx;                    /* per batch 8 × MG_LANES: 3·node of corner k per lane */
+    /* ... or, where every batch's corners lie within 65536 floats of x (narrow_corners: any
+     * box up to about 100 cells across a layer), as 16-bit offsets from a base per batch
+     * (half the bytes; bidx is then NULL) */
+    int32_t *bbase;                   /* per batch: the least 3·node of its corners */
+    uint16_t *bidx16;                 /* per batch 8 × MG_LANES: 3·node − bbase */
     float *bR;                        /* per batch 9 × MG_LANES: R_c (cs_mg_setup) */
+    /* ... and as unit quaternions (w, x, y, z), per batch 4 × MG_LANES (rotation_layout, per
+     * setup): the element pass rebuilds R from them (16 bytes a cell to stream instead of
+     * 36); bQ_ok false (R not a rotation to float precision somewhere): it reads bR */
+    float *bQ;
+    bool bQ_ok;
     float *bL, *bM;                   /* per batch MG_LANES: s_c·hλ/16, s_c·hμ/16 (cs_mg_setup) */
     /* The cells' products, 8 corners × (x, y, z, ·) per cell (32 floats), in a window per
      * segment of batches
@@ -474,6 +495,60 @@ static int product_layout(mg_level *l)
     return 0;
 }
 
+/*
+ * The element pass's corner indices as 16-bit offsets from a base per batch (bbase, bidx16;
+ * bidx freed), if every batch's fit: 16 bytes a cell less to stream (of 76: indices 32,
+ * rotations 36, λ and μ 8), the same gathers. Otherwise bidx stays. -1 on out of memory.
+ */
+static int narrow_corners(mg_level *l)
+{
+    const size_t per = 8 * MG_LANES;
+    for (int b = 0; b < l->n_batches; b++) {
+        int32_t lo = INT32_MAX, hi = INT32_MIN;
+        for (size_t i = 0; i < per; i++) {
+            const int32_t v = l->bidx[per * b + i];
+            lo = v < lo ? v : lo;
+            hi = v > hi ? v : hi;
+        }
+        if ((int64_t)hi - lo > UINT16_MAX)
+            return 0;
+    }
+    const size_t nb = l->n_batches ? (size_t)l->n_batches : 1;
+    l->bbase = malloc(nb * sizeof(int32_t));
+    l->bidx16 = aligned_alloc(64, nb * per * sizeof(uint16_t));
+    if (!l->bbase || !l->bidx16)
+        return -1;
+    for (int b = 0; b < l->n_batches; b++) {
+        int32_t lo = INT32_MAX;
+        for (size_t i = 0; i < per; i++)
+            lo = l->bidx[per * b + i] < lo ? l->bidx[per * b + i] : lo;
+        l->bbase[b] = lo;
+        for (size_t i = 0; i < per; i++)
+            l->bidx16[per * b + i] = (uint16_t)(l->bidx[per * b + i] - lo);
+    }
+    free(l->bidx);
+    l->bidx = NULL;
+    return 0;
+}
+
+/* The V-cycle's copies of level f's transfer rows: (node, float weight) pairs (the weights
+ * are the float the loops converted them to). -1 on out of memory. */
+static int transfer_layout(mg_level *f)
+{
+    if (!f->p_start)
+        return 0;
+    const int np = f->p_start[f->n_nodes];
+    f->p_tw = malloc((size_t)(np > 0 ? np : 1) * sizeof(mg_tw));
+    f->r_tw = malloc((size_t)(np > 0 ? np : 1) * sizeof(mg_tw));
+    if (!f->p_tw || !f->r_tw)
+        return -1;
+    for (int a = 0; a < np; a++) {
+        f->p_tw[a] = (mg_tw){f->p_node[a], (float)f->p_w[a]};
+        f->r_tw[a] = (mg_tw){f->r_node[a], (float)f->r_w[a]};
+    }
+    return 0;
+}
+
 /* The optimised fourth-kind polynomials' weights β (Lottes, "Optimal polynomial smoothers for
  * multigrid V-cycles", 2023, arXiv:2202.08830, Table 5), degrees 1–4. */
 static const double opt4_beta[CS_MG_CHEB_MAX][CS_MG_CHEB_MAX] = {
@@ -562,6 +637,7 @@ static int alloc_level_state(mg_level *l, int level, int threads, int cheb_deg)
     l->n_batches = (l->n_cells + MG_LANES - 1) / MG_LANES;
     l->bidx = aligned_alloc(64, nb * 8 * vb);
     l->bR = aligned_alloc(64, nb * 9 * vb);
+    l->bQ = aligned_alloc(64, nb * 4 * vb);
     l->bL = aligned_alloc(64, nb * vb);
     l->bM = aligned_alloc(64, nb * vb);
     l->bslot = malloc(nb * sizeof(int32_t));
@@ -574,7 +650,7 @@ static int alloc_level_state(mg_level *l, int level, int threads, int cheb_deg)
     l->t = malloc((n3 ? n3 : 1) * sizeof(float));
     l->d = malloc((n3 ? n3 : 1) * sizeof(float));
     if (!l->d || !l->s || !l->dg || !l->dgf || !l->invf || !l->held || !l->bslot || !l->x || !l->b || !l->t ||
-        !l->bidx || !l->bR || !l->bL || !l->bM || !l->fadj || !l->norder || !l->nminb ||
+        !l->bidx || !l->bR || !l->bQ || !l->bL || !l->bM || !l->fadj || !l->norder || !l->nminb ||
         !l->nfirst)
         return -1;
     /* counting sort of the nodes by the batch of their last cell (adj: cells increasing) */
@@ -603,7 +679,7 @@ static int alloc_level_state(mg_level *l, int level, int threads, int cheb_deg)
             for (int k = 0; k < 8; k++)
                 l->bidx[(8 * b + k) * MG_LANES + p] = 3 * l->cell_nodes[8 * c + k];
         }
-    if (product_layout(l) != 0)
+    if (product_layout(l) != 0 || narrow_corners(l) != 0)
         return -1;
     if (level == 0)
         return 0;
@@ -638,6 +714,10 @@ static void free_level(mg_level *l)
     free(l->r_start);
     free(l->r_node);
     free(l->r_w);
+    free(l->p_tw);
+    free(l->r_tw);
+    free(l->bbase);
+    free(l->bidx16);
     free(l->ch_start);
     free(l->ch);
     free(l->walk);
@@ -650,6 +730,7 @@ static void free_level(mg_level *l)
     free(l->own_mask);
     free(l->bidx);
     free(l->bR);
+    free(l->bQ);
     free(l->bL);
     free(l->bM);
     free(l->fadj);
@@ -739,6 +820,9 @@ cs_mg *cs_mg_build(const cs_cubemesh *cm, const cs_fem *fem, uint32_t version)
             break;
         }
     }
+    for (int l = 0; l < mg->n_levels; l++)
+        if (transfer_layout(&mg->lv[l]) != 0)
+            goto fail;
     for (int l = 0; l < mg->n_levels; l++) {
         mg_level *c = &mg->lv[l];
         c->cycles = l > 0 && l < mg->n_levels - 1 &&
@@ -815,8 +899,27 @@ static inline __attribute__((always_inline)) void half_rest(const mg_level *l, i
 {
     vf R[9], y[24], L, M;
     const size_t o = (size_t)b * MG_LANES + VF_LANES * h;
-    for (int j = 0; j < 9; j++)
-        memcpy(&R[j], l->bR + 9 * MG_LANES * (size_t)b + MG_LANES * j + VF_LANES * h, sizeof(vf));
+    if (l->bQ_ok) {
+        /* R(q), as fem.c's rot_quat_mat, in float */
+        vf q[4];
+        for (int j = 0; j < 4; j++)
+            memcpy(&q[j], l->bQ + 4 * MG_LANES * (size_t)b + MG_LANES * j + VF_LANES * h,
+                   sizeof(vf));
+        const vf w = q[0], qx = q[1], qy = q[2], qz = q[3];
+        R[0] = 1 - 2 * (qy * qy + qz * qz);
+        R[1] = 2 * (qx * qy - w * qz);
+        R[2] = 2 * (qx * qz + w * qy);
+        R[3] = 2 * (qx * qy + w * qz);
+        R[4] = 1 - 2 * (qx * qx + qz * qz);
+        R[5] = 2 * (qy * qz - w * qx);
+        R[6] = 2 * (qx * qz - w * qy);
+        R[7] = 2 * (qy * qz + w * qx);
+        R[8] = 1 - 2 * (qx * qx + qy * qy);
+    } else {
+        for (int j = 0; j < 9; j++)
+            memcpy(&R[j], l->bR + 9 * MG_LANES * (size_t)b + MG_LANES * j + VF_LANES * h,
+                   sizeof(vf));
+    }
     memcpy(&L, l->bL + o, sizeof L);
     memcpy(&M, l->bM + o, sizeof M);
     modal_core_f(u, R, 0.0f, &L, &M, NULL, y);
@@ -842,18 +945,41 @@ static inline __attribute__((always_inline)) void half_rest(const mg_level *l, i
     }
 }
 
+/* The corner indices of half h of batch b: ix (32-bit, bidx) or x moved to the batch's base
+ * and ix16 (16-bit offsets, bidx16), whichever the level has. */
+typedef struct corners {
+    const float *x;
+    const int32_t *ix;
+    const uint16_t *ix16;
+} corners;
+
+static inline __attribute__((always_inline)) corners batch_corners(const mg_level *l,
+                                                                  const float *x, int b, int h)
+{
+    const size_t o = 8 * MG_LANES * (size_t)b + VF_LANES * h;
+    if (l->bidx16)
+        return (corners){x + l->bbase[b], NULL, l->bidx16 + o};
+    return (corners){x, l->bidx + o, NULL};
+}
+
+/* corner k of lane p (the 3·node index, from the batch's base for 16-bit offsets) */
+static inline __attribute__((always_inline)) int32_t corner_at(const corners *q, int k, int p)
+{
+    return q->ix16 ? q->ix16[MG_LANES * k + p] : q->ix[MG_LANES * k + p];
+}
+
 /* Inputs lane by lane. */
 __attribute__((optimize("fp-contract=fast"), target_clones("arch=x86-64-v3", "default")))
 static void batches_generic(const mg_level *l, const float *restrict x, int b0, int b1)
 {
     for (int b = b0; b < b1; b++)
         for (int h = 0; h < MG_LANES / VF_LANES; h++) {
-            const int32_t *ix = l->bidx + 8 * MG_LANES * (size_t)b + VF_LANES * h;
+            const corners q = batch_corners(l, x, b, h);
             vf u[24];
             for (int k = 0; k < 8; k++)
                 for (int i = 0; i < 3; i++)
                     for (int p = 0; p < VF_LANES; p++)
-                        u[3 * k + i][p] = x[ix[MG_LANES * k + p] + i];
+                        u[3 * k + i][p] = q.x[corner_at(&q, k, p) + i];
             half_rest(l, b, h, u);
         }
 }
@@ -866,15 +992,14 @@ static void batches_avx512(const mg_level *l, const float *restrict x, int b0, i
     _Static_assert(VF_LANES == 8, "two 4-lane groups per 256-bit vector");
     for (int b = b0; b < b1; b++)
         for (int h = 0; h < MG_LANES / VF_LANES; h++) {
-            const int32_t *ix = l->bidx + 8 * MG_LANES * (size_t)b + VF_LANES * h;
+            const corners q = batch_corners(l, x, b, h);
             vf u[24];
             for (int k = 0; k < 8; k++) {
-                const int32_t *q = ix + MG_LANES * k;
                 __m256 r[4]; /* (x, y, z, 0) of lanes j | j + 4 */
                 for (int j = 0; j < 4; j++)
                     r[j] = _mm256_insertf128_ps(
-                        _mm256_castps128_ps256(_mm_maskz_loadu_ps(7, x + q[j])),
-                        _mm_maskz_loadu_ps(7, x + q[j + 4]), 1);
+                        _mm256_castps128_ps256(_mm_maskz_loadu_ps(7, q.x + corner_at(&q, k, j))),
+                        _mm_maskz_loadu_ps(7, q.x + corner_at(&q, k, j + 4)), 1);
                 const __m256 t0 = _mm256_unpacklo_ps(r[0], r[1]); /* x0 x1 y0 y1 | 4 5 */
                 const __m256 t1 = _mm256_unpackhi_ps(r[0], r[1]); /* z0 z1 0 0 | 4 5 */
                 const __m256 t2 = _mm256_unpacklo_ps(r[2], r[3]);
@@ -918,19 +1043,24 @@ static inline void store3(float *p, vf4 v)
     _mm_store_ss(p + 2, _mm_movehl_ps((__m128)v, (__m128)v));
 }
 
-/* The free dofs of node n (all bits set; lane 3 clear). */
-static inline vf4 free_mask(const mg_level *l, int n)
+/* The free dofs of a node whose held bits are h (all bits set; lane 3 clear). */
+static inline vf4 free_bits(unsigned h)
 {
     static const vi4 FREE[8] = {{-1, -1, -1, 0}, {0, -1, -1, 0}, {-1, 0, -1, 0}, {0, 0, -1, 0},
                                 {-1, -1, 0, 0},  {0, -1, 0, 0},  {-1, 0, 0, 0},  {0, 0, 0, 0}};
-    return (vf4)FREE[l->held[n] & 7];
+    return (vf4)FREE[h & 7];
 }
 
-/* D⁻¹ v at node n by its columns (16-byte loads: lane 3 is the next column's first entry, or
- * the tail), per component in the order of a row-major product: (m_k0 v0 + m_k1 v1) + m_k2 v2. */
-static inline vf4 dinv(const mg_level *l, int n, vf4 v)
+static inline vf4 free_mask(const mg_level *l, int n)
 {
-    const float *m = l->invf + 9 * (size_t)n;
+    return free_bits(l->held[n]);
+}
+
+/* D⁻¹ v for the node whose D⁻¹ columns start at m (16-byte loads: lane 3 is the next column's
+ * first entry, or what follows the last), per component in the order of a row-major product:
+ * (m_k0 v0 + m_k1 v1) + m_k2 v2. */
+static inline vf4 dinv_at(const float *m, vf4 v)
+{
     vf4 c0, c1, c2;
     memcpy(&c0, m, sizeof c0);
     memcpy(&c1, m + 3, sizeof c1);
@@ -941,50 +1071,55 @@ static inline vf4 dinv(const mg_level *l, int n, vf4 v)
     return c0 * v0 + c1 * v1 + c2 * v2;
 }
 
+static inline vf4 dinv(const mg_level *l, int n, vf4 v)
+{
+    return dinv_at(l->invf + 9 * (size_t)n, v);
+}
+
 static inline vf4 and4(vf4 v, vf4 m)
 {
     return (vf4)((vi4)v & (vi4)m);
 }
 
-/* Node n's row of y (see apply_path): its cells' products summed in the adj order; in the
- * Chebyshev variants, instead of storing it, the step on node n (its cells are all done: no
- * later cell of this pass reads its x). Component by component the same arithmetic in the
- * same order as scalar code, 4 lanes wide (lane 3 is discarded). */
-static inline __attribute__((always_inline)) void node_out(const mg_level *l, int n,
-                                                           const float *x, const float *b,
-                                                           float *y, const cheb_step *cs,
-                                                           const int mode)
+/* Node n's row of y (see apply_path): its cells' products (links at fe + fadj[0..links))
+ * summed in the adj order; in the Chebyshev variants, instead of storing it, the step on node
+ * n (its cells are all done: no later cell of this pass reads its x). inv: its D⁻¹ columns,
+ * dg its diagonal part, held its held dofs. Component by component the same arithmetic in
+ * the same order as scalar code, 4 lanes wide (lane 3 is discarded). */
+static inline __attribute__((always_inline)) void
+node_core(const mg_level *l, int n, const int32_t *fadj, int links, const float *inv, float dg,
+          unsigned held, const float *x, const float *b, float *y, const cheb_step *cs,
+          const int mode)
 {
     /* (x, y, z, ·) per link: one 16-byte load and add each, the same sums per component */
     vf4 s = {0, 0, 0, 0};
-    const int a0 = l->adj_start[n], a1 = l->adj_start[n + 1];
     const float *fe = __builtin_assume_aligned(l->fe, 16);
-    if (a1 - a0 == 8) {
+    if (links == 8) {
         /* an interior node: its 8 links loaded at once, summed in the same order */
         vf4 v[8];
         for (int a = 0; a < 8; a++)
-            memcpy(&v[a], fe + l->fadj[a0 + a], sizeof v[a]);
+            memcpy(&v[a], fe + fadj[a], sizeof v[a]);
         for (int a = 0; a < 8; a++)
             s += v[a];
     } else {
-        for (int a = a0; a < a1; a++) {
+        for (int a = 0; a < links; a++) {
             vf4 v;
-            memcpy(&v, fe + l->fadj[a], sizeof v);
+            memcpy(&v, fe + fadj[a], sizeof v);
             s += v;
         }
     }
-    const vf4 ax = s + l->dgf[n] * load3(x + 3 * n);
+    const vf4 ax = s + dg * load3(x + 3 * n);
     if (mode == NP_APPLY) {
         store3(y + 3 * n, ax);
         return;
     }
-    const vf4 fr = free_mask(l, n);
+    const vf4 fr = free_bits(held);
     const vf4 r = and4(load3(b + 3 * n) - ax, fr);
     if (mode == NP_RESID) {
         store3(y + 3 * n, r);
         return;
     }
-    const vf4 z = dinv(l, n, r);
+    const vf4 z = dinv_at(inv, r);
     const bool first = mode == NP_CHEB_FIRST || mode == NP_CHEB_FIRST_OUT;
     const vf4 dj = and4(first ? cs->c * z : cs->a * load3(cs->d + 3 * n) + cs->c * z, fr);
     store3(cs->d + 3 * n, dj);
@@ -993,6 +1128,17 @@ static inline __attribute__((always_inline)) void node_out(const mg_level *l, in
     if (mode == NP_CHEB_FIRST_OUT || mode == NP_CHEB_OUT)
         for (int k = 0; k < 3; k++)
             cs->out[3 * (size_t)n + k] = xn[k];
+}
+
+/* node_core from the level's arrays by node index */
+static inline __attribute__((always_inline)) void node_out(const mg_level *l, int n,
+                                                           const float *x, const float *b,
+                                                           float *y, const cheb_step *cs,
+                                                           const int mode)
+{
+    const int a0 = l->adj_start[n];
+    node_core(l, n, l->fadj + a0, l->adj_start[n + 1] - a0, l->invf + 9 * (size_t)n, l->dgf[n],
+              l->held[n], x, b, y, cs, mode);
 }
 
 /* One thread's share of apply_path (mode compile-time once inlined): its segments' element
@@ -1429,6 +1575,56 @@ out:
     return isfinite(lam) && lam > 0 ? lam : 2.0;
 }
 
+/*
+ * The element pass's rotations as float unit quaternions (bQ), from the cells' R by
+ * Shepperd's method in double (lanes past the last cell: the identity). Used (bQ_ok) only if
+ * R(q) rebuilt in double from the float q is every cell's R within 1e-6 per entry (a proper
+ * rotation: fem's and setup_coarse's are); otherwise the pass reads bR. Called at the end of
+ * to_single, every setup.
+ */
+static void rotation_layout(mg_level *l)
+{
+    int bad = 0;
+#pragma omp parallel for num_threads(l->threads) schedule(static) reduction(+ : bad)
+    for (int b = 0; b < l->n_batches; b++)
+        for (int p = 0; p < MG_LANES; p++) {
+            const int c = b * MG_LANES + p;
+            double q[4] = {1, 0, 0, 0};
+            if (c < l->n_cells) {
+                const double *R = l->R + 9 * (size_t)c, tr = R[0] + R[4] + R[8];
+                if (tr >= R[0] && tr >= R[4] && tr >= R[8]) {
+                    const double r = sqrt(fmax(1 + tr, 0.0)), f = r > 0 ? 0.5 / r : 0;
+                    q[0] = 0.5 * r, q[1] = (R[7] - R[5]) * f, q[2] = (R[2] - R[6]) * f,
+                    q[3] = (R[3] - R[1]) * f;
+                } else if (R[0] >= R[4] && R[0] >= R[8]) {
+                    const double r = sqrt(fmax(1 + R[0] - R[4] - R[8], 0.0)), f = r > 0 ? 0.5 / r : 0;
+                    q[1] = 0.5 * r, q[0] = (R[7] - R[5]) * f, q[2] = (R[1] + R[3]) * f,
+                    q[3] = (R[2] + R[6]) * f;
+                } else if (R[4] >= R[8]) {
+                    const double r = sqrt(fmax(1 - R[0] + R[4] - R[8], 0.0)), f = r > 0 ? 0.5 / r : 0;
+                    q[2] = 0.5 * r, q[0] = (R[2] - R[6]) * f, q[1] = (R[1] + R[3]) * f,
+                    q[3] = (R[5] + R[7]) * f;
+                } else {
+                    const double r = sqrt(fmax(1 - R[0] - R[4] + R[8], 0.0)), f = r > 0 ? 0.5 / r : 0;
+                    q[3] = 0.5 * r, q[0] = (R[3] - R[1]) * f, q[1] = (R[2] + R[6]) * f,
+                    q[2] = (R[5] + R[7]) * f;
+                }
+                const double n = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+                for (int j = 0; j < 4; j++)
+                    q[j] = n > 0 ? q[j] / n : (j == 0);
+                double qf[4], Rq[9];
+                for (int j = 0; j < 4; j++)
+                    qf[j] = (float)q[j];
+                cs_quat_to_mat(qf, Rq);
+                for (int j = 0; j < 9; j++)
+                    bad += !(fabs(Rq[j] - R[j]) <= 1e-6);
+            }
+            for (int j = 0; j < 4; j++)
+                l->bQ[(4 * b + j) * MG_LANES + p] = (float)q[j];
+        }
+    l->bQ_ok = bad == 0;
+}
+
 /* The single-precision copies the V-cycle reads. */
 static void to_single(mg_level *l, double hl, double hm)
 {
@@ -1452,6 +1648,7 @@ static void to_single(mg_level *l, double hl, double hm)
                                (l->mask[3 * n + 2] ? 4 : 0));
     }
     l->invf[9 * (size_t)l->n_nodes] = 0.0f; /* the tail dinv's last column load reads */
+    rotation_layout(l);
 }
 
 int cs_mg_setup(cs_mg *mg, const cs_fem *fem, cs_matvec_fn A, void *ctx, const double *inv0,
@@ -1564,7 +1761,7 @@ static void vcycle(cs_mg *mg, int level, const float *b, float *x, const double 
         /* (x, y, z, 0) vectors: per component the scalar sums in the same order */
         vf4 s = {0, 0, 0, 0};
         for (int a = f->r_start[J]; a < f->r_start[J + 1]; a++)
-            s += (float)f->r_w[a] * load3(f->t + 3 * f->r_node[a]);
+            s += f->r_tw[a].w * load3(f->t + 3 * f->r_tw[a].node);
         store3(c->b + 3 * J, and4(s, free_mask(c, J)));
     }
     vcycle(mg, level + 1, c->b, c->x, NULL, NULL);
@@ -1581,7 +1778,7 @@ static void vcycle(cs_mg *mg, int level, const float *b, float *x, const double 
     for (int n = 0; n < f->n_nodes; n++) {
         vf4 s = {0, 0, 0, 0};
         for (int a = f->p_start[n]; a < f->p_start[n + 1]; a++)
-            s += (float)f->p_w[a] * load3(c->x + 3 * f->p_node[a]);
+            s += f->p_tw[a].w * load3(c->x + 3 * f->p_tw[a].node);
         /* held dofs keep their value (bit for bit: not x + 0) */
         const vf4 fr = free_mask(f, n), xn = load3(x + 3 * n);
         store3(x + 3 * n, (vf4)(((vi4)(xn + s) & (vi4)fr) | ((vi4)xn & ~(vi4)fr)));
