@@ -1247,6 +1247,14 @@ void cs_mg_cheb_step_level(const cs_mg *mg, int level, const float *b, float *x,
     apply_path(mg, level, mg->avx512, x, b, NULL, &cs);
 }
 
+int cs_mg_level_layout(const cs_mg *mg, int level)
+{
+    if (level < 0 || level >= mg->n_levels)
+        return 0;
+    const mg_level *l = &mg->lv[level];
+    return (l->bidx16 ? CS_MG_NARROW_CORNERS : 0) | (l->bQ_ok ? CS_MG_QUAT_ROTATIONS : 0);
+}
+
 void cs_mg_level_smoother(const cs_mg *mg, int level, float *inv, uint8_t *mask)
 {
     if (level < 0 || level >= mg->n_levels)
