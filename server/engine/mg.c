@@ -498,10 +498,15 @@ static int product_layout(mg_level *l)
 /*
  * The element pass's corner indices as 16-bit offsets from a base per batch (bbase, bidx16;
  * bidx freed), if every batch's fit: 16 bytes a cell less to stream (of 76: indices 32,
- * rotations 36, λ and μ 8), the same gathers. Otherwise bidx stays. -1 on out of memory.
+ * rotations 36, λ and μ 8), the same gathers. Otherwise bidx stays. Only where the pass
+ * gathers with AVX-512 (batches_avx512: a scalar load per corner either way); the portable
+ * pass's loads from 32-bit indices vectorise into AVX2 gathers, from 16-bit ones they did not
+ * (valgrind: 1.6× its instructions). -1 on out of memory.
  */
 static int narrow_corners(mg_level *l)
 {
+    if (!__builtin_cpu_supports("x86-64-v4"))
+        return 0;
     const size_t per = 8 * MG_LANES;
     for (int b = 0; b < l->n_batches; b++) {
         int32_t lo = INT32_MAX, hi = INT32_MIN;
@@ -945,61 +950,64 @@ static inline __attribute__((always_inline)) void half_rest(const mg_level *l, i
     }
 }
 
-/* The corner indices of half h of batch b: ix (32-bit, bidx) or x moved to the batch's base
- * and ix16 (16-bit offsets, bidx16), whichever the level has. */
-typedef struct corners {
-    const float *x;
-    const int32_t *ix;
-    const uint16_t *ix16;
-} corners;
-
-static inline __attribute__((always_inline)) corners batch_corners(const mg_level *l,
-                                                                  const float *x, int b, int h)
+/* Corner k of lane p of half h of batch b: its 3·node index, as an offset from x_b (x moved
+ * to the batch's base with 16-bit offsets, bidx16; x itself with 32-bit indices, bidx). */
+static inline __attribute__((always_inline)) const float *batch_x(const mg_level *l,
+                                                                  const float *x, int b,
+                                                                  const bool narrow)
 {
-    const size_t o = 8 * MG_LANES * (size_t)b + VF_LANES * h;
-    if (l->bidx16)
-        return (corners){x + l->bbase[b], NULL, l->bidx16 + o};
-    return (corners){x, l->bidx + o, NULL};
+    return narrow ? x + l->bbase[b] : x;
 }
 
-/* corner k of lane p (the 3·node index, from the batch's base for 16-bit offsets) */
-static inline __attribute__((always_inline)) int32_t corner_at(const corners *q, int k, int p)
+static inline __attribute__((always_inline)) int32_t corner_at(const mg_level *l, int b, int h,
+                                                              int k, int p, const bool narrow)
 {
-    return q->ix16 ? q->ix16[MG_LANES * k + p] : q->ix[MG_LANES * k + p];
+    const size_t i = 8 * MG_LANES * (size_t)b + VF_LANES * h + MG_LANES * k + p;
+    return narrow ? l->bidx16[i] : l->bidx[i];
 }
 
-/* Inputs lane by lane. */
-__attribute__((optimize("fp-contract=fast"), target_clones("arch=x86-64-v3", "default")))
-static void batches_generic(const mg_level *l, const float *restrict x, int b0, int b1)
+/* Inputs lane by lane (narrow: the layout, compile-time once inlined). */
+static inline __attribute__((always_inline)) void
+generic_body(const mg_level *l, const float *restrict x, int b0, int b1, const bool narrow)
 {
     for (int b = b0; b < b1; b++)
         for (int h = 0; h < MG_LANES / VF_LANES; h++) {
-            const corners q = batch_corners(l, x, b, h);
+            const float *xb = batch_x(l, x, b, narrow);
             vf u[24];
             for (int k = 0; k < 8; k++)
                 for (int i = 0; i < 3; i++)
                     for (int p = 0; p < VF_LANES; p++)
-                        u[3 * k + i][p] = q.x[corner_at(&q, k, p) + i];
+                        u[3 * k + i][p] = xb[corner_at(l, b, h, k, p, narrow) + i];
             half_rest(l, b, h, u);
         }
 }
 
+__attribute__((optimize("fp-contract=fast"), target_clones("arch=x86-64-v3", "default")))
+static void batches_generic(const mg_level *l, const float *restrict x, int b0, int b1)
+{
+    if (l->bidx16)
+        generic_body(l, x, b0, b1, true);
+    else
+        generic_body(l, x, b0, b1, false);
+}
+
 /* Inputs with AVX-512VL: each corner's nodal 3-vectors by masked loads, transposed into x, y, z
  * across the lanes in registers (the same values as batches_generic). */
-__attribute__((optimize("fp-contract=fast"), target("arch=x86-64-v4")))
-static void batches_avx512(const mg_level *l, const float *restrict x, int b0, int b1)
+static inline __attribute__((always_inline, target("arch=x86-64-v4"))) void
+avx512_body(const mg_level *l, const float *restrict x, int b0, int b1, const bool narrow)
 {
     _Static_assert(VF_LANES == 8, "two 4-lane groups per 256-bit vector");
     for (int b = b0; b < b1; b++)
         for (int h = 0; h < MG_LANES / VF_LANES; h++) {
-            const corners q = batch_corners(l, x, b, h);
+            const float *xb = batch_x(l, x, b, narrow);
             vf u[24];
             for (int k = 0; k < 8; k++) {
                 __m256 r[4]; /* (x, y, z, 0) of lanes j | j + 4 */
                 for (int j = 0; j < 4; j++)
                     r[j] = _mm256_insertf128_ps(
-                        _mm256_castps128_ps256(_mm_maskz_loadu_ps(7, q.x + corner_at(&q, k, j))),
-                        _mm_maskz_loadu_ps(7, q.x + corner_at(&q, k, j + 4)), 1);
+                        _mm256_castps128_ps256(
+                            _mm_maskz_loadu_ps(7, xb + corner_at(l, b, h, k, j, narrow))),
+                        _mm_maskz_loadu_ps(7, xb + corner_at(l, b, h, k, j + 4, narrow)), 1);
                 const __m256 t0 = _mm256_unpacklo_ps(r[0], r[1]); /* x0 x1 y0 y1 | 4 5 */
                 const __m256 t1 = _mm256_unpackhi_ps(r[0], r[1]); /* z0 z1 0 0 | 4 5 */
                 const __m256 t2 = _mm256_unpacklo_ps(r[2], r[3]);
@@ -1010,6 +1018,15 @@ static void batches_avx512(const mg_level *l, const float *restrict x, int b0, i
             }
             half_rest(l, b, h, u);
         }
+}
+
+__attribute__((optimize("fp-contract=fast"), target("arch=x86-64-v4")))
+static void batches_avx512(const mg_level *l, const float *restrict x, int b0, int b1)
+{
+    if (l->bidx16)
+        avx512_body(l, x, b0, b1, true);
+    else
+        avx512_body(l, x, b0, b1, false);
 }
 
 /* A Chebyshev step fused into a residual's node pass: d = a d + c D⁻¹ r (d = c D⁻¹ r if
@@ -1174,6 +1191,22 @@ static inline __attribute__((always_inline)) void path_share(const mg_level *l, 
     }
 }
 
+/* path_share per variant, compiled for AVX2 as well where the CPU has it (3-operand VEX
+ * forms: fewer register copies in the node pass; no FMA contraction, the same values). */
+#define PATH_VARIANT(NAME, MODE)                                                               \
+    __attribute__((noinline, target_clones("arch=x86-64-v3", "default"))) static void NAME(    \
+        const mg_level *l, bool avx512, const float *x, const float *b, float *y,              \
+        const cheb_step *cs)                                                                   \
+    {                                                                                          \
+        path_share(l, avx512, x, b, y, cs, MODE);                                              \
+    }
+PATH_VARIANT(path_apply, NP_APPLY)
+PATH_VARIANT(path_resid, NP_RESID)
+PATH_VARIANT(path_cheb_first, NP_CHEB_FIRST)
+PATH_VARIANT(path_cheb, NP_CHEB)
+PATH_VARIANT(path_cheb_first_out, NP_CHEB_FIRST_OUT)
+PATH_VARIANT(path_cheb_out, NP_CHEB_OUT)
+
 /* y = Σ s R K Rᵀ x + dg x on any level (the finest too: rediscretized like the coarse ones);
  * with b, the residual y = b − (that) at free dofs and 0 at held ones, in the same pass; with
  * cs (and b), the Chebyshev step on that residual instead of y (cs->x is x). */
@@ -1196,22 +1229,22 @@ static void apply_path(const cs_mg *mg, int level, bool avx512, const float *x, 
 #pragma omp parallel num_threads(l->threads)
     switch (mode) {
     case NP_APPLY:
-        path_share(l, avx512, x, b, y, cs, NP_APPLY);
+        path_apply(l, avx512, x, b, y, cs);
         break;
     case NP_RESID:
-        path_share(l, avx512, x, b, y, cs, NP_RESID);
+        path_resid(l, avx512, x, b, y, cs);
         break;
     case NP_CHEB_FIRST:
-        path_share(l, avx512, x, b, y, cs, NP_CHEB_FIRST);
+        path_cheb_first(l, avx512, x, b, y, cs);
         break;
     case NP_CHEB:
-        path_share(l, avx512, x, b, y, cs, NP_CHEB);
+        path_cheb(l, avx512, x, b, y, cs);
         break;
     case NP_CHEB_FIRST_OUT:
-        path_share(l, avx512, x, b, y, cs, NP_CHEB_FIRST_OUT);
+        path_cheb_first_out(l, avx512, x, b, y, cs);
         break;
     default:
-        path_share(l, avx512, x, b, y, cs, NP_CHEB_OUT);
+        path_cheb_out(l, avx512, x, b, y, cs);
         break;
     }
 }

@@ -123,8 +123,8 @@ void cs_mg_level_smoother(const cs_mg *mg, int level, float *inv, uint8_t *mask)
 
 /* For tests, which compact layouts level `level`'s element pass reads (set by cs_mg_build and
  * each cs_mg_setup): CS_MG_NARROW_CORNERS, its corner indices as 16-bit offsets from a base
- * per batch of cells (else 32-bit indices: a batch whose corners span more than 65536 floats
- * of x); CS_MG_QUAT_ROTATIONS, its rotations as float quaternions rebuilt into R in the pass
+ * per batch of cells (else 32-bit indices: a CPU without AVX-512, or a batch whose corners
+ * span more than 65536 floats of x); CS_MG_QUAT_ROTATIONS, its rotations as float quaternions rebuilt into R in the pass
  * (else the 3×3 matrices: some cell's R not a rotation to float precision). */
 #define CS_MG_NARROW_CORNERS 1
 #define CS_MG_QUAT_ROTATIONS 2

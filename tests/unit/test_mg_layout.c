@@ -217,8 +217,12 @@ TEST(mg_compact_layouts_match_reference)
             ENSURE_MSG(bad == 0, "case %zu, %d threads: %ld failed checks", c, t + 1, bad);
         }
         printf("    case %zu: layout %d, max error %.3g of the largest term\n", c, lay[0], e[0]);
-        ENSURE_MSG(lay[0] == k.want0 && lay[1] == k.want0, "case %zu: layout %d, %d", c,
-                   lay[0], lay[1]);
+        /* 16-bit corners only where the element pass gathers with AVX-512 */
+        const int want = __builtin_cpu_supports("x86-64-v4")
+                             ? k.want0
+                             : k.want0 & ~CS_MG_NARROW_CORNERS;
+        ENSURE_MSG(lay[0] == want && lay[1] == want, "case %zu: layout %d, %d", c, lay[0],
+                   lay[1]);
         ENSURE(nl[0] == nl[1]);
         ENSURE_MSG(memcmp(yl[0], yl[1], sizeof(float) * nl[0]) == 0,
                    "case %zu: the products differ between 1 and 2 threads", c);
