@@ -1873,7 +1873,6 @@ typedef struct soft_contact {
     double ra[3], rb[3];
     double t1[3], t2[3];
     double kn, kt1, kt2, target, jn, jt1, jt2, mu;
-    bool born;          /* a pair the pieces were born with (soft_crack_nodes) */
 } soft_contact;
 
 static const double ONE[1] = {1.0};
@@ -1968,76 +1967,6 @@ static bool node_normal(const cs_object *A, int i, double n[3])
     return true;
 }
 
-/* A's node i against B's cells filed in rw->grid: the face it is least deep behind (*best;
- * facing the node's outward normal if it is on A's surface, asked only once a cell is near),
- * within the margin outside or at most half a cell inside; false if none. */
-static bool node_face(cs_rigid_world *rw, const cs_object *A, int i, const cs_object *B,
-                      double margin, double tol, cell_face *best)
-{
-    const double *p = A->x + 3 * (size_t)i;
-    double n[3];
-    int surface = -1;
-    const double qlo[3] = {p[0] - margin, p[1] - margin, p[2] - margin};
-    const double qhi[3] = {p[0] + margin, p[1] + margin, p[2] + margin};
-    grid_query(rw->grid, qlo, qhi);
-    best->sep = -INFINITY;
-    for (int e = 0; e < rw->grid->n_cand; e++) {
-        const int32_t cell = rw->grid->cand[e];
-        const int32_t *cn = B->cm.cell_nodes + 8 * (size_t)cell;
-        double X[8][3];
-        bool near = true;
-        for (int a = 0; a < 3 && near; a++) {
-            double l = INFINITY, h = -INFINITY;
-            for (int k = 0; k < 8; k++) {
-                X[k][a] = B->x[3 * (size_t)cn[k] + a];
-                l = X[k][a] < l ? X[k][a] : l;
-                h = X[k][a] > h ? X[k][a] : h;
-            }
-            near = p[a] >= l - margin && p[a] <= h + margin;
-        }
-        if (!near)
-            continue;
-        if (surface < 0)
-            surface = node_normal(A, i, n);
-        cell_face cf;
-        if (point_in_cell(B, cell, X, p, surface ? n : NULL, margin, tol, &cf) &&
-            cf.sep > best->sep)
-            *best = cf;
-    }
-    /* a node more than half a cell behind the face did not get there by a step's
-     * approach (the speculative reach is half a cell): objects that met inside each
-     * other (a tumbling linear-model piece grows) are not pushed apart from within, which
-     * crushed and inverted small pieces in the fracture storm */
-    return best->sep != -INFINITY && best->sep >= -0.5 * B->cm.h;
-}
-
-/* A contact of A's node i with B's face cf (rw->sc grown); NULL if out of memory. */
-static soft_contact *soft_add(cs_rigid_world *rw, const cs_object *A, const cs_object *B,
-                              cs_soft_resp *SA, cs_soft_resp *SB, int i, const cell_face *cf)
-{
-    if (rw->nsc == rw->cap_sc) {
-        const int cap = rw->cap_sc ? 2 * rw->cap_sc : 256;
-        soft_contact *g = realloc(rw->sc, (size_t)cap * sizeof *g);
-        if (!g)
-            return NULL;
-        rw->sc = g;
-        rw->cap_sc = cap;
-    }
-    soft_contact *c = &rw->sc[rw->nsc++];
-    memset(c, 0, sizeof *c);
-    c->SA = SA;
-    c->SB = SB;
-    c->node = i;
-    memcpy(c->bn, cf->dn, sizeof c->bn);
-    memcpy(c->bw, cf->dw, sizeof c->bw);
-    memcpy(c->n, cf->n, sizeof c->n);
-    c->sep = cf->sep;
-    c->hB = B->cm.h;
-    c->mu = sqrt(A->mat.friction * B->mat.friction);
-    c->target = fmax(A->mat.restitution, B->mat.restitution); /* e, until prepared */
-    return c;
-}
-
 /* The nodes of A in the overlap [olo, ohi] against B's cells (filed in rw->grid over B's box
  * [blo, bhi]): at most one contact per node, with the face it is least deep behind. */
 static int soft_nodes_in_cells(cs_rigid_world *rw, cs_object *A, cs_object *B,
@@ -2053,66 +1982,61 @@ static int soft_nodes_in_cells(cs_rigid_world *rw, cs_object *A, cs_object *B,
         if (p[0] < olo[0] || p[0] > ohi[0] || p[1] < olo[1] || p[1] > ohi[1] || p[2] < olo[2] ||
             p[2] > ohi[2])
             continue;
-        cell_face best;
-        if (node_face(rw, A, i, B, margin, tol, &best) &&
-            !soft_add(rw, A, B, SA, SB, i, &best))
-            return -1;
-    }
-    return 0;
-}
-
-/*
- * The nodes of A in the overlap [olo, ohi] that were joined to B before they broke apart, A
- * and B pieces of one object not yet apart: a node whose rest lattice point is a corner of
- * B's cells (kin share their parent's lattice; the split duplicated the node there, one copy
- * each side), against those cells only (at most 8, found by their lattice indices). These
- * are the pairs the pieces are born with across their crack, each node on the face its twin
- * is a corner of (exactly so at birth), so they hold a piece resting on its crack without
- * searching all the overlap: a pair of irregular neighbours' boxes overlap far beyond the
- * crack, and the full search (and the pairs it found there) made the fracture storm five
- * times slower and turned up to 88 of its pieces inside out. The contacts' responses are
- * left for the caller to fill in. Returns 0 or -1 (out of memory).
- */
-static int soft_crack_nodes(cs_rigid_world *rw, const cs_object *A, const cs_object *B,
-                            const double olo[3], const double ohi[3], double margin)
-{
-    if (fabs(A->cm.h - B->cm.h) > 1e-9 * B->cm.h)
-        return 0;
-    const double tol = fmin(0.5, margin / B->cm.h), h = B->cm.h;
-    for (int i = 0; i < A->n; i++) {
-        const double *p = A->x + 3 * (size_t)i;
-        if (p[0] < olo[0] || p[0] > ohi[0] || p[1] < olo[1] || p[1] > ohi[1] || p[2] < olo[2] ||
-            p[2] > ohi[2])
-            continue;
-        int32_t L[3];
-        for (int a = 0; a < 3; a++)
-            L[a] = (int32_t)lround((A->cm.node_rest[3 * (size_t)i + a] - B->cm.origin[a]) / h);
-        cell_face best = {.sep = -INFINITY};
+        const double qlo[3] = {p[0] - margin, p[1] - margin, p[2] - margin};
+        const double qhi[3] = {p[0] + margin, p[1] + margin, p[2] + margin};
+        grid_query(rw->grid, qlo, qhi);
         double pn[3];
-        int normal = -1; /* node_normal's answer, once asked */
-        for (int k = 0; k < 8; k++) {
-            const int32_t cell = cs_cubemesh_find(&B->cm, L[0] - CS_CORNER[k][0],
-                                                  L[1] - CS_CORNER[k][1], L[2] - CS_CORNER[k][2]);
-            if (cell < 0)
-                continue;
-            if (normal < 0)
-                normal = node_normal(A, i, pn);
+        int surface = -1; /* node_normal's answer, asked once a cell is near */
+        cell_face best = {.sep = -INFINITY};
+        for (int e = 0; e < rw->grid->n_cand; e++) {
+            const int32_t cell = rw->grid->cand[e];
             const int32_t *cn = B->cm.cell_nodes + 8 * (size_t)cell;
             double X[8][3];
-            for (int q = 0; q < 8; q++)
-                for (int a = 0; a < 3; a++)
-                    X[q][a] = B->x[3 * (size_t)cn[q] + a];
+            bool near = true;
+            for (int a = 0; a < 3 && near; a++) {
+                double l = INFINITY, h = -INFINITY;
+                for (int k = 0; k < 8; k++) {
+                    X[k][a] = B->x[3 * (size_t)cn[k] + a];
+                    l = X[k][a] < l ? X[k][a] : l;
+                    h = X[k][a] > h ? X[k][a] : h;
+                }
+                near = p[a] >= l - margin && p[a] <= h + margin;
+            }
+            if (!near)
+                continue;
+            if (surface < 0)
+                surface = node_normal(A, i, pn);
             cell_face cf;
-            if (point_in_cell(B, cell, X, p, normal ? pn : NULL, margin, tol, &cf) &&
+            if (point_in_cell(B, cell, X, p, surface ? pn : NULL, margin, tol, &cf) &&
                 cf.sep > best.sep)
                 best = cf;
         }
-        if (best.sep == -INFINITY || best.sep < -0.5 * h)
+        /* a node more than half a cell behind the face did not get there by a step's
+         * approach (the speculative reach is half a cell): objects that met inside each
+         * other (a tumbling linear-model piece grows) are not pushed apart from within, which
+         * crushed and inverted small pieces in the fracture storm */
+        if (best.sep == -INFINITY || best.sep < -0.5 * B->cm.h)
             continue;
-        soft_contact *c = soft_add(rw, A, B, NULL, NULL, i, &best); /* responses: caller's */
-        if (!c)
-            return -1;
-        c->born = true;
+        if (rw->nsc == rw->cap_sc) {
+            const int cap = rw->cap_sc ? 2 * rw->cap_sc : 256;
+            soft_contact *g = realloc(rw->sc, (size_t)cap * sizeof *g);
+            if (!g)
+                return -1;
+            rw->sc = g;
+            rw->cap_sc = cap;
+        }
+        soft_contact *c = &rw->sc[rw->nsc++];
+        memset(c, 0, sizeof *c);
+        c->SA = SA;
+        c->SB = SB;
+        c->node = i;
+        memcpy(c->bn, best.dn, sizeof c->bn);
+        memcpy(c->bw, best.dw, sizeof c->bw);
+        memcpy(c->n, best.n, sizeof c->n);
+        c->sep = best.sep;
+        c->hB = B->cm.h;
+        c->mu = sqrt(A->mat.friction * B->mat.friction);
+        c->target = fmax(A->mat.restitution, B->mat.restitution); /* e, until prepared */
     }
     return 0;
 }
@@ -2187,34 +2111,21 @@ static int soft_contacts(cs_world_t *w, cs_rigid_world *rw, cs_step_stats *st)
                 ohi[a] = fmin(ahi[a], bhi[a]) + margin;
                 over = over && olo[a] <= ohi[a];
             }
-            /* pieces of one object not yet apart (born touching across their crack):
-             * only the pairs they were born with (soft_crack_nodes), until their boxes have
-             * once been apart */
-            bool born = false;
             if (A->kin == B->kin) {
+                /* pieces of one object: born touching across their crack (each crack node
+                 * on the other's cell face), so they take contacts only once their boxes
+                 * have been apart */
                 const int ka = kin_apart(A, B->id), kb = kin_apart(B, A->id);
                 if (!over) {
                     if ((!ka && kin_add(A, B->id) != 0) || (!kb && kin_add(B, A->id) != 0))
                         return CS_ERR_NOMEM;
                     continue;
                 }
-                born = !ka || !kb;
+                if (!ka || !kb)
+                    continue;
             }
             if (!over)
                 continue;
-            /* born pairs: found first, the responses prepared only if there are any (a
-             * pair of neighbours' boxes often overlap where they do not touch) */
-            const int first = rw->nsc;
-            int mid = first;
-            if (born) {
-                if (soft_crack_nodes(rw, A, B, olo, ohi, margin) != 0)
-                    return CS_ERR_NOMEM;
-                mid = rw->nsc;
-                if (soft_crack_nodes(rw, B, A, olo, ohi, margin) != 0)
-                    return CS_ERR_NOMEM;
-                if (rw->nsc == first)
-                    continue;
-            }
             if (soft_prepare(w, rw, A, true) != 0)
                 return CS_ERR_NOMEM;
             cs_soft_resp *SA = rw->cur;
@@ -2222,13 +2133,8 @@ static int soft_contacts(cs_world_t *w, cs_rigid_world *rw, cs_step_stats *st)
                 return CS_ERR_NOMEM;
             cs_soft_resp *SB = rw->cur;
             SA->two_level = SB->two_level = true;
-            for (int k = first; k < rw->nsc; k++) {
-                rw->sc[k].SA = k < mid ? SA : SB;
-                rw->sc[k].SB = k < mid ? SB : SA;
-            }
-            if (!born &&
-                (soft_nodes_in_cells(rw, A, B, SA, SB, olo, ohi, blo, bhi, margin) != 0 ||
-                 soft_nodes_in_cells(rw, B, A, SB, SA, olo, ohi, alo, ahi, margin) != 0))
+            if (soft_nodes_in_cells(rw, A, B, SA, SB, olo, ohi, blo, bhi, margin) != 0 ||
+                soft_nodes_in_cells(rw, B, A, SB, SA, olo, ohi, alo, ahi, margin) != 0)
                 return CS_ERR_NOMEM;
         }
     }
@@ -2251,8 +2157,6 @@ static int soft_contacts(cs_world_t *w, cs_rigid_world *rw, cs_step_stats *st)
         const double vn0 = dot3(vr, c->n), slop = 0.01 * c->hB;
         c->target = c->sep > 0 ? -c->sep / dt
                                : BAUMGARTE * fmin(fmax(0, -c->sep - slop), 0.1 * c->hB) / dt;
-        if (c->born) /* a pair the pieces were born with: never apart, so no impact */
-            continue;
         /* restitution reverses the approach the objects have now (their velocities after
          * their steps), not the predicted one: a compressed block's nodes springing up in
          * the prediction under a block resting on it are no impact */
