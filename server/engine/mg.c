@@ -62,7 +62,10 @@ _Static_assert(MG_CHEB_KIND != 4 ||
 #define MG_COARSE_SWEEPS 8 /* Jacobi sweeps on a coarsest level too large for Cholesky */
 #define MG_POWER_ITERS 10
 #define MG_ROT_BATCH 16    /* coarse cells per batch of setup_coarse's rotation extraction */
-#define MG_CHUNK 64        /* batches per chunk of apply_ex (1024 cells, 128 KiB of results) */
+#ifndef MG_CHUNK
+#define MG_CHUNK 64
+#endif
+/* batches per chunk of apply_ex (1024 cells, 128 KiB of results) */
 #define MG_LANES 16        /* cells per batch of the element pass (one float SIMD lane each) */
 #define VF_LANES 8         /* lanes per vector of the element pass's arithmetic */
 typedef float vf __attribute__((vector_size(4 * VF_LANES)));
@@ -71,6 +74,11 @@ typedef float vf __attribute__((vector_size(4 * VF_LANES)));
 #define MODAL_S float
 #include "modal_core.h"
 #define MG_LAMBDA_EVERY 64 /* re-estimate λmax(D⁻¹A) after this many setups */
+
+typedef struct mg_tw {
+    int32_t node;
+    float w;
+} mg_tw;
 
 typedef struct mg_level {
     int n_cells, n_nodes, threads;
@@ -82,6 +90,9 @@ typedef struct mg_level {
     double *p_w;
     int32_t *r_start, *r_node;        /* per coarse node: its fine nodes (Pᵀ) */
     double *r_w;
+    /* the V-cycle's copies of both (transfer_layout): (node, weight in float) pairs, one
+     * 8-byte stream per transfer instead of a 4- and an 8-byte one */
+    mg_tw *p_tw, *r_tw;
     /* from the next finer level (level >= 1) */
     int32_t *ch_start, *ch;           /* children of each cell */
     int32_t *walk;                    /* the cells in the order of their first child */
@@ -104,7 +115,17 @@ typedef struct mg_level {
      * c % MG_LANES; lanes past the last cell repeat the batch's first cell with L = M = 0) */
     int n_batches;
     int32_t *bidx;                    /* per batch 8 × MG_LANES: 3·node of corner k per lane */
+    /* ... or, where every batch's corners lie within 65536 floats of x (narrow_corners: any
+     * box up to about 100 cells across a layer), as 16-bit offsets from a base per batch
+     * (half the bytes; bidx is then NULL) */
+    int32_t *bbase;                   /* per batch: the least 3·node of its corners */
+    uint16_t *bidx16;                 /* per batch 8 × MG_LANES: 3·node − bbase */
     float *bR;                        /* per batch 9 × MG_LANES: R_c (cs_mg_setup) */
+    /* ... and as unit quaternions (w, x, y, z), per batch 4 × MG_LANES (rotation_layout, per
+     * setup): the element pass rebuilds R from them (16 bytes a cell to stream instead of
+     * 36); bQ_ok false (R not a rotation to float precision somewhere): it reads bR */
+    float *bQ;
+    bool bQ_ok;
     float *bL, *bM;                   /* per batch MG_LANES: s_c·hλ/16, s_c·hμ/16 (cs_mg_setup) */
     /* The cells' products, 8 corners × (x, y, z, ·) per cell (32 floats), in a window per
      * segment of batches
@@ -474,6 +495,65 @@ static int product_layout(mg_level *l)
     return 0;
 }
 
+/*
+ * The element pass's corner indices as 16-bit offsets from a base per batch (bbase, bidx16;
+ * bidx freed), if every batch's fit: 16 bytes a cell less to stream (of 76: indices 32,
+ * rotations 36, λ and μ 8), the same gathers. Otherwise bidx stays. Only where the pass
+ * gathers with AVX-512 (batches_avx512: a scalar load per corner either way); the portable
+ * pass's loads from 32-bit indices vectorise into AVX2 gathers, from 16-bit ones they did not
+ * (valgrind: 1.6× its instructions). -1 on out of memory.
+ */
+static int narrow_corners(mg_level *l)
+{
+    if (!__builtin_cpu_supports("x86-64-v4"))
+        return 0;
+    const size_t per = 8 * MG_LANES;
+    for (int b = 0; b < l->n_batches; b++) {
+        int32_t lo = INT32_MAX, hi = INT32_MIN;
+        for (size_t i = 0; i < per; i++) {
+            const int32_t v = l->bidx[per * b + i];
+            lo = v < lo ? v : lo;
+            hi = v > hi ? v : hi;
+        }
+        if ((int64_t)hi - lo > UINT16_MAX)
+            return 0;
+    }
+    const size_t nb = l->n_batches ? (size_t)l->n_batches : 1;
+    l->bbase = malloc(nb * sizeof(int32_t));
+    l->bidx16 = aligned_alloc(64, nb * per * sizeof(uint16_t));
+    if (!l->bbase || !l->bidx16)
+        return -1;
+    for (int b = 0; b < l->n_batches; b++) {
+        int32_t lo = INT32_MAX;
+        for (size_t i = 0; i < per; i++)
+            lo = l->bidx[per * b + i] < lo ? l->bidx[per * b + i] : lo;
+        l->bbase[b] = lo;
+        for (size_t i = 0; i < per; i++)
+            l->bidx16[per * b + i] = (uint16_t)(l->bidx[per * b + i] - lo);
+    }
+    free(l->bidx);
+    l->bidx = NULL;
+    return 0;
+}
+
+/* The V-cycle's copies of level f's transfer rows: (node, float weight) pairs (the weights
+ * are the float the loops converted them to). -1 on out of memory. */
+static int transfer_layout(mg_level *f)
+{
+    if (!f->p_start)
+        return 0;
+    const int np = f->p_start[f->n_nodes];
+    f->p_tw = malloc((size_t)(np > 0 ? np : 1) * sizeof(mg_tw));
+    f->r_tw = malloc((size_t)(np > 0 ? np : 1) * sizeof(mg_tw));
+    if (!f->p_tw || !f->r_tw)
+        return -1;
+    for (int a = 0; a < np; a++) {
+        f->p_tw[a] = (mg_tw){f->p_node[a], (float)f->p_w[a]};
+        f->r_tw[a] = (mg_tw){f->r_node[a], (float)f->r_w[a]};
+    }
+    return 0;
+}
+
 /* The optimised fourth-kind polynomials' weights β (Lottes, "Optimal polynomial smoothers for
  * multigrid V-cycles", 2023, arXiv:2202.08830, Table 5), degrees 1–4. */
 static const double opt4_beta[CS_MG_CHEB_MAX][CS_MG_CHEB_MAX] = {
@@ -562,6 +642,7 @@ static int alloc_level_state(mg_level *l, int level, int threads, int cheb_deg)
     l->n_batches = (l->n_cells + MG_LANES - 1) / MG_LANES;
     l->bidx = aligned_alloc(64, nb * 8 * vb);
     l->bR = aligned_alloc(64, nb * 9 * vb);
+    l->bQ = aligned_alloc(64, nb * 4 * vb);
     l->bL = aligned_alloc(64, nb * vb);
     l->bM = aligned_alloc(64, nb * vb);
     l->bslot = malloc(nb * sizeof(int32_t));
@@ -574,7 +655,7 @@ static int alloc_level_state(mg_level *l, int level, int threads, int cheb_deg)
     l->t = malloc((n3 ? n3 : 1) * sizeof(float));
     l->d = malloc((n3 ? n3 : 1) * sizeof(float));
     if (!l->d || !l->s || !l->dg || !l->dgf || !l->invf || !l->held || !l->bslot || !l->x || !l->b || !l->t ||
-        !l->bidx || !l->bR || !l->bL || !l->bM || !l->fadj || !l->norder || !l->nminb ||
+        !l->bidx || !l->bR || !l->bQ || !l->bL || !l->bM || !l->fadj || !l->norder || !l->nminb ||
         !l->nfirst)
         return -1;
     /* counting sort of the nodes by the batch of their last cell (adj: cells increasing) */
@@ -603,7 +684,7 @@ static int alloc_level_state(mg_level *l, int level, int threads, int cheb_deg)
             for (int k = 0; k < 8; k++)
                 l->bidx[(8 * b + k) * MG_LANES + p] = 3 * l->cell_nodes[8 * c + k];
         }
-    if (product_layout(l) != 0)
+    if (product_layout(l) != 0 || narrow_corners(l) != 0)
         return -1;
     if (level == 0)
         return 0;
@@ -638,6 +719,10 @@ static void free_level(mg_level *l)
     free(l->r_start);
     free(l->r_node);
     free(l->r_w);
+    free(l->p_tw);
+    free(l->r_tw);
+    free(l->bbase);
+    free(l->bidx16);
     free(l->ch_start);
     free(l->ch);
     free(l->walk);
@@ -650,6 +735,7 @@ static void free_level(mg_level *l)
     free(l->own_mask);
     free(l->bidx);
     free(l->bR);
+    free(l->bQ);
     free(l->bL);
     free(l->bM);
     free(l->fadj);
@@ -739,6 +825,9 @@ cs_mg *cs_mg_build(const cs_cubemesh *cm, const cs_fem *fem, uint32_t version)
             break;
         }
     }
+    for (int l = 0; l < mg->n_levels; l++)
+        if (transfer_layout(&mg->lv[l]) != 0)
+            goto fail;
     for (int l = 0; l < mg->n_levels; l++) {
         mg_level *c = &mg->lv[l];
         c->cycles = l > 0 && l < mg->n_levels - 1 &&
@@ -815,8 +904,27 @@ static inline __attribute__((always_inline)) void half_rest(const mg_level *l, i
 {
     vf R[9], y[24], L, M;
     const size_t o = (size_t)b * MG_LANES + VF_LANES * h;
-    for (int j = 0; j < 9; j++)
-        memcpy(&R[j], l->bR + 9 * MG_LANES * (size_t)b + MG_LANES * j + VF_LANES * h, sizeof(vf));
+    if (l->bQ_ok) {
+        /* R(q), as fem.c's rot_quat_mat, in float */
+        vf q[4];
+        for (int j = 0; j < 4; j++)
+            memcpy(&q[j], l->bQ + 4 * MG_LANES * (size_t)b + MG_LANES * j + VF_LANES * h,
+                   sizeof(vf));
+        const vf w = q[0], qx = q[1], qy = q[2], qz = q[3];
+        R[0] = 1 - 2 * (qy * qy + qz * qz);
+        R[1] = 2 * (qx * qy - w * qz);
+        R[2] = 2 * (qx * qz + w * qy);
+        R[3] = 2 * (qx * qy + w * qz);
+        R[4] = 1 - 2 * (qx * qx + qz * qz);
+        R[5] = 2 * (qy * qz - w * qx);
+        R[6] = 2 * (qx * qz - w * qy);
+        R[7] = 2 * (qy * qz + w * qx);
+        R[8] = 1 - 2 * (qx * qx + qy * qy);
+    } else {
+        for (int j = 0; j < 9; j++)
+            memcpy(&R[j], l->bR + 9 * MG_LANES * (size_t)b + MG_LANES * j + VF_LANES * h,
+                   sizeof(vf));
+    }
     memcpy(&L, l->bL + o, sizeof L);
     memcpy(&M, l->bM + o, sizeof M);
     modal_core_f(u, R, 0.0f, &L, &M, NULL, y);
@@ -842,39 +950,64 @@ static inline __attribute__((always_inline)) void half_rest(const mg_level *l, i
     }
 }
 
-/* Inputs lane by lane. */
-__attribute__((optimize("fp-contract=fast"), target_clones("arch=x86-64-v3", "default")))
-static void batches_generic(const mg_level *l, const float *restrict x, int b0, int b1)
+/* Corner k of lane p of half h of batch b: its 3·node index, as an offset from x_b (x moved
+ * to the batch's base with 16-bit offsets, bidx16; x itself with 32-bit indices, bidx). */
+static inline __attribute__((always_inline)) const float *batch_x(const mg_level *l,
+                                                                  const float *x, int b,
+                                                                  const bool narrow)
+{
+    return narrow ? x + l->bbase[b] : x;
+}
+
+static inline __attribute__((always_inline)) int32_t corner_at(const mg_level *l, int b, int h,
+                                                              int k, int p, const bool narrow)
+{
+    const size_t i = 8 * MG_LANES * (size_t)b + VF_LANES * h + MG_LANES * k + p;
+    return narrow ? l->bidx16[i] : l->bidx[i];
+}
+
+/* Inputs lane by lane (narrow: the layout, compile-time once inlined). */
+static inline __attribute__((always_inline)) void
+generic_body(const mg_level *l, const float *restrict x, int b0, int b1, const bool narrow)
 {
     for (int b = b0; b < b1; b++)
         for (int h = 0; h < MG_LANES / VF_LANES; h++) {
-            const int32_t *ix = l->bidx + 8 * MG_LANES * (size_t)b + VF_LANES * h;
+            const float *xb = batch_x(l, x, b, narrow);
             vf u[24];
             for (int k = 0; k < 8; k++)
                 for (int i = 0; i < 3; i++)
                     for (int p = 0; p < VF_LANES; p++)
-                        u[3 * k + i][p] = x[ix[MG_LANES * k + p] + i];
+                        u[3 * k + i][p] = xb[corner_at(l, b, h, k, p, narrow) + i];
             half_rest(l, b, h, u);
         }
 }
 
+__attribute__((optimize("fp-contract=fast"), target_clones("arch=x86-64-v3", "default")))
+static void batches_generic(const mg_level *l, const float *restrict x, int b0, int b1)
+{
+    if (l->bidx16)
+        generic_body(l, x, b0, b1, true);
+    else
+        generic_body(l, x, b0, b1, false);
+}
+
 /* Inputs with AVX-512VL: each corner's nodal 3-vectors by masked loads, transposed into x, y, z
  * across the lanes in registers (the same values as batches_generic). */
-__attribute__((optimize("fp-contract=fast"), target("arch=x86-64-v4")))
-static void batches_avx512(const mg_level *l, const float *restrict x, int b0, int b1)
+static inline __attribute__((always_inline, target("arch=x86-64-v4"))) void
+avx512_body(const mg_level *l, const float *restrict x, int b0, int b1, const bool narrow)
 {
     _Static_assert(VF_LANES == 8, "two 4-lane groups per 256-bit vector");
     for (int b = b0; b < b1; b++)
         for (int h = 0; h < MG_LANES / VF_LANES; h++) {
-            const int32_t *ix = l->bidx + 8 * MG_LANES * (size_t)b + VF_LANES * h;
+            const float *xb = batch_x(l, x, b, narrow);
             vf u[24];
             for (int k = 0; k < 8; k++) {
-                const int32_t *q = ix + MG_LANES * k;
                 __m256 r[4]; /* (x, y, z, 0) of lanes j | j + 4 */
                 for (int j = 0; j < 4; j++)
                     r[j] = _mm256_insertf128_ps(
-                        _mm256_castps128_ps256(_mm_maskz_loadu_ps(7, x + q[j])),
-                        _mm_maskz_loadu_ps(7, x + q[j + 4]), 1);
+                        _mm256_castps128_ps256(
+                            _mm_maskz_loadu_ps(7, xb + corner_at(l, b, h, k, j, narrow))),
+                        _mm_maskz_loadu_ps(7, xb + corner_at(l, b, h, k, j + 4, narrow)), 1);
                 const __m256 t0 = _mm256_unpacklo_ps(r[0], r[1]); /* x0 x1 y0 y1 | 4 5 */
                 const __m256 t1 = _mm256_unpackhi_ps(r[0], r[1]); /* z0 z1 0 0 | 4 5 */
                 const __m256 t2 = _mm256_unpacklo_ps(r[2], r[3]);
@@ -885,6 +1018,15 @@ static void batches_avx512(const mg_level *l, const float *restrict x, int b0, i
             }
             half_rest(l, b, h, u);
         }
+}
+
+__attribute__((optimize("fp-contract=fast"), target("arch=x86-64-v4")))
+static void batches_avx512(const mg_level *l, const float *restrict x, int b0, int b1)
+{
+    if (l->bidx16)
+        avx512_body(l, x, b0, b1, true);
+    else
+        avx512_body(l, x, b0, b1, false);
 }
 
 /* A Chebyshev step fused into a residual's node pass: d = a d + c D⁻¹ r (d = c D⁻¹ r if
@@ -918,19 +1060,24 @@ static inline void store3(float *p, vf4 v)
     _mm_store_ss(p + 2, _mm_movehl_ps((__m128)v, (__m128)v));
 }
 
-/* The free dofs of node n (all bits set; lane 3 clear). */
-static inline vf4 free_mask(const mg_level *l, int n)
+/* The free dofs of a node whose held bits are h (all bits set; lane 3 clear). */
+static inline vf4 free_bits(unsigned h)
 {
     static const vi4 FREE[8] = {{-1, -1, -1, 0}, {0, -1, -1, 0}, {-1, 0, -1, 0}, {0, 0, -1, 0},
                                 {-1, -1, 0, 0},  {0, -1, 0, 0},  {-1, 0, 0, 0},  {0, 0, 0, 0}};
-    return (vf4)FREE[l->held[n] & 7];
+    return (vf4)FREE[h & 7];
 }
 
-/* D⁻¹ v at node n by its columns (16-byte loads: lane 3 is the next column's first entry, or
- * the tail), per component in the order of a row-major product: (m_k0 v0 + m_k1 v1) + m_k2 v2. */
-static inline vf4 dinv(const mg_level *l, int n, vf4 v)
+static inline vf4 free_mask(const mg_level *l, int n)
 {
-    const float *m = l->invf + 9 * (size_t)n;
+    return free_bits(l->held[n]);
+}
+
+/* D⁻¹ v for the node whose D⁻¹ columns start at m (16-byte loads: lane 3 is the next column's
+ * first entry, or what follows the last), per component in the order of a row-major product:
+ * (m_k0 v0 + m_k1 v1) + m_k2 v2. */
+static inline vf4 dinv_at(const float *m, vf4 v)
+{
     vf4 c0, c1, c2;
     memcpy(&c0, m, sizeof c0);
     memcpy(&c1, m + 3, sizeof c1);
@@ -941,50 +1088,55 @@ static inline vf4 dinv(const mg_level *l, int n, vf4 v)
     return c0 * v0 + c1 * v1 + c2 * v2;
 }
 
+static inline vf4 dinv(const mg_level *l, int n, vf4 v)
+{
+    return dinv_at(l->invf + 9 * (size_t)n, v);
+}
+
 static inline vf4 and4(vf4 v, vf4 m)
 {
     return (vf4)((vi4)v & (vi4)m);
 }
 
-/* Node n's row of y (see apply_path): its cells' products summed in the adj order; in the
- * Chebyshev variants, instead of storing it, the step on node n (its cells are all done: no
- * later cell of this pass reads its x). Component by component the same arithmetic in the
- * same order as scalar code, 4 lanes wide (lane 3 is discarded). */
-static inline __attribute__((always_inline)) void node_out(const mg_level *l, int n,
-                                                           const float *x, const float *b,
-                                                           float *y, const cheb_step *cs,
-                                                           const int mode)
+/* Node n's row of y (see apply_path): its cells' products (links at fe + fadj[0..links))
+ * summed in the adj order; in the Chebyshev variants, instead of storing it, the step on node
+ * n (its cells are all done: no later cell of this pass reads its x). inv: its D⁻¹ columns,
+ * dg its diagonal part, held its held dofs. Component by component the same arithmetic in
+ * the same order as scalar code, 4 lanes wide (lane 3 is discarded). */
+static inline __attribute__((always_inline)) void
+node_core(const mg_level *l, int n, const int32_t *fadj, int links, const float *inv, float dg,
+          unsigned held, const float *x, const float *b, float *y, const cheb_step *cs,
+          const int mode)
 {
     /* (x, y, z, ·) per link: one 16-byte load and add each, the same sums per component */
     vf4 s = {0, 0, 0, 0};
-    const int a0 = l->adj_start[n], a1 = l->adj_start[n + 1];
     const float *fe = __builtin_assume_aligned(l->fe, 16);
-    if (a1 - a0 == 8) {
+    if (links == 8) {
         /* an interior node: its 8 links loaded at once, summed in the same order */
         vf4 v[8];
         for (int a = 0; a < 8; a++)
-            memcpy(&v[a], fe + l->fadj[a0 + a], sizeof v[a]);
+            memcpy(&v[a], fe + fadj[a], sizeof v[a]);
         for (int a = 0; a < 8; a++)
             s += v[a];
     } else {
-        for (int a = a0; a < a1; a++) {
+        for (int a = 0; a < links; a++) {
             vf4 v;
-            memcpy(&v, fe + l->fadj[a], sizeof v);
+            memcpy(&v, fe + fadj[a], sizeof v);
             s += v;
         }
     }
-    const vf4 ax = s + l->dgf[n] * load3(x + 3 * n);
+    const vf4 ax = s + dg * load3(x + 3 * n);
     if (mode == NP_APPLY) {
         store3(y + 3 * n, ax);
         return;
     }
-    const vf4 fr = free_mask(l, n);
+    const vf4 fr = free_bits(held);
     const vf4 r = and4(load3(b + 3 * n) - ax, fr);
     if (mode == NP_RESID) {
         store3(y + 3 * n, r);
         return;
     }
-    const vf4 z = dinv(l, n, r);
+    const vf4 z = dinv_at(inv, r);
     const bool first = mode == NP_CHEB_FIRST || mode == NP_CHEB_FIRST_OUT;
     const vf4 dj = and4(first ? cs->c * z : cs->a * load3(cs->d + 3 * n) + cs->c * z, fr);
     store3(cs->d + 3 * n, dj);
@@ -993,6 +1145,17 @@ static inline __attribute__((always_inline)) void node_out(const mg_level *l, in
     if (mode == NP_CHEB_FIRST_OUT || mode == NP_CHEB_OUT)
         for (int k = 0; k < 3; k++)
             cs->out[3 * (size_t)n + k] = xn[k];
+}
+
+/* node_core from the level's arrays by node index */
+static inline __attribute__((always_inline)) void node_out(const mg_level *l, int n,
+                                                           const float *x, const float *b,
+                                                           float *y, const cheb_step *cs,
+                                                           const int mode)
+{
+    const int a0 = l->adj_start[n];
+    node_core(l, n, l->fadj + a0, l->adj_start[n + 1] - a0, l->invf + 9 * (size_t)n, l->dgf[n],
+              l->held[n], x, b, y, cs, mode);
 }
 
 /* One thread's share of apply_path (mode compile-time once inlined): its segments' element
@@ -1028,6 +1191,22 @@ static inline __attribute__((always_inline)) void path_share(const mg_level *l, 
     }
 }
 
+/* path_share per variant, compiled for AVX2 as well where the CPU has it (3-operand VEX
+ * forms: fewer register copies in the node pass; no FMA contraction, the same values). */
+#define PATH_VARIANT(NAME, MODE)                                                               \
+    __attribute__((noinline, target_clones("arch=x86-64-v3", "default"))) static void NAME(    \
+        const mg_level *l, bool avx512, const float *x, const float *b, float *y,              \
+        const cheb_step *cs)                                                                   \
+    {                                                                                          \
+        path_share(l, avx512, x, b, y, cs, MODE);                                              \
+    }
+PATH_VARIANT(path_apply, NP_APPLY)
+PATH_VARIANT(path_resid, NP_RESID)
+PATH_VARIANT(path_cheb_first, NP_CHEB_FIRST)
+PATH_VARIANT(path_cheb, NP_CHEB)
+PATH_VARIANT(path_cheb_first_out, NP_CHEB_FIRST_OUT)
+PATH_VARIANT(path_cheb_out, NP_CHEB_OUT)
+
 /* y = Σ s R K Rᵀ x + dg x on any level (the finest too: rediscretized like the coarse ones);
  * with b, the residual y = b − (that) at free dofs and 0 at held ones, in the same pass; with
  * cs (and b), the Chebyshev step on that residual instead of y (cs->x is x). */
@@ -1050,22 +1229,22 @@ static void apply_path(const cs_mg *mg, int level, bool avx512, const float *x, 
 #pragma omp parallel num_threads(l->threads)
     switch (mode) {
     case NP_APPLY:
-        path_share(l, avx512, x, b, y, cs, NP_APPLY);
+        path_apply(l, avx512, x, b, y, cs);
         break;
     case NP_RESID:
-        path_share(l, avx512, x, b, y, cs, NP_RESID);
+        path_resid(l, avx512, x, b, y, cs);
         break;
     case NP_CHEB_FIRST:
-        path_share(l, avx512, x, b, y, cs, NP_CHEB_FIRST);
+        path_cheb_first(l, avx512, x, b, y, cs);
         break;
     case NP_CHEB:
-        path_share(l, avx512, x, b, y, cs, NP_CHEB);
+        path_cheb(l, avx512, x, b, y, cs);
         break;
     case NP_CHEB_FIRST_OUT:
-        path_share(l, avx512, x, b, y, cs, NP_CHEB_FIRST_OUT);
+        path_cheb_first_out(l, avx512, x, b, y, cs);
         break;
     default:
-        path_share(l, avx512, x, b, y, cs, NP_CHEB_OUT);
+        path_cheb_out(l, avx512, x, b, y, cs);
         break;
     }
 }
@@ -1099,6 +1278,14 @@ void cs_mg_cheb_step_level(const cs_mg *mg, int level, const float *b, float *x,
         return;
     const cheb_step cs = {d, x, a, c, first, NULL};
     apply_path(mg, level, mg->avx512, x, b, NULL, &cs);
+}
+
+int cs_mg_level_layout(const cs_mg *mg, int level)
+{
+    if (level < 0 || level >= mg->n_levels)
+        return 0;
+    const mg_level *l = &mg->lv[level];
+    return (l->bidx16 ? CS_MG_NARROW_CORNERS : 0) | (l->bQ_ok ? CS_MG_QUAT_ROTATIONS : 0);
 }
 
 void cs_mg_level_smoother(const cs_mg *mg, int level, float *inv, uint8_t *mask)
@@ -1429,6 +1616,56 @@ out:
     return isfinite(lam) && lam > 0 ? lam : 2.0;
 }
 
+/*
+ * The element pass's rotations as float unit quaternions (bQ), from the cells' R by
+ * Shepperd's method in double (lanes past the last cell: the identity). Used (bQ_ok) only if
+ * R(q) rebuilt in double from the float q is every cell's R within 1e-6 per entry (a proper
+ * rotation: fem's and setup_coarse's are); otherwise the pass reads bR. Called at the end of
+ * to_single, every setup.
+ */
+static void rotation_layout(mg_level *l)
+{
+    int bad = 0;
+#pragma omp parallel for num_threads(l->threads) schedule(static) reduction(+ : bad)
+    for (int b = 0; b < l->n_batches; b++)
+        for (int p = 0; p < MG_LANES; p++) {
+            const int c = b * MG_LANES + p;
+            double q[4] = {1, 0, 0, 0};
+            if (c < l->n_cells) {
+                const double *R = l->R + 9 * (size_t)c, tr = R[0] + R[4] + R[8];
+                if (tr >= R[0] && tr >= R[4] && tr >= R[8]) {
+                    const double r = sqrt(fmax(1 + tr, 0.0)), f = r > 0 ? 0.5 / r : 0;
+                    q[0] = 0.5 * r, q[1] = (R[7] - R[5]) * f, q[2] = (R[2] - R[6]) * f,
+                    q[3] = (R[3] - R[1]) * f;
+                } else if (R[0] >= R[4] && R[0] >= R[8]) {
+                    const double r = sqrt(fmax(1 + R[0] - R[4] - R[8], 0.0)), f = r > 0 ? 0.5 / r : 0;
+                    q[1] = 0.5 * r, q[0] = (R[7] - R[5]) * f, q[2] = (R[1] + R[3]) * f,
+                    q[3] = (R[2] + R[6]) * f;
+                } else if (R[4] >= R[8]) {
+                    const double r = sqrt(fmax(1 - R[0] + R[4] - R[8], 0.0)), f = r > 0 ? 0.5 / r : 0;
+                    q[2] = 0.5 * r, q[0] = (R[2] - R[6]) * f, q[1] = (R[1] + R[3]) * f,
+                    q[3] = (R[5] + R[7]) * f;
+                } else {
+                    const double r = sqrt(fmax(1 - R[0] - R[4] + R[8], 0.0)), f = r > 0 ? 0.5 / r : 0;
+                    q[3] = 0.5 * r, q[0] = (R[3] - R[1]) * f, q[1] = (R[2] + R[6]) * f,
+                    q[2] = (R[5] + R[7]) * f;
+                }
+                const double n = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+                for (int j = 0; j < 4; j++)
+                    q[j] = n > 0 ? q[j] / n : (j == 0);
+                double qf[4], Rq[9];
+                for (int j = 0; j < 4; j++)
+                    qf[j] = (float)q[j];
+                cs_quat_to_mat(qf, Rq);
+                for (int j = 0; j < 9; j++)
+                    bad += !(fabs(Rq[j] - R[j]) <= 1e-6);
+            }
+            for (int j = 0; j < 4; j++)
+                l->bQ[(4 * b + j) * MG_LANES + p] = (float)q[j];
+        }
+    l->bQ_ok = bad == 0;
+}
+
 /* The single-precision copies the V-cycle reads. */
 static void to_single(mg_level *l, double hl, double hm)
 {
@@ -1452,6 +1689,7 @@ static void to_single(mg_level *l, double hl, double hm)
                                (l->mask[3 * n + 2] ? 4 : 0));
     }
     l->invf[9 * (size_t)l->n_nodes] = 0.0f; /* the tail dinv's last column load reads */
+    rotation_layout(l);
 }
 
 int cs_mg_setup(cs_mg *mg, const cs_fem *fem, cs_matvec_fn A, void *ctx, const double *inv0,
@@ -1564,7 +1802,7 @@ static void vcycle(cs_mg *mg, int level, const float *b, float *x, const double 
         /* (x, y, z, 0) vectors: per component the scalar sums in the same order */
         vf4 s = {0, 0, 0, 0};
         for (int a = f->r_start[J]; a < f->r_start[J + 1]; a++)
-            s += (float)f->r_w[a] * load3(f->t + 3 * f->r_node[a]);
+            s += f->r_tw[a].w * load3(f->t + 3 * f->r_tw[a].node);
         store3(c->b + 3 * J, and4(s, free_mask(c, J)));
     }
     vcycle(mg, level + 1, c->b, c->x, NULL, NULL);
@@ -1581,7 +1819,7 @@ static void vcycle(cs_mg *mg, int level, const float *b, float *x, const double 
     for (int n = 0; n < f->n_nodes; n++) {
         vf4 s = {0, 0, 0, 0};
         for (int a = f->p_start[n]; a < f->p_start[n + 1]; a++)
-            s += (float)f->p_w[a] * load3(c->x + 3 * f->p_node[a]);
+            s += f->p_tw[a].w * load3(c->x + 3 * f->p_tw[a].node);
         /* held dofs keep their value (bit for bit: not x + 0) */
         const vf4 fr = free_mask(f, n), xn = load3(x + 3 * n);
         store3(x + 3 * n, (vf4)(((vi4)(xn + s) & (vi4)fr) | ((vi4)xn & ~(vi4)fr)));

@@ -121,6 +121,15 @@ void cs_mg_cheb_step_level(const cs_mg *mg, int level, const float *b, float *x,
                            float a, float c, bool first);
 void cs_mg_level_smoother(const cs_mg *mg, int level, float *inv, uint8_t *mask);
 
+/* For tests, which compact layouts level `level`'s element pass reads (set by cs_mg_build and
+ * each cs_mg_setup): CS_MG_NARROW_CORNERS, its corner indices as 16-bit offsets from a base
+ * per batch of cells (else 32-bit indices: a CPU without AVX-512, or a batch whose corners
+ * span more than 65536 floats of x); CS_MG_QUAT_ROTATIONS, its rotations as float quaternions rebuilt into R in the pass
+ * (else the 3×3 matrices: some cell's R not a rotation to float precision). */
+#define CS_MG_NARROW_CORNERS 1
+#define CS_MG_QUAT_ROTATIONS 2
+int cs_mg_level_layout(const cs_mg *mg, int level);
+
 /* The transfers between level `level` and the next coarser one, without masks (for tests):
  * xf = P xc (prolongation, trilinear) and xc = Pᵀ xf (restriction); nothing on the coarsest. */
 void cs_mg_prolong(const cs_mg *mg, int level, const float *xc, float *xf);

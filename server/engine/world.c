@@ -227,6 +227,7 @@ int cs_world_create(const cs_world_def *def, cs_world_t **out, char *err, size_t
     w->broadphase_min_bodies = CS_BROADPHASE_BODIES;
     w->pc_lag_angle = CS_PC_LAG_ANGLE;
     w->pc_lag_steps = CS_PC_LAG_STEPS;
+    w->pc_lag_cap = true;
     *out = w;
     return CS_OK;
 }
@@ -1327,8 +1328,9 @@ static bool setup_multigrid(const cs_world_t *w, cs_object *o, cs_matvec_fn A,
  * the solve (constraints, ground contacts, frozen nodes), a statics solve, a reset; and when
  * some cell's rotation has turned by more than w->pc_lag_angle since the build (measured as
  * 3 − tr(R_builtᵀ R) = 2(1 − cos θ), one pass over the cells), or after w->pc_lag_steps
- * steps. A lagged solve that misses the tolerance within the iteration limit is redone from
- * where it stopped with a fresh build. Block Jacobi alone (small objects) is rebuilt every
+ * steps. A lagged solve that misses the tolerance within the iteration limit (or within
+ * twice the last fresh solve's iterations + 2, at least 8) is continued from where it
+ * stopped with a fresh build. Block Jacobi alone (small objects) is rebuilt every
  * step as before: its set-up is cheap next to its iterations, and o->blocks is shared scratch
  * (the impact solve and central differences write it).
  */
@@ -2015,11 +2017,19 @@ static int step_implicit(cs_world_t *w, cs_object *o, cs_step_stats *st, bool tr
         }
         if (round == 0)
             t3 = now_ms();
+        /* A lagged solve may take at most twice the last fresh one's iterations (+ 2, and
+         * no fewer than 8): past that a build (about half an iteration) is the cheaper way
+         * on, and the retry below continues from where it stopped. */
+        int max_it = w->def.cg_max_iterations;
+        if (lagged && w->pc_lag_cap && max_it > 2 * o->lag.fresh_it + 2 && max_it > 8)
+            max_it = 2 * o->lag.fresh_it + 2 > 8 ? 2 * o->lag.fresh_it + 2 : 8;
         cs_cg_result rr = solve(w, o, use_mg, step_operator, o->smask, o->b, o->v1,
-                                w->def.cg_tolerance, w->def.cg_max_iterations);
+                                w->def.cg_tolerance, max_it);
         if (lagged) {
             o->lag.steps++;
             o->lag.reuses++;
+        } else if (use_mg && round == 0) {
+            o->lag.fresh_it = rr.iterations;
         }
         if (lagged && (!rr.converged || !all_finite(o->v1, n3))) {
             /* The lagged hierarchy did not get there: build a fresh one and go on from where

@@ -107,6 +107,7 @@ typedef struct cs_pc_lag {
     /* counters (tests, measurements): builds of the implicit step, steps that reused one,
      * lagged solves that missed the tolerance and were redone with a fresh build */
     long builds, reuses, retries;
+    int fresh_it;          /* CG iterations of the last round-0 solve on a fresh build */
     double drift;          /* the last step's max over cells of 3 − tr(R_builtᵀ R) */
 } cs_pc_lag;
 
@@ -234,6 +235,9 @@ struct cs_world {
      * pc_lag_steps steps; CS_PC_LAG_ANGLE and CS_PC_LAG_STEPS unless a test sets them. */
     double pc_lag_angle;
     int pc_lag_steps;
+    /* a lagged solve stops at twice the last fresh one's iterations + 2 (at least 8) and
+     * goes on with a fresh build (true unless a test clears it) */
+    bool pc_lag_cap;
 };
 
 #define CS_BROADPHASE_BODIES 4

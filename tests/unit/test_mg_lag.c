@@ -281,6 +281,7 @@ TEST(mg_lag_retry_with_fresh_build)
     ENSURE(make(&s, 12, 6, 6, 0.05, 1e7, false, CS_INTEGRATOR_IMPLICIT_EULER, false) == 0);
     s.w->pc_lag_angle = 10; /* never by angle */
     s.w->pc_lag_steps = 1000000;
+    s.w->pc_lag_cap = false; /* nor by iterations */
     const double om[3] = {0, 0, 3.0};
     spin(s.o, om);
     for (int k = 0; k < 30; k++) /* ≈ 1.5 rad turned since the build */
@@ -299,5 +300,36 @@ TEST(mg_lag_retry_with_fresh_build)
            s.o->lag.retries - r0);
     ENSURE(it_lag > 6);
     ENSURE(s.o->lag.retries > r0);
+    cs_world_destroy(s.w);
+}
+
+/* The same body lagged by 1.5 rad under the default iteration limit (500): the lagged solve
+ * stops at twice the last fresh solve's iterations + 2 (at least 8) and goes on with a fresh
+ * build, so the step costs fewer iterations than the lagged solve alone needs. */
+TEST(mg_lag_capped_by_fresh_iterations)
+{
+    scene s;
+    ENSURE(make(&s, 12, 6, 6, 0.05, 1e7, false, CS_INTEGRATOR_IMPLICIT_EULER, false) == 0);
+    s.w->pc_lag_angle = 10;
+    s.w->pc_lag_steps = 1000000;
+    s.w->pc_lag_cap = false; /* until the lagged step */
+    const double om[3] = {0, 0, 3.0};
+    spin(s.o, om);
+    for (int k = 0; k < 30; k++)
+        ENSURE(cs_world_step(s.w) == CS_OK);
+    ENSURE(s.o->lag.builds == 1 && s.o->lag.retries == 0);
+    const int it_lag = cs_world_last_stats(s.w)->cg_iterations, fresh = s.o->lag.fresh_it;
+    const int cap = 2 * fresh + 2 > 8 ? 2 * fresh + 2 : 8;
+    ENSURE_MSG(it_lag > cap, "lagged %d, cap %d: the scene no longer tests the cap", it_lag,
+               cap);
+    s.w->pc_lag_cap = true;
+    ENSURE(cs_world_step(s.w) == CS_OK);
+    const int it = cs_world_last_stats(s.w)->cg_iterations;
+    printf("    lagged by 1.5 rad: %d iterations alone; capped at %d (fresh %d): %d in all, "
+           "%ld retries\n", it_lag, cap, fresh, it, s.o->lag.retries);
+    ENSURE(s.o->lag.retries == 1 && s.o->lag.builds == 2);
+    ENSURE_MSG(cs_world_last_stats(s.w)->cg_residual <= 1e-6, "%g",
+               cs_world_last_stats(s.w)->cg_residual);
+    ENSURE_MSG(it < it_lag, "%d iterations with the cap against %d without", it, it_lag);
     cs_world_destroy(s.w);
 }
