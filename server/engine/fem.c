@@ -998,13 +998,22 @@ static int product_layout(cs_fem *fem)
     return 0;
 }
 
+/* What a product's node pass adds to each node's row besides sign · Σ (fused_pass's na):
+ * mcoef·m[n]·p[n] (3 per node), the mass term of the implicit step's operator. NULL: none. */
+typedef struct node_add {
+    const double *m, *p;
+    double mcoef;
+} node_add;
+
 /* Node n's row: out[n] = sign · Σ of its (cell, corner) results, in the node→cell list's order
- * (increasing cells, whatever the thread count). A node with all 8 cells (every interior node
- * of a block) sums them unrolled, in the same order: its 8 slots are loaded at once instead of
- * one per trip of a loop whose length varies from node to node (measured 20–30 % faster on
- * 32³–64³ blocks). */
-static inline __attribute__((always_inline)) void node_sum(const cs_fem *fem, int n,
-                                                           double *out, double sign)
+ * (increasing cells, whatever the thread count), + mcoef·m[n]·p[n] with na (the product
+ * mcoef·m[n] first, then by p: the rounding of the separate pass it replaces). A node with all
+ * 8 cells (every interior node of a block) sums them unrolled, in the same order: its 8 slots
+ * are loaded at once instead of one per trip of a loop whose length varies from node to node
+ * (measured 20–30 % faster on 32³–64³ blocks). */
+static inline __attribute__((always_inline)) void
+node_sum(const cs_fem *fem, int n, double *restrict out, double sign, const double *restrict m,
+         const double *restrict p, double mcoef)
 {
     const int32_t *restrict fadj = fem->fadj;
     const double *restrict fe = fem->fe;
@@ -1030,35 +1039,55 @@ static inline __attribute__((always_inline)) void node_sum(const cs_fem *fem, in
             s2 += v[2];
         }
     }
-    out[3 * (size_t)n] = sign * s0;
-    out[3 * (size_t)n + 1] = sign * s1;
-    out[3 * (size_t)n + 2] = sign * s2;
+    double *o = out + 3 * (size_t)n;
+    if (m) {
+        const double mm = mcoef * m[n], *pn = p + 3 * (size_t)n;
+        o[0] = sign * s0 + mm * pn[0];
+        o[1] = sign * s1 + mm * pn[1];
+        o[2] = sign * s2 + mm * pn[2];
+    } else {
+        o[0] = sign * s0;
+        o[1] = sign * s1;
+        o[2] = sign * s2;
+    }
 }
 
 /* The node pass over positions [q0, q1) of norder: the nodes whose first batch is >= b0
  * (after = 0: their cells are all in this segment) or < b0 (after = 1: shared with a lower
- * segment, after the barrier). */
+ * segment, after the barrier). With na, a loop of its own with its terms in locals. */
 static void node_range_any(const cs_fem *fem, int q0, int q1, int b0, int after, double *out,
-                           double sign)
+                           double sign, const node_add *na)
 {
+    if (na) {
+        const double *restrict m = na->m, *restrict p = na->p;
+        const double mcoef = na->mcoef;
+        for (int q = q0; q < q1; q++)
+            if ((fem->nminb[q] < b0) == after)
+                node_sum(fem, fem->norder[q], out, sign, m, p, mcoef);
+        return;
+    }
     for (int q = q0; q < q1; q++)
         if ((fem->nminb[q] < b0) == after)
-            node_sum(fem, fem->norder[q], out, sign);
+            node_sum(fem, fem->norder[q], out, sign, NULL, NULL, 0.0);
 }
 
 /* The same with AVX-512VL: a node sums its corner results as masked 3-double vectors (one
  * load and one add per link instead of two of each), the same terms in the same order from the
- * same zero, so bit for bit node_sum's (an interior node's 8 unrolled); one masked store. No
- * call in the loop: with node_sum's scalar branch inlined or called, GCC kept fadj in a vector
- * register and moved it back before every link. */
-__attribute__((target("arch=x86-64-v4"))) static void
-node_range_avx512(const cs_fem *fem, int q0, int q1, int b0, int after, double *out, double sign)
+ * same zero, so bit for bit node_sum's (an interior node's 8 unrolled); one masked store (with
+ * the mass term: the same products and sum as node_sum's, no fused multiply-add). No call in
+ * the loop: with node_sum's scalar branch inlined or called, GCC kept fadj in a vector register
+ * and moved it back before every link. One instance per value of `mass` (a constant). */
+__attribute__((target("arch=x86-64-v4"))) static inline __attribute__((always_inline)) void
+node_range_avx512_body(const cs_fem *fem, int q0, int q1, int b0, int after, double *out,
+                       double sign, const node_add *na, const int mass)
 {
     const int32_t *restrict fadj = fem->fadj, *restrict as = fem->adj_start;
     const int32_t *restrict norder = fem->norder, *restrict nminb = fem->nminb;
     const int32_t *restrict adj = fem->adj;
     const uint8_t *act = fem->cell_active;
     const double *restrict fe = fem->fe;
+    const double *restrict m = mass ? na->m : NULL, *restrict p = mass ? na->p : NULL;
+    const double mcoef = mass ? na->mcoef : 0.0;
     const __m256d sg = _mm256_set1_pd(sign);
     for (int q = q0; q < q1; q++) {
         if ((nminb[q] < b0) != after)
@@ -1074,17 +1103,38 @@ node_range_avx512(const cs_fem *fem, int q0, int q1, int b0, int after, double *
                 if (!act || act[adj[a] >> 3])
                     s = _mm256_add_pd(s, _mm256_maskz_loadu_pd(7, fe + fadj[a]));
         }
-        _mm256_mask_storeu_pd(out + 3 * (size_t)n, 7, _mm256_mul_pd(sg, s));
+        __m256d r = _mm256_mul_pd(sg, s);
+        if (mass)
+            r = _mm256_add_pd(r, _mm256_mul_pd(_mm256_set1_pd(mcoef * m[n]),
+                                               _mm256_maskz_loadu_pd(7, p + 3 * (size_t)n)));
+        _mm256_mask_storeu_pd(out + 3 * (size_t)n, 7, r);
     }
 }
 
-static void node_range(const cs_fem *fem, int q0, int q1, int b0, int after, double *out,
-                       double sign)
+__attribute__((target("arch=x86-64-v4"))) static void
+node_range_avx512(const cs_fem *fem, int q0, int q1, int b0, int after, double *out, double sign)
 {
-    if (__builtin_cpu_supports("x86-64-v4"))
-        node_range_avx512(fem, q0, q1, b0, after, out, sign);
-    else
-        node_range_any(fem, q0, q1, b0, after, out, sign);
+    node_range_avx512_body(fem, q0, q1, b0, after, out, sign, NULL, 0);
+}
+
+__attribute__((target("arch=x86-64-v4"))) static void
+node_range_avx512_mass(const cs_fem *fem, int q0, int q1, int b0, int after, double *out,
+                       double sign, const node_add *na)
+{
+    node_range_avx512_body(fem, q0, q1, b0, after, out, sign, na, 1);
+}
+
+static void node_range(const cs_fem *fem, int q0, int q1, int b0, int after, double *out,
+                       double sign, const node_add *na)
+{
+    if (__builtin_cpu_supports("x86-64-v4")) {
+        if (na)
+            node_range_avx512_mass(fem, q0, q1, b0, after, out, sign, na);
+        else
+            node_range_avx512(fem, q0, q1, b0, after, out, sign);
+    } else {
+        node_range_any(fem, q0, q1, b0, after, out, sign, na);
+    }
 }
 
 /* The element pass of batch b: its results into fb (24 × LANES), its energy added to *e. */
@@ -1095,9 +1145,11 @@ typedef void (*batch_fn)(cs_fem *fem, int b, double *fb, const void *ctx, double
  * each segment's batches chunk by chunk, each chunk's element pass followed by the node pass
  * of the nodes whose cells are all done and all in the segment (their results still in
  * cache); after the barrier the nodes it shares with lower segments. Every node's sum has the
- * same terms in the same order for any thread count. Returns the sum of the batches' energies.
+ * same terms in the same order for any thread count; na (may be NULL): a term per node added
+ * as the row is written (node_sum). Returns the sum of the batches' energies.
  */
-static double fused_pass(cs_fem *fem, batch_fn fn, const void *ctx, double *out, double sign)
+static double fused_pass(cs_fem *fem, batch_fn fn, const void *ctx, double *out, double sign,
+                         const node_add *na)
 {
     const int nb = n_batches(fem->n_cells);
     double e_sum = 0;
@@ -1110,20 +1162,21 @@ static double fused_pass(cs_fem *fem, batch_fn fn, const void *ctx, double *out,
                 const int j1 = j0 + FEM_CHUNK < b1 ? j0 + FEM_CHUNK : b1;
                 for (int b = j0; b < j1; b++)
                     fn(fem, b, fem->fe + 24 * LANES * (size_t)fem->bslot[b], ctx, &e_sum);
-                node_range(fem, fem->nfirst[j0], fem->nfirst[j1], b0, 0, out, sign);
+                node_range(fem, fem->nfirst[j0], fem->nfirst[j1], b0, 0, out, sign, na);
             }
         }
         /* nodes without cells (sorted to batch 0): when there are no batches at all */
         if (nb == 0 && t == 0)
             for (int q = 0; q < fem->n_nodes; q++)
-                node_sum(fem, fem->norder[q], out, sign);
+                node_sum(fem, fem->norder[q], out, sign, na ? na->m : NULL,
+                         na ? na->p : NULL, na ? na->mcoef : 0.0);
 #pragma omp barrier
         for (int sg = t; sg < fem->nseg; sg += nt) {
             const int b0 = seg_start(fem, nb, sg), b1 = seg_start(fem, nb, sg + 1);
             /* a node whose first batch is below b0 has its last within span of it */
             const int bs = b0 + fem->span + 1 < b1 ? b0 + fem->span + 1 : b1;
             if (b0 > 0)
-                node_range(fem, fem->nfirst[b0], fem->nfirst[bs], b0, 1, out, sign);
+                node_range(fem, fem->nfirst[b0], fem->nfirst[bs], b0, 1, out, sign, na);
         }
     }
     return e_sum;
@@ -1149,7 +1202,7 @@ static void force_batch(cs_fem *fem, int b, double *fb, const void *ctx, double 
 void cs_fem_elastic_force(cs_fem *fem, const double *x, double *f, double *energy)
 {
     const force_ctx fc = {x};
-    const double e_sum = fused_pass(fem, force_batch, &fc, f, -1.0);
+    const double e_sum = fused_pass(fem, force_batch, &fc, f, -1.0, NULL);
     if (energy)
         *energy = e_sum;
 }
@@ -1177,7 +1230,15 @@ static void kw_batch(cs_fem *fem, int b, double *fb, const void *ctx, double *e_
 void cs_fem_apply_Kw(cs_fem *fem, const double *kf, const double *p, double *y)
 {
     const kw_ctx kc = {kf, p};
-    fused_pass(fem, kw_batch, &kc, y, 1.0);
+    fused_pass(fem, kw_batch, &kc, y, 1.0, NULL);
+}
+
+void cs_fem_apply_K_mass(cs_fem *fem, double kcoef, double mcoef, const double *m,
+                         const double *p, double *y)
+{
+    const kw_ctx kc = {fem->kf, p};
+    const node_add na = {m, p, mcoef};
+    fused_pass(fem, kw_batch, &kc, y, kcoef, &na);
 }
 
 double cs_fem_product_flops(const cs_fem *fem)
@@ -1474,5 +1535,5 @@ static void tangent_batch(cs_fem *fem, int bt, double *fb, const void *ctx, doub
 void cs_fem_apply_tangent(cs_fem *fem, const double *p, double *y)
 {
     const tangent_ctx tc = {p};
-    fused_pass(fem, tangent_batch, &tc, y, 1.0);
+    fused_pass(fem, tangent_batch, &tc, y, 1.0, NULL);
 }

@@ -114,6 +114,12 @@ typedef struct cs_fem_node_terms {
  * i's block of cs_fem_diag_blocks_w(fem, kf), bit for bit what those two passes give. */
 void cs_fem_precond_blocks(cs_fem *fem, const double *kf, double kcoef, const cs_fem_node_terms *t,
                            double *blocks);
+/* y = kcoef·K p + mcoef·m_i p_i (m: 1 per node), K as cs_fem_apply_K's: the implicit step's
+ * operator without its damping field, penalty and springs, in one product (the mass term added
+ * in the node pass as each row is written; bit for bit kcoef·y + (mcoef·m_i)·p_i on y from
+ * cs_fem_apply_K, on any number of threads). */
+void cs_fem_apply_K_mass(cs_fem *fem, double kcoef, double mcoef, const double *m,
+                         const double *p, double *y);
 /* The unit matrix of Gauss point g (0..7) of a cube: K = Σ_g Kg. */
 void cs_cube_stiffness_gauss(double young, double poisson, double h, int g, double K[24 * 24]);
 /*

@@ -1190,10 +1190,21 @@ static void step_operator_kp(cs_object *o, const double *p, const double *kp, do
     add_spring_operator(o, o->dcoef, p, y);
 }
 
-/* y = mcoef·M p + kcoef·K_R p + dcoef·Σ drags k w (w·p): the implicit Euler operator. */
+/* y = mcoef·M p + kcoef·K_R p + dcoef·Σ drags k w (w·p): the implicit Euler operator. With
+ * the FEM models (cs_elastic_apply_K's fem path) and no damping field in it, the mass term
+ * is added by the product's node pass as it writes each row (cs_fem_apply_K_mass: the same
+ * bits as step_operator_kp's pass over y, which it saves); the penalty and springs, on a few
+ * nodes, after it as there. */
 static void step_operator(void *ctx, const double *p, double *y)
 {
     cs_object *o = ctx;
+    if (!o->lf && o->model != CS_MODEL_MSS &&
+        !(o->fld.has_damping && (o->cmcoef != 0 || o->ckcoef != 0))) {
+        cs_fem_apply_K_mass(&o->fem, o->kcoef, o->mcoef, o->m, p, y);
+        add_penalty_operator(o, o->pcoef, p, y);
+        add_spring_operator(o, o->dcoef, p, y);
+        return;
+    }
     cs_elastic_apply_K(o, p, y);
     step_operator_kp(o, p, y, y);
 }

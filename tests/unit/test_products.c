@@ -16,6 +16,7 @@
 #include "fem.h"
 #include "lattice.h"
 #include "mg.h"
+#include "solver.h"
 
 static double urand(unsigned *seed)
 {
@@ -203,4 +204,179 @@ TEST(mg_fine_product_windowed_matches_fem)
             free(y[t]);
         cs_cubemesh_free(&cm);
     }
+}
+
+/* An irregular mesh: an nx × ny × nz block with holes (every cell whose ijk hash hits 1 in 6
+ * removed, so many nodes have 1–7 cells), in a scrambled order. */
+static int holey_block(cs_cubemesh *cm, int nx, int ny, int nz, double h)
+{
+    int32_t *ijk = cs_box_cells(nx, ny, nz);
+    if (!ijk)
+        return -1;
+    int n = 0;
+    for (int c = 0; c < nx * ny * nz; c++) {
+        const int32_t *q = ijk + 3 * c;
+        if ((q[0] * 7 + q[1] * 13 + q[2] * 29) % 6 == 5 && q[0] > 0 && q[0] < nx - 1)
+            continue;
+        memmove(ijk + 3 * n++, q, 3 * sizeof(int32_t));
+    }
+    unsigned seed = 9;
+    for (int c = n - 1; c > 0; c--) {
+        const int d = rand_r(&seed) % (c + 1);
+        for (int a = 0; a < 3; a++) {
+            const int32_t t = ijk[3 * c + a];
+            ijk[3 * c + a] = ijk[3 * d + a];
+            ijk[3 * d + a] = t;
+        }
+    }
+    char err[128];
+    const double origin[3] = {0, 0, 0};
+    const int rc = cs_cubemesh_build(cm, h, origin, ijk, n, err, sizeof err);
+    free(ijk);
+    return rc;
+}
+
+/* The implicit step's operator both ways (world.c step_operator): fused = cs_fem_apply_K_mass,
+ * unfused = cs_fem_apply_K then y = kc·y + mc·m_i·p_i in a pass of its own. */
+typedef struct km_ctx {
+    cs_fem *fem;
+    const double *m;
+    double kc, mc;
+} km_ctx;
+
+static void km_fused(void *ctx, const double *p, double *y)
+{
+    km_ctx *c = ctx;
+    cs_fem_apply_K_mass(c->fem, c->kc, c->mc, c->m, p, y);
+}
+
+static void km_unfused(void *ctx, const double *p, double *y)
+{
+    km_ctx *c = ctx;
+    cs_fem_apply_K(c->fem, p, y);
+    for (int i = 0; i < c->fem->n_nodes; i++)
+        for (int a = 0; a < 3; a++)
+            y[3 * i + a] = c->kc * y[3 * i + a] + c->mc * c->m[i] * p[3 * i + a];
+}
+
+/* cs_fem_apply_K_mass (the mass term added in the node pass) on an irregular, graded,
+ * corotated mesh, whole and with inactive cells: the same bits as the unfused operator on one
+ * and two threads, kc·(dense K p) + mc·M p to rounding; and a block-Jacobi CG solve with held
+ * dofs on it takes the same iterations to the same bits, holds the held dofs, and its answer
+ * meets the tolerance against the dense operator. */
+TEST(fem_products_K_mass_match_unfused_operator)
+{
+    cs_cubemesh cm;
+    ENSURE(holey_block(&cm, 30, 11, 10, 0.04) == 0);
+    cs_fem f[2];
+    ENSURE(cs_fem_init(&f[0], &cm, 1e8, 0.3, true, 1) == 0);
+    ENSURE(cs_fem_init(&f[1], &cm, 1e8, 0.3, true, 2) == 0);
+    ENSURE(f[1].threads == 2);
+    const int n = cm.n_nodes, nc = cm.n_cells, nd = 3 * n;
+    int partial = 0;
+    for (int i = 0; i < n; i++)
+        partial += f[0].adj_start[i + 1] - f[0].adj_start[i] < 8;
+    ENSURE(partial > n / 3); /* irregular: many nodes with fewer than 8 cells */
+    const size_t bytes = sizeof(double) * (size_t)nd;
+    double *x = malloc(bytes), *p = malloc(bytes), *ref = malloc(bytes), *b = malloc(bytes),
+           *ya[2] = {malloc(bytes), malloc(bytes)}, *yb[2] = {malloc(bytes), malloc(bytes)},
+           *m = malloc(sizeof(double) * n), *kf = malloc(sizeof(double) * 8 * nc),
+           *blocks = malloc(sizeof(double) * 9 * n);
+    uint8_t *act = malloc((size_t)nc), *mask = malloc((size_t)nd);
+    ENSURE(x && p && ref && b && ya[0] && ya[1] && yb[0] && yb[1] && m && kf && blocks && act &&
+           mask);
+    unsigned seed = 33;
+    bent(&cm, x, &seed);
+    for (int i = 0; i < nd; i++)
+        p[i] = urand(&seed);
+    for (int i = 0; i < n; i++)
+        m[i] = 0.01 * (1.0 + urand(&seed)); /* positive, every node different */
+    for (int c = 0; c < nc; c++) {
+        act[c] = c % 9 != 4;
+        for (int g = 0; g < 8; g++) /* graded: every third cell point by point, others scaled */
+            kf[8 * c + g] = c % 3 == 0 ? 0.3 + 0.3 * g : 1.0 + 0.5 * (c % 4);
+    }
+    for (int t = 0; t < 2; t++) {
+        f[t].kf = kf;
+        cs_fem_update_rotations(&f[t], x);
+    }
+    const double kc = 2.5e-5, mc = 1.0;
+    for (int pass = 0; pass < 2; pass++) { /* whole; an active region */
+        const uint8_t *a = pass ? act : NULL;
+        dense_apply(&f[0], kf, a, p, ref);
+        double big = 0;
+        for (int i = 0; i < nd; i++) {
+            ref[i] = kc * ref[i] + mc * m[i / 3] * p[i];
+            big = fmax(big, fabs(ref[i]));
+        }
+        for (int t = 0; t < 2; t++) {
+            f[t].cell_active = a;
+            km_ctx c = {&f[t], m, kc, mc};
+            km_fused(&c, p, ya[t]);
+            km_unfused(&c, p, yb[t]);
+            f[t].cell_active = NULL;
+            ENSURE_MSG(memcmp(ya[t], yb[t], bytes) == 0, "pass %d threads %d", pass, t + 1);
+            for (int i = 0; i < nd; i++)
+                ENSURE_MSG(fabs(ya[t][i] - ref[i]) <= 1e-13 * big, "pass %d threads %d dof %d",
+                           pass, t + 1, i);
+        }
+        ENSURE(memcmp(ya[0], ya[1], bytes) == 0);
+    }
+    /* CG with held dofs: the nodes of the x = 0 face all held, 1 in 7 of the others' dofs */
+    for (int i = 0; i < nd; i++)
+        mask[i] = cm.node_rest[3 * (i / 3)] < 1e-9 || i % 7 == 2;
+    cs_fem_diag_blocks(&f[0], blocks);
+    for (int i = 0; i < n; i++) {
+        for (int k = 0; k < 9; k++)
+            blocks[9 * i + k] *= kc;
+        for (int k = 0; k < 3; k++)
+            blocks[9 * i + 4 * k] += mc * m[i];
+    }
+    cs_invert_blocks(blocks, n);
+    for (int i = 0; i < nd; i++)
+        b[i] = mask[i] ? 0.0 : urand(&seed) * 0.01;
+    cs_cg_work w;
+    ENSURE(cs_cg_work_init(&w, nd) == 0);
+    cs_cg_result r[2][2];
+    const double tol = 1e-8;
+    for (int t = 0; t < 2; t++) {
+        km_ctx c = {&f[t], m, kc, mc};
+        for (int i = 0; i < nd; i++)
+            ya[t][i] = yb[t][i] = mask[i] ? x[i] : 0.0; /* held dofs keep a value */
+        r[t][0] = cs_pcg(&w, km_fused, &c, blocks, mask, b, ya[t], tol, 2000, t + 1);
+        r[t][1] = cs_pcg(&w, km_unfused, &c, blocks, mask, b, yb[t], tol, 2000, t + 1);
+        ENSURE_MSG(r[t][0].converged && r[t][1].converged, "threads %d", t + 1);
+        ENSURE(r[t][0].iterations == r[t][1].iterations && r[t][0].iterations > 10);
+        ENSURE_MSG(memcmp(ya[t], yb[t], bytes) == 0, "CG threads %d", t + 1);
+        for (int i = 0; i < nd; i++)
+            ENSURE(!mask[i] || ya[t][i] == x[i]);
+    }
+    /* the answer against the dense operator: the free rows' residual (the held dofs' values
+     * moved to the right-hand side) within the tolerance, with room for the products' rounding */
+    dense_apply(&f[0], kf, NULL, ya[0], ref);
+    double rr = 0, bb = 0;
+    for (int i = 0; i < nd; i++)
+        if (!mask[i]) {
+            const double res = b[i] - (kc * ref[i] + mc * m[i / 3] * ya[0][i]);
+            rr += res * res;
+            bb += b[i] * b[i];
+        }
+    ENSURE_MSG(sqrt(rr) <= 1.01 * tol * sqrt(bb), "relres %g", sqrt(rr / bb));
+    cs_cg_work_free(&w);
+    free(x);
+    free(p);
+    free(ref);
+    free(b);
+    for (int t = 0; t < 2; t++) {
+        free(ya[t]);
+        free(yb[t]);
+    }
+    free(m);
+    free(kf);
+    free(blocks);
+    free(act);
+    free(mask);
+    cs_fem_free(&f[0]);
+    cs_fem_free(&f[1]);
+    cs_cubemesh_free(&cm);
 }
