@@ -14,6 +14,7 @@
 #include <string.h>
 
 #include "check.h"
+#include "cells_ref.h"
 #include "cubemesh.h"
 #include "fem.h"
 #include "lattice.h"
@@ -37,20 +38,7 @@ static int block(cs_cubemesh *cm, int nx, int ny, int nz, int hole, bool scrambl
             memmove(ijk + 3 * n, ijk + 3 * c, 3 * sizeof(int32_t));
             n++;
         }
-    unsigned seed = 11;
-    for (int c = n - 1; scrambled && c > 0; c--) {
-        const int d = rand_r(&seed) % (c + 1);
-        for (int a = 0; a < 3; a++) {
-            const int32_t t = ijk[3 * c + a];
-            ijk[3 * c + a] = ijk[3 * d + a];
-            ijk[3 * d + a] = t;
-        }
-    }
-    char err[128];
-    const double origin[3] = {0, 0, 0};
-    const int rc = cs_cubemesh_build(cm, 0.05, origin, ijk, n, err, sizeof err);
-    free(ijk);
-    return rc;
+    return cells_build(cm, 0.05, ijk, n, scrambled ? 11 : 0);
 }
 
 typedef struct lay_case {

@@ -11,6 +11,7 @@
 #include <string.h>
 
 #include "check.h"
+#include "cells_ref.h"
 #include "cubemesh.h"
 #include "dense_ref.h"
 #include "fem.h"
@@ -26,24 +27,7 @@ static double urand(unsigned *seed)
 /* An nx × ny × nz block of cubes of edge h, i fastest; scrambled: the cells in a random order. */
 static int block(cs_cubemesh *cm, int nx, int ny, int nz, double h, bool scrambled)
 {
-    const int n = nx * ny * nz;
-    int32_t *ijk = cs_box_cells(nx, ny, nz);
-    if (!ijk)
-        return -1;
-    unsigned seed = 5;
-    for (int c = n - 1; scrambled && c > 0; c--) {
-        const int d = rand_r(&seed) % (c + 1);
-        for (int a = 0; a < 3; a++) {
-            const int32_t t = ijk[3 * c + a];
-            ijk[3 * c + a] = ijk[3 * d + a];
-            ijk[3 * d + a] = t;
-        }
-    }
-    char err[128];
-    const double origin[3] = {0, 0, 0};
-    const int rc = cs_cubemesh_build(cm, h, origin, ijk, n, err, sizeof err);
-    free(ijk);
-    return rc;
+    return cells_build(cm, h, cs_box_cells(nx, ny, nz), nx * ny * nz, scrambled ? 5 : 0);
 }
 
 /* Positions of a block bent about y and jiggled: every cell rotated differently. */
@@ -220,20 +204,7 @@ static int holey_block(cs_cubemesh *cm, int nx, int ny, int nz, double h)
             continue;
         memmove(ijk + 3 * n++, q, 3 * sizeof(int32_t));
     }
-    unsigned seed = 9;
-    for (int c = n - 1; c > 0; c--) {
-        const int d = rand_r(&seed) % (c + 1);
-        for (int a = 0; a < 3; a++) {
-            const int32_t t = ijk[3 * c + a];
-            ijk[3 * c + a] = ijk[3 * d + a];
-            ijk[3 * d + a] = t;
-        }
-    }
-    char err[128];
-    const double origin[3] = {0, 0, 0};
-    const int rc = cs_cubemesh_build(cm, h, origin, ijk, n, err, sizeof err);
-    free(ijk);
-    return rc;
+    return cells_build(cm, h, ijk, n, 9);
 }
 
 /* The implicit step's operator both ways (world.c step_operator): fused = cs_fem_apply_K_mass,
