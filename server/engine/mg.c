@@ -99,6 +99,7 @@ typedef struct mg_level {
     int32_t *nwalk;                   /* the nodes in the order of their first fine node */
     /* per solve */
     const double *R;                  /* 9 per cell (level 0: fem's) */
+    const double *rq;                 /* 4 per cell: the unit quaternions R was made from */
     double *own_R, *q;                /* level >= 1 */
     double *s;                        /* per cell: stiffness multiplier */
     double *dg;                       /* per node: diagonal part */
@@ -701,6 +702,7 @@ static int alloc_level_state(mg_level *l, int level, int threads, int cheb_deg)
         l->q[4 * c + 1] = l->q[4 * c + 2] = l->q[4 * c + 3] = 0;
     }
     l->R = l->own_R;
+    l->rq = l->q;
     l->inv = l->own_inv;
     l->mask = l->own_mask;
     return 0;
@@ -1617,11 +1619,11 @@ out:
 }
 
 /*
- * The element pass's rotations as float unit quaternions (bQ), from the cells' R by
- * Shepperd's method in double (lanes past the last cell: the identity). Used (bQ_ok) only if
- * R(q) rebuilt in double from the float q is every cell's R within 1e-6 per entry (a proper
- * rotation: fem's and setup_coarse's are); otherwise the pass reads bR. Called at the end of
- * to_single, every setup.
+ * The element pass's rotations as float unit quaternions (bQ): the quaternions the cells' R
+ * were made from (l->rq: fem's rotation extraction on level 0, setup_coarse's below; lanes
+ * past the last cell: the identity). Used (bQ_ok) only if R(q) rebuilt in double from the
+ * float q is every cell's R within 1e-6 per entry; otherwise the pass reads bR. Called at
+ * the end of to_single, every setup.
  */
 static void rotation_layout(mg_level *l)
 {
@@ -1630,38 +1632,17 @@ static void rotation_layout(mg_level *l)
     for (int b = 0; b < l->n_batches; b++)
         for (int p = 0; p < MG_LANES; p++) {
             const int c = b * MG_LANES + p;
-            double q[4] = {1, 0, 0, 0};
+            double qf[4] = {1, 0, 0, 0};
             if (c < l->n_cells) {
-                const double *R = l->R + 9 * (size_t)c, tr = R[0] + R[4] + R[8];
-                if (tr >= R[0] && tr >= R[4] && tr >= R[8]) {
-                    const double r = sqrt(fmax(1 + tr, 0.0)), f = r > 0 ? 0.5 / r : 0;
-                    q[0] = 0.5 * r, q[1] = (R[7] - R[5]) * f, q[2] = (R[2] - R[6]) * f,
-                    q[3] = (R[3] - R[1]) * f;
-                } else if (R[0] >= R[4] && R[0] >= R[8]) {
-                    const double r = sqrt(fmax(1 + R[0] - R[4] - R[8], 0.0)), f = r > 0 ? 0.5 / r : 0;
-                    q[1] = 0.5 * r, q[0] = (R[7] - R[5]) * f, q[2] = (R[1] + R[3]) * f,
-                    q[3] = (R[2] + R[6]) * f;
-                } else if (R[4] >= R[8]) {
-                    const double r = sqrt(fmax(1 - R[0] + R[4] - R[8], 0.0)), f = r > 0 ? 0.5 / r : 0;
-                    q[2] = 0.5 * r, q[0] = (R[2] - R[6]) * f, q[1] = (R[1] + R[3]) * f,
-                    q[3] = (R[5] + R[7]) * f;
-                } else {
-                    const double r = sqrt(fmax(1 - R[0] - R[4] + R[8], 0.0)), f = r > 0 ? 0.5 / r : 0;
-                    q[3] = 0.5 * r, q[0] = (R[3] - R[1]) * f, q[1] = (R[2] + R[6]) * f,
-                    q[2] = (R[5] + R[7]) * f;
-                }
-                const double n = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
                 for (int j = 0; j < 4; j++)
-                    q[j] = n > 0 ? q[j] / n : (j == 0);
-                double qf[4], Rq[9];
-                for (int j = 0; j < 4; j++)
-                    qf[j] = (float)q[j];
+                    qf[j] = (float)l->rq[4 * (size_t)c + j];
+                double Rq[9];
                 cs_quat_to_mat(qf, Rq);
                 for (int j = 0; j < 9; j++)
-                    bad += !(fabs(Rq[j] - R[j]) <= 1e-6);
+                    bad += !(fabs(Rq[j] - l->R[9 * (size_t)c + j]) <= 1e-6);
             }
             for (int j = 0; j < 4; j++)
-                l->bQ[(4 * b + j) * MG_LANES + p] = (float)q[j];
+                l->bQ[(4 * b + j) * MG_LANES + p] = (float)qf[j];
         }
     l->bQ_ok = bad == 0;
 }
@@ -1699,6 +1680,7 @@ int cs_mg_setup(cs_mg *mg, const cs_fem *fem, cs_matvec_fn A, void *ctx, const d
     mg->ctx = ctx;
     mg_level *l0 = &mg->lv[0];
     l0->R = fem->R;
+    l0->rq = fem->q;
     l0->inv = inv0;
     l0->mask = mask0;
     for (int l = 1; l < mg->n_levels; l++)
