@@ -62,10 +62,9 @@ _Static_assert(MG_CHEB_KIND != 4 ||
 #define MG_COARSE_SWEEPS 8 /* Jacobi sweeps on a coarsest level too large for Cholesky */
 #define MG_POWER_ITERS 10
 #define MG_ROT_BATCH 16    /* coarse cells per batch of setup_coarse's rotation extraction */
-#ifndef MG_CHUNK
+#ifndef MG_CHUNK /* batches per chunk of apply_ex (1024 cells, 128 KiB of results) */
 #define MG_CHUNK 64
 #endif
-/* batches per chunk of apply_ex (1024 cells, 128 KiB of results) */
 #define MG_LANES 16        /* cells per batch of the element pass (one float SIMD lane each) */
 #define VF_LANES 8         /* lanes per vector of the element pass's arithmetic */
 typedef float vf __attribute__((vector_size(4 * VF_LANES)));
@@ -1062,24 +1061,19 @@ static inline void store3(float *p, vf4 v)
     _mm_store_ss(p + 2, _mm_movehl_ps((__m128)v, (__m128)v));
 }
 
-/* The free dofs of a node whose held bits are h (all bits set; lane 3 clear). */
-static inline vf4 free_bits(unsigned h)
+/* The free dofs of node n (all bits set; lane 3 clear). */
+static inline vf4 free_mask(const mg_level *l, int n)
 {
     static const vi4 FREE[8] = {{-1, -1, -1, 0}, {0, -1, -1, 0}, {-1, 0, -1, 0}, {0, 0, -1, 0},
                                 {-1, -1, 0, 0},  {0, -1, 0, 0},  {-1, 0, 0, 0},  {0, 0, 0, 0}};
-    return (vf4)FREE[h & 7];
+    return (vf4)FREE[l->held[n] & 7];
 }
 
-static inline vf4 free_mask(const mg_level *l, int n)
+/* D⁻¹ v at node n by its columns (16-byte loads: lane 3 is the next column's first entry, or
+ * the tail), per component in the order of a row-major product: (m_k0 v0 + m_k1 v1) + m_k2 v2. */
+static inline vf4 dinv(const mg_level *l, int n, vf4 v)
 {
-    return free_bits(l->held[n]);
-}
-
-/* D⁻¹ v for the node whose D⁻¹ columns start at m (16-byte loads: lane 3 is the next column's
- * first entry, or what follows the last), per component in the order of a row-major product:
- * (m_k0 v0 + m_k1 v1) + m_k2 v2. */
-static inline vf4 dinv_at(const float *m, vf4 v)
-{
+    const float *m = l->invf + 9 * (size_t)n;
     vf4 c0, c1, c2;
     memcpy(&c0, m, sizeof c0);
     memcpy(&c1, m + 3, sizeof c1);
@@ -1090,26 +1084,22 @@ static inline vf4 dinv_at(const float *m, vf4 v)
     return c0 * v0 + c1 * v1 + c2 * v2;
 }
 
-static inline vf4 dinv(const mg_level *l, int n, vf4 v)
-{
-    return dinv_at(l->invf + 9 * (size_t)n, v);
-}
-
 static inline vf4 and4(vf4 v, vf4 m)
 {
     return (vf4)((vi4)v & (vi4)m);
 }
 
-/* Node n's row of y (see apply_path): its cells' products (links at fe + fadj[0..links))
- * summed in the adj order; in the Chebyshev variants, instead of storing it, the step on node
- * n (its cells are all done: no later cell of this pass reads its x). inv: its D⁻¹ columns,
- * dg its diagonal part, held its held dofs. Component by component the same arithmetic in
- * the same order as scalar code, 4 lanes wide (lane 3 is discarded). */
-static inline __attribute__((always_inline)) void
-node_core(const mg_level *l, int n, const int32_t *fadj, int links, const float *inv, float dg,
-          unsigned held, const float *x, const float *b, float *y, const cheb_step *cs,
-          const int mode)
+/* Node n's row of y (see apply_path): its cells' products summed in the adj order; in the
+ * Chebyshev variants, instead of storing it, the step on node n (its cells are all done: no
+ * later cell of this pass reads its x). Component by component the same arithmetic in the
+ * same order as scalar code, 4 lanes wide (lane 3 is discarded). */
+static inline __attribute__((always_inline)) void node_out(const mg_level *l, int n,
+                                                           const float *x, const float *b,
+                                                           float *y, const cheb_step *cs,
+                                                           const int mode)
 {
+    const int32_t *fadj = l->fadj + l->adj_start[n];
+    const int links = l->adj_start[n + 1] - l->adj_start[n];
     /* (x, y, z, ·) per link: one 16-byte load and add each, the same sums per component */
     vf4 s = {0, 0, 0, 0};
     const float *fe = __builtin_assume_aligned(l->fe, 16);
@@ -1127,18 +1117,18 @@ node_core(const mg_level *l, int n, const int32_t *fadj, int links, const float 
             s += v;
         }
     }
-    const vf4 ax = s + dg * load3(x + 3 * n);
+    const vf4 ax = s + l->dgf[n] * load3(x + 3 * n);
     if (mode == NP_APPLY) {
         store3(y + 3 * n, ax);
         return;
     }
-    const vf4 fr = free_bits(held);
+    const vf4 fr = free_mask(l, n);
     const vf4 r = and4(load3(b + 3 * n) - ax, fr);
     if (mode == NP_RESID) {
         store3(y + 3 * n, r);
         return;
     }
-    const vf4 z = dinv_at(inv, r);
+    const vf4 z = dinv(l, n, r);
     const bool first = mode == NP_CHEB_FIRST || mode == NP_CHEB_FIRST_OUT;
     const vf4 dj = and4(first ? cs->c * z : cs->a * load3(cs->d + 3 * n) + cs->c * z, fr);
     store3(cs->d + 3 * n, dj);
@@ -1147,17 +1137,6 @@ node_core(const mg_level *l, int n, const int32_t *fadj, int links, const float 
     if (mode == NP_CHEB_FIRST_OUT || mode == NP_CHEB_OUT)
         for (int k = 0; k < 3; k++)
             cs->out[3 * (size_t)n + k] = xn[k];
-}
-
-/* node_core from the level's arrays by node index */
-static inline __attribute__((always_inline)) void node_out(const mg_level *l, int n,
-                                                           const float *x, const float *b,
-                                                           float *y, const cheb_step *cs,
-                                                           const int mode)
-{
-    const int a0 = l->adj_start[n];
-    node_core(l, n, l->fadj + a0, l->adj_start[n + 1] - a0, l->invf + 9 * (size_t)n, l->dgf[n],
-              l->held[n], x, b, y, cs, mode);
 }
 
 /* One thread's share of apply_path (mode compile-time once inlined): its segments' element
