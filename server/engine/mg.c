@@ -864,6 +864,34 @@ bool cs_mg_matches(const cs_mg *mg, const cs_cubemesh *cm, const cs_fem *fem, ui
            mg->lv[0].adj == fem->adj && mg->lv[0].adj_start == fem->adj_start;
 }
 
+double cs_mg_rotation_drift(const cs_mg *mg, const double *R)
+{
+    const mg_level *l = &mg->lv[0];
+    double dmax = 0;
+#pragma omp parallel for num_threads(l->threads) schedule(static) reduction(max : dmax)
+    for (int c = 0; c < l->n_cells; c++) {
+        const int b = c / MG_LANES, p = c % MG_LANES;
+        double t = 0;
+        for (int k = 0; k < 9; k++)
+            t += (double)l->bR[(9 * b + k) * MG_LANES + p] * R[9 * (size_t)c + k];
+        const double d = 3.0 - t;
+        dmax = isfinite(d) ? (d > dmax ? d : dmax) : INFINITY;
+    }
+    return dmax;
+}
+
+bool cs_mg_held_matches(const cs_mg *mg, const uint8_t *mask)
+{
+    const mg_level *l = &mg->lv[0];
+    for (int n = 0; n < l->n_nodes; n++) {
+        const uint8_t h = (uint8_t)((mask[3 * n] ? 1 : 0) | (mask[3 * n + 1] ? 2 : 0) |
+                                    (mask[3 * n + 2] ? 4 : 0));
+        if (h != l->held[n])
+            return false;
+    }
+    return true;
+}
+
 int cs_mg_levels(const cs_mg *mg)
 {
     return mg->n_levels;

@@ -135,4 +135,11 @@ int cs_mg_level_layout(const cs_mg *mg, int level);
 void cs_mg_prolong(const cs_mg *mg, int level, const float *xc, float *xf);
 void cs_mg_restrict(const cs_mg *mg, int level, const float *xf, float *xc);
 
+/* Against the finest level's copies made by the last cs_mg_setup (what a lagged hierarchy was
+ * built from, world.c): the max over cells of 3 − tr(R_builtᵀ R) = 2(1 − cos θ), θ the angle
+ * a cell has turned by since (+inf if R is not finite); and whether mask (3 per node) holds
+ * the same dofs. */
+double cs_mg_rotation_drift(const cs_mg *mg, const double *R);
+bool cs_mg_held_matches(const cs_mg *mg, const uint8_t *mask);
+
 #endif

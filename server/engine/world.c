@@ -266,8 +266,6 @@ void cs_object_free_internal(cs_object *o)
     cs_fields_free(&o->fld);
     cs_cg_work_free(&o->cg);
     cs_mg_free(o->mg);
-    free(o->lag.R);
-    free(o->lag.mask);
     free(o);
 }
 
@@ -1338,7 +1336,7 @@ static bool setup_multigrid(const cs_world_t *w, cs_object *o, cs_matvec_fn A,
 /* A hash of the drag springs the operator holds (cell, weights, stiffness), FNV-1a. */
 static uint64_t pc_lag_springs(const cs_object *o)
 {
-    uint64_t h = 1469598103934665603ull;
+    uint64_t h = 14695981039346656037ull; /* FNV-1a 64 offset basis */
     for (int i = 0; i < o->n_inputs; i++) {
         const cs_input *in = &o->inputs[i];
         if (!cs_input_is_spring(in) || in->delay > 0)
@@ -1364,26 +1362,6 @@ static void pc_lag_coefs(const cs_object *o, double c[7])
     c[6] = o->dcoef;
 }
 
-/* max over cells of 3 − tr(R_builtᵀ R) = 2(1 − cos θ), θ the angle each cell has turned by
- * since the build (+inf if a rotation is not finite). */
-static double pc_lag_drift(const cs_object *o)
-{
-    if (!o->fem.corotational)
-        return 0;
-    const float *Rb = o->lag.R;
-    const double *R = o->fem.R;
-    double dmax = 0;
-#pragma omp parallel for num_threads(cs_elastic_threads(o)) schedule(static) reduction(max : dmax)
-    for (int c = 0; c < o->cm.n_cells; c++) {
-        double t = 0;
-        for (int k = 0; k < 9; k++)
-            t += (double)Rb[9 * (size_t)c + k] * R[9 * (size_t)c + k];
-        const double d = 3.0 - t;
-        dmax = isfinite(d) ? (d > dmax ? d : dmax) : INFINITY;
-    }
-    return dmax;
-}
-
 /* Can this step's solve on step_operator with held dofs mask reuse the last build? */
 static bool pc_lag_reusable(const cs_world_t *w, cs_object *o, const uint8_t *mask)
 {
@@ -1392,40 +1370,28 @@ static bool pc_lag_reusable(const cs_world_t *w, cs_object *o, const uint8_t *ma
         return false;
     if (!wants_multigrid(w, o) || !cs_mg_matches(o->mg, &o->cm, &o->fem, o->topology_version))
         return false;
-    if (L->n != o->n || L->n_cells != o->cm.n_cells || L->kf != o->fem.kf ||
-        L->has_damping != o->fld.has_damping)
+    if (L->kf != o->fem.kf || L->has_damping != o->fld.has_damping)
         return false;
     double c[7];
     pc_lag_coefs(o, c);
     if (memcmp(c, L->coef, sizeof c) != 0 || L->springs != pc_lag_springs(o))
         return false;
-    if (memcmp(mask, L->mask, 3 * (size_t)o->n) != 0)
+    /* the build's held dofs and rotations: the hierarchy's own copies (cs_mg_setup) */
+    if (!cs_mg_held_matches(o->mg, mask))
         return false;
-    L->drift = pc_lag_drift(o);
+    L->drift = o->fem.corotational ? cs_mg_rotation_drift(o->mg, o->fem.R) : 0.0;
     return L->drift <= 2.0 * (1.0 - cos(w->pc_lag_angle));
 }
 
-/* After setup_multigrid built the hierarchy for step_operator with held dofs mask: the key. */
-static void pc_lag_record(const cs_world_t *w, cs_object *o, const uint8_t *mask)
+/* After setup_multigrid built the hierarchy for step_operator: the key (the held dofs and
+ * rotations it was built from are the hierarchy's own copies). */
+static void pc_lag_record(const cs_world_t *w, cs_object *o)
 {
     cs_pc_lag *L = &o->lag;
     L->valid = false;
     L->builds++;
     if (!(w->pc_lag_angle > 0))
         return; /* no lag: nothing to keep */
-    if (L->n != o->n || L->n_cells != o->cm.n_cells || !L->R || !L->mask) {
-        free(L->R);
-        free(L->mask);
-        L->R = malloc(9 * (size_t)(o->cm.n_cells ? o->cm.n_cells : 1) * sizeof *L->R);
-        L->mask = malloc(3 * (size_t)(o->n ? o->n : 1));
-        L->n = o->n;
-        L->n_cells = o->cm.n_cells;
-        if (!L->R || !L->mask)
-            return; /* out of memory: no lag, every step builds (as before) */
-    }
-    for (size_t k = 0; k < 9 * (size_t)o->cm.n_cells; k++)
-        L->R[k] = (float)o->fem.R[k];
-    memcpy(L->mask, mask, 3 * (size_t)o->n);
     pc_lag_coefs(o, L->coef);
     L->kf = o->fem.kf;
     L->has_damping = o->fld.has_damping;
@@ -2013,7 +1979,7 @@ static int step_implicit(cs_world_t *w, cs_object *o, cs_step_stats *st, bool tr
                 build_preconditioner(o);
             use_mg = setup_multigrid(w, o, step_operator, o->smask);
             if (use_mg && round == 0)
-                pc_lag_record(w, o, o->smask);
+                pc_lag_record(w, o);
         }
         if (round == 0)
             t3 = now_ms();
@@ -2048,7 +2014,7 @@ static int step_implicit(cs_world_t *w, cs_object *o, cs_step_stats *st, bool tr
             build_preconditioner(o);
             use_mg = setup_multigrid(w, o, step_operator, o->smask);
             if (use_mg)
-                pc_lag_record(w, o, o->smask);
+                pc_lag_record(w, o);
             rr = solve(w, o, use_mg, step_operator, o->smask, o->b, o->v1, w->def.cg_tolerance,
                        w->def.cg_max_iterations);
         }

@@ -92,14 +92,12 @@ typedef struct cs_fields {
  * The lagged preconditioner of the implicit step (world.c "the lagged preconditioner"): the
  * multigrid hierarchy built for one step is reused by the next ones while what it was built
  * from has not changed (the key below) and no cell has turned by more than the world's
- * pc_lag_angle since. Zeroed with the object (calloc); owns R and mask.
+ * pc_lag_angle since (against the hierarchy's own copies of the held dofs and rotations,
+ * cs_mg_held_matches, cs_mg_rotation_drift). Zeroed with the object (calloc); owns nothing.
  */
 typedef struct cs_pc_lag {
     bool valid;            /* the hierarchy o->mg holds is the one this key describes */
     int steps;             /* later steps that reused it since it was built */
-    int n, n_cells;        /* sizes R and mask were made for */
-    float *R;              /* 9 per cell: fem's rotations at the build */
-    uint8_t *mask;         /* 3 per node: the solve's held dofs (smask) at the build */
     double coef[7];        /* mcoef, kcoef, cmcoef, ckcoef, pcoef, penalty, dcoef */
     const double *kf;      /* fem.kf at the build (NULL: uniform) */
     bool has_damping;
