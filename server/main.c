@@ -7,7 +7,8 @@
  *   poll LCM's fd (timeout: 0 when running as fast as possible, else the next deadline of a
  *   step, a status, a key frame or a paced send) → drain every pending message (handlers only
  *   decode, validate and queue) → apply queued inputs, ack each → step if due → queue deltas
- *   at the scene's publish_hz of simulated time → status / key frame if due → paced sends.
+ *   at the scene's publish_hz of simulated time → while paused, the current frame's deltas
+ *   once if the surfaces may be ahead of them → status / key frame if due → paced sends.
  * Signals only set a flag: a step is never interrupted; SIGINT/SIGTERM end the loop, the
  * outputs are written, everything is freed and the exit status is 0.
  * Exit status: 0 done, 1 a runtime failure (output not written, static solve not converged,
@@ -620,10 +621,12 @@ static void do_step(cs_daemon *d)
  * While paused, bring the clients up to the world as it is: the deltas (and rigid poses) of
  * the current frame, queued behind whatever the FIFO holds (a forced fracture's topology
  * changes go first, so every delta finds the topology it was made for). Without this, a
- * daemon paused off the publish grid (publish_hz below the step rate), or changed while
- * paused (a forced fracture: rigid objects are refitted and re-skinned after the change, a
- * paint of a rigid object likewise), leaves its clients behind its status' state_hash until
- * it steps again or the next key frame. Off the grid of publish frames: next_publish stays.
+ * daemon paused off the publish grid (publish_hz below the step rate) leaves its clients at
+ * the last publish frame, behind its status' state_hash, until it steps again or the next
+ * key frame. After a forced fracture or a paint it is a guarantee rather than a repair: the
+ * change sends every new vertex where it is and moves none it had, and a rigid object's
+ * refit (cs_rigid_sync, cs_rigid_fields_changed) re-skins by double round-off only — none of
+ * it visible in float32 as measured (README CUBESIM_TOPOLOGY). next_publish stays.
  */
 static void publish_paused(cs_daemon *d)
 {
