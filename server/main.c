@@ -7,7 +7,8 @@
  *   poll LCM's fd (timeout: 0 when running as fast as possible, else the next deadline of a
  *   step, a status, a key frame or a paced send) → drain every pending message (handlers only
  *   decode, validate and queue) → apply queued inputs, ack each → step if due → queue deltas
- *   at the scene's publish_hz of simulated time → status / key frame if due → paced sends.
+ *   at the scene's publish_hz of simulated time → while paused, the current frame's deltas
+ *   once if the surfaces may be ahead of them → status / key frame if due → paced sends.
  * Signals only set a flag: a step is never interrupted; SIGINT/SIGTERM end the loop, the
  * outputs are written, everything is freed and the exit status is 0.
  * Exit status: 0 done, 1 a runtime failure (output not written, static solve not converged,
@@ -57,6 +58,9 @@ typedef struct cs_daemon {
     bool diverged_logged;
     bool fractured;         /* the world's topology changed since it was built from the scene */
     bool painted;           /* material fields were painted since it was built from the scene */
+    bool unpublished;       /* the surfaces may be ahead of what the bus last queued: a step
+                               off the publish grid, a forced fracture or a paint since the
+                               last deltas; sent at once while paused (publish_paused) */
 
     double next_step;       /* monotonic s (realtime) */
     double next_publish;    /* simulated s */
@@ -314,6 +318,7 @@ static void new_epoch(cs_daemon *d, double now)
     d->next_keyframe = now + ((isfinite(ks) && ks > 0) ? ks : 2.0);
     d->next_step = now;
     d->diverged_logged = false;
+    d->unpublished = false; /* the snapshot just queued is the current state */
 }
 
 /* One info line per fracture event of the last step or forced fracture. */
@@ -422,8 +427,10 @@ static void apply_sculpt(cs_daemon *d, const cs_input *in, char *msg, size_t msg
         snprintf(msg, msglen, "%s: %s", in->request, err[0] ? err : cs_status_str(rc));
         return;
     }
-    if (in->kind == CS_INPUT_PAINT && touched > 0)
+    if (in->kind == CS_INPUT_PAINT && touched > 0) {
         d->painted = true;
+        d->unpublished = true; /* a rigid object is refitted to its new mass properties */
+    }
     if (in->kind == CS_INPUT_PAINT)
         cs_dlog_info(&d->log, "paint of object %u '%s': %d Gauss points", (unsigned)id,
                      info.name, touched);
@@ -527,6 +534,7 @@ static void apply_command(cs_daemon *d, const cs_input *in, double now, char *ms
                      (unsigned)id, info.name ? info.name : "?",
                      (long long)cs_world_frame(d->world), ne);
         publish_topology(d);
+        d->unpublished = true; /* while paused: the deltas follow (publish_paused) */
         break;
     }
     case CS_CMD_UNKNOWN:
@@ -596,14 +604,40 @@ static void do_step(cs_daemon *d)
                      (long long)cs_world_frame(d->world));
     }
     double t = cs_world_time(d->world), period = publish_period(d);
+    d->unpublished = true;
     if (t + 1e-9 * (period > 0 ? period : 1) >= d->next_publish) {
         sync_context(d);
         if (cs_bus_queue_deltas(d->bus, d->world, d->scene.publish_epsilon) < 0)
             cs_dlog_warn(&d->log, "deltas", "could not queue deltas (out of memory)");
+        else
+            d->unpublished = false;
         d->next_publish += period;
         if (d->next_publish <= t)
             d->next_publish = t + period;
     }
+}
+
+/*
+ * While paused, bring the clients up to the world as it is: the deltas (and rigid poses) of
+ * the current frame, queued behind whatever the FIFO holds (a forced fracture's topology
+ * changes go first, so every delta finds the topology it was made for). Without this, a
+ * daemon paused off the publish grid (publish_hz below the step rate) leaves its clients at
+ * the last publish frame, behind its status' state_hash, until it steps again or the next
+ * key frame. After a forced fracture or a paint it is a guarantee rather than a repair: the
+ * change sends every new vertex where it is and moves none it had, and a rigid object's
+ * refit (cs_rigid_sync, cs_rigid_fields_changed) re-skins by double round-off only — none of
+ * it visible in float32 as measured (README CUBESIM_TOPOLOGY). next_publish stays.
+ */
+static void publish_paused(cs_daemon *d)
+{
+    if (!d->paused || !d->unpublished)
+        return;
+    sync_context(d);
+    if (cs_bus_queue_deltas(d->bus, d->world, d->scene.publish_epsilon) < 0) {
+        cs_dlog_warn(&d->log, "deltas", "could not queue deltas (out of memory)");
+        return; /* tried again on the next loop iteration */
+    }
+    d->unpublished = false;
 }
 
 static void publish_status(cs_daemon *d, double now)
@@ -694,6 +728,7 @@ static int run_loop(cs_daemon *d)
                 }
             }
         }
+        publish_paused(d); /* paused (now, or by the step just done) with news: send it */
         now = cs_dlog_now();
         if (now >= d->next_keyframe) {
             sync_context(d);
