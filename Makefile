@@ -7,6 +7,8 @@
 #   make bench    benchmarks; figures to bench/results/
 #   make stress   longer stability suites
 #   make valgrind unit tests under valgrind
+#   make fuzz     coverage-guided fuzzing of the scene parser and the clients' surface state
+#                 (clang's libFuzzer; FUZZ_SECONDS each, default 120)
 #   make san      the address/undefined-sanitizer build into build/san/
 
 PACKAGES := build-essential pkg-config liblcm-dev liblcm-bin libglib2.0-dev libassimp-dev assimp-testmodels \
@@ -58,7 +60,7 @@ BINS := $(B)/bin/cubesimd $(patsubst client/%.c,$(B)/bin/%,$(CLIENT_SRC)) \
         $(patsubst tests/it/tools/%.c,$(B)/bin/cs_it_%,$(IT_TOOL_SRC)) \
         $(patsubst tests/stress/%.c,$(B)/bin/cs_stress_%,$(STRESS_TOOL_SRC))
 
-.PHONY: all deps test run bench stress valgrind san clean gen
+.PHONY: all deps test run bench stress valgrind san clean gen fuzz
 all: $(BINS)
 
 deps:
@@ -125,6 +127,28 @@ test: deps
 valgrind: all
 	valgrind --error-exitcode=1 --leak-check=full --errors-for-leak-kinds=definite --show-possibly-lost=no \
 	  --suppressions=tests/stress/lcm.supp $(B)/bin/cs_unit_tests --quick
+
+# libFuzzer targets (tests/fuzz): the fuzzed code (common/) is compiled by clang with coverage,
+# address and undefined-behaviour instrumentation; the engine, which needs GCC (target_clones,
+# vector extensions), is linked from the release build uninstrumented. Corpora and any crash
+# reproducer go to build/fuzz/. Not part of `make test`: clang is not one of the packages.
+FUZZ_SECONDS ?= 120
+FUZZ_FLAGS := -O1 -g -std=c11 -D_GNU_SOURCE -fsanitize=fuzzer,address,undefined \
+              -I. -Iserver/engine -Icommon -I$(GEN) $(shell pkg-config --cflags glib-2.0 libcjson)
+FUZZ_LIBS := $(PKG_LIBS) -lgomp -lm -lpthread
+fuzz:
+	$(MAKE) SAN=0 all
+	@command -v clang >/dev/null || { echo "make fuzz needs clang (apt-get install clang)"; exit 1; }
+	@mkdir -p build/fuzz/scene build/fuzz/surface_state
+	clang $(FUZZ_FLAGS) tests/fuzz/fuzz_scene.c $(COMMON_SRC) -o build/fuzz/fuzz_scene \
+	  build/lib/libcsengine.a build/lib/libcstypes.a $(FUZZ_LIBS)
+	clang $(FUZZ_FLAGS) tests/fuzz/fuzz_surface_state.c $(COMMON_SRC) -o build/fuzz/fuzz_surface_state \
+	  build/lib/libcsengine.a build/lib/libcstypes.a $(FUZZ_LIBS)
+	cp scenes/*.json build/fuzz/scene/
+	build/fuzz/fuzz_scene -max_total_time=$(FUZZ_SECONDS) -timeout=20 -max_len=4096 \
+	  -artifact_prefix=build/fuzz/ build/fuzz/scene
+	build/fuzz/fuzz_surface_state -max_total_time=$(FUZZ_SECONDS) -timeout=10 -max_len=2048 \
+	  -artifact_prefix=build/fuzz/ build/fuzz/surface_state
 
 run: deps all
 	bash scenes/demo.sh
