@@ -135,6 +135,7 @@ typedef struct mg_level {
     int32_t *bslot;                   /* per batch: its slot in fe */
     int32_t *fadj;                    /* per adj link: its corner's x component in fe */
     int nseg;                         /* segments of batches: l->threads */
+    int span;                         /* the most batches between a node's first and last cell */
     /* the node pass follows the element pass chunk by chunk (apply_ex): the nodes ordered by
      * the batch of their last cell (nodes without cells: batch 0), then by index */
     int32_t *norder;                  /* n_nodes */
@@ -474,6 +475,7 @@ static int product_layout(mg_level *l)
         if (hi >= 0 && hi - lo > span)
             span = hi - lo;
     }
+    l->span = span;
     const int64_t head = span, ring = (int64_t)span + MG_CHUNK;
     int64_t total = 0;
     for (int s = 0; s < l->nseg; s++) {
@@ -1059,7 +1061,8 @@ static void batches_avx512(const mg_level *l, const float *restrict x, int b0, i
 }
 
 /* A Chebyshev step fused into a residual's node pass: d = a d + c D⁻¹ r (d = c D⁻¹ r if
- * first), x += d at free dofs, 0 at held ones (cheb_update's arithmetic, node by node); with
+ * first; d NULL: first, and d is not stored), x += d at free dofs, 0 at held ones
+ * (cheb_update's arithmetic, node by node); with
  * out, the new x also converted to double into out (the V-cycle's last step: its result). */
 typedef struct cheb_step {
     float *d, *x;
@@ -1159,7 +1162,8 @@ static inline __attribute__((always_inline)) void node_out(const mg_level *l, in
     const vf4 z = dinv(l, n, r);
     const bool first = mode == NP_CHEB_FIRST || mode == NP_CHEB_FIRST_OUT;
     const vf4 dj = and4(first ? cs->c * z : cs->a * load3(cs->d + 3 * n) + cs->c * z, fr);
-    store3(cs->d + 3 * n, dj);
+    if (cs->d)
+        store3(cs->d + 3 * n, dj);
     const vf4 xn = and4(load3(cs->x + 3 * n) + dj, fr);
     store3(cs->x + 3 * n, xn);
     if (mode == NP_CHEB_FIRST_OUT || mode == NP_CHEB_OUT)
@@ -1192,9 +1196,12 @@ static inline __attribute__((always_inline)) void path_share(const mg_level *l, 
         }
     }
 #pragma omp barrier
-    for (int sg = t; sg < l->nseg; sg += nt) {
+    /* a node shared with a lower segment has its last cell within span batches of the
+     * segment's start: only those positions are scanned (none in the first segment) */
+    for (int sg = t > 0 ? t : nt; sg < l->nseg; sg += nt) {
         const int b0 = seg_start(l, sg), b1 = seg_start(l, sg + 1);
-        for (int q = l->nfirst[b0]; q < l->nfirst[b1]; q++)
+        const int e = b0 + l->span < b1 ? b0 + l->span : b1;
+        for (int q = l->nfirst[b0]; q < l->nfirst[e]; q++)
             if (l->nminb[q] < b0)
                 node_out(l, l->norder[q], x, b, y, cs, mode);
     }
@@ -1329,7 +1336,8 @@ static void smooth(const cs_mg *mg, int level, const float *b, float *x)
     jacobi(l, l->t, x, l->omega, true);
 }
 
-/* d = a d + c D⁻¹ t (d = c D⁻¹ t if first), x += d (x = d if zero) at free dofs, 0 at held. */
+/* d = a d + c D⁻¹ t (d = c D⁻¹ t if first), x += d (x = d if zero) at free dofs, 0 at held;
+ * d NULL (first only): d not stored. */
 static void cheb_update(const mg_level *l, const float *t, float *d, float *x, float a, float c,
                         bool first, bool zero)
 {
@@ -1337,7 +1345,8 @@ static void cheb_update(const mg_level *l, const float *t, float *d, float *x, f
     for (int i = 0; i < l->n_nodes; i++) {
         const vf4 z = dinv(l, i, load3(t + 3 * i)), fr = free_mask(l, i);
         const vf4 dj = and4(first ? c * z : a * load3(d + 3 * i) + c * z, fr);
-        store3(d + 3 * i, dj);
+        if (d)
+            store3(d + 3 * i, dj);
         store3(x + 3 * i, zero ? dj : and4(load3(x + 3 * i) + dj, fr));
     }
 }
@@ -1353,7 +1362,8 @@ static void cheb_update_in(const mg_level *l, const double *in, float *t, float 
         const vf4 tv = {(float)v[0], (float)v[1], (float)v[2], 0.0f};
         store3(t + 3 * i, tv);
         const vf4 z = dinv(l, i, tv), dj = and4(c * z, free_mask(l, i));
-        store3(d + 3 * i, dj);
+        if (d)
+            store3(d + 3 * i, dj);
         store3(x + 3 * i, dj);
     }
 }
@@ -1375,15 +1385,16 @@ static void cheb(const cs_mg *mg, int level, const float *b, float *x, bool zero
     /* in (with zero): b is yet to be converted from it, by the first step (into l->b: the
      * V-cycle's finest right-hand side); out: the last step writes x in double there too */
     if (MG_CHEB_KIND == 4) {
-        /* the polynomial as a product of its root factors: x += (c_i/λ) D⁻¹ (b − A x) */
+        /* the polynomial as a product of its root factors: x += (c_i/λ) D⁻¹ (b − A x); each
+         * step's d = (c_i/λ) D⁻¹ r is added to x and not kept (d NULL: not stored) */
         for (int k = 0; k < l->cheb_deg; k++) {
             const float c = (float)(l->cheb_c[k] / l->lam);
             if (k == 0 && zero && in) {
-                cheb_update_in(l, in, l->b, l->d, x, c);
+                cheb_update_in(l, in, l->b, NULL, x, c);
             } else if (k == 0 && zero) {
-                cheb_update(l, b, l->d, x, 0.0f, c, true, true);
+                cheb_update(l, b, NULL, x, 0.0f, c, true, true);
             } else {
-                const cheb_step cs = {l->d, x, 0.0f, c, true,
+                const cheb_step cs = {NULL, x, 0.0f, c, true,
                                       k == l->cheb_deg - 1 ? out : NULL};
                 apply_path(mg, level, mg->avx512, x, b, NULL, &cs);
             }
