@@ -92,6 +92,16 @@ typedef struct mg_level {
     /* the V-cycle's copies of both (transfer_layout): (node, weight in float) pairs, one
      * 8-byte stream per transfer instead of a 4- and an 8-byte one */
     mg_tw *p_tw, *r_tw;
+    /* ... and the prolongation by coarse cells (transfer_layout; NULL: by p_tw): per coarse
+     * cell C, the fine nodes whose row was made from C (their first cell's parent), each as
+     * n | (position of n in C, 0..26) << 27; their rows are the cs_mg position tables' */
+    int32_t *pc_start;                /* per coarse cell */
+    uint32_t *pc_ent;
+    int32_t *p_lone;                  /* the fine nodes with empty rows (no cell) */
+    int n_lone;
+    /* the restriction's pairs packed (transfer_layout; NULL: r_tw): fine node | e << 27 for
+     * the weight 2^−e, e = 0..3 (the trilinear weights are 1, 1/2, 1/4, 1/8): 4 bytes each */
+    uint32_t *r_pk;
     /* from the next finer level (level >= 1) */
     int32_t *ch_start, *ch;           /* children of each cell */
     int32_t *walk;                    /* the cells in the order of their first child */
@@ -166,6 +176,10 @@ struct cs_mg {
     int dense_n;
     cs_matvec_fn A;
     void *ctx;
+    /* the trilinear rows by a fine node's position t in its coarse cell (t0 + 3 t1 + 9 t2,
+     * half-units): its nonzero weights' corners K, increasing, and the weights in float */
+    uint8_t pos_n[27], pos_k[27][8];
+    float pos_w[27][8];
     int setups;
     double key[3];
 };
@@ -538,12 +552,49 @@ static int narrow_corners(mg_level *l)
     return 0;
 }
 
-/* The V-cycle's copies of level f's transfer rows: (node, float weight) pairs (the weights
- * are the float the loops converted them to). -1 on out of memory. */
-static int transfer_layout(mg_level *f)
+/* corner_weight with CS_CORNER's offsets as compile-time constants (position_row folds them;
+ * transfer_layout checks every row made from them against coarsen's) */
+static inline __attribute__((always_inline)) double position_weight(const int t[3], int K)
 {
+    static const int CORNER[8][3] = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0},
+                                     {0, 0, 1}, {1, 0, 1}, {1, 1, 1}, {0, 1, 1}};
+    double w = 1;
+    for (int a = 0; a < 3; a++)
+        w *= CORNER[K][a] ? t[a] * 0.5 : 1.0 - t[a] * 0.5;
+    return w;
+}
+
+/* The trilinear rows by position in the coarse cell (cs_mg pos_*): as coarsen makes them. */
+static void position_rows(cs_mg *mg)
+{
+    for (int p = 0; p < 27; p++) {
+        const int t[3] = {p % 3, p / 3 % 3, p / 9};
+        int m = 0;
+        for (int K = 0; K < 8; K++) {
+            const double w = position_weight(t, K);
+            if (w == 0)
+                continue;
+            mg->pos_k[p][m] = (uint8_t)K;
+            mg->pos_w[p][m++] = (float)w;
+        }
+        mg->pos_n[p] = (uint8_t)m;
+    }
+}
+
+/*
+ * The V-cycle's copies of level f's transfer rows: (node, float weight) pairs (the weights
+ * are the float the loops converted them to); and the prolongation by coarse cells
+ * (pc_start, pc_ent, p_lone), used if every fine row is its position's row of its coarse
+ * cell's corners, weight for weight (else pc_ent stays NULL and p_tw is used): it streams 4
+ * bytes per fine node instead of 8 per weight (3.4 per node on a box) and reads each coarse
+ * cell's corners once, for the same sums in the same order. -1 on out of memory.
+ */
+static int transfer_layout(cs_mg *mg, int level)
+{
+    mg_level *f = &mg->lv[level];
     if (!f->p_start)
         return 0;
+    const mg_level *c = &mg->lv[level + 1];
     const int np = f->p_start[f->n_nodes];
     f->p_tw = malloc((size_t)(np > 0 ? np : 1) * sizeof(mg_tw));
     f->r_tw = malloc((size_t)(np > 0 ? np : 1) * sizeof(mg_tw));
@@ -552,6 +603,77 @@ static int transfer_layout(mg_level *f)
     for (int a = 0; a < np; a++) {
         f->p_tw[a] = (mg_tw){f->p_node[a], (float)f->p_w[a]};
         f->r_tw[a] = (mg_tw){f->r_node[a], (float)f->r_w[a]};
+    }
+    if (f->n_nodes >= 1 << 27)
+        return 0;
+    f->r_pk = malloc((size_t)(np > 0 ? np : 1) * sizeof(uint32_t));
+    bool pk = f->r_pk != NULL;
+    for (int a = 0; pk && a < np; a++) {
+        int e = 0;
+        while (e < 3 && f->r_tw[a].w != 1.0f / (float)(1 << e))
+            e++;
+        pk = f->r_tw[a].w == 1.0f / (float)(1 << e);
+        f->r_pk[a] = (uint32_t)f->r_tw[a].node | (uint32_t)e << 27;
+    }
+    if (pk) {
+        free(f->r_tw);
+        f->r_tw = NULL;
+    } else {
+        free(f->r_pk);
+        f->r_pk = NULL;
+    }
+    f->pc_start = calloc((size_t)c->n_cells + 1, sizeof(int32_t));
+    f->pc_ent = malloc((size_t)(f->n_nodes ? f->n_nodes : 1) * sizeof(uint32_t));
+    f->p_lone = malloc((size_t)(f->n_nodes ? f->n_nodes : 1) * sizeof(int32_t));
+    int32_t *owner = malloc((size_t)(f->n_nodes ? f->n_nodes : 1) * sizeof(int32_t));
+    uint8_t *pos = malloc((size_t)(f->n_nodes ? f->n_nodes : 1));
+    bool ok = f->pc_start && f->pc_ent && f->p_lone && owner && pos;
+    f->n_lone = 0;
+    for (int n = 0; ok && n < f->n_nodes; n++) {
+        owner[n] = -1;
+        if (f->adj_start[n] == f->adj_start[n + 1]) {
+            f->p_lone[f->n_lone++] = n;
+            ok = f->p_start[n] == f->p_start[n + 1];
+            continue;
+        }
+        const int e = f->adj[f->adj_start[n]], fc = e / 8, C = f->parent[fc];
+        int t[3];
+        half_units(f, c, fc, e % 8, C, t);
+        const int p = t[0] + 3 * t[1] + 9 * t[2];
+        /* the row as the position tables give it, or no fast path */
+        ok = f->p_start[n + 1] - f->p_start[n] == mg->pos_n[p];
+        for (int j = 0; ok && j < mg->pos_n[p]; j++)
+            ok = f->p_tw[f->p_start[n] + j].node == c->cell_nodes[8 * C + mg->pos_k[p][j]] &&
+                 f->p_tw[f->p_start[n] + j].w == mg->pos_w[p][j];
+        owner[n] = C;
+        pos[n] = (uint8_t)p;
+        f->pc_start[C + 1]++;
+    }
+    if (ok) {
+        for (int C = 0; C < c->n_cells; C++)
+            f->pc_start[C + 1] += f->pc_start[C];
+        int32_t *fill = malloc(((size_t)c->n_cells + 1) * sizeof(int32_t));
+        ok = fill != NULL;
+        if (ok) {
+            memcpy(fill, f->pc_start, ((size_t)c->n_cells + 1) * sizeof(int32_t));
+            for (int n = 0; n < f->n_nodes; n++)
+                if (owner[n] >= 0)
+                    f->pc_ent[fill[owner[n]]++] = (uint32_t)n | (uint32_t)pos[n] << 27;
+        }
+        free(fill);
+    }
+    free(owner);
+    free(pos);
+    if (ok) { /* the rows by position replace p_tw */
+        free(f->p_tw);
+        f->p_tw = NULL;
+    } else { /* out of memory or another row: p_tw */
+        free(f->pc_start);
+        free(f->pc_ent);
+        free(f->p_lone);
+        f->pc_start = f->p_lone = NULL;
+        f->pc_ent = NULL;
+        f->n_lone = 0;
     }
     return 0;
 }
@@ -724,6 +846,10 @@ static void free_level(mg_level *l)
     free(l->r_w);
     free(l->p_tw);
     free(l->r_tw);
+    free(l->r_pk);
+    free(l->pc_start);
+    free(l->pc_ent);
+    free(l->p_lone);
     free(l->bbase);
     free(l->bidx16);
     free(l->ch_start);
@@ -828,8 +954,9 @@ cs_mg *cs_mg_build(const cs_cubemesh *cm, const cs_fem *fem, uint32_t version)
             break;
         }
     }
+    position_rows(mg);
     for (int l = 0; l < mg->n_levels; l++)
-        if (transfer_layout(&mg->lv[l]) != 0)
+        if (transfer_layout(mg, l) != 0)
             goto fail;
     for (int l = 0; l < mg->n_levels; l++) {
         mg_level *c = &mg->lv[l];
@@ -1301,7 +1428,8 @@ int cs_mg_level_layout(const cs_mg *mg, int level)
     if (level < 0 || level >= mg->n_levels)
         return 0;
     const mg_level *l = &mg->lv[level];
-    return (l->bidx16 ? CS_MG_NARROW_CORNERS : 0) | (l->bQ_ok ? CS_MG_QUAT_ROTATIONS : 0);
+    return (l->bidx16 ? CS_MG_NARROW_CORNERS : 0) | (l->bQ_ok ? CS_MG_QUAT_ROTATIONS : 0) |
+           (l->pc_ent ? CS_MG_CELL_PROLONGATION : 0) | (l->r_pk ? CS_MG_PACKED_RESTRICTION : 0);
 }
 
 void cs_mg_level_smoother(const cs_mg *mg, int level, float *inv, uint8_t *mask)
@@ -1769,6 +1897,101 @@ static void to_double(const mg_level *l, const float *x, double *out)
         out[d] = x[d];
 }
 
+/* xc = Pᵀ xf at the free dofs of level `level` + 1, 0 at its held ones (the residual's
+ * restriction), by the packed pairs where the layout allows (transfer_layout). */
+static void restrict_to(const cs_mg *mg, int level, const float *xf, float *xc)
+{
+    const mg_level *f = &mg->lv[level], *c = &mg->lv[level + 1];
+#pragma omp parallel for num_threads(c->threads) schedule(static)
+    for (int J = 0; J < c->n_nodes; J++) {
+        /* (x, y, z, 0) vectors: per component the scalar sums in the same order */
+        vf4 s = {0, 0, 0, 0};
+        if (f->r_pk) {
+            static const float W[4] = {1.0f, 0.5f, 0.25f, 0.125f};
+            for (int a = f->r_start[J]; a < f->r_start[J + 1]; a++) {
+                const uint32_t e = f->r_pk[a];
+                s += W[e >> 27] * load3(xf + 3 * (size_t)(e & ((1u << 27) - 1)));
+            }
+        } else {
+            for (int a = f->r_start[J]; a < f->r_start[J + 1]; a++)
+                s += f->r_tw[a].w * load3(xf + 3 * f->r_tw[a].node);
+        }
+        store3(xc + 3 * J, and4(s, free_mask(c, J)));
+    }
+}
+
+/* The prolongation row of position p (t0 + 3 t1 + 9 t2 in half-units, constant once inlined)
+ * applied to its coarse cell's corner values: the nonzero trilinear weights in corner order,
+ * in float, summed from 0 as the rows are (position_rows, coarsen). */
+static inline __attribute__((always_inline)) vf4 position_row(const int p, const vf4 *xc)
+{
+    const int t[3] = {p % 3, p / 3 % 3, p / 9};
+    vf4 s = {0, 0, 0, 0};
+    for (int K = 0; K < 8; K++) {
+        const float w = (float)position_weight(t, K);
+        if (w != 0)
+            s += w * xc[K];
+    }
+    return s;
+}
+
+/* x += P xc at free dofs of level `level` (held dofs keep their value, bit for bit: not
+ * x + 0), by coarse cells where the layout allows (transfer_layout), else by rows. */
+static void prolong_add(const cs_mg *mg, int level, const float *xc_in, float *x)
+{
+    const mg_level *f = &mg->lv[level], *c = &mg->lv[level + 1];
+    if (f->pc_ent) {
+        /* by coarse cells: each fine node once, from its coarse cell's corners (the same sums
+         * in the same order as its row) */
+#pragma omp parallel for num_threads(f->threads) schedule(static)
+        for (int C = 0; C < c->n_cells; C++) {
+            const int a0 = f->pc_start[C], a1 = f->pc_start[C + 1];
+            if (a0 == a1)
+                continue;
+            vf4 xc[8];
+            for (int K = 0; K < 8; K++)
+                xc[K] = load3(xc_in + 3 * c->cell_nodes[8 * C + K]);
+            for (int a = a0; a < a1; a++) {
+                const int n = (int)(f->pc_ent[a] & ((1u << 27) - 1)), p = f->pc_ent[a] >> 27;
+                vf4 s;
+                switch (p) { /* the row of each position with its weights as constants */
+#define PROW_CASE(P)                                                                           \
+    case P:                                                                                    \
+        s = position_row(P, xc);                                                               \
+        break;
+                    PROW_CASE(0) PROW_CASE(1) PROW_CASE(2) PROW_CASE(3) PROW_CASE(4)
+                    PROW_CASE(5) PROW_CASE(6) PROW_CASE(7) PROW_CASE(8) PROW_CASE(9)
+                    PROW_CASE(10) PROW_CASE(11) PROW_CASE(12) PROW_CASE(13) PROW_CASE(14)
+                    PROW_CASE(15) PROW_CASE(16) PROW_CASE(17) PROW_CASE(18) PROW_CASE(19)
+                    PROW_CASE(20) PROW_CASE(21) PROW_CASE(22) PROW_CASE(23) PROW_CASE(24)
+                    PROW_CASE(25)
+#undef PROW_CASE
+                default:
+                    s = position_row(26, xc);
+                    break;
+                }
+                const vf4 fr = free_mask(f, n), xn = load3(x + 3 * n);
+                store3(x + 3 * n, (vf4)(((vi4)(xn + s) & (vi4)fr) | ((vi4)xn & ~(vi4)fr)));
+            }
+        }
+        for (int i = 0; i < f->n_lone; i++) { /* x + 0, as an empty row gives */
+            const int n = f->p_lone[i];
+            const vf4 fr = free_mask(f, n), xn = load3(x + 3 * n), s = {0, 0, 0, 0};
+            store3(x + 3 * n, (vf4)(((vi4)(xn + s) & (vi4)fr) | ((vi4)xn & ~(vi4)fr)));
+        }
+    } else {
+#pragma omp parallel for num_threads(f->threads) schedule(static)
+        for (int n = 0; n < f->n_nodes; n++) {
+            vf4 s = {0, 0, 0, 0};
+            for (int a = f->p_start[n]; a < f->p_start[n + 1]; a++)
+                s += f->p_tw[a].w * load3(xc_in + 3 * f->p_tw[a].node);
+            /* held dofs keep their value (bit for bit: not x + 0) */
+            const vf4 fr = free_mask(f, n), xn = load3(x + 3 * n);
+            store3(x + 3 * n, (vf4)(((vi4)(xn + s) & (vi4)fr) | ((vi4)xn & ~(vi4)fr)));
+        }
+    }
+}
+
 /* The V-cycle from `level` down. On the finest level (cs_mg_vcycle) b is l->b, still to be
  * converted from in (double), and the result also goes to out in double: the first and the
  * last smoothing steps do that in their passes (a pass and a parallel region fewer each). */
@@ -1797,14 +2020,7 @@ static void vcycle(cs_mg *mg, int level, const float *b, float *x, const double 
     }
     /* residual, restricted */
     apply_ex(mg, level, x, b, f->t);
-#pragma omp parallel for num_threads(c->threads) schedule(static)
-    for (int J = 0; J < c->n_nodes; J++) {
-        /* (x, y, z, 0) vectors: per component the scalar sums in the same order */
-        vf4 s = {0, 0, 0, 0};
-        for (int a = f->r_start[J]; a < f->r_start[J + 1]; a++)
-            s += f->r_tw[a].w * load3(f->t + 3 * f->r_tw[a].node);
-        store3(c->b + 3 * J, and4(s, free_mask(c, J)));
-    }
+    restrict_to(mg, level, f->t, c->b);
     vcycle(mg, level + 1, c->b, c->x, NULL, NULL);
     for (int g = 1; g < c->cycles; g++) {
         /* W: one more cycle on the level's residual, x_c += B_c (b_c − A_c x_c); with B_c
@@ -1815,15 +2031,7 @@ static void vcycle(cs_mg *mg, int level, const float *b, float *x, const double 
         for (int d = 0; d < 3 * c->n_nodes; d++)
             c->x[d] += c->gx[d]; /* 0 at held dofs */
     }
-#pragma omp parallel for num_threads(f->threads) schedule(static)
-    for (int n = 0; n < f->n_nodes; n++) {
-        vf4 s = {0, 0, 0, 0};
-        for (int a = f->p_start[n]; a < f->p_start[n + 1]; a++)
-            s += f->p_tw[a].w * load3(c->x + 3 * f->p_tw[a].node);
-        /* held dofs keep their value (bit for bit: not x + 0) */
-        const vf4 fr = free_mask(f, n), xn = load3(x + 3 * n);
-        store3(x + 3 * n, (vf4)(((vi4)(xn + s) & (vi4)fr) | ((vi4)xn & ~(vi4)fr)));
-    }
+    prolong_add(mg, level, c->x, x);
     if (f->cheb_deg) {
         cheb(mg, level, b, x, false, NULL, out);
     } else {
@@ -1855,6 +2063,18 @@ void cs_mg_prolong(const cs_mg *mg, int level, const float *xc, float *xf)
                 s += (float)f->p_w[a] * xc[3 * f->p_node[a] + k];
             xf[3 * n + k] = s;
         }
+}
+
+void cs_mg_prolong_add_level(const cs_mg *mg, int level, const float *xc, float *xf)
+{
+    if (level >= 0 && level + 1 < mg->n_levels)
+        prolong_add(mg, level, xc, xf);
+}
+
+void cs_mg_restrict_level(const cs_mg *mg, int level, const float *xf, float *xc)
+{
+    if (level >= 0 && level + 1 < mg->n_levels)
+        restrict_to(mg, level, xf, xc);
 }
 
 void cs_mg_restrict(const cs_mg *mg, int level, const float *xf, float *xc)
