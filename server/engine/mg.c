@@ -16,6 +16,10 @@
 #ifndef MG_CHEB
 #define MG_CHEB 2         /* Chebyshev degree on the finest level (0: damped Jacobi, MG_NU sweeps) */
 #endif
+/* Session 17 (README "Cheaper cycles, measured"): degree 1 on the finest level (2 products per
+ * cycle instead of 4) took 1.5–2× the CG iterations, a hybrid of degree 1 with the second
+ * weight added to the coarse correction 1.2–1.7×, an additive two-level cycle (no finest
+ * products) 3–4×; degree 1 breaks even at about 1.36×: none kept. */
 /* ... and on the finest level of a nearly incompressible material, Poisson ratio ν ≥ MG_CHEB_NU
  * (λ ≥ 4μ): there degree 3 took 14–28 % fewer CG iterations per step than 2 (75×15×15 beam,
  * 32³ block; ν = 0.4, 0.45, 0.49), for about 20 % more instructions per iteration: the same
@@ -29,6 +33,8 @@
 #ifndef MG_CHEB_COARSE
 #define MG_CHEB_COARSE 3  /* ... and on the coarse levels (an eighth of the cost each) */
 #endif
+/* (Degree 2 on every coarse level, on level 1 only or on the thin levels only cost 2–18 % more
+ * iterations somewhere on each of those rules: beams, ν = 0.45, 32³, a plate; session 17.) */
 /* The smoothing polynomial's kind. 4 (default): Lottes' optimised fourth kind over [0, λ]
  * (cs_mg_smoother_steps), λ = MG_LAMBDA_SAFETY × the power estimate of λmax(D⁻¹A); |1 − t p|
  * stays below 1 up to 1.17 λ (degree 2) and 1.11 λ (degree 3), i.e. to 1.29× and 1.22× the
