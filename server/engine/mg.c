@@ -78,6 +78,13 @@ typedef float vf __attribute__((vector_size(4 * VF_LANES)));
 #define MODAL_V vf
 #define MODAL_S float
 #include "modal_core.h"
+/* A level with fewer cells runs on one thread. 256 (the beam's 19×4×4 level on two threads
+ * too) measured on the loaded machine of session 17: stiff beam 40 → 22 steps/s with
+ * OMP_WAIT_POLICY=passive (more synchronisations, each a futex wake-up), 19.7 → 20.4 with the
+ * default spinning (medians of 6 rounds; noise); an idle measurement is still to be made. */
+#ifndef MG_PARALLEL_CELLS
+#define MG_PARALLEL_CELLS CS_FEM_PARALLEL_CELLS
+#endif
 #define MG_LAMBDA_EVERY 64 /* re-estimate λmax(D⁻¹A) after this many setups */
 
 typedef struct mg_tw {
@@ -758,7 +765,7 @@ int cs_mg_smoother_steps(int deg, double *c)
 static int alloc_level_state(mg_level *l, int level, int threads, int cheb_deg)
 {
     const size_t n3 = 3 * (size_t)l->n_nodes, nc = l->n_cells ? (size_t)l->n_cells : 1;
-    l->threads = threads > 1 && l->n_cells >= CS_FEM_PARALLEL_CELLS ? threads : 1;
+    l->threads = threads > 1 && l->n_cells >= MG_PARALLEL_CELLS ? threads : 1;
     l->cheb_deg = cheb_deg;
     if (MG_CHEB_KIND == 4 && l->cheb_deg > 0 &&
         cs_mg_smoother_steps(l->cheb_deg, l->cheb_c) != 0)
