@@ -596,11 +596,12 @@ static void position_rows(cs_mg *mg)
 
 /*
  * The V-cycle's copies of level f's transfer rows: (node, float weight) pairs (the weights
- * are the float the loops converted them to); and the prolongation by coarse cells
- * (pc_start, pc_ent, p_lone), used if every fine row is its position's row of its coarse
- * cell's corners, weight for weight (else pc_ent stays NULL and p_tw is used): it streams 4
- * bytes per fine node instead of 8 per weight (3.4 per node on a box) and reads each coarse
- * cell's corners once, for the same sums in the same order. -1 on out of memory.
+ * are the float the loops converted them to); the restriction's packed into 4 bytes (r_pk)
+ * if every weight is 2^−e, e ≤ 3; and the prolongation by coarse cells (pc_start, pc_ent,
+ * p_lone), used if every fine row is its position's row of its coarse cell's corners, weight
+ * for weight: it streams 4 bytes per fine node instead of 8 per weight (3.4 per node on a
+ * box) and reads each coarse cell's corners once. Either way the same sums in the same order;
+ * where a check fails (or memory is short), the pairs stay (r_tw, p_tw). -1 on out of memory.
  */
 static int transfer_layout(cs_mg *mg, int level)
 {
