@@ -16,6 +16,10 @@
 #ifndef MG_CHEB
 #define MG_CHEB 2         /* Chebyshev degree on the finest level (0: damped Jacobi, MG_NU sweeps) */
 #endif
+/* Session 17 (README "Cheaper cycles, measured"): degree 1 on the finest level (2 products per
+ * cycle instead of 4) took 1.5–2× the CG iterations, a hybrid of degree 1 with the second
+ * weight added to the coarse correction 1.2–1.7×, an additive two-level cycle (no finest
+ * products) 3–4×; degree 1 breaks even at about 1.36×: none kept. */
 /* ... and on the finest level of a nearly incompressible material, Poisson ratio ν ≥ MG_CHEB_NU
  * (λ ≥ 4μ): there degree 3 took 14–28 % fewer CG iterations per step than 2 (75×15×15 beam,
  * 32³ block; ν = 0.4, 0.45, 0.49), for about 20 % more instructions per iteration: the same
@@ -29,6 +33,8 @@
 #ifndef MG_CHEB_COARSE
 #define MG_CHEB_COARSE 3  /* ... and on the coarse levels (an eighth of the cost each) */
 #endif
+/* (Degree 2 on every coarse level, on level 1 only or on the thin levels only cost 2–18 % more
+ * iterations somewhere on each of those rules: beams, ν = 0.45, 32³, a plate; session 17.) */
 /* The smoothing polynomial's kind. 4 (default): Lottes' optimised fourth kind over [0, λ]
  * (cs_mg_smoother_steps), λ = MG_LAMBDA_SAFETY × the power estimate of λmax(D⁻¹A); |1 − t p|
  * stays below 1 up to 1.17 λ (degree 2) and 1.11 λ (degree 3), i.e. to 1.29× and 1.22× the
@@ -72,6 +78,13 @@ typedef float vf __attribute__((vector_size(4 * VF_LANES)));
 #define MODAL_V vf
 #define MODAL_S float
 #include "modal_core.h"
+/* A level with fewer cells runs on one thread. 256 (the beam's 19×4×4 level on two threads
+ * too) measured on the loaded machine of session 17: stiff beam 40 → 22 steps/s with
+ * OMP_WAIT_POLICY=passive (more synchronisations, each a futex wake-up), 19.7 → 20.4 with the
+ * default spinning (medians of 6 rounds; noise); an idle measurement is still to be made. */
+#ifndef MG_PARALLEL_CELLS
+#define MG_PARALLEL_CELLS CS_FEM_PARALLEL_CELLS
+#endif
 #define MG_LAMBDA_EVERY 64 /* re-estimate λmax(D⁻¹A) after this many setups */
 
 typedef struct mg_tw {
@@ -92,6 +105,16 @@ typedef struct mg_level {
     /* the V-cycle's copies of both (transfer_layout): (node, weight in float) pairs, one
      * 8-byte stream per transfer instead of a 4- and an 8-byte one */
     mg_tw *p_tw, *r_tw;
+    /* ... and the prolongation by coarse cells (transfer_layout; NULL: by p_tw): per coarse
+     * cell C, the fine nodes whose row was made from C (their first cell's parent), each as
+     * n | (position of n in C, 0..26) << 27; their rows are the cs_mg position tables' */
+    int32_t *pc_start;                /* per coarse cell */
+    uint32_t *pc_ent;
+    int32_t *p_lone;                  /* the fine nodes with empty rows (no cell) */
+    int n_lone;
+    /* the restriction's pairs packed (transfer_layout; NULL: r_tw): fine node | e << 27 for
+     * the weight 2^−e, e = 0..3 (the trilinear weights are 1, 1/2, 1/4, 1/8): 4 bytes each */
+    uint32_t *r_pk;
     /* from the next finer level (level >= 1) */
     int32_t *ch_start, *ch;           /* children of each cell */
     int32_t *walk;                    /* the cells in the order of their first child */
@@ -135,6 +158,7 @@ typedef struct mg_level {
     int32_t *bslot;                   /* per batch: its slot in fe */
     int32_t *fadj;                    /* per adj link: its corner's x component in fe */
     int nseg;                         /* segments of batches: l->threads */
+    int span;                         /* the most batches between a node's first and last cell */
     /* the node pass follows the element pass chunk by chunk (apply_ex): the nodes ordered by
      * the batch of their last cell (nodes without cells: batch 0), then by index */
     int32_t *norder;                  /* n_nodes */
@@ -165,6 +189,10 @@ struct cs_mg {
     int dense_n;
     cs_matvec_fn A;
     void *ctx;
+    /* the trilinear rows by a fine node's position t in its coarse cell (t0 + 3 t1 + 9 t2,
+     * half-units): its nonzero weights' corners K, increasing, and the weights in float */
+    uint8_t pos_n[27], pos_k[27][8];
+    float pos_w[27][8];
     int setups;
     double key[3];
 };
@@ -474,6 +502,7 @@ static int product_layout(mg_level *l)
         if (hi >= 0 && hi - lo > span)
             span = hi - lo;
     }
+    l->span = span;
     const int64_t head = span, ring = (int64_t)span + MG_CHUNK;
     int64_t total = 0;
     for (int s = 0; s < l->nseg; s++) {
@@ -536,12 +565,50 @@ static int narrow_corners(mg_level *l)
     return 0;
 }
 
-/* The V-cycle's copies of level f's transfer rows: (node, float weight) pairs (the weights
- * are the float the loops converted them to). -1 on out of memory. */
-static int transfer_layout(mg_level *f)
+/* corner_weight with CS_CORNER's offsets as compile-time constants (position_row folds them;
+ * transfer_layout checks every row made from them against coarsen's) */
+static inline __attribute__((always_inline)) double position_weight(const int t[3], int K)
 {
+    static const int CORNER[8][3] = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0},
+                                     {0, 0, 1}, {1, 0, 1}, {1, 1, 1}, {0, 1, 1}};
+    double w = 1;
+    for (int a = 0; a < 3; a++)
+        w *= CORNER[K][a] ? t[a] * 0.5 : 1.0 - t[a] * 0.5;
+    return w;
+}
+
+/* The trilinear rows by position in the coarse cell (cs_mg pos_*): as coarsen makes them. */
+static void position_rows(cs_mg *mg)
+{
+    for (int p = 0; p < 27; p++) {
+        const int t[3] = {p % 3, p / 3 % 3, p / 9};
+        int m = 0;
+        for (int K = 0; K < 8; K++) {
+            const double w = position_weight(t, K);
+            if (w == 0)
+                continue;
+            mg->pos_k[p][m] = (uint8_t)K;
+            mg->pos_w[p][m++] = (float)w;
+        }
+        mg->pos_n[p] = (uint8_t)m;
+    }
+}
+
+/*
+ * The V-cycle's copies of level f's transfer rows: (node, float weight) pairs (the weights
+ * are the float the loops converted them to); the restriction's packed into 4 bytes (r_pk)
+ * if every weight is 2^−e, e ≤ 3; and the prolongation by coarse cells (pc_start, pc_ent,
+ * p_lone), used if every fine row is its position's row of its coarse cell's corners, weight
+ * for weight: it streams 4 bytes per fine node instead of 8 per weight (3.4 per node on a
+ * box) and reads each coarse cell's corners once. Either way the same sums in the same order;
+ * where a check fails (or memory is short), the pairs stay (r_tw, p_tw). -1 on out of memory.
+ */
+static int transfer_layout(cs_mg *mg, int level)
+{
+    mg_level *f = &mg->lv[level];
     if (!f->p_start)
         return 0;
+    const mg_level *c = &mg->lv[level + 1];
     const int np = f->p_start[f->n_nodes];
     f->p_tw = malloc((size_t)(np > 0 ? np : 1) * sizeof(mg_tw));
     f->r_tw = malloc((size_t)(np > 0 ? np : 1) * sizeof(mg_tw));
@@ -550,6 +617,77 @@ static int transfer_layout(mg_level *f)
     for (int a = 0; a < np; a++) {
         f->p_tw[a] = (mg_tw){f->p_node[a], (float)f->p_w[a]};
         f->r_tw[a] = (mg_tw){f->r_node[a], (float)f->r_w[a]};
+    }
+    if (f->n_nodes >= 1 << 27)
+        return 0;
+    f->r_pk = malloc((size_t)(np > 0 ? np : 1) * sizeof(uint32_t));
+    bool pk = f->r_pk != NULL;
+    for (int a = 0; pk && a < np; a++) {
+        int e = 0;
+        while (e < 3 && f->r_tw[a].w != 1.0f / (float)(1 << e))
+            e++;
+        pk = f->r_tw[a].w == 1.0f / (float)(1 << e);
+        f->r_pk[a] = (uint32_t)f->r_tw[a].node | (uint32_t)e << 27;
+    }
+    if (pk) {
+        free(f->r_tw);
+        f->r_tw = NULL;
+    } else {
+        free(f->r_pk);
+        f->r_pk = NULL;
+    }
+    f->pc_start = calloc((size_t)c->n_cells + 1, sizeof(int32_t));
+    f->pc_ent = malloc((size_t)(f->n_nodes ? f->n_nodes : 1) * sizeof(uint32_t));
+    f->p_lone = malloc((size_t)(f->n_nodes ? f->n_nodes : 1) * sizeof(int32_t));
+    int32_t *owner = malloc((size_t)(f->n_nodes ? f->n_nodes : 1) * sizeof(int32_t));
+    uint8_t *pos = malloc((size_t)(f->n_nodes ? f->n_nodes : 1));
+    bool ok = f->pc_start && f->pc_ent && f->p_lone && owner && pos;
+    f->n_lone = 0;
+    for (int n = 0; ok && n < f->n_nodes; n++) {
+        owner[n] = -1;
+        if (f->adj_start[n] == f->adj_start[n + 1]) {
+            f->p_lone[f->n_lone++] = n;
+            ok = f->p_start[n] == f->p_start[n + 1];
+            continue;
+        }
+        const int e = f->adj[f->adj_start[n]], fc = e / 8, C = f->parent[fc];
+        int t[3];
+        half_units(f, c, fc, e % 8, C, t);
+        const int p = t[0] + 3 * t[1] + 9 * t[2];
+        /* the row as the position tables give it, or no fast path */
+        ok = f->p_start[n + 1] - f->p_start[n] == mg->pos_n[p];
+        for (int j = 0; ok && j < mg->pos_n[p]; j++)
+            ok = f->p_tw[f->p_start[n] + j].node == c->cell_nodes[8 * C + mg->pos_k[p][j]] &&
+                 f->p_tw[f->p_start[n] + j].w == mg->pos_w[p][j];
+        owner[n] = C;
+        pos[n] = (uint8_t)p;
+        f->pc_start[C + 1]++;
+    }
+    if (ok) {
+        for (int C = 0; C < c->n_cells; C++)
+            f->pc_start[C + 1] += f->pc_start[C];
+        int32_t *fill = malloc(((size_t)c->n_cells + 1) * sizeof(int32_t));
+        ok = fill != NULL;
+        if (ok) {
+            memcpy(fill, f->pc_start, ((size_t)c->n_cells + 1) * sizeof(int32_t));
+            for (int n = 0; n < f->n_nodes; n++)
+                if (owner[n] >= 0)
+                    f->pc_ent[fill[owner[n]]++] = (uint32_t)n | (uint32_t)pos[n] << 27;
+        }
+        free(fill);
+    }
+    free(owner);
+    free(pos);
+    if (ok) { /* the rows by position replace p_tw */
+        free(f->p_tw);
+        f->p_tw = NULL;
+    } else { /* out of memory or another row: p_tw */
+        free(f->pc_start);
+        free(f->pc_ent);
+        free(f->p_lone);
+        f->pc_start = f->p_lone = NULL;
+        f->pc_ent = NULL;
+        f->n_lone = 0;
     }
     return 0;
 }
@@ -628,7 +766,7 @@ int cs_mg_smoother_steps(int deg, double *c)
 static int alloc_level_state(mg_level *l, int level, int threads, int cheb_deg)
 {
     const size_t n3 = 3 * (size_t)l->n_nodes, nc = l->n_cells ? (size_t)l->n_cells : 1;
-    l->threads = threads > 1 && l->n_cells >= CS_FEM_PARALLEL_CELLS ? threads : 1;
+    l->threads = threads > 1 && l->n_cells >= MG_PARALLEL_CELLS ? threads : 1;
     l->cheb_deg = cheb_deg;
     if (MG_CHEB_KIND == 4 && l->cheb_deg > 0 &&
         cs_mg_smoother_steps(l->cheb_deg, l->cheb_c) != 0)
@@ -722,6 +860,10 @@ static void free_level(mg_level *l)
     free(l->r_w);
     free(l->p_tw);
     free(l->r_tw);
+    free(l->r_pk);
+    free(l->pc_start);
+    free(l->pc_ent);
+    free(l->p_lone);
     free(l->bbase);
     free(l->bidx16);
     free(l->ch_start);
@@ -826,8 +968,9 @@ cs_mg *cs_mg_build(const cs_cubemesh *cm, const cs_fem *fem, uint32_t version)
             break;
         }
     }
+    position_rows(mg);
     for (int l = 0; l < mg->n_levels; l++)
-        if (transfer_layout(&mg->lv[l]) != 0)
+        if (transfer_layout(mg, l) != 0)
             goto fail;
     for (int l = 0; l < mg->n_levels; l++) {
         mg_level *c = &mg->lv[l];
@@ -1059,7 +1202,8 @@ static void batches_avx512(const mg_level *l, const float *restrict x, int b0, i
 }
 
 /* A Chebyshev step fused into a residual's node pass: d = a d + c D⁻¹ r (d = c D⁻¹ r if
- * first), x += d at free dofs, 0 at held ones (cheb_update's arithmetic, node by node); with
+ * first; d NULL: first, and d is not stored), x += d at free dofs, 0 at held ones
+ * (cheb_update's arithmetic, node by node); with
  * out, the new x also converted to double into out (the V-cycle's last step: its result). */
 typedef struct cheb_step {
     float *d, *x;
@@ -1159,7 +1303,8 @@ static inline __attribute__((always_inline)) void node_out(const mg_level *l, in
     const vf4 z = dinv(l, n, r);
     const bool first = mode == NP_CHEB_FIRST || mode == NP_CHEB_FIRST_OUT;
     const vf4 dj = and4(first ? cs->c * z : cs->a * load3(cs->d + 3 * n) + cs->c * z, fr);
-    store3(cs->d + 3 * n, dj);
+    if (cs->d)
+        store3(cs->d + 3 * n, dj);
     const vf4 xn = and4(load3(cs->x + 3 * n) + dj, fr);
     store3(cs->x + 3 * n, xn);
     if (mode == NP_CHEB_FIRST_OUT || mode == NP_CHEB_OUT)
@@ -1192,9 +1337,12 @@ static inline __attribute__((always_inline)) void path_share(const mg_level *l, 
         }
     }
 #pragma omp barrier
-    for (int sg = t; sg < l->nseg; sg += nt) {
+    /* a node shared with a lower segment has its last cell within span batches of the
+     * segment's start: only those positions are scanned (none in the first segment) */
+    for (int sg = t > 0 ? t : nt; sg < l->nseg; sg += nt) {
         const int b0 = seg_start(l, sg), b1 = seg_start(l, sg + 1);
-        for (int q = l->nfirst[b0]; q < l->nfirst[b1]; q++)
+        const int e = b0 + l->span < b1 ? b0 + l->span : b1;
+        for (int q = l->nfirst[b0]; q < l->nfirst[e]; q++)
             if (l->nminb[q] < b0)
                 node_out(l, l->norder[q], x, b, y, cs, mode);
     }
@@ -1294,7 +1442,8 @@ int cs_mg_level_layout(const cs_mg *mg, int level)
     if (level < 0 || level >= mg->n_levels)
         return 0;
     const mg_level *l = &mg->lv[level];
-    return (l->bidx16 ? CS_MG_NARROW_CORNERS : 0) | (l->bQ_ok ? CS_MG_QUAT_ROTATIONS : 0);
+    return (l->bidx16 ? CS_MG_NARROW_CORNERS : 0) | (l->bQ_ok ? CS_MG_QUAT_ROTATIONS : 0) |
+           (l->pc_ent ? CS_MG_CELL_PROLONGATION : 0) | (l->r_pk ? CS_MG_PACKED_RESTRICTION : 0);
 }
 
 void cs_mg_level_smoother(const cs_mg *mg, int level, float *inv, uint8_t *mask)
@@ -1329,7 +1478,8 @@ static void smooth(const cs_mg *mg, int level, const float *b, float *x)
     jacobi(l, l->t, x, l->omega, true);
 }
 
-/* d = a d + c D⁻¹ t (d = c D⁻¹ t if first), x += d (x = d if zero) at free dofs, 0 at held. */
+/* d = a d + c D⁻¹ t (d = c D⁻¹ t if first), x += d (x = d if zero) at free dofs, 0 at held;
+ * d NULL (first only): d not stored. */
 static void cheb_update(const mg_level *l, const float *t, float *d, float *x, float a, float c,
                         bool first, bool zero)
 {
@@ -1337,7 +1487,8 @@ static void cheb_update(const mg_level *l, const float *t, float *d, float *x, f
     for (int i = 0; i < l->n_nodes; i++) {
         const vf4 z = dinv(l, i, load3(t + 3 * i)), fr = free_mask(l, i);
         const vf4 dj = and4(first ? c * z : a * load3(d + 3 * i) + c * z, fr);
-        store3(d + 3 * i, dj);
+        if (d)
+            store3(d + 3 * i, dj);
         store3(x + 3 * i, zero ? dj : and4(load3(x + 3 * i) + dj, fr));
     }
 }
@@ -1353,7 +1504,8 @@ static void cheb_update_in(const mg_level *l, const double *in, float *t, float 
         const vf4 tv = {(float)v[0], (float)v[1], (float)v[2], 0.0f};
         store3(t + 3 * i, tv);
         const vf4 z = dinv(l, i, tv), dj = and4(c * z, free_mask(l, i));
-        store3(d + 3 * i, dj);
+        if (d)
+            store3(d + 3 * i, dj);
         store3(x + 3 * i, dj);
     }
 }
@@ -1375,15 +1527,16 @@ static void cheb(const cs_mg *mg, int level, const float *b, float *x, bool zero
     /* in (with zero): b is yet to be converted from it, by the first step (into l->b: the
      * V-cycle's finest right-hand side); out: the last step writes x in double there too */
     if (MG_CHEB_KIND == 4) {
-        /* the polynomial as a product of its root factors: x += (c_i/λ) D⁻¹ (b − A x) */
+        /* the polynomial as a product of its root factors: x += (c_i/λ) D⁻¹ (b − A x); each
+         * step's d = (c_i/λ) D⁻¹ r is added to x and not kept (d NULL: not stored) */
         for (int k = 0; k < l->cheb_deg; k++) {
             const float c = (float)(l->cheb_c[k] / l->lam);
             if (k == 0 && zero && in) {
-                cheb_update_in(l, in, l->b, l->d, x, c);
+                cheb_update_in(l, in, l->b, NULL, x, c);
             } else if (k == 0 && zero) {
-                cheb_update(l, b, l->d, x, 0.0f, c, true, true);
+                cheb_update(l, b, NULL, x, 0.0f, c, true, true);
             } else {
-                const cheb_step cs = {l->d, x, 0.0f, c, true,
+                const cheb_step cs = {NULL, x, 0.0f, c, true,
                                       k == l->cheb_deg - 1 ? out : NULL};
                 apply_path(mg, level, mg->avx512, x, b, NULL, &cs);
             }
@@ -1758,6 +1911,101 @@ static void to_double(const mg_level *l, const float *x, double *out)
         out[d] = x[d];
 }
 
+/* xc = Pᵀ xf at the free dofs of level `level` + 1, 0 at its held ones (the residual's
+ * restriction), by the packed pairs where the layout allows (transfer_layout). */
+static void restrict_to(const cs_mg *mg, int level, const float *xf, float *xc)
+{
+    const mg_level *f = &mg->lv[level], *c = &mg->lv[level + 1];
+#pragma omp parallel for num_threads(c->threads) schedule(static)
+    for (int J = 0; J < c->n_nodes; J++) {
+        /* (x, y, z, 0) vectors: per component the scalar sums in the same order */
+        vf4 s = {0, 0, 0, 0};
+        if (f->r_pk) {
+            static const float W[4] = {1.0f, 0.5f, 0.25f, 0.125f};
+            for (int a = f->r_start[J]; a < f->r_start[J + 1]; a++) {
+                const uint32_t e = f->r_pk[a];
+                s += W[e >> 27] * load3(xf + 3 * (size_t)(e & ((1u << 27) - 1)));
+            }
+        } else {
+            for (int a = f->r_start[J]; a < f->r_start[J + 1]; a++)
+                s += f->r_tw[a].w * load3(xf + 3 * f->r_tw[a].node);
+        }
+        store3(xc + 3 * J, and4(s, free_mask(c, J)));
+    }
+}
+
+/* The prolongation row of position p (t0 + 3 t1 + 9 t2 in half-units, constant once inlined)
+ * applied to its coarse cell's corner values: the nonzero trilinear weights in corner order,
+ * in float, summed from 0 as the rows are (position_rows, coarsen). */
+static inline __attribute__((always_inline)) vf4 position_row(const int p, const vf4 *xc)
+{
+    const int t[3] = {p % 3, p / 3 % 3, p / 9};
+    vf4 s = {0, 0, 0, 0};
+    for (int K = 0; K < 8; K++) {
+        const float w = (float)position_weight(t, K);
+        if (w != 0)
+            s += w * xc[K];
+    }
+    return s;
+}
+
+/* x += P xc at free dofs of level `level` (held dofs keep their value, bit for bit: not
+ * x + 0), by coarse cells where the layout allows (transfer_layout), else by rows. */
+static void prolong_add(const cs_mg *mg, int level, const float *xc_in, float *x)
+{
+    const mg_level *f = &mg->lv[level], *c = &mg->lv[level + 1];
+    if (f->pc_ent) {
+        /* by coarse cells: each fine node once, from its coarse cell's corners (the same sums
+         * in the same order as its row) */
+#pragma omp parallel for num_threads(f->threads) schedule(static)
+        for (int C = 0; C < c->n_cells; C++) {
+            const int a0 = f->pc_start[C], a1 = f->pc_start[C + 1];
+            if (a0 == a1)
+                continue;
+            vf4 xc[8];
+            for (int K = 0; K < 8; K++)
+                xc[K] = load3(xc_in + 3 * c->cell_nodes[8 * C + K]);
+            for (int a = a0; a < a1; a++) {
+                const int n = (int)(f->pc_ent[a] & ((1u << 27) - 1)), p = f->pc_ent[a] >> 27;
+                vf4 s;
+                switch (p) { /* the row of each position with its weights as constants */
+#define PROW_CASE(P)                                                                           \
+    case P:                                                                                    \
+        s = position_row(P, xc);                                                               \
+        break;
+                    PROW_CASE(0) PROW_CASE(1) PROW_CASE(2) PROW_CASE(3) PROW_CASE(4)
+                    PROW_CASE(5) PROW_CASE(6) PROW_CASE(7) PROW_CASE(8) PROW_CASE(9)
+                    PROW_CASE(10) PROW_CASE(11) PROW_CASE(12) PROW_CASE(13) PROW_CASE(14)
+                    PROW_CASE(15) PROW_CASE(16) PROW_CASE(17) PROW_CASE(18) PROW_CASE(19)
+                    PROW_CASE(20) PROW_CASE(21) PROW_CASE(22) PROW_CASE(23) PROW_CASE(24)
+                    PROW_CASE(25)
+#undef PROW_CASE
+                default:
+                    s = position_row(26, xc);
+                    break;
+                }
+                const vf4 fr = free_mask(f, n), xn = load3(x + 3 * n);
+                store3(x + 3 * n, (vf4)(((vi4)(xn + s) & (vi4)fr) | ((vi4)xn & ~(vi4)fr)));
+            }
+        }
+        for (int i = 0; i < f->n_lone; i++) { /* x + 0, as an empty row gives */
+            const int n = f->p_lone[i];
+            const vf4 fr = free_mask(f, n), xn = load3(x + 3 * n), s = {0, 0, 0, 0};
+            store3(x + 3 * n, (vf4)(((vi4)(xn + s) & (vi4)fr) | ((vi4)xn & ~(vi4)fr)));
+        }
+    } else {
+#pragma omp parallel for num_threads(f->threads) schedule(static)
+        for (int n = 0; n < f->n_nodes; n++) {
+            vf4 s = {0, 0, 0, 0};
+            for (int a = f->p_start[n]; a < f->p_start[n + 1]; a++)
+                s += f->p_tw[a].w * load3(xc_in + 3 * f->p_tw[a].node);
+            /* held dofs keep their value (bit for bit: not x + 0) */
+            const vf4 fr = free_mask(f, n), xn = load3(x + 3 * n);
+            store3(x + 3 * n, (vf4)(((vi4)(xn + s) & (vi4)fr) | ((vi4)xn & ~(vi4)fr)));
+        }
+    }
+}
+
 /* The V-cycle from `level` down. On the finest level (cs_mg_vcycle) b is l->b, still to be
  * converted from in (double), and the result also goes to out in double: the first and the
  * last smoothing steps do that in their passes (a pass and a parallel region fewer each). */
@@ -1786,14 +2034,7 @@ static void vcycle(cs_mg *mg, int level, const float *b, float *x, const double 
     }
     /* residual, restricted */
     apply_ex(mg, level, x, b, f->t);
-#pragma omp parallel for num_threads(c->threads) schedule(static)
-    for (int J = 0; J < c->n_nodes; J++) {
-        /* (x, y, z, 0) vectors: per component the scalar sums in the same order */
-        vf4 s = {0, 0, 0, 0};
-        for (int a = f->r_start[J]; a < f->r_start[J + 1]; a++)
-            s += f->r_tw[a].w * load3(f->t + 3 * f->r_tw[a].node);
-        store3(c->b + 3 * J, and4(s, free_mask(c, J)));
-    }
+    restrict_to(mg, level, f->t, c->b);
     vcycle(mg, level + 1, c->b, c->x, NULL, NULL);
     for (int g = 1; g < c->cycles; g++) {
         /* W: one more cycle on the level's residual, x_c += B_c (b_c − A_c x_c); with B_c
@@ -1804,15 +2045,7 @@ static void vcycle(cs_mg *mg, int level, const float *b, float *x, const double 
         for (int d = 0; d < 3 * c->n_nodes; d++)
             c->x[d] += c->gx[d]; /* 0 at held dofs */
     }
-#pragma omp parallel for num_threads(f->threads) schedule(static)
-    for (int n = 0; n < f->n_nodes; n++) {
-        vf4 s = {0, 0, 0, 0};
-        for (int a = f->p_start[n]; a < f->p_start[n + 1]; a++)
-            s += f->p_tw[a].w * load3(c->x + 3 * f->p_tw[a].node);
-        /* held dofs keep their value (bit for bit: not x + 0) */
-        const vf4 fr = free_mask(f, n), xn = load3(x + 3 * n);
-        store3(x + 3 * n, (vf4)(((vi4)(xn + s) & (vi4)fr) | ((vi4)xn & ~(vi4)fr)));
-    }
+    prolong_add(mg, level, c->x, x);
     if (f->cheb_deg) {
         cheb(mg, level, b, x, false, NULL, out);
     } else {
@@ -1844,6 +2077,18 @@ void cs_mg_prolong(const cs_mg *mg, int level, const float *xc, float *xf)
                 s += (float)f->p_w[a] * xc[3 * f->p_node[a] + k];
             xf[3 * n + k] = s;
         }
+}
+
+void cs_mg_prolong_add_level(const cs_mg *mg, int level, const float *xc, float *xf)
+{
+    if (level >= 0 && level + 1 < mg->n_levels)
+        prolong_add(mg, level, xc, xf);
+}
+
+void cs_mg_restrict_level(const cs_mg *mg, int level, const float *xf, float *xc)
+{
+    if (level >= 0 && level + 1 < mg->n_levels)
+        restrict_to(mg, level, xf, xc);
 }
 
 void cs_mg_restrict(const cs_mg *mg, int level, const float *xf, float *xc)

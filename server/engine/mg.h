@@ -128,12 +128,25 @@ void cs_mg_level_smoother(const cs_mg *mg, int level, float *inv, uint8_t *mask)
  * (else the 3×3 matrices: some cell's R not a rotation to float precision). */
 #define CS_MG_NARROW_CORNERS 1
 #define CS_MG_QUAT_ROTATIONS 2
+/* CS_MG_CELL_PROLONGATION: its prolongation from the next coarser level runs by coarse cells
+ * (each fine node's row read as its position's row of its coarse cell's corners: the same
+ * sums in the same order as by rows; else by its (node, weight) rows). */
+#define CS_MG_CELL_PROLONGATION 4
+/* CS_MG_PACKED_RESTRICTION: its restriction to the next coarser level reads (fine node,
+ * weight) pairs packed into 4 bytes (the weight 2^−e as e in the top bits; else 8-byte pairs). */
+#define CS_MG_PACKED_RESTRICTION 8
 int cs_mg_level_layout(const cs_mg *mg, int level);
 
 /* The transfers between level `level` and the next coarser one, without masks (for tests):
  * xf = P xc (prolongation, trilinear) and xc = Pᵀ xf (restriction); nothing on the coarsest. */
 void cs_mg_prolong(const cs_mg *mg, int level, const float *xc, float *xf);
 void cs_mg_restrict(const cs_mg *mg, int level, const float *xf, float *xc);
+/* The V-cycle's own prolongation (for tests): xf += P xc at the free dofs of level `level`
+ * as the last cs_mg_setup left them; held dofs keep their value. */
+void cs_mg_prolong_add_level(const cs_mg *mg, int level, const float *xc, float *xf);
+/* The V-cycle's own restriction (for tests): xc = Pᵀ xf at the free dofs of level `level` + 1,
+ * 0 at its held ones. */
+void cs_mg_restrict_level(const cs_mg *mg, int level, const float *xf, float *xc);
 
 /* Against the finest level's copies made by the last cs_mg_setup (what a lagged hierarchy was
  * built from, world.c): the max over cells of 3 − tr(R_builtᵀ R) = 2(1 − cos θ), θ the angle

@@ -6,8 +6,9 @@
  * take each layout and each fallback (a scrambled cell order whose batches span more than
  * 16-bit offsets reach; a cell whose R is not a rotation), with graded stiffness scales and
  * held dofs (the residual pass: 0 there); every level bit-identical with the portable gathers
- * and on one and two threads. (The transfer pairs are covered by the V-cycle's symmetry and
- * iteration tests in test_multigrid.c.)
+ * and on one and two threads; and the V-cycle's prolongation by coarse cells against P's rows
+ * and its packed restriction against Pᵀ's rows on every level, bit for bit (held dofs
+ * unchanged, and 0 at the coarse held ones).
  */
 #include <math.h>
 #include <stdlib.h>
@@ -162,8 +163,57 @@ static long run_case(lay_case k, int threads, float *y, float *ylev, size_t *nle
         cs_mg_apply_level(mg, L, true, xl, pl);
         bad += memcmp(ylev + *nlev, pl, sizeof(float) * m3) != 0;
         *nlev += (size_t)m3;
+        if (L + 1 < cs_mg_levels(mg)) {
+            /* the V-cycle's prolongation (by coarse cells) against P's rows: x + P xc at
+             * free dofs, x at held ones, bit for bit */
+            const int c3 = 3 * cs_mg_level_nodes(mg, L + 1);
+            float *xc = malloc(sizeof(float) * c3), *pf = malloc(sizeof(float) * m3),
+                  *linv = malloc(sizeof(float) * 3 * m3);
+            uint8_t *held = malloc(m3);
+            if (xc && pf && linv && held) {
+                for (int d = 0; d < c3; d++)
+                    xc[d] = (float)urand(&seed);
+                cs_mg_prolong(mg, L, xc, pf);
+                cs_mg_level_smoother(mg, L, linv, held);
+                memcpy(pl, xl, sizeof(float) * m3);
+                cs_mg_prolong_add_level(mg, L, xc, pl);
+                for (int d = 0; d < m3; d++) {
+                    const float want = held[d] ? xl[d] : xl[d] + pf[d];
+                    bad += memcmp(&want, pl + d, sizeof want) != 0;
+                }
+                bad += !(cs_mg_level_layout(mg, L) & CS_MG_CELL_PROLONGATION);
+                /* ... and its restriction against the rows: Pᵀ x at the coarse free dofs */
+                float *rc = malloc(sizeof(float) * c3), *rr = malloc(sizeof(float) * c3),
+                      *cinv = malloc(sizeof(float) * 3 * c3);
+                uint8_t *cheld = malloc(c3);
+                if (rc && rr && cinv && cheld) {
+                    cs_mg_restrict(mg, L, xl, rr);
+                    cs_mg_restrict_level(mg, L, xl, rc);
+                    cs_mg_level_smoother(mg, L + 1, cinv, cheld);
+                    for (int d = 0; d < c3; d++) {
+                        const float want = cheld[d] ? 0.0f : rr[d];
+                        bad += memcmp(&want, rc + d, sizeof want) != 0;
+                    }
+                    bad += !(cs_mg_level_layout(mg, L) & CS_MG_PACKED_RESTRICTION);
+                } else {
+                    bad = -1;
+                }
+                free(rc);
+                free(rr);
+                free(cinv);
+                free(cheld);
+            } else {
+                bad = -1;
+            }
+            free(xc);
+            free(pf);
+            free(linv);
+            free(held);
+        }
         free(xl);
         free(pl);
+        if (bad < 0)
+            goto out;
     }
 out:
     cs_mg_free(mg);
@@ -184,11 +234,15 @@ TEST(mg_compact_layouts_match_reference)
 {
     const lay_case cases[] = {
         /* a cut block in lattice order, 2300 cells (two threads' segments): both layouts */
-        {20, 12, 10, 7, false, false, CS_MG_NARROW_CORNERS | CS_MG_QUAT_ROTATIONS},
+        {20, 12, 10, 7, false, false,
+         CS_MG_NARROW_CORNERS | CS_MG_QUAT_ROTATIONS | CS_MG_CELL_PROLONGATION |
+             CS_MG_PACKED_RESTRICTION},
         /* scrambled: a batch's corners span the whole x (> 65536 floats): 32-bit indices */
-        {30, 28, 28, 0, true, false, CS_MG_QUAT_ROTATIONS},
+        {30, 28, 28, 0, true, false,
+         CS_MG_QUAT_ROTATIONS | CS_MG_CELL_PROLONGATION | CS_MG_PACKED_RESTRICTION},
         /* one cell's R not a rotation: the matrices */
-        {20, 12, 10, 7, false, true, CS_MG_NARROW_CORNERS},
+        {20, 12, 10, 7, false, true,
+         CS_MG_NARROW_CORNERS | CS_MG_CELL_PROLONGATION | CS_MG_PACKED_RESTRICTION},
     };
     for (size_t c = 0; c < sizeof cases / sizeof cases[0]; c++) {
         const lay_case k = cases[c];
