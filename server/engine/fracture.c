@@ -2750,13 +2750,6 @@ static cs_object *make_piece(cs_world_t *w, const cs_object *o, const int32_t *c
         vmap[i] = -1;
     p->model = o->model;
     p->kin = o->kin;
-    /* the kin o's box has been apart from, p's has been too (rigid.c soft_contacts) */
-    if (o->n_apart > 0) {
-        if (!(p->apart = malloc((size_t)o->n_apart * sizeof *p->apart)))
-            goto fail;
-        memcpy(p->apart, o->apart, (size_t)o->n_apart * sizeof *p->apart);
-        p->n_apart = p->cap_apart = o->n_apart;
-    }
     p->integrator = o->integrator;
     p->mat = o->mat;
     p->omega2_plain = o->omega2_plain;
@@ -3042,7 +3035,6 @@ static int keep_cells(cs_world_t *w, cs_object *o, const int32_t *kept, int nk,
         *o = *p;
         o->id = tmp.id;
         o->kin = tmp.kin;
-        free(o->apart); /* p's copy of the same list */
         o->apart = tmp.apart;
         o->n_apart = tmp.n_apart;
         o->cap_apart = tmp.cap_apart;
