@@ -56,6 +56,12 @@ cs_rigid *cs_rigid_clone(const cs_rigid *rb);
 /* Refit every rigid object whose cells or nodes changed since its mass properties were
  * computed (fracture), continuing the motion it had. Returns CS_OK or CS_ERR_NOMEM. */
 int cs_rigid_sync(cs_world_t *w);
+/* Before a fracture between steps (cs_world_fracture, cs_world_cut_face): take back the
+ * impulses the last deformable–deformable pass left on node velocities for the next step to
+ * share out, if no step has shared them since. A fracture would hand a node's impulse, meant
+ * for its whole object, to whichever piece gets the node (a single cube then flew off at up to
+ * 271 m/s in the fracture storm); the next pass makes the contacts of the new pieces. */
+void cs_rigid_drop_pending(cs_world_t *w);
 /* Back to the rest pose, at rest. */
 void cs_rigid_reset(cs_object *o);
 /* Kinetic energy ½ m v² + ½ ωᵀ I ω. */
