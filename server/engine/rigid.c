@@ -2127,7 +2127,10 @@ static cs_born_ref *born_new(cs_object *o, cs_object_id id)
  * its sibling from the crack is stopped at the crack; an overlap the pieces were born with
  * (an earlier crack between their parents had opened inwards, no contact stopping it) is
  * left as it is: pushing it out from within crushed and inverted small pieces in the
- * fracture storm. Contacts go to rw->sc with SA and SB. Returns 0 or -1.
+ * fracture storm. Resting contact only: a node approaching the face faster than v_rest (an
+ * impact by restitution's measure) takes none (stopping a small piece's flight into its
+ * large sibling kicked nodes at 8–116 m/s in the storm). Contacts go to rw->sc with SA and
+ * SB. Returns 0 or -1.
  */
 static int born_contacts(cs_rigid_world *rw, double dt, double v_rest, cs_object *A, cs_object *B,
                          cs_soft_resp *SA, cs_soft_resp *SB, const double olo[3],

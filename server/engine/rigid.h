@@ -46,6 +46,7 @@ int cs_rigid_init(cs_object *o);
  * ω = w0. Replaces o->rb. Returns 0 or -1. */
 int cs_rigid_refit(cs_object *o, const double q[4], const double c0[3], const double C0[3],
                    const double v0[3], const double w0[3]);
+/* Frees what rigid.c keeps in o: its rigid body and its born-pair records (o->born). */
 void cs_rigid_free(cs_object *o);
 /* After the density field changed (painting): mass, centre of mass and inertia again, the
  * body keeping its pose of the old centre and its velocities (cs_rigid_refit). 0 or -1. */
