@@ -2750,6 +2750,13 @@ static cs_object *make_piece(cs_world_t *w, const cs_object *o, const int32_t *c
         vmap[i] = -1;
     p->model = o->model;
     p->kin = o->kin;
+    /* the kin o's box has been apart from, p's has been too (rigid.c soft_contacts) */
+    if (o->n_apart > 0) {
+        if (!(p->apart = malloc((size_t)o->n_apart * sizeof *p->apart)))
+            goto fail;
+        memcpy(p->apart, o->apart, (size_t)o->n_apart * sizeof *p->apart);
+        p->n_apart = p->cap_apart = o->n_apart;
+    }
     p->integrator = o->integrator;
     p->mat = o->mat;
     p->omega2_plain = o->omega2_plain;
@@ -3035,6 +3042,7 @@ static int keep_cells(cs_world_t *w, cs_object *o, const int32_t *kept, int nk,
         *o = *p;
         o->id = tmp.id;
         o->kin = tmp.kin;
+        free(o->apart); /* p's copy of the same list */
         o->apart = tmp.apart;
         o->n_apart = tmp.n_apart;
         o->cap_apart = tmp.cap_apart;
@@ -3792,6 +3800,7 @@ int cs_world_fracture(cs_world_t *w, cs_object_id id, const double point[3],
         return cs_engine_fail(err, errlen, CS_ERR_INVALID, "fracture radius must be >= 0 m, got %g",
                     radius);
     cs_fracture_clear_step(w);
+    cs_rigid_drop_pending(w);
     const double n[3] = {normal[0] / sqrt(nn), normal[1] / sqrt(nn), normal[2] / sqrt(nn)};
     int best = -1;
     double bd = INFINITY;
@@ -3840,6 +3849,7 @@ int cs_world_cut_face(cs_world_t *w, cs_object_id id, const int32_t ijk[3], int 
         return cs_engine_fail(err, errlen, CS_ERR_INVALID, "the face after cell (%d,%d,%d) along %c is "
                     "already cut", ijk[0], ijk[1], ijk[2], "xyz"[axis]);
     cs_fracture_clear_step(w);
+    cs_rigid_drop_pending(w);
     int8_t *label = calloc((size_t)o->cm.n_cells, 1);
     if (!label)
         return cs_engine_fail(err, errlen, CS_ERR_NOMEM, "out of memory");

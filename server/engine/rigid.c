@@ -131,6 +131,13 @@ typedef struct cs_rigid_world {
     int nsc, cap_sc;
     double *sbox;       /* soft_contacts: 7 per object, its box and fastest node's speed */
     int cap_sbox;
+    /* the last soft_contacts pass's impulses are still on the node velocities of rw->sc's
+     * objects (cs_rigid_drop_pending): until the step after frame pending_frame; each
+     * object's topology version then (sc_version, 2 per contact) */
+    bool pending;
+    int64_t pending_frame;
+    uint32_t *sc_version;
+    int cap_sc_version;
 } cs_rigid_world;
 
 /* cs_world carries the pointer: world_internal.h. */
@@ -420,6 +427,11 @@ void cs_rigid_free(cs_object *o)
 {
     free(o->rb);
     o->rb = NULL;
+    for (int i = 0; i < o->n_born; i++)
+        free(o->born[i].ref);
+    free(o->born);
+    o->born = NULL;
+    o->n_born = o->cap_born = 0;
 }
 
 double cs_rigid_kinetic_energy(const cs_object *o)
@@ -667,6 +679,7 @@ void cs_rigid_world_free(cs_world_t *w)
     }
     free(rw->soft);
     free(rw->sc);
+    free(rw->sc_version);
     free(rw->sbox);
     free(rw);
     w->rigid = NULL;
@@ -2064,6 +2077,181 @@ static int kin_add(cs_object *o, cs_object_id id)
     return 0;
 }
 
+/* o's record of kin id's born pairs (NULL if none). */
+static cs_born_ref *born_find(cs_object *o, cs_object_id id)
+{
+    for (int i = 0; i < o->n_born; i++)
+        if (o->born[i].other == id)
+            return &o->born[i];
+    return NULL;
+}
+
+/* Drop o's record of kin id (their boxes came apart: the whole search takes over). */
+static void born_drop(cs_object *o, cs_object_id id)
+{
+    cs_born_ref *r = born_find(o, id);
+    if (!r)
+        return;
+    free(r->ref);
+    *r = o->born[--o->n_born];
+}
+
+/* A new record of kin id for o, all references 0; NULL when out of memory. */
+static cs_born_ref *born_new(cs_object *o, cs_object_id id)
+{
+    if (o->n_born == o->cap_born) {
+        const int cap = o->cap_born ? 2 * o->cap_born : 4;
+        cs_born_ref *g = realloc(o->born, (size_t)cap * sizeof *g);
+        if (!g)
+            return NULL;
+        o->born = g;
+        o->cap_born = cap;
+    }
+    float *ref = calloc((size_t)(o->n ? o->n : 1), sizeof *ref);
+    if (!ref)
+        return NULL;
+    cs_born_ref *r = &o->born[o->n_born++];
+    *r = (cs_born_ref){.other = id, .n = o->n, .ref = ref};
+    return r;
+}
+
+/*
+ * The born pairs of kin A and B whose boxes have not been apart: each node of A (in the
+ * overlap [olo, ohi]) at a lattice point that is a corner of B's cells (kin share their
+ * parent's lattice), against those cells only (point_in_cell: the nearest exposed face that
+ * faces it). Contacts are taken against a reference depth instead of the face: the first
+ * time the pair is seen (A's record of B is made), each such node's depth moved back by a
+ * step of its relative motion (sep − dt·vn: where it was before the step that followed the
+ * split; a piece split between steps has since moved by one), or 0 if it is outside; after
+ * that the reference follows the node out towards 0 and never back in. A piece falling into
+ * its sibling from the crack is stopped at the crack; an overlap the pieces were born with
+ * (an earlier crack between their parents had opened inwards, no contact stopping it) is
+ * left as it is: pushing it out from within crushed and inverted small pieces in the
+ * fracture storm. Resting contact only: a node approaching the face faster than v_rest (an
+ * impact by restitution's measure) takes none (stopping a small piece's flight into its
+ * large sibling kicked nodes at 8–116 m/s in the storm). Contacts go to rw->sc with SA and
+ * SB. Returns 0 or -1.
+ */
+static int born_contacts(cs_rigid_world *rw, double dt, double v_rest, cs_object *A, cs_object *B,
+                         cs_soft_resp *SA, cs_soft_resp *SB, const double olo[3],
+                         const double ohi[3], double margin)
+{
+    cs_born_ref *R = born_find(A, B->id);
+    const bool first = R == NULL;
+    if (first && !(R = born_new(A, B->id)))
+        return -1;
+    if (R->n < A->n) { /* nodes A made since (a crack opened inside it): reference 0 */
+        float *g = realloc(R->ref, (size_t)A->n * sizeof *g);
+        if (!g)
+            return -1;
+        memset(g + R->n, 0, (size_t)(A->n - R->n) * sizeof *g);
+        R->ref = g;
+        R->n = A->n;
+    }
+    const double tol = fmin(0.5, margin / B->cm.h);
+    for (int i = 0; i < A->n; i++) {
+        const double *p = A->x + 3 * (size_t)i;
+        if (p[0] < olo[0] || p[0] > ohi[0] || p[1] < olo[1] || p[1] > ohi[1] || p[2] < olo[2] ||
+            p[2] > ohi[2] || A->fem.adj_start[i] == A->fem.adj_start[i + 1])
+            continue;
+        /* node i's lattice point, from the first of its cells */
+        const int32_t e0 = A->fem.adj[A->fem.adj_start[i]];
+        const int32_t *cijk = A->cm.cell_ijk + 3 * (size_t)(e0 >> 3);
+        int32_t L[3];
+        for (int a = 0; a < 3; a++)
+            L[a] = cijk[a] + CS_CORNER[e0 & 7][a];
+        double pn[3];
+        int surface = -1;
+        cell_face best = {.sep = -INFINITY};
+        for (int q = 0; q < 8; q++) {
+            const int32_t cell = cs_cubemesh_find(&B->cm, L[0] - CS_CORNER[q][0],
+                                                  L[1] - CS_CORNER[q][1], L[2] - CS_CORNER[q][2]);
+            if (cell < 0)
+                continue;
+            const int32_t *cn = B->cm.cell_nodes + 8 * (size_t)cell;
+            double X[8][3];
+            for (int k = 0; k < 8; k++)
+                for (int a = 0; a < 3; a++)
+                    X[k][a] = B->x[3 * (size_t)cn[k] + a];
+            if (surface < 0)
+                surface = node_normal(A, i, pn);
+            cell_face cf;
+            if (point_in_cell(B, cell, X, p, surface ? pn : NULL, margin, tol, &cf) &&
+                cf.sep > best.sep)
+                best = cf;
+        }
+        if (best.sep == -INFINITY)
+            continue;
+        /* the relative normal velocity of the node and the face point now */
+        double v[3];
+        for (int a = 0; a < 3; a++) {
+            v[a] = A->v[3 * (size_t)i + a];
+            for (int k = 0; k < 4; k++)
+                v[a] -= best.dw[k] * B->v[3 * (size_t)best.dn[k] + a];
+        }
+        if (first)
+            R->ref[i] = (float)fmin(0, best.sep - dt * dot3(v, best.n));
+        else
+            R->ref[i] = (float)fmin(0, fmax(R->ref[i], best.sep));
+        if (best.sep < -0.5 * B->cm.h) /* as soft_nodes_in_cells: met inside, left there */
+            continue;
+        if (dot3(v, best.n) < -v_rest)
+            continue; /* an impact, not pieces resting on each other */
+        if (rw->nsc == rw->cap_sc) {
+            const int cap = rw->cap_sc ? 2 * rw->cap_sc : 256;
+            soft_contact *g = realloc(rw->sc, (size_t)cap * sizeof *g);
+            if (!g)
+                return -1;
+            rw->sc = g;
+            rw->cap_sc = cap;
+        }
+        soft_contact *c = &rw->sc[rw->nsc++];
+        memset(c, 0, sizeof *c);
+        c->SA = SA;
+        c->SB = SB;
+        c->node = i;
+        memcpy(c->bn, best.dn, sizeof c->bn);
+        memcpy(c->bw, best.dw, sizeof c->bw);
+        memcpy(c->n, best.n, sizeof c->n);
+        c->sep = best.sep - R->ref[i];
+        c->hB = B->cm.h;
+        c->mu = sqrt(A->mat.friction * B->mat.friction);
+        c->target = fmax(A->mat.restitution, B->mat.restitution); /* never applies: v_rest */
+    }
+    return 0;
+}
+
+void cs_rigid_drop_pending(cs_world_t *w)
+{
+    cs_rigid_world *rw = w->rigid;
+    if (!rw || !rw->pending)
+        return;
+    rw->pending = false;
+    if (w->frame != rw->pending_frame + 1)
+        return; /* a step has shared them out */
+    for (int k = 0; k < rw->nsc; k++) {
+        const soft_contact *c = &rw->sc[k];
+        cs_object *A = cs_world_find_internal(w, c->SA->id);
+        cs_object *B = cs_world_find_internal(w, c->SB->id);
+        if (!A || !B || A->topology_version != rw->sc_version[2 * k] ||
+            B->topology_version != rw->sc_version[2 * k + 1] || c->node >= A->n)
+            continue; /* removed or remade since: its nodes are others */
+        double J[3];
+        for (int a = 0; a < 3; a++)
+            J[a] = c->jn * c->n[a] + c->jt1 * c->t1[a] + c->jt2 * c->t2[a];
+        const size_t i = (size_t)c->node;
+        if (!A->mask[3 * i] && A->m[i] > 0)
+            for (int a = 0; a < 3; a++)
+                A->v[3 * i + a] -= J[a] / A->m[i];
+        for (int q = 0; q < 4; q++) {
+            const size_t j = (size_t)c->bn[q];
+            if (j < (size_t)B->n && !B->mask[3 * j] && B->m[j] > 0)
+                for (int a = 0; a < 3; a++)
+                    B->v[3 * j + a] += c->bw[q] * J[a] / B->m[j];
+        }
+    }
+}
+
 /*
  * Contacts between deformable objects, once per step after the rigid bodies' (the same
  * sequential impulses, their own solve): only pairs whose boxes, grown by the distance they can
@@ -2074,7 +2262,10 @@ static int soft_contacts(cs_world_t *w, cs_rigid_world *rw, cs_step_stats *st)
 {
     const double t0 = now_ms();
     const double dt = w->def.dt;
+    /* the approach that is an impact, not resting contact (restitution's threshold below) */
+    const double v_rest = 2 * sqrt(dot3(w->def.gravity, w->def.gravity)) * dt + 1e-3;
     rw->nsc = 0;
+    rw->pending = false;
     int soft = 0;
     for (int i = 0; i < w->n_objects; i++)
         soft += w->objects[i]->model != CS_MODEL_RIGID;
@@ -2113,16 +2304,33 @@ static int soft_contacts(cs_world_t *w, cs_rigid_world *rw, cs_step_stats *st)
             }
             if (A->kin == B->kin) {
                 /* pieces of one object: born touching across their crack (each crack node
-                 * on the other's cell face), so they take contacts only once their boxes
-                 * have been apart */
+                 * on the other's cell face), so they take the whole search only once their
+                 * boxes have been apart; until then their born pairs (born_contacts) */
                 const int ka = kin_apart(A, B->id), kb = kin_apart(B, A->id);
                 if (!over) {
                     if ((!ka && kin_add(A, B->id) != 0) || (!kb && kin_add(B, A->id) != 0))
                         return CS_ERR_NOMEM;
+                    born_drop(A, B->id);
+                    born_drop(B, A->id);
                     continue;
                 }
-                if (!ka || !kb)
+                if (!ka && !kb) { /* (a piece inherits its parent's list, not its kin) */
+                    /* mass-spring pieces take none: a contact impulse turned a small one
+                     * inside out (its cube has zero energy in its mirror image) */
+                    if (A->model == CS_MODEL_MSS || B->model == CS_MODEL_MSS)
+                        continue;
+                    if (soft_prepare(w, rw, A, true) != 0)
+                        return CS_ERR_NOMEM;
+                    cs_soft_resp *SA = rw->cur;
+                    if (soft_prepare(w, rw, B, true) != 0)
+                        return CS_ERR_NOMEM;
+                    cs_soft_resp *SB = rw->cur;
+                    SA->two_level = SB->two_level = true;
+                    if (born_contacts(rw, dt, v_rest, A, B, SA, SB, olo, ohi, margin) != 0 ||
+                        born_contacts(rw, dt, v_rest, B, A, SB, SA, olo, ohi, margin) != 0)
+                        return CS_ERR_NOMEM;
                     continue;
+                }
             }
             if (!over)
                 continue;
@@ -2141,8 +2349,7 @@ static int soft_contacts(cs_world_t *w, cs_rigid_world *rw, cs_step_stats *st)
     if (rw->nsc == 0)
         return CS_OK;
     /* prepare: arms, tangents, effective masses, target normal velocities */
-    const double gn = sqrt(dot3(w->def.gravity, w->def.gravity));
-    const double v_bounce = 2 * gn * dt + 1e-3;
+    const double v_bounce = v_rest;
     for (int k = 0; k < rw->nsc; k++) {
         soft_contact *c = &rw->sc[k];
         const double e = c->target;
@@ -2192,6 +2399,20 @@ static int soft_contacts(cs_world_t *w, cs_rigid_world *rw, cs_step_stats *st)
                 soft_impulse(c, J);
             }
         }
+    /* left on the node velocities until the next step shares them out */
+    if (rw->cap_sc_version < 2 * rw->nsc) {
+        uint32_t *g = realloc(rw->sc_version, (size_t)rw->nsc * 2 * sizeof *g);
+        if (!g)
+            return CS_ERR_NOMEM;
+        rw->sc_version = g;
+        rw->cap_sc_version = 2 * rw->nsc;
+    }
+    for (int k = 0; k < rw->nsc; k++) {
+        rw->sc_version[2 * k] = rw->sc[k].SA->D->topology_version;
+        rw->sc_version[2 * k + 1] = rw->sc[k].SB->D->topology_version;
+    }
+    rw->pending = true;
+    rw->pending_frame = w->frame;
     /* the objects pushed stay awake; their energies follow the velocities they now have.
      * Newmark objects with a contact, pushing or not, take their next step by implicit Euler:
      * the step the solve modelled (a speculative contact that did not push trusts that

@@ -46,6 +46,7 @@ int cs_rigid_init(cs_object *o);
  * ω = w0. Replaces o->rb. Returns 0 or -1. */
 int cs_rigid_refit(cs_object *o, const double q[4], const double c0[3], const double C0[3],
                    const double v0[3], const double w0[3]);
+/* Frees what rigid.c keeps in o: its rigid body and its born-pair records (o->born). */
 void cs_rigid_free(cs_object *o);
 /* After the density field changed (painting): mass, centre of mass and inertia again, the
  * body keeping its pose of the old centre and its velocities (cs_rigid_refit). 0 or -1. */
@@ -56,6 +57,12 @@ cs_rigid *cs_rigid_clone(const cs_rigid *rb);
 /* Refit every rigid object whose cells or nodes changed since its mass properties were
  * computed (fracture), continuing the motion it had. Returns CS_OK or CS_ERR_NOMEM. */
 int cs_rigid_sync(cs_world_t *w);
+/* Before a fracture between steps (cs_world_fracture, cs_world_cut_face): take back the
+ * impulses the last deformable–deformable pass left on node velocities for the next step to
+ * share out, if no step has shared them since. A fracture would hand a node's impulse, meant
+ * for its whole object, to whichever piece gets the node (a single cube then flew off at up to
+ * 271 m/s in the fracture storm); the next pass makes the contacts of the new pieces. */
+void cs_rigid_drop_pending(cs_world_t *w);
 /* Back to the rest pose, at rest. */
 void cs_rigid_reset(cs_object *o);
 /* Kinetic energy ½ m v² + ½ ωᵀ I ω. */

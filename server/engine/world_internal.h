@@ -117,6 +117,14 @@ typedef struct cs_pc_lag {
 #define CS_PC_LAG_ANGLE 0.05
 #define CS_PC_LAG_STEPS 50
 
+/* One kin's born pairs seen from an object (cs_object.born): ref[i] is node i's reference depth
+ * [m] behind the kin's born faces (≤ 0); nodes from n on (made since) have 0. */
+typedef struct cs_born_ref {
+    cs_object_id other;
+    int n;
+    float *ref;
+} cs_born_ref;
+
 typedef struct cs_object {
     cs_object_id id;
     char *name;
@@ -175,6 +183,14 @@ typedef struct cs_object {
     cs_object_id kin;
     cs_object_id *apart;
     int n_apart, cap_apart;
+    /* Until then they take contacts only between their born pairs (rigid.c born_contacts):
+     * this object's nodes at a lattice point that is a corner of a kin's cells, against those
+     * cells. born lists, per kin not yet apart, the reference depth each node had behind the
+     * kin's faces when the pair was first seen (≤ 0; the overlap the crack was born with,
+     * moved back by a step) and has come out to since: only depth beyond it is pushed out.
+     * Owned (cs_rigid_free), n_born of cap_born; a piece made by a fracture starts with none. */
+    struct cs_born_ref *born;
+    int n_born, cap_born;
     /* Active regions (world.c "active regions", seed 000 §2.2): NULL/0 until first used.
      * A frozen node is held where it is with v = 0 outside the solve; a cell whose 8 nodes are
      * frozen is inactive and skipped by the element passes (fem.cell_active during a step). */

@@ -180,6 +180,7 @@ static double now_s(void)
 int main(int argc, char **argv)
 {
     int n_fract = 2000, n_steps = 600;
+    bool trace = false; /* --trace: after every storm step, the fastest node's object */
     uint64_t seed = 1;
     const char *dir = "scenes/meshes";
     for (int i = 1; i < argc; i++) {
@@ -191,8 +192,10 @@ int main(int argc, char **argv)
             seed = strtoull(argv[++i], NULL, 10);
         else if (!strcmp(argv[i], "--meshes") && i + 1 < argc)
             dir = argv[++i];
+        else if (!strcmp(argv[i], "--trace"))
+            trace = true;
         else {
-            fprintf(stderr, "usage: %s [--fractures N] [--steps S] [--seed K] [--meshes DIR]\n",
+            fprintf(stderr, "usage: %s [--fractures N] [--steps S] [--seed K] [--meshes DIR] [--trace]\n",
                     argv[0]);
             return 2;
         }
@@ -334,6 +337,26 @@ int main(int argc, char **argv)
             } else if (!check_all(w, &vw, NAN, 0, &tot, &objects, &inverted, CS_NULL_OBJECT, 0, why, sizeof why)) {
                 printf("FAIL storm-watertight: after the step following fracture %d: %s\n", f, why);
                 fail = 1;
+            }
+            if (trace) {
+                const int nt = cs_world_object_ids(w, vw.ids, MAX_OBJ);
+                double vmax = 0;
+                cs_object_id fast = CS_NULL_OBJECT;
+                for (int k = 0; k < nt; k++) {
+                    const double *tv;
+                    int tn;
+                    cs_object_nodes(w, vw.ids[k], NULL, NULL, &tv, &tn);
+                    for (int q = 0; q < 3 * tn; q++)
+                        if (fabs(tv[q]) > vmax) {
+                            vmax = fabs(tv[q]);
+                            fast = vw.ids[k];
+                        }
+                }
+                cs_object_info ti;
+                if (fast != CS_NULL_OBJECT && cs_object_get_info(w, fast, &ti) == CS_OK)
+                    printf("     trace: after fracture %d: fastest node %.3g m/s, object %u (%s, %s, "
+                           "%d cells)\n", f, vmax, (unsigned)fast, ti.name, cs_model_name(ti.model),
+                           ti.n_cells);
             }
         }
     }
