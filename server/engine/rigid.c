@@ -1980,6 +1980,35 @@ static bool node_normal(const cs_object *A, int i, double n[3])
     return true;
 }
 
+/* Append a deformable contact of node i of A behind best's face of B, at separation sep
+ * (e = the larger restitution, until prepared). NULL when out of memory. */
+static soft_contact *add_soft_contact(cs_rigid_world *rw, const cs_object *A, const cs_object *B,
+                                      cs_soft_resp *SA, cs_soft_resp *SB, int i,
+                                      const cell_face *best, double sep)
+{
+    if (rw->nsc == rw->cap_sc) {
+        const int cap = rw->cap_sc ? 2 * rw->cap_sc : 256;
+        soft_contact *g = realloc(rw->sc, (size_t)cap * sizeof *g);
+        if (!g)
+            return NULL;
+        rw->sc = g;
+        rw->cap_sc = cap;
+    }
+    soft_contact *c = &rw->sc[rw->nsc++];
+    memset(c, 0, sizeof *c);
+    c->SA = SA;
+    c->SB = SB;
+    c->node = i;
+    memcpy(c->bn, best->dn, sizeof c->bn);
+    memcpy(c->bw, best->dw, sizeof c->bw);
+    memcpy(c->n, best->n, sizeof c->n);
+    c->sep = sep;
+    c->hB = B->cm.h;
+    c->mu = sqrt(A->mat.friction * B->mat.friction);
+    c->target = fmax(A->mat.restitution, B->mat.restitution);
+    return c;
+}
+
 /* The nodes of A in the overlap [olo, ohi] against B's cells (filed in rw->grid over B's box
  * [blo, bhi]): at most one contact per node, with the face it is least deep behind. */
 static int soft_nodes_in_cells(cs_rigid_world *rw, cs_object *A, cs_object *B,
@@ -2030,26 +2059,8 @@ static int soft_nodes_in_cells(cs_rigid_world *rw, cs_object *A, cs_object *B,
          * crushed and inverted small pieces in the fracture storm */
         if (best.sep == -INFINITY || best.sep < -0.5 * B->cm.h)
             continue;
-        if (rw->nsc == rw->cap_sc) {
-            const int cap = rw->cap_sc ? 2 * rw->cap_sc : 256;
-            soft_contact *g = realloc(rw->sc, (size_t)cap * sizeof *g);
-            if (!g)
-                return -1;
-            rw->sc = g;
-            rw->cap_sc = cap;
-        }
-        soft_contact *c = &rw->sc[rw->nsc++];
-        memset(c, 0, sizeof *c);
-        c->SA = SA;
-        c->SB = SB;
-        c->node = i;
-        memcpy(c->bn, best.dn, sizeof c->bn);
-        memcpy(c->bw, best.dw, sizeof c->bw);
-        memcpy(c->n, best.n, sizeof c->n);
-        c->sep = best.sep;
-        c->hB = B->cm.h;
-        c->mu = sqrt(A->mat.friction * B->mat.friction);
-        c->target = fmax(A->mat.restitution, B->mat.restitution); /* e, until prepared */
+        if (!add_soft_contact(rw, A, B, SA, SB, i, &best, best.sep))
+            return -1;
     }
     return 0;
 }
@@ -2197,26 +2208,9 @@ static int born_contacts(cs_rigid_world *rw, double dt, double v_rest, cs_object
             continue;
         if (dot3(v, best.n) < -v_rest)
             continue; /* an impact, not pieces resting on each other */
-        if (rw->nsc == rw->cap_sc) {
-            const int cap = rw->cap_sc ? 2 * rw->cap_sc : 256;
-            soft_contact *g = realloc(rw->sc, (size_t)cap * sizeof *g);
-            if (!g)
-                return -1;
-            rw->sc = g;
-            rw->cap_sc = cap;
-        }
-        soft_contact *c = &rw->sc[rw->nsc++];
-        memset(c, 0, sizeof *c);
-        c->SA = SA;
-        c->SB = SB;
-        c->node = i;
-        memcpy(c->bn, best.dn, sizeof c->bn);
-        memcpy(c->bw, best.dw, sizeof c->bw);
-        memcpy(c->n, best.n, sizeof c->n);
-        c->sep = best.sep - R->ref[i];
-        c->hB = B->cm.h;
-        c->mu = sqrt(A->mat.friction * B->mat.friction);
-        c->target = fmax(A->mat.restitution, B->mat.restitution); /* never applies: v_rest */
+        /* its restitution never applies: v_rest */
+        if (!add_soft_contact(rw, A, B, SA, SB, i, &best, best.sep - R->ref[i]))
+            return -1;
     }
     return 0;
 }
