@@ -2296,6 +2296,7 @@ static int soft_contacts(cs_world_t *w, cs_rigid_world *rw, cs_step_stats *st)
                 ohi[a] = fmin(ahi[a], bhi[a]) + margin;
                 over = over && olo[a] <= ohi[a];
             }
+            bool born = false; /* kin never apart: only their born pairs */
             if (A->kin == B->kin) {
                 /* pieces of one object: born touching across their crack (each crack node
                  * on the other's cell face), so they take the whole search only once their
@@ -2313,17 +2314,7 @@ static int soft_contacts(cs_world_t *w, cs_rigid_world *rw, cs_step_stats *st)
                      * inside out (its cube has zero energy in its mirror image) */
                     if (A->model == CS_MODEL_MSS || B->model == CS_MODEL_MSS)
                         continue;
-                    if (soft_prepare(w, rw, A, true) != 0)
-                        return CS_ERR_NOMEM;
-                    cs_soft_resp *SA = rw->cur;
-                    if (soft_prepare(w, rw, B, true) != 0)
-                        return CS_ERR_NOMEM;
-                    cs_soft_resp *SB = rw->cur;
-                    SA->two_level = SB->two_level = true;
-                    if (born_contacts(rw, dt, v_rest, A, B, SA, SB, olo, ohi, margin) != 0 ||
-                        born_contacts(rw, dt, v_rest, B, A, SB, SA, olo, ohi, margin) != 0)
-                        return CS_ERR_NOMEM;
-                    continue;
+                    born = true;
                 }
             }
             if (!over)
@@ -2335,9 +2326,14 @@ static int soft_contacts(cs_world_t *w, cs_rigid_world *rw, cs_step_stats *st)
                 return CS_ERR_NOMEM;
             cs_soft_resp *SB = rw->cur;
             SA->two_level = SB->two_level = true;
-            if (soft_nodes_in_cells(rw, A, B, SA, SB, olo, ohi, blo, bhi, margin) != 0 ||
-                soft_nodes_in_cells(rw, B, A, SB, SA, olo, ohi, alo, ahi, margin) != 0)
+            if (born) {
+                if (born_contacts(rw, dt, v_rest, A, B, SA, SB, olo, ohi, margin) != 0 ||
+                    born_contacts(rw, dt, v_rest, B, A, SB, SA, olo, ohi, margin) != 0)
+                    return CS_ERR_NOMEM;
+            } else if (soft_nodes_in_cells(rw, A, B, SA, SB, olo, ohi, blo, bhi, margin) != 0 ||
+                       soft_nodes_in_cells(rw, B, A, SB, SA, olo, ohi, alo, ahi, margin) != 0) {
                 return CS_ERR_NOMEM;
+            }
         }
     }
     if (rw->nsc == 0)
