@@ -17,6 +17,7 @@
 #include <string.h>
 
 #include "check.h"
+#include "contact_probe.h"
 #include "cubesim.h"
 #include "lattice.h"
 #include "world_internal.h"
@@ -50,79 +51,6 @@ static cs_object_id add_column(cs_world_t *w, double young)
     }
     free(ijk);
     return id;
-}
-
-/* Local coordinates u of p in the hexahedron X (CS_CORNER order) by Newton on the trilinear
- * map; false if it does not converge. */
-static bool hex_coords(const double X[8][3], const double p[3], double u[3])
-{
-    u[0] = u[1] = u[2] = 0.5;
-    for (int it = 0; it < 20; it++) {
-        double r[3] = {-p[0], -p[1], -p[2]}, J[3][3] = {{0}};
-        for (int k = 0; k < 8; k++) {
-            double f[3], df[3];
-            for (int a = 0; a < 3; a++) {
-                f[a] = CS_CORNER[k][a] ? u[a] : 1 - u[a];
-                df[a] = CS_CORNER[k][a] ? 1 : -1;
-            }
-            const double dN[3] = {df[0] * f[1] * f[2], f[0] * df[1] * f[2], f[0] * f[1] * df[2]};
-            for (int a = 0; a < 3; a++) {
-                r[a] += f[0] * f[1] * f[2] * X[k][a];
-                for (int b = 0; b < 3; b++)
-                    J[a][b] += X[k][a] * dN[b];
-            }
-        }
-        const double det = J[0][0] * (J[1][1] * J[2][2] - J[1][2] * J[2][1]) -
-                           J[0][1] * (J[1][0] * J[2][2] - J[1][2] * J[2][0]) +
-                           J[0][2] * (J[1][0] * J[2][1] - J[1][1] * J[2][0]);
-        if (!(fabs(det) > 0))
-            return false;
-        double du[3];
-        for (int a = 0; a < 3; a++) { /* Cramer */
-            double M[3][3];
-            memcpy(M, J, sizeof M);
-            for (int b = 0; b < 3; b++)
-                M[b][a] = r[b];
-            du[a] = (M[0][0] * (M[1][1] * M[2][2] - M[1][2] * M[2][1]) -
-                     M[0][1] * (M[1][0] * M[2][2] - M[1][2] * M[2][0]) +
-                     M[0][2] * (M[1][0] * M[2][1] - M[1][1] * M[2][0])) /
-                    det;
-        }
-        double m = 0;
-        for (int a = 0; a < 3; a++) {
-            u[a] -= du[a];
-            m = fmax(m, fabs(du[a]));
-        }
-        if (!(m < 1e3))
-            return false;
-        if (m < 1e-12)
-            break;
-    }
-    for (int a = 0; a < 3; a++)
-        if (!(u[a] > 0 && u[a] < 1))
-            return false;
-    return true;
-}
-
-/* How deep the deepest node of P lies inside a cell of Q (its distance to the cell's nearest
- * face in the cell's own coordinates, times h); 0 if none is inside. */
-static double deepest_inside(const cs_object *P, const cs_object *Q)
-{
-    double deep = 0;
-    for (int i = 0; i < P->n; i++)
-        for (int32_t c = 0; c < Q->cm.n_cells; c++) {
-            double X[8][3], u[3];
-            for (int k = 0; k < 8; k++)
-                for (int a = 0; a < 3; a++)
-                    X[k][a] = Q->x[3 * (size_t)Q->cm.cell_nodes[8 * c + k] + a];
-            if (!hex_coords(X, P->x + 3 * i, u))
-                continue;
-            double d = INFINITY;
-            for (int a = 0; a < 3; a++)
-                d = fmin(d, fmin(u[a], 1 - u[a]));
-            deep = fmax(deep, d * Q->cm.h);
-        }
-    return deep;
 }
 
 /* The piece holding a cell of layer round(z/h) (of the layer below z when `below`). */
