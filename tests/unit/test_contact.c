@@ -806,21 +806,45 @@ TEST(contact_soft_block_far_away_changes_nothing)
  * 0.5 m/s each for 20 steps (their boxes part) and back at 1 m/s each, the pieces must then
  * collide as any two objects (no node 0.05 h inside the other): the skip ends once apart.
  */
-TEST(contact_fracture_pieces_born_touching_stay_put)
+/* A soft 4×2×2 block of 0.1 m cubes without gravity, split across its middle by a forced
+ * fracture: the world, with the two pieces' ids in ids; NULL if anything failed. */
+static cs_world_t *split_block(cs_object_id ids[2])
 {
     cs_world_t *w = free_world(0);
-    ENSURE(w);
+    if (!w)
+        return NULL;
     char err[256];
     cs_material soft = cs_material_default();
     soft.young = 1e5;
     const cs_object_id a = add_box(w, "a", 4, 2, 2, 0.1, (double[3]){0, 0, 0}, soft,
                                    CS_MODEL_COROTATIONAL);
-    ENSURE(a != CS_NULL_OBJECT);
-    ENSURE_MSG(cs_world_fracture(w, a, (double[3]){0.2, 0.1, 0.1}, (double[3]){1, 0, 0}, 1.0,
-                                 err, sizeof err) == CS_OK, "%s", err);
-    cs_object_id ids[4];
-    ENSURE_MSG(cs_world_object_ids(w, ids, 4) == 2, "%d objects after the split",
-               cs_world_object_ids(w, ids, 4));
+    cs_object_id got[4];
+    if (a == CS_NULL_OBJECT ||
+        cs_world_fracture(w, a, (double[3]){0.2, 0.1, 0.1}, (double[3]){1, 0, 0}, 1.0, err,
+                          sizeof err) != CS_OK ||
+        cs_world_object_ids(w, got, 4) != 2) {
+        cs_world_destroy(w);
+        return NULL;
+    }
+    ids[0] = got[0];
+    ids[1] = got[1];
+    return w;
+}
+
+/* The mean x of o's nodes. */
+static double centre_x(const cs_object *o)
+{
+    double c = 0;
+    for (int i = 0; i < o->n; i++)
+        c += o->x[3 * i] / o->n;
+    return c;
+}
+
+TEST(contact_fracture_pieces_born_touching_stay_put)
+{
+    cs_object_id ids[2];
+    cs_world_t *w = split_block(ids);
+    ENSURE_MSG(w, "the split block could not be made");
     cs_object *P = cs_world_find_internal(w, ids[0]), *Q = cs_world_find_internal(w, ids[1]);
     for (int s = 0; s < 20; s++)
         ENSURE(cs_world_step(w) == CS_OK);
@@ -832,13 +856,7 @@ TEST(contact_fracture_pieces_born_touching_stay_put)
     printf("    pieces of %d and %d cells born touching: fastest node %.2e m/s after 20 steps\n",
            P->cm.n_cells, Q->cm.n_cells, vmax);
     ENSURE_MSG(vmax < 1e-9, "fastest node %.3e m/s", vmax);
-    /* which piece is on the low-x side */
-    double cp = 0, cq = 0;
-    for (int i = 0; i < P->n; i++)
-        cp += P->x[3 * i] / P->n;
-    for (int i = 0; i < Q->n; i++)
-        cq += Q->x[3 * i] / Q->n;
-    const double sgn = cp < cq ? 1 : -1;
+    const double sgn = centre_x(P) < centre_x(Q) ? 1 : -1; /* P on the low-x side when 1 */
     set_velocity(w, ids[0], (double[3]){-0.5 * sgn, 0, 0});
     set_velocity(w, ids[1], (double[3]){0.5 * sgn, 0, 0});
     for (int s = 0; s < 20; s++)
@@ -876,25 +894,12 @@ static double x_gap(const cs_object *L, const cs_object *H)
  * (checked: the new half then ends 1.26 m past its kin's centre). */
 TEST(contact_piece_broken_again_keeps_apart_record)
 {
-    cs_world_t *w = free_world(0);
-    ENSURE(w);
+    cs_object_id ids[2];
+    cs_world_t *w = split_block(ids);
+    ENSURE_MSG(w, "the split block could not be made");
     char err[256];
-    cs_material soft = cs_material_default();
-    soft.young = 1e5;
-    const cs_object_id a = add_box(w, "a", 4, 2, 2, 0.1, (double[3]){0, 0, 0}, soft,
-                                   CS_MODEL_COROTATIONAL);
-    ENSURE(a != CS_NULL_OBJECT);
-    ENSURE_MSG(cs_world_fracture(w, a, (double[3]){0.2, 0.1, 0.1}, (double[3]){1, 0, 0}, 1.0,
-                                 err, sizeof err) == CS_OK, "%s", err);
-    cs_object_id ids[8];
-    ENSURE(cs_world_object_ids(w, ids, 8) == 2);
     cs_object *P = cs_world_find_internal(w, ids[0]), *Q = cs_world_find_internal(w, ids[1]);
-    double cp = 0, cq = 0;
-    for (int i = 0; i < P->n; i++)
-        cp += P->x[3 * i] / P->n;
-    for (int i = 0; i < Q->n; i++)
-        cq += Q->x[3 * i] / Q->n;
-    const double sgn = cp < cq ? 1 : -1; /* P on the low-x side when 1 */
+    const double sgn = centre_x(P) < centre_x(Q) ? 1 : -1; /* P on the low-x side when 1 */
     const cs_object *lo = sgn > 0 ? P : Q, *hi = sgn > 0 ? Q : P;
     set_velocity(w, ids[0], (double[3]){-0.5 * sgn, 0, 0});
     set_velocity(w, ids[1], (double[3]){0.5 * sgn, 0, 0});
@@ -935,12 +940,7 @@ TEST(contact_piece_broken_again_keeps_apart_record)
         ENSURE(cs_world_step(w) == CS_OK);
         deep = fmax(deep, fmax(deepest_inside(P, N), deepest_inside(N, P)));
     }
-    double cn = 0;
-    cp = 0;
-    for (int i = 0; i < P->n; i++)
-        cp += P->x[3 * i] / P->n;
-    for (int i = 0; i < N->n; i++)
-        cn += N->x[3 * i] / N->n;
+    const double cn = centre_x(N), cp = centre_x(P);
     printf("    back in touch after %d steps, the far piece cut, its new half thrown at its kin "
            "at 1 m/s each: deepest node %.2f mm inside the other; centres %.3f m apart along "
            "x after 1 s\n",
