@@ -576,6 +576,17 @@ static void apply_inputs(cs_daemon *d, double now)
 /* ---------------------------------------------------------------- stepping */
 
 /* One physics step and what follows it. Returns false if the run must stop. */
+/* The current frame's deltas (and rigid poses) into the send queue; the clients are then
+ * current (d->unpublished cleared) unless memory ran out (warned). */
+static void queue_deltas(cs_daemon *d)
+{
+    sync_context(d);
+    if (cs_bus_queue_deltas(d->bus, d->world, d->scene.publish_epsilon) < 0)
+        cs_dlog_warn(&d->log, "deltas", "could not queue deltas (out of memory)");
+    else
+        d->unpublished = false;
+}
+
 static void do_step(cs_daemon *d)
 {
     double t0 = cs_dlog_now();
@@ -606,11 +617,7 @@ static void do_step(cs_daemon *d)
     double t = cs_world_time(d->world), period = publish_period(d);
     d->unpublished = true;
     if (t + 1e-9 * (period > 0 ? period : 1) >= d->next_publish) {
-        sync_context(d);
-        if (cs_bus_queue_deltas(d->bus, d->world, d->scene.publish_epsilon) < 0)
-            cs_dlog_warn(&d->log, "deltas", "could not queue deltas (out of memory)");
-        else
-            d->unpublished = false;
+        queue_deltas(d);
         d->next_publish += period;
         if (d->next_publish <= t)
             d->next_publish = t + period;
@@ -630,14 +637,8 @@ static void do_step(cs_daemon *d)
  */
 static void publish_paused(cs_daemon *d)
 {
-    if (!d->paused || !d->unpublished)
-        return;
-    sync_context(d);
-    if (cs_bus_queue_deltas(d->bus, d->world, d->scene.publish_epsilon) < 0) {
-        cs_dlog_warn(&d->log, "deltas", "could not queue deltas (out of memory)");
-        return; /* tried again on the next loop iteration */
-    }
-    d->unpublished = false;
+    if (d->paused && d->unpublished)
+        queue_deltas(d); /* if out of memory: tried again on the next loop iteration */
 }
 
 static void publish_status(cs_daemon *d, double now)
