@@ -81,7 +81,8 @@ typedef float vf __attribute__((vector_size(4 * VF_LANES)));
 /* A level with fewer cells runs on one thread. 256 (the beam's 19×4×4 level on two threads
  * too) measured on the loaded machine of session 17: stiff beam 40 → 22 steps/s with
  * OMP_WAIT_POLICY=passive (more synchronisations, each a futex wake-up), 19.7 → 20.4 with the
- * default spinning (medians of 6 rounds; noise); an idle measurement is still to be made. */
+ * default spinning (medians of 6 rounds; noise); idle in session 18: within the host's noise
+ * (bench/HISTORY.md "Session 18: where the second thread waits"). */
 #ifndef MG_PARALLEL_CELLS
 #define MG_PARALLEL_CELLS CS_FEM_PARALLEL_CELLS
 #endif
