@@ -845,16 +845,26 @@ static void expire(cs_object *o)
 
 /* ---------------------------------------------------------------- contacts */
 
+/* p (n of *cap elements of elem bytes in use) with room for one more: p itself while there is,
+ * else reallocated to twice *cap (first, when empty), *cap updated. NULL when out of memory
+ * (p is then still valid). */
+static void *room_for_one(void *p, int n, int *cap, size_t elem, int first)
+{
+    if (n < *cap)
+        return p;
+    const int c = *cap ? 2 * *cap : first;
+    void *g = realloc(p, (size_t)c * elem);
+    if (g)
+        *cap = c;
+    return g;
+}
+
 static contact *new_contact(cs_rigid_world *rw)
 {
-    if (rw->nc == rw->cap_c) {
-        int cap = rw->cap_c ? 2 * rw->cap_c : 256;
-        contact *g = realloc(rw->c, (size_t)cap * sizeof *g);
-        if (!g)
-            return NULL;
-        rw->c = g;
-        rw->cap_c = cap;
-    }
+    contact *g = room_for_one(rw->c, rw->nc, &rw->cap_c, sizeof *g, 256);
+    if (!g)
+        return NULL;
+    rw->c = g;
     contact *c = &rw->c[rw->nc++];
     memset(c, 0, sizeof *c);
     c->node_a = c->node_b = c->cell_a = c->cell_b = -1;
@@ -1464,14 +1474,10 @@ static int soft_prepare(const cs_world_t *w, cs_rigid_world *rw, cs_object *D, b
         if (rw->soft[i]->id == D->id)
             r = rw->soft[i];
     if (!r) {
-        if (rw->n_soft == rw->cap_soft) {
-            const int cap = rw->cap_soft ? 2 * rw->cap_soft : 4;
-            cs_soft_resp **g = realloc(rw->soft, (size_t)cap * sizeof *g);
-            if (!g)
-                return -1;
-            rw->soft = g;
-            rw->cap_soft = cap;
-        }
+        cs_soft_resp **g = room_for_one(rw->soft, rw->n_soft, &rw->cap_soft, sizeof *g, 4);
+        if (!g)
+            return -1;
+        rw->soft = g;
         if (!(r = calloc(1, sizeof *r)))
             return -1;
         rw->soft[rw->n_soft++] = r;
@@ -1986,14 +1992,10 @@ static soft_contact *add_soft_contact(cs_rigid_world *rw, const cs_object *A, co
                                       cs_soft_resp *SA, cs_soft_resp *SB, int i,
                                       const cell_face *best, double sep)
 {
-    if (rw->nsc == rw->cap_sc) {
-        const int cap = rw->cap_sc ? 2 * rw->cap_sc : 256;
-        soft_contact *g = realloc(rw->sc, (size_t)cap * sizeof *g);
-        if (!g)
-            return NULL;
-        rw->sc = g;
-        rw->cap_sc = cap;
-    }
+    soft_contact *g = room_for_one(rw->sc, rw->nsc, &rw->cap_sc, sizeof *g, 256);
+    if (!g)
+        return NULL;
+    rw->sc = g;
     soft_contact *c = &rw->sc[rw->nsc++];
     memset(c, 0, sizeof *c);
     c->SA = SA;
@@ -2076,14 +2078,10 @@ static int kin_apart(const cs_object *o, cs_object_id id)
 
 static int kin_add(cs_object *o, cs_object_id id)
 {
-    if (o->n_apart == o->cap_apart) {
-        const int cap = o->cap_apart ? 2 * o->cap_apart : 4;
-        cs_object_id *g = realloc(o->apart, (size_t)cap * sizeof *g);
-        if (!g)
-            return -1;
-        o->apart = g;
-        o->cap_apart = cap;
-    }
+    cs_object_id *g = room_for_one(o->apart, o->n_apart, &o->cap_apart, sizeof *g, 4);
+    if (!g)
+        return -1;
+    o->apart = g;
     o->apart[o->n_apart++] = id;
     return 0;
 }
@@ -2110,14 +2108,10 @@ static void born_drop(cs_object *o, cs_object_id id)
 /* A new record of kin id for o, all references 0; NULL when out of memory. */
 static cs_born_ref *born_new(cs_object *o, cs_object_id id)
 {
-    if (o->n_born == o->cap_born) {
-        const int cap = o->cap_born ? 2 * o->cap_born : 4;
-        cs_born_ref *g = realloc(o->born, (size_t)cap * sizeof *g);
-        if (!g)
-            return NULL;
-        o->born = g;
-        o->cap_born = cap;
-    }
+    cs_born_ref *g = room_for_one(o->born, o->n_born, &o->cap_born, sizeof *g, 4);
+    if (!g)
+        return NULL;
+    o->born = g;
     float *ref = calloc((size_t)(o->n ? o->n : 1), sizeof *ref);
     if (!ref)
         return NULL;
