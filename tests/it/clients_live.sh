@@ -21,9 +21,7 @@ source "$(dirname "$0")/lib.sh"
 cs_netns_reexec "$@"
 B=$CS_IT_BIN
 U=$CS_LCM_URL
-for b in cubesimd cubesim-push cubesim-log cubesim-replay; do
-    [ -x "$B/$b" ] || { cs_fail clients_live "missing $B/$b (run make)"; cs_finish; }
-done
+cs_need_bins clients_live cubesimd cubesim-push cubesim-log cubesim-replay
 command -v lcm-logger >/dev/null && command -v lcm-logplayer >/dev/null \
     || { cs_fail clients_live "lcm-logger/lcm-logplayer missing (make deps installs liblcm-bin)"; cs_finish; }
 cd "$CS_TMP" || exit 1

@@ -20,9 +20,7 @@
 source "$(dirname "$0")/lib.sh"
 cs_netns_reexec "$@"
 B=$CS_IT_BIN
-for b in cs_it_mklog cubesim-replay cubesim-log; do
-    [ -x "$B/$b" ] || { cs_fail clients_topology "missing $B/$b (run make)"; cs_finish; }
-done
+cs_need_bins clients_topology cs_it_mklog cubesim-replay cubesim-log
 cd "$CS_TMP" || exit 1
 for m in good badvolume open gap lagged nosrc; do "$B/cs_it_mklog" $m.lcm $m || cs_fail "mklog_$m" "cs_it_mklog failed"; done
 "$B/cs_it_mklog" chunked.lcm good --chunk-bytes 40

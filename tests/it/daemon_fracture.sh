@@ -22,9 +22,7 @@ source "$(dirname "$0")/lib.sh"
 cs_netns_reexec "$@"
 B=$CS_IT_BIN
 U=$CS_LCM_URL
-for b in cubesimd cubesim-push cubesim-log cubesim-replay cs_it_bus; do
-    [ -x "$B/$b" ] || { cs_fail daemon_fracture "missing $B/$b (run make)"; cs_finish; }
-done
+cs_need_bins daemon_fracture cubesimd cubesim-push cubesim-log cubesim-replay cs_it_bus
 cd "$CS_TMP" || exit 1
 EPS=1e-5
 

@@ -28,9 +28,7 @@ source "$(dirname "$0")/lib.sh"
 cs_netns_reexec "$@"
 B=$CS_IT_BIN
 U=$CS_LCM_URL
-for b in cubesimd cubesim-push cubesim-log cubesim-replay cs_it_bus; do
-    [ -x "$B/$b" ] || { cs_fail daemon_paused "missing $B/$b (run make)"; cs_finish; }
-done
+cs_need_bins daemon_paused cubesimd cubesim-push cubesim-log cubesim-replay cs_it_bus
 cd "$CS_TMP" || exit 1
 GRID=20 # steps per publish frame: dt 0.01, publish_hz 5
 

@@ -13,9 +13,7 @@ source "$(dirname "$0")/lib.sh"
 cs_netns_reexec "$@"
 B=$CS_IT_BIN
 U=$CS_LCM_URL
-for b in cubesimd cubesim-push cubesim-log cubesim-replay; do
-    [ -x "$B/$b" ] || { cs_fail daemon_sculpt "missing $B/$b (run make)"; cs_finish; }
-done
+cs_need_bins daemon_sculpt cubesimd cubesim-push cubesim-log cubesim-replay
 cd "$CS_TMP" || exit 1
 
 cat > blob.json <<'JSON'

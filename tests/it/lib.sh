@@ -25,6 +25,14 @@ CS_DAEMON_RC=
 cs_pass() { echo "PASS $1"; }
 cs_fail() { echo "FAIL $1: $2"; CS_FAILED=1; }
 cs_finish() { [ "$CS_FAILED" -eq 0 ] && exit 0; exit 1; }
+# cs_need_bins NAME BIN...: fail test NAME and finish unless every BIN is built in $CS_IT_BIN
+cs_need_bins() {
+    local name=$1 b
+    shift
+    for b in "$@"; do
+        [ -x "$CS_IT_BIN/$b" ] || { cs_fail "$name" "missing $CS_IT_BIN/$b (run make)"; cs_finish; }
+    done
+}
 
 # cs_check NAME CMD...: PASS if CMD succeeds, else FAIL naming the command.
 cs_check() {
