@@ -30,11 +30,17 @@ cat "$out/blocks.growth.txt"
 # The 75×15×15 cantilever (h = 0.04 m: a 3 m × 0.6 m × 0.6 m beam, end x = 0 held), preconditioner
 # auto, at the scene default E = 1e5 Pa (a jelly: it folds down) and at E = 1e8 Pa (a stiff
 # beam: its static tip sag is about 1 % of its length).
+# beams NAME [ARGS]: both beams into $out/NAME.csv and NAME.md, ARGS passed to bench_blocks.
+beams() {
+  local name=$1
+  shift
+  build/bin/bench_blocks --box 75x15x15 --h 0.04 --young 1e5 --precond auto --runs "$runs" --threads 1,2 \
+    "$@" --csv "$out/$name.csv" 2>/dev/null | tee "$out/$name.md"
+  build/bin/bench_blocks --box 75x15x15 --h 0.04 --young 1e8 --precond auto --runs "$runs" --threads 1,2 \
+    "$@" --csv "$out/$name.csv" --append 2>/dev/null | tee -a "$out/$name.md"
+}
 echo "bench_blocks: 75×15×15 cantilever, E = 1e5 and 1e8 Pa, auto, threads 1 and 2"
-build/bin/bench_blocks --box 75x15x15 --h 0.04 --young 1e5 --precond auto --runs "$runs" --threads 1,2 \
-  --csv "$out/beam.csv" 2>/dev/null | tee "$out/beam.md"
-build/bin/bench_blocks --box 75x15x15 --h 0.04 --young 1e8 --precond auto --runs "$runs" --threads 1,2 \
-  --csv "$out/beam.csv" --append 2>/dev/null | tee -a "$out/beam.md"
+beams beam
 # Sustained runs: the same beams over 120 steps (2 s of simulated time: the beam sags, swings
 # and the warm start has its directions) and 64³ over 60 steps (1 s), after the first 12 steps
 # from rest above, which are the hardest (6–8 CG iterations per step against 2–3 later).
@@ -43,10 +49,7 @@ build/bin/bench_blocks --box 75x15x15 --h 0.04 --young 1e8 --precond auto --runs
 ssteps=${BENCH_SUSTAINED_STEPS:-120}
 sbig=${BENCH_SUSTAINED_BIG_STEPS:-60}
 echo "bench_blocks: sustained: 75×15×15 cantilever over $ssteps steps, 64³ over $sbig steps"
-build/bin/bench_blocks --box 75x15x15 --h 0.04 --young 1e5 --precond auto --runs "$runs" --threads 1,2 \
-  --steps "$ssteps" --csv "$out/beam_sustained.csv" 2>/dev/null | tee "$out/beam_sustained.md"
-build/bin/bench_blocks --box 75x15x15 --h 0.04 --young 1e8 --precond auto --runs "$runs" --threads 1,2 \
-  --steps "$ssteps" --csv "$out/beam_sustained.csv" --append 2>/dev/null | tee -a "$out/beam_sustained.md"
+beams beam_sustained --steps "$ssteps"
 rm -f "$out/blocks_sustained.csv"
 if [ "${BENCH_SKIP_64:-0}" != 1 ]; then
   build/bin/bench_blocks --sizes 64 --precond multigrid --big-runs "${BENCH_BIG_RUNS:-3}" \
