@@ -275,7 +275,7 @@ void cs_soft_velocity(const cs_soft_resp *r, const int32_t *nodes, const double 
 }
 
 double cs_soft_compliance(const cs_soft_resp *r, const int32_t *nodes, const double *w, int k,
-                          const double arm[3], const double d[3])
+                          const double arm[3], const double d[3], double local)
 {
     double s = 0;
     for (int j = 0; j < k; j++) {
@@ -285,9 +285,9 @@ double cs_soft_compliance(const cs_soft_resp *r, const int32_t *nodes, const dou
         if (r->stiff) {
             double t[3];
             mul3(r->ainv + 9 * i, d, t);
-            s += w[j] * w[j] * (d[0] * t[0] + d[1] * t[1] + d[2] * t[2]);
+            s += local * w[j] * w[j] * (d[0] * t[0] + d[1] * t[1] + d[2] * t[2]);
         } else {
-            s += w[j] * w[j] * (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) / r->D->m[i];
+            s += local * w[j] * w[j] * (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) / r->D->m[i];
         }
     }
     if (r->coarse) {
@@ -307,7 +307,7 @@ double cs_soft_compliance(const cs_soft_resp *r, const int32_t *nodes, const dou
 }
 
 void cs_soft_impulse(cs_soft_resp *r, const int32_t *nodes, const double *w, int k,
-                     const double arm[3], const double J[3])
+                     const double arm[3], const double J[3], double local)
 {
     cs_object *D = r->D;
     bool any = false;
@@ -324,7 +324,7 @@ void cs_soft_impulse(cs_soft_resp *r, const int32_t *nodes, const double *w, int
                 du[a] = J[a] / D->m[i];
         for (int a = 0; a < 3; a++) {
             D->v[3 * i + a] += w[j] * J[a] / D->m[i]; /* the momentum, now */
-            r->u[3 * i + a] += w[j] * du[a];          /* the solve's view of the response */
+            r->u[3 * i + a] += local * w[j] * du[a];  /* the solve's view of the response */
         }
     }
     if (!any || !r->coarse)

@@ -77,9 +77,9 @@ void cs_soft_velocity(const cs_soft_resp *r, const int32_t *nodes, const double 
                       const double arm[3], double v[3]);
 /* dᵀ W d: the velocity change along d of an impulse d on that point (W its compliance). */
 double cs_soft_compliance(const cs_soft_resp *r, const int32_t *nodes, const double *w, int k,
-                          const double arm[3], const double d[3]);
+                          const double arm[3], const double d[3], double local);
 /* An impulse J on D at that point: D->v and the solve's view of it change. */
 void cs_soft_impulse(cs_soft_resp *r, const int32_t *nodes, const double *w, int k,
-                     const double arm[3], const double J[3]);
+                     const double arm[3], const double J[3], double local);
 
 #endif

@@ -64,6 +64,16 @@
 #include "mat3.h"
 
 #define PGS_ITERATIONS 60
+/* The friction rows' view of a deformable side's local response, as a multiple of the model's
+ * A_ii⁻¹ (contact_soft.h). That model is the inverse of the node's diagonal block, a lower
+ * bound of the true response (A⁻¹)_ii, which at a block's corner or edge is several times
+ * larger; a bilateral friction row solved against a model ρ times too stiff overshoots by
+ * (ρ − 1) of the slip each step, and in alternating steps grows once ρ > 2: a rigid box resting
+ * on a soft block (E 1e5 Pa) set the block's top corners swinging at 0.05 m/s, its friction
+ * impulses changing sign every step. Seen at twice its size (stable to ρ < 4; below ρ = 2 the
+ * slip is taken out over several steps instead of one) the corners stay below 3e-5 m/s. The
+ * normal rows keep the model: there a softer view lets a box sink in (0.03 h deeper at 2×). */
+#define FRICTION_LOCAL 2.0
 #define BAUMGARTE 0.2
 /* (Against deformable objects too. The whole depth per substep was needed while the solve saw
  * their nodes as free masses: they took most of the push-out and their own step pulled them
@@ -1207,7 +1217,7 @@ static void tangents(const double n[3], double t1[3], double t2[3])
     cross3(n, t1, t2);
 }
 
-static double eff_mass(const cs_rigid_world *rw, const contact *c, const double d[3])
+static double eff_mass(const cs_rigid_world *rw, const contact *c, const double d[3], double local)
 {
     double k = 0;
     for (int s = 0; s < 2; s++) {
@@ -1221,7 +1231,7 @@ static double eff_mass(const cs_rigid_world *rw, const contact *c, const double 
         k += rb->inv_mass + dot3(rxd, t);
     }
     if (c->D)
-        k += cs_soft_compliance(c->S, c->dn, c->dw, 4, c->rd, d);
+        k += cs_soft_compliance(c->S, c->dn, c->dw, 4, c->rd, d, local);
     return k > 0 ? 1.0 / k : 0.0;
 }
 
@@ -1253,7 +1263,7 @@ static void rel_velocity(const cs_rigid_world *rw, const contact *c, double v[3]
     rel_velocity_at(rw, c, v, false);
 }
 
-static void contact_impulse(cs_rigid_world *rw, const contact *c, const double J[3])
+static void contact_impulse(cs_rigid_world *rw, const contact *c, const double J[3], double local)
 {
     if (rw->dyn[c->a])
         apply_impulse(rw->body[c->a]->rb, c->ra, J, 1.0);
@@ -1261,7 +1271,7 @@ static void contact_impulse(cs_rigid_world *rw, const contact *c, const double J
         apply_impulse(rw->body[c->b]->rb, c->rb, J, -1.0);
     if (c->D) { /* −J on the deformable side */
         const double mJ[3] = {-J[0], -J[1], -J[2]};
-        cs_soft_impulse(c->S, c->dn, c->dw, 4, c->rd, mJ);
+        cs_soft_impulse(c->S, c->dn, c->dw, 4, c->rd, mJ, local);
     }
 }
 
@@ -1280,9 +1290,9 @@ static void prepare_contacts(const cs_world_t *w, cs_rigid_world *rw)
         if (c->D)
             cs_soft_arm(c->S, c->dn, c->dw, 4, c->rd);
         tangents(c->n, c->t1, c->t2);
-        c->kn = eff_mass(rw, c, c->n);
-        c->kt1 = eff_mass(rw, c, c->t1);
-        c->kt2 = eff_mass(rw, c, c->t2);
+        c->kn = eff_mass(rw, c, c->n, 1.0);
+        c->kt1 = eff_mass(rw, c, c->t1, FRICTION_LOCAL);
+        c->kt2 = eff_mass(rw, c, c->t2, FRICTION_LOCAL);
         double vr[3];
         rel_velocity(rw, c, vr);
         const double vn0 = dot3(vr, c->n);
@@ -1341,10 +1351,13 @@ static void warm_start(cs_rigid_world *rw)
         const double lim = c->mu * c->jn;
         c->jt1 = fmin(lim, fmax(-lim, sg * dot3(f->J, c->t1)));
         c->jt2 = fmin(lim, fmax(-lim, sg * dot3(f->J, c->t2)));
-        double J[3];
-        for (int a = 0; a < 3; a++)
-            J[a] = c->jn * c->n[a] + c->jt1 * c->t1[a] + c->jt2 * c->t2[a];
-        contact_impulse(rw, c, J);
+        double J[3], T[3];
+        for (int a = 0; a < 3; a++) {
+            J[a] = c->jn * c->n[a];
+            T[a] = c->jt1 * c->t1[a] + c->jt2 * c->t2[a];
+        }
+        contact_impulse(rw, c, J, 1.0);
+        contact_impulse(rw, c, T, FRICTION_LOCAL);
     }
 }
 
@@ -1392,7 +1405,7 @@ static void solve_contacts(cs_rigid_world *rw)
             double J[3];
             for (int a = 0; a < 3; a++)
                 J[a] = dj * c->n[a];
-            contact_impulse(rw, c, J);
+            contact_impulse(rw, c, J, 1.0);
             /* friction, each tangent clamped to μ jn */
             rel_velocity(rw, c, vr);
             const double lim = c->mu * c->jn;
@@ -1405,7 +1418,7 @@ static void solve_contacts(cs_rigid_world *rw)
                 *jt[s] = nj;
                 for (int a = 0; a < 3; a++)
                     J[a] = d * t[s][a];
-                contact_impulse(rw, c, J);
+                contact_impulse(rw, c, J, FRICTION_LOCAL);
             }
         }
 }
@@ -1853,8 +1866,11 @@ static int cell_contacts(cs_world_t *w, cs_rigid_world *rw, int n_objects)
     return 0;
 }
 
-/* After the solve: the deformable objects contacts pushed stay awake; their energies and
- * surfaces follow the velocities and positions they now have. */
+/* After the solve: the deformable objects contacts pushed are awake; their energies and
+ * surfaces follow the velocities and positions they now have. A push from a moving body, or
+ * one that woke D, starts D's count of still steps afresh; a body at rest (asleep) lying on
+ * an awake D does not, so D falls asleep under it once its own nodes are still (finish_step)
+ * and the pair is then skipped until something moves. */
 static void cell_contacts_done(cs_rigid_world *rw)
 {
     const cs_object *last = NULL; /* contacts come grouped by object: skin each once a group */
@@ -1863,8 +1879,9 @@ static void cell_contacts_done(cs_rigid_world *rw)
         cs_object *D = c->D;
         if (D && c->jn > 0) {
             D->elastic_energy_valid = false;
+            if (D->sleeping || rw->dyn[c->a])
+                D->still_steps = 0;
             D->sleeping = false;
-            D->still_steps = 0;
             D->contact_pushed = true;
             if (D != last)
                 cs_surface_skin(&D->surf, &D->cm, D->x);
@@ -1907,16 +1924,16 @@ static void soft_rel_velocity(const soft_contact *c, double v[3])
 
 static double soft_eff_mass(const soft_contact *c, const double d[3])
 {
-    const double k = cs_soft_compliance(c->SA, &c->node, ONE, 1, c->ra, d) +
-                     cs_soft_compliance(c->SB, c->bn, c->bw, 4, c->rb, d);
+    const double k = cs_soft_compliance(c->SA, &c->node, ONE, 1, c->ra, d, 1.0) +
+                     cs_soft_compliance(c->SB, c->bn, c->bw, 4, c->rb, d, 1.0);
     return k > 0 ? 1.0 / k : 0.0;
 }
 
 static void soft_impulse(soft_contact *c, const double J[3])
 {
     const double mJ[3] = {-J[0], -J[1], -J[2]};
-    cs_soft_impulse(c->SA, &c->node, ONE, 1, c->ra, J);
-    cs_soft_impulse(c->SB, c->bn, c->bw, 4, c->rb, mJ);
+    cs_soft_impulse(c->SA, &c->node, ONE, 1, c->ra, J, 1.0);
+    cs_soft_impulse(c->SB, c->bn, c->bw, 4, c->rb, mJ, 1.0);
 }
 
 /* The normal relative velocity the two sides have now (D->v: after their steps). */
