@@ -501,13 +501,10 @@ static int cmp_double(const void *a, const void *b)
  * over steps 100–300; a rare single-step kick is not what this measures). */
 TEST(rigid_box_on_soft_block_without_friction_chatter)
 {
-    cs_world_def wd = cs_world_def_default();
-    wd.has_ground = true;
-    wd.threads = 1;
-    wd.sleep_steps = 0;
-    cs_world_t *w = NULL;
+    cs_world_t *w = world(true, true);
+    ENSURE(w != NULL);
+    w->def.sleep_steps = 0;
     char err[256] = "";
-    ENSURE(cs_world_create(&wd, &w, err, sizeof err) == CS_OK);
     cs_object_id block, box;
     ENSURE_MSG(box_on_soft_block(w, &block, &box, err), "%s", err);
     double vmax[200], *prev = NULL;
@@ -525,7 +522,7 @@ TEST(rigid_box_on_soft_block_without_friction_chatter)
             double m = 0;
             for (int k = 0; k < 3 * n; k += 3) {
                 const double d[3] = {x[k] - prev[k], x[k + 1] - prev[k + 1], x[k + 2] - prev[k + 2]};
-                m = fmax(m, norm3(d) / wd.dt);
+                m = fmax(m, norm3(d) / w->def.dt);
             }
             vmax[i - 101] = m;
         }
