@@ -16,7 +16,9 @@
  *           centre of mass c. Without it a free soft block seen by its diagonal blocks alone is
  *           ~40 times stiffer than it is: a drop on a rigid floor threw it ten times higher.
  *           An object held in place (removed dofs) has no coarse part; one lying on the ground
- *           keeps only the modes the ground leaves free (x, y translation, rotation about z).
+ *           keeps only the modes the ground leaves free (x, y translation, rotation about z),
+ *           and while the ground's friction holds it, u0 keeps none of them and the rigid
+ *           bodies' contacts see none (contact_soft.c).
  *
  * The velocity each node heads for without contacts, u0, is one two-level iteration of D's
  * next step from v (coarse, then block Jacobi on what is left): a node held up by its elastic
@@ -52,6 +54,7 @@ typedef struct cs_soft_resp {
      * rotations; V, W the coarse velocity the impulses gave so far */
     double c[3], minv[3], iinv[9], V[3], W[3];
     bool coarse;        /* D has free rigid modes (else the coarse terms are all zero) */
+    bool held;          /* on the ground, which holds it by friction (contact_soft.c) */
     /* the response as one two-level iteration on the impulses, like u0: the block-Jacobi
      * pass after the coarse one takes back A_ii⁻¹ mass_i of the coarse velocity at node i
      * (false: local and coarse responses added, the model of the rigid bodies' contacts). Set
@@ -65,8 +68,10 @@ typedef struct cs_soft_resp {
 /* Make r (whose arrays may be from an earlier use) D's response for step `step` of world
  * step dt: nothing is done if it already is (whatever iso asks). iso: the model of the
  * deformable–deformable contacts (rigid.c): an isotropic local part and the two-level
- * response from the start. Returns 0 or -1 (out of memory). */
-int cs_soft_prepare(cs_soft_resp *r, cs_object *D, double dt, uint64_t step, bool iso);
+ * response from the start. ground_mu: the ground's friction coefficient (an object on the
+ * ground that it holds has no coarse part). Returns 0 or -1 (out of memory). */
+int cs_soft_prepare(cs_soft_resp *r, cs_object *D, double dt, uint64_t step, bool iso,
+                    double ground_mu);
 void cs_soft_free(cs_soft_resp *r);
 
 /* A point of D given by k nodes and weights (Σ w = 1): its arm from the centre of mass. */

@@ -1495,7 +1495,7 @@ static int soft_prepare(const cs_world_t *w, cs_rigid_world *rw, cs_object *D, b
             return -1;
         rw->soft[rw->n_soft++] = r;
     }
-    if (cs_soft_prepare(r, D, w->def.dt, rw->step, iso) != 0)
+    if (cs_soft_prepare(r, D, w->def.dt, rw->step, iso, w->def.ground_friction) != 0)
         return -1;
     rw->cur = r;
     return 0;
@@ -1949,6 +1949,19 @@ static double soft_now_normal(const soft_contact *c)
     return dot3(v, c->n);
 }
 
+/* Room in rw->sbox for n objects' boxes (7 doubles each). */
+static int sbox_room(cs_rigid_world *rw, int n)
+{
+    if (n <= rw->cap_sbox)
+        return 0;
+    double *g = realloc(rw->sbox, (size_t)n * 7 * sizeof *g);
+    if (!g)
+        return -1;
+    rw->sbox = g;
+    rw->cap_sbox = n;
+    return 0;
+}
+
 /* D's box (of its nodes) and its fastest node's speed. */
 static void object_box(const cs_object *D, double lo[3], double hi[3], double *vmax)
 {
@@ -2276,13 +2289,8 @@ static int soft_contacts(cs_world_t *w, cs_rigid_world *rw, cs_step_stats *st)
         soft += w->objects[i]->model != CS_MODEL_RIGID;
     if (soft < 2)
         return CS_OK;
-    if (w->n_objects > rw->cap_sbox) {
-        double *g = realloc(rw->sbox, (size_t)w->n_objects * 7 * sizeof *g);
-        if (!g)
-            return CS_ERR_NOMEM;
-        rw->sbox = g;
-        rw->cap_sbox = w->n_objects;
-    }
+    if (sbox_room(rw, w->n_objects) != 0)
+        return CS_ERR_NOMEM;
     for (int i = 0; i < w->n_objects; i++) {
         const cs_object *o = w->objects[i];
         if (o->model != CS_MODEL_RIGID && o->n > 0)
@@ -2414,7 +2422,7 @@ static int soft_contacts(cs_world_t *w, cs_rigid_world *rw, cs_step_stats *st)
     }
     rw->pending = true;
     rw->pending_frame = w->frame;
-    /* the objects pushed stay awake; their energies follow the velocities they now have.
+    /* the objects pushed wake; their energies follow the velocities they now have.
      * Newmark objects with a contact, pushing or not, take their next step by implicit Euler:
      * the step the solve modelled (a speculative contact that did not push trusts that
      * prediction; Newmark's own step after an impact went 13 mm into the other block) */
@@ -2425,9 +2433,29 @@ static int soft_contacts(cs_world_t *w, cs_rigid_world *rw, cs_step_stats *st)
             o[s]->contact_pushed = true;
             if (c->jn <= 0)
                 continue;
-            o[s]->sleeping = false;
-            o[s]->still_steps = 0;
+            if (o[s]->sleeping) {
+                o[s]->sleeping = false;
+                o[s]->still_steps = 0;
+            }
             o[s]->elastic_energy_valid = false;
+        }
+    }
+    /* Objects pressing on each other sleep together: each takes the fewest still steps of
+     * the objects its pushing contacts join it to (relaxed over the contacts until no count
+     * changes), so they reach sleep_steps in the same step or not at all, and one that moves
+     * restarts the count of all. (Every push restarted both counts, so soft objects resting
+     * on each other never slept; one asleep alone would have left the other's contacts
+     * against a body that is not stepped.) */
+    for (bool changed = true; changed;) {
+        changed = false;
+        for (int k = 0; k < rw->nsc; k++) {
+            const soft_contact *c = &rw->sc[k];
+            cs_object *a = c->SA->D, *b = c->SB->D;
+            if (c->jn <= 0 || a->still_steps == b->still_steps)
+                continue;
+            a->still_steps = b->still_steps =
+                a->still_steps < b->still_steps ? a->still_steps : b->still_steps;
+            changed = true;
         }
     }
     st->ms_solve += now_ms() - t0;
@@ -2699,7 +2727,8 @@ static int substep(cs_world_t *w, cs_rigid_world *rw, bool last, cs_step_stats *
     /* 2. sort-and-sweep over the bodies' boxes. A sleeping body that a moving one may reach
      * this step wakes now, so that the collision exchanges momentum with it (were it fixed
      * for this step, the mover would bounce off it as off a wall). Moving: faster than
-     * twice the sleep speed before this step's forces. */
+     * twice the sleep speed before this step's forces, or under an input (a box pushed from
+     * rest with a sleeping box on it was held by that box as by a wall: it never moved). */
     for (int i = 0; i < rw->n_body; i++)
         rw->order[i] = i;
     if (rw->n_body > 1)
@@ -2719,8 +2748,9 @@ static int substep(cs_world_t *w, cs_rigid_world *rw, bool last, cs_step_stats *
             const cs_rigid *m = rw->body[mv]->rb;
             cs_object *o = rw->body[sl];
             if (!o->sleeping || o->n_fixed_nodes > 0 ||
-                sqrt(dot3(m->v_pre, m->v_pre)) + sqrt(dot3(m->w_pre, m->w_pre)) * m->radius <=
-                    2 * w->def.sleep_speed)
+                (rw->body[mv]->n_inputs == 0 &&
+                 sqrt(dot3(m->v_pre, m->v_pre)) + sqrt(dot3(m->w_pre, m->w_pre)) * m->radius <=
+                     2 * w->def.sleep_speed))
                 continue;
             o->sleeping = false;
             o->still_steps = 0;
@@ -2872,6 +2902,64 @@ static int substep(cs_world_t *w, cs_rigid_world *rw, bool last, cs_step_stats *
  * speed; a bounce off a still surface is moved to its time of impact within the substep
  * (bounce_positions).
  */
+/*
+ * A sleeping object that a moving neighbour may leave or reach wakes, when one of the two is
+ * deformable (rigid pairs: substep's sort-and-sweep). Contacts only wake what they push, so a
+ * box asleep on a soft block that was then dragged away stayed in the air, and so did a soft
+ * block asleep on anything that moved out from under it. Moving: a node faster than twice the
+ * sleep speed; near: the two boxes of nodes, the mover's grown by how far it goes in the step
+ * and 5 % of the smaller cube edge, overlap. Run after the deformable objects' steps, whose
+ * velocities are then their motion (after the contact solve they also hold its impulses).
+ */
+static int wake_near_movers(cs_world_t *w, cs_rigid_world *rw)
+{
+    const double v_wake = 2 * w->def.sleep_speed, dt = w->def.dt;
+    int asleep = 0, moving = 0;
+    for (int i = 0; i < w->n_objects; i++)
+        asleep += w->objects[i]->sleeping;
+    if (asleep == 0 || asleep == w->n_objects)
+        return CS_OK;
+    if (sbox_room(rw, w->n_objects) != 0)
+        return CS_ERR_NOMEM;
+    for (int i = 0; i < w->n_objects; i++) {
+        const cs_object *o = w->objects[i];
+        double *b = rw->sbox + 7 * i;
+        if (o->n == 0) {
+            b[6] = -1; /* not taking part */
+            continue;
+        }
+        object_box(o, b, b + 3, b + 6);
+        if (o->sleeping)
+            b[6] = 0;
+        else if (o->n_fixed_nodes == o->n || b[6] <= v_wake)
+            b[6] = -1;
+        else
+            moving++;
+    }
+    for (int m = 0; m < w->n_objects && moving > 0; m++) {
+        const cs_object *M = w->objects[m];
+        const double *mb = rw->sbox + 7 * m;
+        if (mb[6] <= 0)
+            continue;
+        for (int s = 0; s < w->n_objects; s++) {
+            cs_object *S = w->objects[s];
+            const double *sb = rw->sbox + 7 * s;
+            if (!S->sleeping || sb[6] < 0 || S->n_fixed_nodes == S->n ||
+                (M->model == CS_MODEL_RIGID && S->model == CS_MODEL_RIGID))
+                continue;
+            const double g = dt * mb[6] + 0.05 * fmin(M->cm.h, S->cm.h);
+            bool near = true;
+            for (int a = 0; a < 3; a++)
+                near = near && mb[a] - g <= sb[3 + a] && mb[3 + a] + g >= sb[a];
+            if (!near)
+                continue;
+            S->sleeping = false;
+            S->still_steps = 0;
+        }
+    }
+    return CS_OK;
+}
+
 int cs_rigid_step(cs_world_t *w, cs_step_stats *st)
 {
     if (!w->rigid) {
@@ -2900,7 +2988,7 @@ int cs_rigid_step(cs_world_t *w, cs_step_stats *st)
         free(rw->soft[i]);
     }
     rw->n_soft = kept_soft;
-    if (cs_rigid_sync(w) != CS_OK)
+    if (cs_rigid_sync(w) != CS_OK || wake_near_movers(w, rw) != CS_OK)
         return CS_ERR_NOMEM;
     const double dt = w->def.dt, gn = sqrt(dot3(w->def.gravity, w->def.gravity));
     int n_sub = 1;
