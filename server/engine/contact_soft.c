@@ -49,9 +49,9 @@ static void mul3(const double M[9], const double v[3], double r[3])
  * acceleration while the ground held it, and a rigid box resting on the block slid off it
  * (1.2 cm/s, then faster). The deformable–deformable pass keeps the coarse response to its
  * impulses: without it a soft block overhanging another on the ground gained energy (0.11 J
- * over 3 s against 0.04 J).
+ * over 3 s against 0.04 J). Returns whether the object is held.
  */
-static void coarse_modes(cs_soft_resp *r, const cs_object *D, const double *mass,
+static bool coarse_modes(cs_soft_resp *r, const cs_object *D, const double *mass,
                          const double P[3], double ground_mu)
 {
     memset(r->minv, 0, sizeof r->minv);
@@ -67,12 +67,12 @@ static void coarse_modes(cs_soft_resp *r, const cs_object *D, const double *mass
             r->c[a] += mass[i] * D->x[3 * (size_t)i + a];
     }
     if (pinned || !(M > 0))
-        return;
+        return false;
     for (int a = 0; a < 3; a++)
         r->c[a] /= M;
-    r->held = ground && hypot(P[0], P[1]) <= ground_mu * -P[2];
-    if (r->held && !r->iso)
-        return;
+    const bool held = ground && hypot(P[0], P[1]) <= ground_mu * -P[2];
+    if (held && !r->iso)
+        return true;
     r->coarse = true;
     double I[9] = {0};
     for (int i = 0; i < D->n; i++) {
@@ -88,7 +88,7 @@ static void coarse_modes(cs_soft_resp *r, const cs_object *D, const double *mass
     if (ground) {
         if (I[8] > 0)
             r->iinv[8] = 1 / I[8];
-        return;
+        return held;
     }
     r->minv[2] = 1 / M;
     double adj[9];
@@ -96,6 +96,7 @@ static void coarse_modes(cs_soft_resp *r, const cs_object *D, const double *mass
     if (det > 0) /* (a body of one row of nodes has a singular inertia: no rotations then) */
         for (int k = 0; k < 9; k++)
             r->iinv[k] = adj[k] / det;
+    return false;
 }
 
 /*
@@ -156,7 +157,7 @@ static void prepare_stiff(cs_soft_resp *r, cs_object *D, double dt, double groun
     double P[3] = {0, 0, 0}, L[3] = {0, 0, 0}, U[3], Wc[3];
     for (size_t i = 0; i < 3 * n; i++)
         P[i % 3] += f[i];
-    coarse_modes(r, D, mass, P, ground_mu);
+    const bool held = coarse_modes(r, D, mass, P, ground_mu);
     /* U = (Φᵀ A Φ)⁻¹ Φᵀ res */
     for (size_t i = 0; i < n; i++) {
         double d[3], t[3];
@@ -167,9 +168,9 @@ static void prepare_stiff(cs_soft_resp *r, cs_object *D, double dt, double groun
             L[a] += t[a];
     }
     for (int a = 0; a < 3; a++)
-        U[a] = r->held ? 0.0 : r->minv[a] * P[a];
+        U[a] = held ? 0.0 : r->minv[a] * P[a];
     mul3(r->iinv, L, Wc);
-    if (r->held)
+    if (held)
         Wc[0] = Wc[1] = Wc[2] = 0;
     for (size_t i = 0; i < n; i++) {
         double d[3], wd[3], res[3], du[3];
@@ -209,7 +210,6 @@ int cs_soft_prepare(cs_soft_resp *r, cs_object *D, double dt, uint64_t step, boo
     r->n = D->n;
     r->stiff = stiff;
     r->coarse = false;
-    r->held = false;
     r->two_level = iso;
     r->iso = iso;
     memset(r->V, 0, sizeof r->V);

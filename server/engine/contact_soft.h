@@ -54,7 +54,6 @@ typedef struct cs_soft_resp {
      * rotations; V, W the coarse velocity the impulses gave so far */
     double c[3], minv[3], iinv[9], V[3], W[3];
     bool coarse;        /* D has free rigid modes (else the coarse terms are all zero) */
-    bool held;          /* on the ground, which holds it by friction (contact_soft.c) */
     /* the response as one two-level iteration on the impulses, like u0: the block-Jacobi
      * pass after the coarse one takes back A_ii⁻¹ mass_i of the coarse velocity at node i
      * (false: local and coarse responses added, the model of the rigid bodies' contacts). Set

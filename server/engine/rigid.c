@@ -2897,12 +2897,6 @@ static int substep(cs_world_t *w, cs_rigid_world *rw, bool last, cs_step_stats *
 }
 
 /*
- * The frame is split into substeps so that no body moves more than its cube edge in one (at
- * most MAX_SUBSTEPS): contacts are speculative, so nothing passes through anything at any
- * speed; a bounce off a still surface is moved to its time of impact within the substep
- * (bounce_positions).
- */
-/*
  * A sleeping object that a moving neighbour may leave or reach wakes, when one of the two is
  * deformable (rigid pairs: substep's sort-and-sweep). Contacts only wake what they push, so a
  * box asleep on a soft block that was then dragged away stayed in the air, and so did a soft
@@ -2960,6 +2954,12 @@ static int wake_near_movers(cs_world_t *w, cs_rigid_world *rw)
     return CS_OK;
 }
 
+/*
+ * The frame is split into substeps so that no body moves more than its cube edge in one (at
+ * most MAX_SUBSTEPS): contacts are speculative, so nothing passes through anything at any
+ * speed; a bounce off a still surface is moved to its time of impact within the substep
+ * (bounce_positions).
+ */
 int cs_rigid_step(cs_world_t *w, cs_step_stats *st)
 {
     if (!w->rigid) {
