@@ -61,7 +61,7 @@ static bool coarse_modes(cs_soft_resp *r, const cs_object *D, const double *mass
     double M = 0;
     for (int i = 0; i < D->n; i++) {
         pinned = pinned || D->pin[i];
-        ground = ground || (D->contact && D->contact[i] == 1);
+        ground = ground || (D->contact && cs_ground_contact(D->contact[i]));
         M += mass[i];
         for (int a = 0; a < 3; a++)
             r->c[a] += mass[i] * D->x[3 * (size_t)i + a];
@@ -184,7 +184,7 @@ static void prepare_stiff(cs_soft_resp *r, cs_object *D, double dt, double groun
             if (!D->mask[3 * i + a])
                 r->u[3 * i + a] += U[a] + wd[a] + du[a];
         /* a node on the ground does not go down through it */
-        if (D->contact && D->contact[i] == 1 && r->u[3 * i + 2] < 0)
+        if (D->contact && cs_ground_contact(D->contact[i]) && r->u[3 * i + 2] < 0)
             r->u[3 * i + 2] = 0;
     }
 }

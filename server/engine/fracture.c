@@ -1162,6 +1162,7 @@ static int split_nodes(cs_object *o, const crack_face *F, int nF, const pairkey 
             resize(&o->x, 3 * sizeof(double), (size_t)n1) ||
             resize(&o->v, 3 * sizeof(double), (size_t)n1) ||
             resize(&o->mask, 3, (size_t)n1) || resize(&o->contact, 1, (size_t)n1) ||
+            resize(&o->ground, 3 * sizeof(double), (size_t)n1) ||
             resize(&o->pin, 1, (size_t)n1) ||
             resize(&o->corner_vertex, sizeof(int32_t), (size_t)n1))
             goto out;
@@ -1174,6 +1175,7 @@ static int split_nodes(cs_object *o, const crack_face *F, int nF, const pairkey 
             memcpy(o->mask + 3 * (size_t)d, o->mask + 3 * (size_t)s, 3);
             o->pin[d] = o->pin[s];
             o->contact[d] = o->contact[s];
+            memcpy(o->ground + 3 * (size_t)d, o->ground + 3 * (size_t)s, 3 * sizeof(double));
             o->corner_vertex[d] = -1; /* assigned when the surface is split */
         }
         cm->n_nodes = n1;
@@ -2818,6 +2820,7 @@ static cs_object *make_piece(cs_world_t *w, const cs_object *o, const int32_t *c
         p->pin[i] = o->pin[nd];
         p->m[i] = o->m[nd];
         p->contact[i] = o->contact[nd];
+        memcpy(p->ground + 3 * (size_t)i, o->ground + 3 * (size_t)nd, 3 * sizeof(double));
         if ((p->mask[3 * i] && p->mask[3 * i + 1] && p->mask[3 * i + 2]) || p->pin[i])
             p->n_fixed_nodes++;
     }

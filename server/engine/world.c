@@ -257,6 +257,8 @@ void cs_object_free_internal(cs_object *o)
     free(o->mask);
     free(o->smask);
     free(o->contact);
+    free(o->ground);
+    free(o->v_wake);
     free(o->pin);
     free(o->frozen);
     free(o->cell_active);
@@ -453,9 +455,10 @@ int cs_object_alloc_state(cs_object *o)
     o->mask = calloc(n3, 1);
     o->smask = calloc(n3, 1);
     o->contact = calloc((size_t)o->n, 1);
+    o->ground = calloc(n3 ? n3 : 1, sizeof(double));
     o->pin = calloc((size_t)(o->n ? o->n : 1), 1);
     if (!o->x || !o->v || !o->m || !o->f_const || !o->f || !o->b || !o->v1 || !o->blocks ||
-        !o->mask || !o->smask || !o->contact || !o->pin || cs_cg_work_init(&o->cg, (int)n3) != 0)
+        !o->mask || !o->smask || !o->contact || !o->ground || !o->pin || cs_cg_work_init(&o->cg, (int)n3) != 0)
         return -1;
     return 0;
 }
@@ -1416,60 +1419,165 @@ static cs_cg_result solve(const cs_world_t *w, cs_object *o, bool use_mg, cs_mat
  * Ground contact (seed 000 has no contact model; this is Baraff–Witkin style filtered CG).
  * A node on or below the plane at the start of a step has its normal velocity constrained
  * inside the solve (to 0, or to what lifts it back onto the plane), so the implicit system
- * sees the support. After the solve the reaction force dt·f_c = (A v − b)_z tells whether the
- * ground pushed (keep, and apply Coulomb friction with that normal force) or would have to
- * pull (release the node for the next step). A projection after the step catches nodes that
- * reached the plane during it.
+ * sees the support. Coulomb friction is in the solve too: a sticking node's tangential
+ * velocity is held at 0 as well, and a sliding node feels μ fn against its tangential
+ * velocity as a force in b (fn: its last normal force). After the solve the reaction
+ * s·f_c = (A v1 − b) (s: b's factor on forces) tells whether the ground pushed (fn = f_c,z)
+ * or would have to pull (release the node for the next step), whether a sticking node needs
+ * more than μ fn to stay (it slides) and whether friction turned a sliding node back (it
+ * sticks); ground_reactions re-poses the solve when that changes. A projection after the
+ * step catches nodes that reached the plane during it.
+ *
+ * (Friction applied after the solve, node by node, as up to μ fn dt / m_i off each contact
+ * node's velocity, could not hold a stiff body: its bottom nodes stopped and the nodes above
+ * pulled them on, so a stiff block slid down slopes well inside the friction cone.)
  */
-static int constrain_ground(const cs_world_t *w, cs_object *o)
+static int constrain_ground(const cs_world_t *w, cs_object *o, double s)
 {
     const size_t n3 = (size_t)o->n * 3;
     memcpy(o->smask, o->mask, n3);
     if (!w->def.has_ground)
         return 0;
     const double g = w->def.ground_height, dt = w->def.dt, eps = 1e-9 * (1 + fabs(g));
+    const double mu = w->def.ground_friction, *gv = w->def.gravity;
+    const double gn = sqrt(gv[0] * gv[0] + gv[1] * gv[1] + gv[2] * gv[2]);
     int count = 0;
     for (int i = 0; i < o->n; i++) {
         const double z = o->x[3 * i + 2];
-        if (o->mask[3 * i + 2] || z > g + eps || o->contact[i] == 2) {
-            o->contact[i] = 0;
+        const uint8_t prev = o->contact[i];
+        double *gr = o->ground + 3 * i;
+        if (o->mask[3 * i + 2] || z > g + eps || prev == CS_GROUND_RELEASED) {
+            o->contact[i] = CS_GROUND_FREE;
+            gr[0] = gr[1] = 0;
+            if (prev == CS_GROUND_FREE)
+                gr[2] = 0; /* a step out of contact: its normal force is forgotten */
             continue;
         }
-        o->contact[i] = 1;
         o->smask[3 * i + 2] = 1;
         o->v1[3 * i + 2] = (g - z) / dt > 0 ? (g - z) / dt : 0.0;
         count++;
+        /* A node that slid goes on sliding, at μ fn against its tangential velocity (or, if
+         * that is zero, where its friction last pointed), and so does one that arrives, or was
+         * pushed, faster than friction under its own weight stops it in a step (μ |g| dt);
+         * any other sticks. fn is the node's last normal force (0 if it had none: no friction
+         * until the solve has found one). */
+        const double *v = o->v + 3 * i;
+        const double vt = sqrt(v[0] * v[0] + v[1] * v[1]), fm = sqrt(gr[0] * gr[0] + gr[1] * gr[1]);
+        const double F = mu * gr[2];
+        if ((prev == CS_GROUND_SLIDE && (vt > 0 || fm > 0)) || vt > mu * gn * dt) {
+            o->contact[i] = CS_GROUND_SLIDE;
+            gr[0] = vt > 0 ? -F * v[0] / vt : F * gr[0] / fm;
+            gr[1] = vt > 0 ? -F * v[1] / vt : F * gr[1] / fm;
+            o->b[3 * i] += s * gr[0];
+            o->b[3 * i + 1] += s * gr[1];
+            continue;
+        }
+        o->contact[i] = CS_GROUND_STICK;
+        gr[0] = gr[1] = 0;
+        for (int a = 0; a < 2; a++) {
+            o->smask[3 * i + a] = 1;
+            if (!o->mask[3 * i + a])
+                o->v1[3 * i + a] = 0.0;
+        }
     }
     return count;
 }
 
-static void ground_after_solve(const cs_world_t *w, cs_object *o, int contacts)
+/*
+ * After a solve with `contacts` ground contacts (A the solve's operator, s b's factor on
+ * forces): the reactions. A node the ground would have to pull is released for the next step;
+ * the others keep their normal force. A sticking node that needs more than μ fn slides, with
+ * μ fn along its reaction; a sliding node whose velocity friction turned back sticks. With
+ * resolve, those changes are made to b, smask and v1 for another solve of this step and the
+ * count of changes is returned; without, they hold from the next step on (a node turned back
+ * stops here, as friction would have stopped it) and 0 is returned.
+ */
+static int ground_reactions(const cs_world_t *w, cs_object *o, int contacts, cs_matvec_fn A,
+                            double s, bool resolve)
 {
-    if (!w->def.has_ground)
-        return;
-    const double dt = w->def.dt, mu = w->def.ground_friction;
-    if (contacts > 0) {
-        double *av = o->cg.q; /* scratch: the solve is done */
-        step_operator(o, o->v1, av);
-        for (int i = 0; i < o->n; i++) {
-            if (o->contact[i] != 1)
-                continue;
-            const double fn = (av[3 * i + 2] - o->b[3 * i + 2]) / dt;
-            if (fn < 0) {
-                o->contact[i] = 2; /* the ground would have to pull: free it next step */
-                continue;
+    if (!w->def.has_ground || contacts == 0)
+        return 0;
+    const double mu = w->def.ground_friction;
+    double *av = o->cg.q; /* scratch: the solve is done */
+    A(o, o->v1, av);
+    int changes = 0;
+    for (int i = 0; i < o->n; i++) {
+        const uint8_t c = o->contact[i];
+        if (c != CS_GROUND_SLIDE && c != CS_GROUND_STICK)
+            continue;
+        double *gr = o->ground + 3 * i, *v = o->v1 + 3 * i, *b = o->b + 3 * i;
+        const double *ax = av + 3 * i;
+        const double fn = (ax[2] - b[2]) / s;
+        if (!(fn >= 0)) {
+            o->contact[i] = CS_GROUND_RELEASED; /* the ground would have to pull */
+            gr[2] = 0;
+            continue;
+        }
+        gr[2] = fn;
+        double nf[2] = {0, 0};
+        uint8_t nc = c;
+        if (c == CS_GROUND_STICK) {
+            /* the ground's tangential force holding it (held dofs of the object excepted) */
+            double ft[2];
+            for (int a = 0; a < 2; a++)
+                ft[a] = o->mask[3 * i + a] ? 0.0 : (ax[a] - b[a]) / s;
+            const double t = sqrt(ft[0] * ft[0] + ft[1] * ft[1]);
+            if (!(t <= mu * fn)) {
+                nc = CS_GROUND_SLIDE;
+                nf[0] = t > 0 ? mu * fn * ft[0] / t : 0.0;
+                nf[1] = t > 0 ? mu * fn * ft[1] / t : 0.0;
             }
-            double *v = o->v1 + 3 * i;
-            const double vt = sqrt(v[0] * v[0] + v[1] * v[1]);
-            const double dv = mu * fn * dt / o->m[i];
-            const double sc = vt > dv ? (vt - dv) / vt : 0.0;
-            v[0] *= sc;
-            v[1] *= sc;
+        } else if (v[0] * gr[0] + v[1] * gr[1] > 0) {
+            nc = CS_GROUND_STICK; /* friction turned it back */
+        } else {
+            continue;
+        }
+        if (nc == c)
+            continue;
+        o->contact[i] = nc;
+        if (!resolve) {
+            /* from the next step on (constrain_ground); a node turned back stops now */
+            if (nc == CS_GROUND_STICK) {
+                v[0] = o->mask[3 * i] ? v[0] : 0.0;
+                v[1] = o->mask[3 * i + 1] ? v[1] : 0.0;
+            } else {
+                gr[0] = nf[0];
+                gr[1] = nf[1];
+            }
+            continue;
+        }
+        changes++;
+        for (int a = 0; a < 2; a++) {
+            if (o->mask[3 * i + a])
+                continue;
+            b[a] += s * (nf[a] - gr[a]);
+            gr[a] = nf[a];
+            o->smask[3 * i + a] = nc == CS_GROUND_STICK;
+            if (nc == CS_GROUND_STICK)
+                v[a] = 0.0;
         }
     }
+    return changes;
 }
 
-/* Returns how many nodes it moved. */
+/* Solves of one step that may follow a change of ground contacts (ground_reactions). */
+#define CS_GROUND_RESOLVES 2
+
+/* Coulomb friction for a contact node whose downward velocity dvn the ground just removed:
+ * up to μ·dvn off the tangential velocity. */
+static void ground_friction(const cs_world_t *w, cs_object *o, int i, double dvn)
+{
+    double *v = o->v + 3 * i;
+    const double vt = sqrt(v[0] * v[0] + v[1] * v[1]), mu = w->def.ground_friction;
+    const double sc = vt > mu * dvn ? (vt - mu * dvn) / vt : 0.0;
+    if (!o->mask[3 * i])
+        v[0] *= sc;
+    if (!o->mask[3 * i + 1])
+        v[1] *= sc;
+}
+
+/* Nodes that went below the plane during a step are put back on it, their downward velocity
+ * taken out with its Coulomb friction (ground_friction); returns how many nodes it moved. */
 static int ground_project(const cs_world_t *w, cs_object *o)
 {
     if (!w->def.has_ground)
@@ -1481,8 +1589,9 @@ static int ground_project(const cs_world_t *w, cs_object *o)
         if (x[2] >= g || o->mask[3 * i + 2])
             continue;
         x[2] = g;
-        if (v[2] < 0)
-            v[2] = 0;
+        const double dvn = v[2] < 0 ? -v[2] : 0.0;
+        v[2] += dvn;
+        ground_friction(w, o, i, dvn);
         moved++;
     }
     return moved;
@@ -1537,6 +1646,7 @@ static double finish_step(const cs_world_t *w, cs_object *o)
     if (w->def.sleep_steps > 0 && o->n_inputs == 0 && sqrt(vmax2) < w->def.sleep_speed) {
         if (++o->still_steps >= w->def.sleep_steps) {
             o->sleeping = true;
+            o->wake_armed = o->wake_saved;
             memset(o->v, 0, n3 * sizeof(double));
         }
     } else {
@@ -1771,7 +1881,7 @@ static void active_begin(const cs_world_t *w, cs_object *o)
 }
 
 /* Into the solve: frozen nodes' dofs held at v = 0, the others as constrain_ground left them
- * (held, or z in ground contact). */
+ * (held, z in ground contact, and x, y too if sticking). */
 static void active_hold(cs_object *o)
 {
     if (!o->frozen)
@@ -1779,7 +1889,9 @@ static void active_hold(cs_object *o)
     for (int i = 0; i < o->n; i++)
         for (int a = 0; a < 3; a++) {
             const size_t d = 3 * (size_t)i + a;
-            o->smask[d] = o->mask[d] || (a == 2 && o->contact[i] == 1) || o->frozen[i];
+            const uint8_t c = o->contact[i];
+            o->smask[d] = o->mask[d] || (a == 2 && c == CS_GROUND_SLIDE) ||
+                          c == CS_GROUND_STICK || o->frozen[i];
             if (o->frozen[i])
                 o->v1[d] = 0;
         }
@@ -1959,15 +2071,17 @@ static int step_implicit(cs_world_t *w, cs_object *o, cs_step_stats *st, bool tr
     for (size_t d = 0; d < n3; d++)
         if (o->mask[d])
             o->v1[d] = 0.0;
-    int contacts = constrain_ground(w, o);
+    int contacts = constrain_ground(w, o, dt);
     active_hold(o);
     double t3 = now_ms(), t4 = t3, *av = NULL;
+    int ground_rounds = 0;
     cs_cg_result r = {0, 0, 1, 0};
     /* The tolerance is relative to ‖b − A v1‖ at the guess above (w->def.cg_relative_to):
      * the Δv form's right-hand side; a re-solve of this step keeps that reference. */
     o->cg.stop = w->def.cg_relative_to == CS_CG_RELATIVE_STEP ? CS_CG_STOP_START : CS_CG_STOP_RHS;
     /* With frozen nodes: solve, and while the reactions wake some, solve again with them free
-     * (warm start), so the step ends with every frozen node near balance. */
+     * (warm start), so the step ends with every frozen node near balance. Likewise while
+     * ground contacts change between sticking and sliding (up to CS_GROUND_RESOLVES times). */
     for (int round = 0;; round++) {
         /* round 0: the last steps' hierarchy if it still fits (pc_lag_reusable), else a
          * fresh one; a re-solve (woken nodes) always builds (before the loop's end) */
@@ -2031,9 +2145,15 @@ static int step_implicit(cs_world_t *w, cs_object *o, cs_step_stats *st, bool tr
             o->cg.stop = CS_CG_STOP_RHS;
             return CS_ERR_DIVERGED;
         }
+        const bool again = ground_rounds < CS_GROUND_RESOLVES;
+        if (ground_reactions(w, o, contacts, step_operator, dt, again) > 0) {
+            ground_rounds++;
+            active_hold(o); /* frozen nodes stay held */
+            continue;
+        }
         if (!active_needs_av(w, o, contacts))
             break;
-        av = o->cg.z; /* scratch: the solve is done (ground_after_solve uses cg.q) */
+        av = o->cg.z; /* scratch: the solve is done (ground_reactions uses cg.q) */
         step_operator(o, o->v1, av);
         if (active_reactions(w, o, av) == 0 || round == CS_ACTIVE_MAX_RESOLVES)
             break;
@@ -2049,7 +2169,6 @@ static int step_implicit(cs_world_t *w, cs_object *o, cs_step_stats *st, bool tr
         active_hold(o);
     }
     o->cg.stop = CS_CG_STOP_RHS; /* the other solves on this work (statics, impacts) */
-    ground_after_solve(w, o, contacts);
     active_end(w, o, av);
     o->fem.cell_active = NULL;
     double el_end = NAN;
@@ -2191,34 +2310,24 @@ static int step_central_difference(cs_world_t *w, cs_object *o, cs_step_stats *s
     o->dcoef = 2.0 * dt * dt;
     o->pcoef = 2.0 * dt * dt; /* penalty springs at p⁺: no limit on k_p */
     cd_preconditioner(o);
-    int contacts = constrain_ground(w, o);
+    /* forces enter b as 2dt·f: the held rows' residual is the ground's reaction, 2dt·f_c */
+    int contacts = constrain_ground(w, o, 2.0 * dt);
     double t3 = now_ms();
-    cs_cg_result r = cs_pcg(&o->cg, cd_operator, o, o->blocks, o->smask, o->b, o->v1,
-                            w->def.cg_tolerance, w->def.cg_max_iterations, cs_elastic_threads(o));
-    double t4 = now_ms();
-    if (!all_finite(o->v1, n3))
-        return CS_ERR_DIVERGED;
-    if (w->def.has_ground && contacts > 0) {
-        /* The held rows' residual is the ground's reaction: 2dt·f_c = (A v1 − b). */
-        double *av = o->cg.q;
-        const double mu = w->def.ground_friction;
-        cd_operator(o, o->v1, av);
-        for (int i = 0; i < o->n; i++) {
-            if (o->contact[i] != 1)
-                continue;
-            const double fn = (av[3 * i + 2] - o->b[3 * i + 2]) / (2.0 * dt);
-            if (fn < 0) {
-                o->contact[i] = 2;
-                continue;
-            }
-            double *v = o->v1 + 3 * i;
-            const double vt = sqrt(v[0] * v[0] + v[1] * v[1]);
-            const double dv = mu * fn * dt / o->m[i];
-            const double sc = vt > dv ? (vt - dv) / vt : 0.0;
-            v[0] *= sc;
-            v[1] *= sc;
-        }
+    cs_cg_result r = {0, 0, 1, 0};
+    for (int round = 0;; round++) {
+        const cs_cg_result rr =
+            cs_pcg(&o->cg, cd_operator, o, o->blocks, o->smask, o->b, o->v1,
+                   w->def.cg_tolerance, w->def.cg_max_iterations, cs_elastic_threads(o));
+        r.iterations += rr.iterations;
+        r.relres = rr.relres;
+        r.converged = rr.converged;
+        if (!all_finite(o->v1, n3))
+            return CS_ERR_DIVERGED;
+        if (ground_reactions(w, o, contacts, cd_operator, 2.0 * dt,
+                             round < CS_GROUND_RESOLVES) == 0)
+            break;
     }
+    double t4 = now_ms();
     end_solved_step(w, o, st, (const double[5]){t0, t1, t2, t3, t4}, r, NULL, NAN);
     return CS_OK;
 }
@@ -2268,19 +2377,6 @@ static void explicit_drift(cs_object *o, double dt)
     for (size_t d = 0; d < (size_t)o->n * 3; d++)
         if (!o->mask[d])
             o->x[d] += dt * o->v[d];
-}
-
-/* Coulomb friction for a contact node whose downward velocity dvn the ground just removed:
- * up to μ·dvn off the tangential velocity. */
-static void ground_friction(const cs_world_t *w, cs_object *o, int i, double dvn)
-{
-    double *v = o->v + 3 * i;
-    const double vt = sqrt(v[0] * v[0] + v[1] * v[1]), mu = w->def.ground_friction;
-    const double sc = vt > mu * dvn ? (vt - mu * dvn) / vt : 0.0;
-    if (!o->mask[3 * i])
-        v[0] *= sc;
-    if (!o->mask[3 * i + 1])
-        v[1] *= sc;
 }
 
 /*
@@ -2356,8 +2452,43 @@ static int step_explicit(cs_world_t *w, cs_object *o, cs_step_stats *st, bool ve
     return CS_OK;
 }
 
+/*
+ * Sleep keeps the load of what rests on an object. Contact impulses reach a deformable object
+ * as velocities its next step shares out (rigid.c), and once both sides sleep there are none:
+ * the step after it woke (a box asleep on a soft block, the block then pulled) saw no box, the
+ * ground held the block by its own weight alone, and it slipped a step early (the box then
+ * landed 0.9 m from where it does when nothing sleeps). So a step that may end in sleep keeps
+ * the velocity it started from, and the first step after waking starts from it, unless
+ * contacts gave the object impulses while it slept (an awake rigid body on it still does):
+ * those carry the load already.
+ */
+static void wake_velocity(const cs_world_t *w, cs_object *o)
+{
+    const size_t n3 = (size_t)o->n * 3;
+    if (o->wake_armed && o->n_wake == o->n) {
+        size_t d = 0;
+        while (d < n3 && o->v[d] == 0)
+            d++;
+        if (d == n3)
+            memcpy(o->v, o->v_wake, n3 * sizeof(double));
+    }
+    o->wake_armed = o->wake_saved = false;
+    if (w->def.sleep_steps <= 0 || o->still_steps + 1 < w->def.sleep_steps)
+        return;
+    if (o->n_wake != o->n) {
+        double *g = realloc(o->v_wake, (n3 ? n3 : 1) * sizeof *g);
+        if (!g)
+            return; /* it wakes without that load, as it did before */
+        o->v_wake = g;
+        o->n_wake = o->n;
+    }
+    memcpy(o->v_wake, o->v, n3 * sizeof(double));
+    o->wake_saved = true;
+}
+
 static int step_object(cs_world_t *w, cs_object *o, cs_step_stats *st)
 {
+    wake_velocity(w, o);
     switch (o->integrator) {
     case CS_INTEGRATOR_IMPLICIT_EULER:
         return step_implicit(w, o, st, false);
@@ -2593,6 +2724,7 @@ int cs_world_solve_static(cs_world_t *w)
         if (r != CS_OK)
             rc = r;
         o->sleeping = false;
+        o->wake_armed = false;
         o->still_steps = 0;
         o->act_wake_all = true;
     }
@@ -2614,10 +2746,12 @@ void cs_world_reset(cs_world_t *w)
         memset(o->v, 0, (size_t)o->n * 3 * sizeof(double));
         o->n_inputs = 0;
         o->sleeping = false;
+        o->wake_armed = false;
         o->still_steps = 0;
         o->act_wake_all = true;
         o->lag.valid = false;
         memset(o->contact, 0, (size_t)o->n);
+        memset(o->ground, 0, (size_t)o->n * 3 * sizeof(double));
         o->elastic_energy_valid = false;
         cs_cg_forget(&o->cg);
         cs_elastic_reset(o);

@@ -125,6 +125,22 @@ typedef struct cs_born_ref {
     float *ref;
 } cs_born_ref;
 
+/* A node's ground contact (cs_object.contact). In implicit solves a sticking node's tangential
+ * velocity is held at 0 and a sliding node feels μ fn against its motion, both inside the
+ * solve (world.c, constrain_ground and ground_reactions). */
+enum {
+    CS_GROUND_FREE = 0,     /* not in contact */
+    CS_GROUND_SLIDE = 1,    /* normal velocity held; Coulomb friction μ fn in b */
+    CS_GROUND_RELEASED = 2, /* the ground would have had to pull: free for the next step */
+    CS_GROUND_STICK = 3     /* normal and tangential velocity held */
+};
+
+/* Whether a node's contact state (cs_object.contact) has it on the ground this step. */
+static inline bool cs_ground_contact(uint8_t c)
+{
+    return c == CS_GROUND_SLIDE || c == CS_GROUND_STICK;
+}
+
 typedef struct cs_object {
     cs_object_id id;
     char *name;
@@ -151,7 +167,9 @@ typedef struct cs_object {
     double *f, *b, *v1, *blocks;
     uint8_t *mask;         /* per dof: held */
     uint8_t *smask;        /* per dof: held or in ground contact during this step's solve */
-    uint8_t *contact;      /* per node: 1 constrained by the ground this step, 2 released */
+    uint8_t *contact;      /* per node, CS_GROUND_*: the ground contact this step */
+    double *ground;        /* per node: the ground's friction force on it while it slides,
+                              as in b (x, y) [N], and the normal force of its last contact [N] */
     int n_fixed_nodes;     /* held nodes (removed dofs or penalty springs) */
     /* Constraints (seed 001 §4.2): with penalty == 0 held nodes' dofs are removed (mask);
      * with penalty > 0 they stay free and a spring of that stiffness [N/m] per node pulls
@@ -175,6 +193,12 @@ typedef struct cs_object {
                             object's next step is implicit Euler's, whose response the contact
                             solve modelled (contact_soft.h) */
     bool sleeping;
+    /* The velocity the step in which it fell asleep started from (world.c, step_object): at
+     * rest, what the contacts' impulses left on its nodes, the load of what rests on it. Added
+     * back in the first step after it wakes (wake_armed), if it still has n_wake nodes. */
+    double *v_wake;
+    int n_wake;
+    bool wake_saved, wake_armed;
     /* Deformable–deformable contacts (rigid.c soft_contacts) between pieces of one fractured
      * object: kin is the id of the object all of them came from (its own id otherwise); a
      * piece is born touching its kin across the crack, so a pair of kin takes no contacts

@@ -3,7 +3,8 @@
  * the inertia of a box, conservation of momentum, angular momentum and energy in free
  * tumbling about the intermediate axis, an elastic bounce, a settling stack that sleeps, no
  * tunnelling at speed, refusal of bad input, rigid against deformable, and an impact that
- * breaks a brittle body into closed pieces that keep the momentum.
+ * breaks a brittle body into closed pieces that keep the momentum; and the ground's Coulomb
+ * friction on blocks of every model against the rigid body's and Coulomb's answers.
  */
 #include <math.h>
 #include <stdio.h>
@@ -18,15 +19,16 @@
 #include "lattice.h"
 
 /* A box of nx×ny×nz cubes of edge h with its lower corner at `at`. */
-static cs_object_id add_box(cs_world_t *w, const char *name, int nx, int ny, int nz, double h,
-                            const double at[3], cs_material mat, bool fracture, cs_model model,
-                            const cs_aabb *fixed, char *err)
+static cs_object_id add_box_i(cs_world_t *w, const char *name, int nx, int ny, int nz,
+                              double h, const double at[3], cs_material mat, bool fracture,
+                              cs_model model, cs_integrator integ, const cs_aabb *fixed, char *err)
 {
     int n = nx * ny * nz;
     int32_t *ijk = cs_box_cells(nx, ny, nz);
     cs_object_def d = cs_object_def_default();
     d.name = name;
     d.model = model;
+    d.integrator = integ;
     d.material = mat;
     d.cube_size = h;
     d.fracture = fracture;
@@ -41,6 +43,14 @@ static cs_object_id add_box(cs_world_t *w, const char *name, int nx, int ny, int
         id = CS_NULL_OBJECT;
     free(ijk);
     return id;
+}
+
+static cs_object_id add_box(cs_world_t *w, const char *name, int nx, int ny, int nz, double h,
+                            const double at[3], cs_material mat, bool fracture, cs_model model,
+                            const cs_aabb *fixed, char *err)
+{
+    return add_box_i(w, name, nx, ny, nz, h, at, mat, fracture, model, CS_INTEGRATOR_DEFAULT,
+                     fixed, err);
 }
 
 static cs_world_t *world(bool gravity, bool ground)
@@ -929,12 +939,31 @@ TEST(rigid_deformable_broad_phase_equals_plain_loop)
  * session 22 only contacts woke a sleeper, and only where they pushed: an object whose support
  * left stayed asleep in the air; soft objects resting on each other never slept (every push
  * restarted both counts); and a rigid box pushed with a sleeping rigid box on it did not move
- * (the sleeper held it as a wall). With sleeping the upper one should end where it does when
- * nothing sleeps. sleep_at: steps until both slept (−1: not within 400). */
+ * (the sleeper held it as a wall). Woken, the pair should move as it does when nothing sleeps:
+ * the lower one as far, and the upper one, while it rides (RIDE_STEPS into the pull), where
+ * it does then; until session 24 the step after waking lost the load of what rested on the
+ * lower one (world.c, wake_velocity), a box on a soft block was 5 cm behind by then and landed
+ * 0.9 m away. Where it lands after tumbling off is not compared: runs that differ by their
+ * settling alone (0.2 mm) land up to 0.2 m apart. sleep_at: steps until both slept (−1: not
+ * within 400). */
+#define RIDE_STEPS 20
 typedef struct pulled_result {
     int sleep_at;
-    double low_z, centre[2], lower_dx;
+    double low_z, centre[2], lower_dx, ride[2];
 } pulled_result;
+
+/* The upper object's mean node (x, y). */
+static void upper_centre(const cs_world_t *w, cs_object_id up, double c[2])
+{
+    const double *x;
+    int n;
+    cs_object_nodes(w, up, NULL, &x, NULL, &n);
+    c[0] = c[1] = 0;
+    for (int i = 0; i < n; i++) {
+        c[0] += x[3 * i] / n;
+        c[1] += x[3 * i + 1] / n;
+    }
+}
 
 static bool support_pulled(bool lower_rigid, bool upper_rigid, bool sleep, pulled_result *r)
 {
@@ -972,18 +1001,18 @@ static bool support_pulled(bool lower_rigid, bool upper_rigid, bool sleep, pulle
     const double x0 = x[0];
     ok = ok && cs_world_apply_force(w, low, (double[3]){0.2, 0.2, 0.1}, (double[3]){600, 0, 0},
                                     0.5, err, sizeof err) == CS_OK;
-    for (int i = 0; i < 150 && ok; i++)
+    for (int i = 0; i < 150 && ok; i++) {
         ok = cs_world_step(w) == CS_OK;
+        if (i == RIDE_STEPS - 1)
+            upper_centre(w, up, r->ride);
+    }
     cs_object_nodes(w, low, NULL, &x, NULL, &n);
     r->lower_dx = x[0] - x0;
     cs_object_nodes(w, up, NULL, &x, NULL, &n);
     r->low_z = INFINITY;
-    r->centre[0] = r->centre[1] = 0;
-    for (int i = 0; i < n; i++) {
+    for (int i = 0; i < n; i++)
         r->low_z = fmin(r->low_z, x[3 * i + 2]);
-        r->centre[0] += x[3 * i] / n;
-        r->centre[1] += x[3 * i + 1] / n;
-    }
+    upper_centre(w, up, r->centre);
     cs_world_destroy(w);
     return ok;
 }
@@ -995,20 +1024,24 @@ TEST(rigid_sleeper_wakes_when_its_support_is_pulled_away)
         pulled_result r, ref;
         ENSURE(support_pulled(lower_rigid, upper_rigid, true, &r));
         ENSURE(support_pulled(lower_rigid, upper_rigid, false, &ref));
-        printf("    %s on %s: both asleep after %d steps; pulled away (%.2f m), the upper one's "
-               "lowest node ends at z = %.4f m, centre (%.3f, %.3f) m; never sleeping: %.4f m, "
-               "(%.3f, %.3f) m\n",
+        const double ride = hypot(r.ride[0] - ref.ride[0], r.ride[1] - ref.ride[1]);
+        printf("    %s on %s: both asleep after %d steps; pulled away %.3f m (never sleeping "
+               "%.3f m); the upper one after %d steps at (%.4f, %.4f) m (%.4f, %.4f), ends with "
+               "its lowest node at z = %.4f m, centre (%.3f, %.3f) m (%.4f m, (%.3f, %.3f) m)\n",
                upper_rigid ? "rigid" : "soft", lower_rigid ? "rigid" : "soft", r.sleep_at,
-               r.lower_dx, r.low_z, r.centre[0], r.centre[1], ref.low_z, ref.centre[0],
+               r.lower_dx, ref.lower_dx, RIDE_STEPS, r.ride[0], r.ride[1], ref.ride[0],
+               ref.ride[1], r.low_z, r.centre[0], r.centre[1], ref.low_z, ref.centre[0],
                ref.centre[1]);
         ENSURE_MSG(r.sleep_at > 0, "the pair did not fall asleep within 400 steps");
         ENSURE_MSG(r.lower_dx > 1, "the lower object moved only %.3f m", r.lower_dx);
-        /* it fell to the ground, as it does when nothing sleeps, and near where it does */
+        ENSURE_MSG(fabs(r.lower_dx / ref.lower_dx - 1) < 0.02,
+                   "the lower object moved %.3f m, %.3f m when nothing sleeps", r.lower_dx,
+                   ref.lower_dx);
+        ENSURE_MSG(ride < 0.01, "riding, the upper object is %.4f m from where it is when "
+                   "nothing sleeps", ride);
+        /* it fell to the ground, as it does when nothing sleeps */
         ENSURE_MSG(r.low_z < 0.01, "the upper object stayed at z = %.4f m", r.low_z);
         ENSURE(ref.low_z < 0.01);
-        ENSURE_MSG(hypot(r.centre[0] - ref.centre[0], r.centre[1] - ref.centre[1]) < 0.1,
-                   "it lies %.3f m from where it lands when nothing sleeps",
-                   hypot(r.centre[0] - ref.centre[0], r.centre[1] - ref.centre[1]));
     }
 }
 
@@ -1073,5 +1106,120 @@ TEST(rigid_box_holds_on_sloped_soft_block)
                "steps 120-600, %.4f m in 10 s\n", th[k], creep, moved);
         ENSURE_MSG(creep < lim[k], "the box slides at %.3g m/s", creep);
         ENSURE_MSG(moved < 0.1, "the box slid %.3f m", moved);
+    }
+}
+
+/*
+ * A 3×3×3 block of 0.1 m cubes (model, E, integrator, world dt) on the ground under gravity
+ * tilted by θ about y, after 0.5 s of settling: with v0 > 0, every node (a rigid body: its
+ * centre) is given v0 along x and the block's centre travels `dist` in `secs`; a[0], a[1] are
+ * its mean velocity along x at secs/2 and at the end. Sleeping off. False if it cannot be built.
+ */
+static bool block_on_slope(cs_model model, double young, double beta, cs_integrator integ,
+                           double dt, double theta_deg, double v0, double secs, double *dist,
+                           double a[2])
+{
+    cs_world_t *w = world(true, true);
+    if (!w)
+        return false;
+    const double th = theta_deg * M_PI / 180;
+    w->def.dt = dt;
+    w->def.sleep_steps = 0;
+    w->def.gravity[0] = 9.81 * sin(th);
+    w->def.gravity[2] = -9.81 * cos(th);
+    cs_material m = cs_material_default();
+    m.young = young;
+    m.damping[1] = beta;
+    char err[256] = "";
+    const cs_object_id id = add_box_i(w, "block", 3, 3, 3, 0.1, (double[3]){0, 0, 0}, m, false,
+                                      model, integ, NULL, err);
+    bool ok = id != CS_NULL_OBJECT;
+    const int settle = (int)lround(0.5 / dt), steps = (int)lround(secs / dt);
+    for (int i = 0; i < settle && ok; i++)
+        ok = cs_world_step(w) == CS_OK;
+    if (ok && v0 > 0) {
+        if (model == CS_MODEL_RIGID) {
+            ok = kick(w, id, 0.3, (double[3]){v0, 0, 0}) == 0;
+        } else {
+            cs_object *o = w->objects[0];
+            for (int j = 0; j < o->n; j++)
+                o->v[3 * j] += v0;
+        }
+    }
+    double x0 = 0;
+    for (int i = 0; i <= steps && ok; i++) {
+        const double *x, *v;
+        int n;
+        cs_object_nodes(w, id, NULL, &x, &v, &n);
+        double c = 0, cv = 0;
+        for (int j = 0; j < n; j++) {
+            c += x[3 * j] / n;
+            cv += v[3 * j] / n;
+        }
+        if (i == 0)
+            x0 = c;
+        if (i == steps / 2)
+            a[0] = cv;
+        if (i == steps) {
+            a[1] = cv;
+            *dist = c - x0;
+        } else {
+            ok = cs_world_step(w) == CS_OK;
+        }
+    }
+    cs_world_destroy(w);
+    return ok;
+}
+
+TEST(ground_friction_is_coulomb_for_every_model)
+{
+    /* μ = 0.5 (the ground's default). On 20° (tan 0.36 < μ) a block stays; on 35° it slides
+     * at g (sin θ − μ cos θ) = 1.609 m/s²; pushed to 2 m/s on level ground it stops after
+     * v0²/(2 μ g) = 0.408 m (implicit Euler's steps: Σ dt (v0 − k μ g dt) = 0.391 m at 1/60 s).
+     * Friction applied after the solve, node by node, let stiff blocks slide on 20°, at up to
+     * 4 m/s² on 35° and 0.64–2.2 m when pushed. The central-difference block has stiffness
+     * damping: undamped it keeps vibrating on the ground and walks down 20° (30 mm in 2 s). */
+    const struct {
+        cs_model model;
+        double young, beta, dt;
+        cs_integrator integ;
+    } c[] = {
+        {CS_MODEL_RIGID, 1e5, 0, 1.0 / 60, CS_INTEGRATOR_DEFAULT},
+        {CS_MODEL_COROTATIONAL, 1e5, 0, 1.0 / 60, CS_INTEGRATOR_DEFAULT},
+        {CS_MODEL_COROTATIONAL, 1e7, 0, 1.0 / 60, CS_INTEGRATOR_DEFAULT},
+        {CS_MODEL_COROTATIONAL, 1e10, 0, 1.0 / 60, CS_INTEGRATOR_DEFAULT},
+        {CS_MODEL_LINEAR, 1e7, 0, 1.0 / 60, CS_INTEGRATOR_DEFAULT},
+        {CS_MODEL_MSS, 1e7, 0, 1.0 / 60, CS_INTEGRATOR_DEFAULT},
+        {CS_MODEL_LOCALFRAME, 1e7, 0, 1.0 / 60, CS_INTEGRATOR_DEFAULT},
+        {CS_MODEL_COROTATIONAL, 1e8, 0, 1.0 / 60, CS_INTEGRATOR_NEWMARK},
+        {CS_MODEL_LOCALFRAME, 1e5, 1e-3, 0.002, CS_INTEGRATOR_CENTRAL_DIFFERENCE},
+    };
+    const double g = 9.81, mu = 0.5, th = 35 * M_PI / 180;
+    const double acc = g * (sin(th) - mu * cos(th));
+    for (size_t k = 0; k < sizeof c / sizeof c[0]; k++) {
+        double hold, slide, stop, a20[2], a35[2], a0[2];
+        ENSURE(block_on_slope(c[k].model, c[k].young, c[k].beta, c[k].integ, c[k].dt, 20, 0, 2, &hold, a20));
+        ENSURE(block_on_slope(c[k].model, c[k].young, c[k].beta, c[k].integ, c[k].dt, 35, 0, 2, &slide, a35));
+        ENSURE(block_on_slope(c[k].model, c[k].young, c[k].beta, c[k].integ, c[k].dt, 0, 2, 1, &stop, a0));
+        /* implicit Euler's stopping distance at this dt; the others' (x moves by the mean of
+         * the step's velocities) is the continuous one, but for the last step */
+        double v = 2, want = 0;
+        while (v > 0) {
+            v -= mu * g * c[k].dt;
+            want += v > 0 ? v * c[k].dt : 0;
+        }
+        if (c[k].integ != CS_INTEGRATOR_DEFAULT)
+            want = 2 * 2 / (2 * mu * g);
+        const double got = (a35[1] - a35[0]) / 1.0;
+        printf("    %-12s E %.0e %-18s: 20°: moved %.2e m; 35°: %.3f m/s² (%.3f); "
+               "pushed: stops after %.4f m (%.4f)\n",
+               cs_model_name(c[k].model), c[k].young, cs_integrator_name(c[k].integ), hold,
+               got, acc, stop, want);
+        ENSURE_MSG(fabs(hold) < 2e-3, "slid %.3g m on 20°", hold);
+        ENSURE_MSG(fabs(got / acc - 1) < 0.03, "%.3f m/s² down 35° (Coulomb: %.3f)", got, acc);
+        /* central differences (a vibrating, lightly damped block) stop 4.7 % short: not
+         * traced (README Known limitations) */
+        const double tol = c[k].integ == CS_INTEGRATOR_CENTRAL_DIFFERENCE ? 0.06 : 0.03;
+        ENSURE_MSG(fabs(stop / want - 1) < tol, "stopped after %.4f m (%.4f)", stop, want);
     }
 }
