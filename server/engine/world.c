@@ -1515,25 +1515,23 @@ static int ground_reactions(const cs_world_t *w, cs_object *o, int contacts, cs_
         }
         gr[2] = fn;
         double nf[2] = {0, 0};
-        uint8_t nc = c;
+        uint8_t nc;
         if (c == CS_GROUND_STICK) {
             /* the ground's tangential force holding it (held dofs of the object excepted) */
             double ft[2];
             for (int a = 0; a < 2; a++)
                 ft[a] = o->mask[3 * i + a] ? 0.0 : (ax[a] - b[a]) / s;
             const double t = sqrt(ft[0] * ft[0] + ft[1] * ft[1]);
-            if (!(t <= mu * fn)) {
-                nc = CS_GROUND_SLIDE;
-                nf[0] = t > 0 ? mu * fn * ft[0] / t : 0.0;
-                nf[1] = t > 0 ? mu * fn * ft[1] / t : 0.0;
-            }
+            if (t <= mu * fn)
+                continue;
+            nc = CS_GROUND_SLIDE;
+            nf[0] = t > 0 ? mu * fn * ft[0] / t : 0.0;
+            nf[1] = t > 0 ? mu * fn * ft[1] / t : 0.0;
         } else if (v[0] * gr[0] + v[1] * gr[1] > 0) {
             nc = CS_GROUND_STICK; /* friction turned it back */
         } else {
             continue;
         }
-        if (nc == c)
-            continue;
         o->contact[i] = nc;
         if (!resolve) {
             /* from the next step on (constrain_ground); a node turned back stops now */
@@ -2395,12 +2393,12 @@ static void ground_explicit(const cs_world_t *w, cs_object *o, bool positions)
     for (int i = 0; i < o->n; i++) {
         double *x = o->x + 3 * i, *v = o->v + 3 * i;
         if (positions) {
-            o->contact[i] = 0;
+            o->contact[i] = CS_GROUND_FREE;
             if (x[2] >= g || o->mask[3 * i + 2])
                 continue;
-            o->contact[i] = 1;
+            o->contact[i] = CS_GROUND_SLIDE;
             x[2] = g;
-        } else if (!o->contact[i]) {
+        } else if (o->contact[i] == CS_GROUND_FREE) {
             continue;
         }
         const double dvn = v[2] < 0 ? -v[2] : 0.0;

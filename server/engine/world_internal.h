@@ -193,9 +193,10 @@ typedef struct cs_object {
                             object's next step is implicit Euler's, whose response the contact
                             solve modelled (contact_soft.h) */
     bool sleeping;
-    /* The velocity the step in which it fell asleep started from (world.c, step_object): at
-     * rest, what the contacts' impulses left on its nodes, the load of what rests on it. Added
-     * back in the first step after it wakes (wake_armed), if it still has n_wake nodes. */
+    /* The velocity the step in which it fell asleep started from (world.c, wake_velocity): at
+     * rest, what the contacts' impulses left on its nodes, the load of what rests on it. The
+     * first step after it wakes (wake_armed) starts from it if no contact reached the object
+     * while it slept and it still has n_wake nodes. wake_saved: this step made the copy. */
     double *v_wake;
     int n_wake;
     bool wake_saved, wake_armed;
