@@ -172,6 +172,8 @@ static void prepare_stiff(cs_soft_resp *r, cs_object *D, double dt, double groun
     mul3(r->iinv, L, Wc);
     if (held)
         Wc[0] = Wc[1] = Wc[2] = 0;
+    memcpy(r->U0, U, sizeof U);
+    memcpy(r->W0, Wc, sizeof Wc);
     for (size_t i = 0; i < n; i++) {
         double d[3], wd[3], res[3], du[3];
         for (int a = 0; a < 3; a++)
@@ -214,6 +216,8 @@ int cs_soft_prepare(cs_soft_resp *r, cs_object *D, double dt, uint64_t step, boo
     r->iso = iso;
     memset(r->V, 0, sizeof r->V);
     memset(r->W, 0, sizeof r->W);
+    memset(r->U0, 0, sizeof r->U0);
+    memset(r->W0, 0, sizeof r->W0);
     memset(r->minv, 0, sizeof r->minv);
     memset(r->iinv, 0, sizeof r->iinv);
     memset(r->c, 0, sizeof r->c);

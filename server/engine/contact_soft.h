@@ -53,6 +53,9 @@ typedef struct cs_soft_resp {
      * each axis (0: a blocked translation), iinv the inverse inertia restricted to the free
      * rotations; V, W the coarse velocity the impulses gave so far */
     double c[3], minv[3], iinv[9], V[3], W[3];
+    /* the coarse velocity D's next step adds to v's without contacts (forces, gravity): u0's
+     * coarse correction (zero when not stiff or held) */
+    double U0[3], W0[3];
     bool coarse;        /* D has free rigid modes (else the coarse terms are all zero) */
     /* the response as one two-level iteration on the impulses, like u0: the block-Jacobi
      * pass after the coarse one takes back A_ii⁻¹ mass_i of the coarse velocity at node i

@@ -127,8 +127,9 @@ static void crack_depth(cs_world_t *w, double *median, double *node)
 
 typedef struct column_result {
     int pieces;
-    double mid;     /* lowering of the third layer's top (the base's, when cut) [m] */
-    double top;     /* lowering of the column's top [m] */
+    double mid;     /* lowering of the third layer's top (the base's, when cut), mean over the
+                     * last second [m] */
+    double top;     /* lowering of the column's top, mean over the last second [m] */
     double crack;   /* largest median depth of a crack's upper nodes below their twins, any step */
     double node;    /* the deepest single node below its twin, any step (corners droop) */
     double inside;  /* deepest node of a piece inside a cell of another, any step */
@@ -172,6 +173,10 @@ static int column(double E, const double *cuts, const int *at, int n_cuts, colum
         r->node = fmax(r->node, node);
         cs_object_id ids[16];
         const int n = cs_world_object_ids(w, ids, 16);
+        if (s >= COL_STEPS - COL_LAST) {
+            r->mid += lowering(piece_at(w, 0.3, true), 0.3) / COL_LAST;
+            r->top += lowering(piece_at(w, 0.6, true), 0.6) / COL_LAST;
+        }
         for (int i = 0; i < n && i < 4; i++) {
             const cs_object *P = cs_world_find_internal(w, ids[i]);
             for (int j = 0; j < n && j < 4; j++)
@@ -189,8 +194,6 @@ static int column(double E, const double *cuts, const int *at, int n_cuts, colum
     if (rc == 0) {
         cs_object_id ids[16];
         r->pieces = cs_world_object_ids(w, ids, 16);
-        r->mid = lowering(piece_at(w, 0.3, true), 0.3);
-        r->top = lowering(piece_at(w, 0.6, true), 0.6);
         for (int i = 0; i < r->pieces && i < 4; i++) {
             double lo = INFINITY, hi = -INFINITY;
             for (int s = 0; s < COL_LAST; s++) {
@@ -218,12 +221,13 @@ static int column(double E, const double *cuts, const int *at, int n_cuts, colum
  * more than 0.1 h below the lower side at any step (on main the upper part fell through);
  * no node ever more than 0.1 h inside a cell of another piece; over the last second no
  * piece's centre moving faster than 5 mm/s on average nor rattling over more than 0.05 h.
- * These bounds are loose because the crack does not come to rest: its corner nodes leave the
- * other piece's faces sideways, take no contact there and droop 10–20 mm, and come back, all
- * along (measured: the median crack node 1–5 mm below its twin, up to 7.5 mm at E = 1e5 Pa);
- * two separate objects stacked lattice on lattice do the same, bit for bit (the pieces
- * treated as unrelated gave the same figures), so that is the deformable contact's, not the
- * born pairs'.
+ * The lowerings are means over the last second (the last step's until session 25: a stack
+ * that still rattles made them a matter of phase). These bounds are loose because at
+ * E = 1e6 Pa the crack does not come to rest: the stiff upper piece rocks on it (centres over
+ * 1.3–2.1 mm; README, Known limitations). Until session 25 the crack's corner nodes, in the
+ * other piece's side planes, also left its faces sideways, took no contact there and drooped
+ * 10–20 mm, at both moduli (two separate objects stacked lattice on lattice did the same,
+ * so that was the deformable contact's, not the born pairs').
  */
 TEST(contact_born_cut_column_rests_on_its_base)
 {
