@@ -358,3 +358,42 @@ void cs_soft_impulse(cs_soft_resp *r, const int32_t *nodes, const double *w, int
         r->W[a] += dw[a];
     }
 }
+
+double cs_soft_coarse_compliance(const cs_soft_resp *r, const double arm[3], const double d[3])
+{
+    if (!r->coarse)
+        return 0;
+    double rd[3], t[3];
+    cross(arm, d, rd);
+    mul3(r->iinv, rd, t);
+    double s = rd[0] * t[0] + rd[1] * t[1] + rd[2] * t[2];
+    for (int a = 0; a < 3; a++)
+        s += r->minv[a] * d[a] * d[a];
+    return s;
+}
+
+void cs_soft_coarse_velocity(const cs_soft_resp *r, const double arm[3], double v[3])
+{
+    v[0] = v[1] = v[2] = 0;
+    if (!r->coarse) /* (coarse modes are set only when stiff: r->mass exists) */
+        return;
+    const cs_object *D = r->D;
+    double P[3] = {0, 0, 0}, L[3] = {0, 0, 0}, W[3], wa[3];
+    for (int i = 0; i < D->n; i++) {
+        const double *x = D->x + 3 * (size_t)i, *u = D->v + 3 * (size_t)i;
+        double d[3], t[3];
+        for (int a = 0; a < 3; a++)
+            d[a] = x[a] - r->c[a];
+        cross(d, u, t);
+        for (int a = 0; a < 3; a++) {
+            P[a] += r->mass[i] * u[a];
+            L[a] += r->mass[i] * t[a];
+        }
+    }
+    mul3(r->iinv, L, W);
+    for (int a = 0; a < 3; a++)
+        W[a] += r->W0[a];
+    cross(W, arm, wa);
+    for (int a = 0; a < 3; a++)
+        v[a] = r->minv[a] * P[a] + r->U0[a] + wa[a];
+}

@@ -89,4 +89,11 @@ double cs_soft_compliance(const cs_soft_resp *r, const int32_t *nodes, const dou
 void cs_soft_impulse(cs_soft_resp *r, const int32_t *nodes, const double *w, int k,
                      const double arm[3], const double J[3], double local);
 
+/* The rigid modes alone (zero without them): the compliance dᵀ (minv d + iinv (arm × d) × arm)
+ * along d at arm, and the velocity they will have at arm in D's next step, that of D's
+ * nodes' momentum now (D->v, with the impulses so far) plus what the step's forces add
+ * (U0, W0). The bounce of two deformable objects (rigid.c's pair_restitution). */
+double cs_soft_coarse_compliance(const cs_soft_resp *r, const double arm[3], const double d[3]);
+void cs_soft_coarse_velocity(const cs_soft_resp *r, const double arm[3], double v[3]);
+
 #endif

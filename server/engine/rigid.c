@@ -1930,7 +1930,8 @@ typedef struct soft_contact {
     double kn, kt1, kt2, target, jn, jt1, jt2, mu;
     double e;           /* restitution: the larger of the two materials' */
     double vimp;        /* < 0: the node's approach now, at an impact (pair_restitution) */
-    double vapp;        /* its pair's approach on their rigid modes (pair_approach) */
+    double vapp;        /* in a pair's first contact: the pair's approach on their rigid
+                         * modes (pair_approach) */
 } soft_contact;
 
 static const double ONE[1] = {1.0};
@@ -2305,50 +2306,7 @@ void cs_rigid_drop_pending(cs_world_t *w)
  * Newton's restitution, shared over the impact's contacts by their impulses; never one that
  * pulls them together (what the contacts gave may part them faster already). The centres then
  * part at 0.293, 0.600 and 1.200 m/s for 1, 2 and 4 m/s of approach.
- *
- * coarse_compliance: dᵀ (minv d + iinv (arm × d) × arm), side r's rigid modes along d at arm.
  */
-static double coarse_compliance(const cs_soft_resp *r, const double arm[3], const double d[3])
-{
-    if (!r->coarse)
-        return 0;
-    double rd[3], t[3];
-    cross3(arm, d, rd);
-    mat_vec(r->iinv, rd, t);
-    double s = dot3(rd, t);
-    for (int a = 0; a < 3; a++)
-        s += r->minv[a] * d[a] * d[a];
-    return s;
-}
-
-/* The velocity side r's rigid modes will have at arm in its next step: that of its nodes'
- * momentum now (D->v, with the impulses so far) plus what the step's forces add (U0, W0). */
-static void coarse_velocity(const cs_soft_resp *r, const double arm[3], double out[3])
-{
-    out[0] = out[1] = out[2] = 0;
-    if (!r->coarse || !r->stiff)
-        return;
-    const cs_object *D = r->D;
-    double P[3] = {0, 0, 0}, L[3] = {0, 0, 0}, W[3], wa[3];
-    for (int i = 0; i < D->n; i++) {
-        const double *x = D->x + 3 * (size_t)i, *v = D->v + 3 * (size_t)i;
-        double d[3], t[3];
-        for (int a = 0; a < 3; a++)
-            d[a] = x[a] - r->c[a];
-        cross3(d, v, t);
-        for (int a = 0; a < 3; a++) {
-            P[a] += r->mass[i] * v[a];
-            L[a] += r->mass[i] * t[a];
-        }
-    }
-    mat_vec(r->iinv, L, W);
-    for (int a = 0; a < 3; a++)
-        W[a] += r->W0[a];
-    cross3(W, arm, wa);
-    for (int a = 0; a < 3; a++)
-        out[a] = r->minv[a] * P[a] + r->U0[a] + wa[a];
-}
-
 /* The end of the run of contacts from k0 between the pair of k0's objects. */
 static int pair_end(const cs_rigid_world *rw, int k0)
 {
@@ -2391,8 +2349,8 @@ static bool pair_impact(const cs_rigid_world *rw, int k0, int k1, double n[3], d
         rp[a] /= m;
         rq[a] /= m;
     }
-    coarse_velocity(P, rp, vp);
-    coarse_velocity(Q, rq, vq);
+    cs_soft_coarse_velocity(P, rp, vp);
+    cs_soft_coarse_velocity(Q, rq, vq);
     *vn = 0;
     for (int a = 0; a < 3; a++)
         *vn += (vp[a] - vq[a]) * n[a];
@@ -2400,7 +2358,7 @@ static bool pair_impact(const cs_rigid_world *rw, int k0, int k1, double n[3], d
 }
 
 /* Whether r's rigid modes translate freely along n (not held there: on the ground, a vertical
- * n; pinned or fixed, any). */
+ * n; pinned or fixed, any; an explicit object has none). */
 static bool free_along(const cs_soft_resp *r, const double n[3])
 {
     const double m = fmax(r->minv[0], fmax(r->minv[1], r->minv[2]));
@@ -2409,22 +2367,20 @@ static bool free_along(const cs_soft_resp *r, const double n[3])
                0.5 * m;
 }
 
-/* Before the contacts' impulses: each pair's approach at its impact, into its contacts' vapp
- * (> 0 approaching), when both objects are free along it; else restitution on the nodes, the
- * impact's targets. */
+/* Before the contacts' impulses: each pair's approach at its impact, into the vapp of its
+ * first contact (> 0 approaching), when both objects are free along it; else restitution on
+ * the nodes, the impact's targets. */
 static void pair_approach(cs_rigid_world *rw)
 {
     for (int k0 = 0, k1; k0 < rw->nsc; k0 = k1) {
         k1 = pair_end(rw, k0);
         double n[3], rp[3], rq[3], vn;
-        if (!pair_impact(rw, k0, k1, n, rp, rq, &vn))
-            continue;
-        if (free_along(rw->sc[k0].SA, n) && free_along(rw->sc[k0].SB, n)) {
-            for (int k = k0; k < k1; k++)
-                rw->sc[k].vapp = -vn;
+        if (pair_impact(rw, k0, k1, n, rp, rq, &vn) && free_along(rw->sc[k0].SA, n) &&
+            free_along(rw->sc[k0].SB, n)) {
+            rw->sc[k0].vapp = -vn;
             continue;
         }
-        for (int k = k0; k < k1; k++) { /* held: restitution on the nodes */
+        for (int k = k0; k < k1; k++) { /* restitution on the nodes */
             soft_contact *c = &rw->sc[k];
             if (c->vimp < 0)
                 c->target = fmax(c->target, -c->e * c->vimp);
@@ -2443,13 +2399,13 @@ static void pair_restitution(cs_rigid_world *rw, double v_bounce)
         const double v0 = rw->sc[k0].vapp;
         if (!(v0 > v_bounce) || !pair_impact(rw, k0, k1, n, rp, rq, &vsep))
             continue;
-        double e = 0, sj = 0;
+        const double e = rw->sc[k0].e; /* (one pair of materials) */
+        double sj = 0;
         for (int k = k0; k < k1; k++)
-            if (rw->sc[k].vimp < 0) {
-                e = fmax(e, rw->sc[k].e);
+            if (rw->sc[k].vimp < 0)
                 sj += rw->sc[k].jn;
-            }
-        const double w = coarse_compliance(P, rp, n) + coarse_compliance(Q, rq, n);
+        const double w =
+            cs_soft_coarse_compliance(P, rp, n) + cs_soft_coarse_compliance(Q, rq, n);
         const double Jr = w > 0 ? (e * v0 - vsep) / w : 0;
         if (!(Jr > 0))
             continue;
@@ -2564,7 +2520,6 @@ static int soft_contacts(cs_world_t *w, cs_rigid_world *rw, cs_step_stats *st)
     const double v_bounce = v_rest;
     for (int k = 0; k < rw->nsc; k++) {
         soft_contact *c = &rw->sc[k];
-        const double e = c->e;
         cs_soft_arm(c->SA, &c->node, ONE, 1, c->ra);
         cs_soft_arm(c->SB, c->bn, c->bw, 4, c->rb);
         tangents(c->n, c->t1, c->t2);
@@ -2579,15 +2534,11 @@ static int soft_contacts(cs_world_t *w, cs_rigid_world *rw, cs_step_stats *st)
         /* an impact is judged on the approach the objects have now (their velocities after
          * their steps), not the predicted one: a compressed block's nodes springing up in
          * the prediction under a block resting on it are no impact. Between two implicit
-         * objects the bounce is the pair's (pair_restitution); with an explicit one, or
-         * neither with rigid modes free, restitution reverses the node's approach. */
+         * objects free along it the bounce is the pair's (pair_restitution); otherwise
+         * restitution reverses the node's approach (pair_approach). */
         const double vn_now = soft_now_normal(c);
-        if (vn_now < -v_bounce && vn0 * dt < -c->sep) {
-            if (c->SA->stiff && c->SB->stiff && (c->SA->coarse || c->SB->coarse))
-                c->vimp = vn_now;
-            else
-                c->target = fmax(c->target, -e * vn_now);
-        }
+        if (vn_now < -v_bounce && vn0 * dt < -c->sep)
+            c->vimp = vn_now; /* (pair_approach turns it into a target or the pair's) */
     }
     pair_approach(rw);
     for (int it = 0; it < PGS_ITERATIONS; it++)
