@@ -442,7 +442,7 @@ static cs_cg_result pcg(cs_cg_work *w, cs_matvec_fn A, void *ctx, cs_precond_fn 
     }
     double ref = bnorm;
     if (w->stop == CS_CG_STOP_START)
-        ref = rnorm;
+        ref = fmin(rnorm, bnorm);
     else if (w->stop == CS_CG_STOP_GIVEN)
         ref = w->stop_ref;
     double stop = tol * ref;
