@@ -1011,7 +1011,7 @@ static int soft_tower(double E, double stag, double gap, tower_result *r)
     soft.damping[0] = 1;
     const cs_object *O[3];
     for (int b = 0; b < 3; b++) {
-        char name[8];
+        char name[16];
         snprintf(name, sizeof name, "b%d", b);
         const cs_object_id id = add_box(w, name, 2, 2, 2, h,
                                         (double[3]){b == 1 ? stag : 0, 0, b * (2 * h + gap)},
