@@ -454,6 +454,16 @@ static void set_velocity(cs_world_t *w, cs_object_id id, const double v[3])
         memcpy(o->v + 3 * i, v, 3 * sizeof *v);
 }
 
+/* The mass-weighted mean of a per-node 3-vector field u of o (its x: the centre of mass; its v:
+ * the velocity of the centre). */
+static void mass_mean(const cs_object *o, const double *u, double c[3])
+{
+    c[0] = c[1] = c[2] = 0;
+    for (int i = 0; i < o->n; i++)
+        for (int k = 0; k < 3; k++)
+            c[k] += o->m[i] * u[3 * i + k] / o->mass;
+}
+
 /*
  * Without gravity, two soft blocks (2×2×2 cubes of 0.1 m, E 1e5 Pa, 8 kg each) thrown at each
  * other at V each from 0.15 m apart along x, either centred or offset by half a cube in y and
@@ -514,19 +524,11 @@ static int soft_pair(double V, bool centred, cs_integrator integ, pair_result *r
             r->dp = fmax(r->dp, fabs(p[k] - p0[k]));
         r->deep = fmax(r->deep, fmax(deepest_inside(A, B), deepest_inside(B, A)));
         /* centres of mass and their distance */
-        double va[3] = {0, 0, 0}, vb[3] = {0, 0, 0};
-        memset(ca, 0, sizeof ca);
-        memset(cb, 0, sizeof cb);
-        for (int i = 0; i < A->n; i++)
-            for (int k = 0; k < 3; k++) {
-                ca[k] += A->m[i] * A->x[3 * i + k] / A->mass;
-                va[k] += A->m[i] * A->v[3 * i + k] / A->mass;
-            }
-        for (int i = 0; i < B->n; i++)
-            for (int k = 0; k < 3; k++) {
-                cb[k] += B->m[i] * B->x[3 * i + k] / B->mass;
-                vb[k] += B->m[i] * B->v[3 * i + k] / B->mass;
-            }
+        double va[3], vb[3];
+        mass_mean(A, A->x, ca);
+        mass_mean(A, A->v, va);
+        mass_mean(B, B->x, cb);
+        mass_mean(B, B->v, vb);
         double d[3], dv = 0, dd = 0, ek = 0;
         for (int k = 0; k < 3; k++)
             ek += 0.5 * (A->mass * va[k] * va[k] + B->mass * vb[k] * vb[k]);
@@ -668,13 +670,11 @@ static int soft_on_soft(int nlow, double ox, double oy, double ground_mu, cs_int
             cs_world_destroy(w);
             return -1;
         }
-        double zu = 0, zf = 0, cx = 0;
+        double zu = 0, zf = 0, ct[3];
         int nu = 0, nf = 0;
-        cz[s] = 0;
-        for (int i = 0; i < T->n; i++) {
-            cz[s] += T->m[i] * T->x[3 * i + 2] / T->mass;
-            cx += T->m[i] * T->x[3 * i] / T->mass;
-        }
+        mass_mean(T, T->x, ct);
+        const double cx = ct[0];
+        cz[s] = ct[2];
         /* L's top nodes under T's footprint, and the others */
         for (int i = 0; i < L->n; i++) {
             const double *x = L->x + 3 * i, *x0 = L->cm.node_rest + 3 * i;
@@ -1031,10 +1031,8 @@ static int soft_tower(double E, double rho, double stag, double gap, tower_resul
             return -1;
         }
         for (int b = 0; b < 3; b++) {
-            double c[3] = {0};
-            for (int i = 0; i < O[b]->n; i++)
-                for (int d = 0; d < 3; d++)
-                    c[d] += O[b]->m[i] * O[b]->x[3 * i + d] / O[b]->mass;
+            double c[3];
+            mass_mean(O[b], O[b]->x, c);
             if (s == 119)
                 memcpy(at2[b], c, sizeof c);
             else if (s > 119)
@@ -1104,10 +1102,11 @@ TEST(contact_soft_tower_of_three_stands)
 TEST(contact_stiff_tower_of_three_rests)
 {
     /* The same towers of stiff materials (E 1e7 Pa to steel's 2e11, staggered 1 cm; and steel
-     * staggered 3 cm, of steel's density, dropped from 0.3 m apart): they rest as rigid blocks would, each centre where it was placed less the gaps closed and
-     * the contact slop (at most 1 % of a cell per interface) and the compression (at most
-     * 0.1 mm at 1e7 Pa); at 1e7 Pa the upper blocks still creep sideways (the top one 0.9 mm
-     * from 2 to 4 s: README, Known limitations). Before the CG's reference was bounded by ‖b‖ (solver.h), the contact
+     * staggered 3 cm, of steel's density, dropped from 0.3 m apart): they rest as rigid blocks
+     * would, each centre where it was placed less the gaps closed and the contact slop (at
+     * most 1 % of a cell per interface) and the compression (at most 0.1 mm at 1e7 Pa); at
+     * 1e7 Pa the upper blocks still creep sideways (the top one 0.9 mm from 2 to 4 s: README,
+     * Known limitations). Before the CG's reference was bounded by ‖b‖ (solver.h), the contact
      * impulses on a few nodes made the step's start residual dt² K v many times ‖b‖: at 1e9
      * Pa the upper blocks bounced and were thrown off within 30 steps, at 2e11 Pa both. The
      * dropped steel tower was thrown kilometres until the contacts' picture of each block's
@@ -1119,13 +1118,12 @@ TEST(contact_stiff_tower_of_three_rests)
         const double gap = gaps[k];
         tower_result r;
         ENSURE(soft_tower(E[k], rho[k], stag[k], gap, &r) == 0);
-        printf("    E %.0e Pa, ρ %.0f kg/m³, middle block staggered %.2f m, %.1f mm apart: centres lowered "
-               "%.2f / %.2f / %.2f mm, drifted %.3f / %.3f / %.3f mm from 2 to 4 s, rattled "
-               "%.4f / %.4f / %.4f mm in the last second; deepest node %.2f mm\n",
-               E[k], rho[k], stag[k], 1e3 * gap, 1e3 * r.drop[0], 1e3 * r.drop[1], 1e3 * r.drop[2],
-               1e3 * r.drift[0],
-               1e3 * r.drift[1], 1e3 * r.drift[2], 1e3 * r.rattle[0], 1e3 * r.rattle[1],
-               1e3 * r.rattle[2], 1e3 * r.deep);
+        printf("    E %.0e Pa, ρ %.0f kg/m³, middle block staggered %.2f m, %.1f mm apart: "
+               "centres lowered %.2f / %.2f / %.2f mm, drifted %.3f / %.3f / %.3f mm from 2 to "
+               "4 s, rattled %.4f / %.4f / %.4f mm in the last second; deepest node %.2f mm\n",
+               E[k], rho[k], stag[k], 1e3 * gap, 1e3 * r.drop[0], 1e3 * r.drop[1],
+               1e3 * r.drop[2], 1e3 * r.drift[0], 1e3 * r.drift[1], 1e3 * r.drift[2],
+               1e3 * r.rattle[0], 1e3 * r.rattle[1], 1e3 * r.rattle[2], 1e3 * r.deep);
         for (int b = 0; b < 3; b++) {
             const double hi = b * (gap + 0.01 * h) + 3e-4;
             ENSURE_MSG(r.drop[b] > -1e-4 && r.drop[b] < hi,
