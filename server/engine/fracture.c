@@ -2752,6 +2752,7 @@ static cs_object *make_piece(cs_world_t *w, const cs_object *o, const int32_t *c
         vmap[i] = -1;
     p->model = o->model;
     p->kin = o->kin;
+    p->contact_seen = true; /* its contacts with its kin are its born pairs' (rigid.c) */
     /* the kin o's box has been apart from, p's has been too (rigid.c soft_contacts) */
     if (o->n_apart > 0) {
         if (!(p->apart = malloc((size_t)o->n_apart * sizeof *p->apart)))

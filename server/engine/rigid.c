@@ -2444,8 +2444,10 @@ static int soft_contacts(cs_world_t *w, cs_rigid_world *rw, cs_step_stats *st)
     rw->nsc = 0;
     rw->pending = false;
     int soft = 0;
-    for (int i = 0; i < w->n_objects; i++)
+    for (int i = 0; i < w->n_objects; i++) {
         soft += w->objects[i]->model != CS_MODEL_RIGID;
+        w->objects[i]->contact_seen = true;
+    }
     if (soft < 2)
         return CS_OK;
     if (sbox_room(rw, w->n_objects) != 0)
@@ -3114,6 +3116,34 @@ static int wake_near_movers(cs_world_t *w, cs_rigid_world *rw)
         }
     }
     return CS_OK;
+}
+
+int cs_rigid_prestep(cs_world_t *w, cs_step_stats *st)
+{
+    int soft = 0;
+    bool unseen = false;
+    for (int i = 0; i < w->n_objects; i++) {
+        const cs_object *o = w->objects[i];
+        if (o->model == CS_MODEL_RIGID || o->n == 0 || o->cm.n_cells == 0)
+            continue;
+        soft++;
+        unseen = unseen || !o->contact_seen;
+    }
+    if (soft < 2) {
+        /* nothing to touch yet: seen as it is */
+        for (int i = 0; i < w->n_objects; i++)
+            w->objects[i]->contact_seen = true;
+        return CS_OK;
+    }
+    if (!unseen)
+        return CS_OK;
+    if (!w->rigid && !(w->rigid = calloc(1, sizeof *w->rigid)))
+        return CS_ERR_NOMEM;
+    w->rigid->step++; /* the responses prepared by the last pass saw other velocities */
+    for (int i = 0; i < w->n_objects; i++)
+        if (!w->objects[i]->contact_seen && w->objects[i]->model != CS_MODEL_RIGID)
+            cs_world_ground_predict(w, w->objects[i]);
+    return soft_contacts(w, w->rigid, st);
 }
 
 /*

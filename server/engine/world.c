@@ -1432,6 +1432,24 @@ static cs_cg_result solve(const cs_world_t *w, cs_object *o, bool use_mg, cs_mat
  * node's velocity, could not hold a stiff body: its bottom nodes stopped and the nodes above
  * pulled them on, so a stiff block slid down slopes well inside the friction cone.)
  */
+void cs_world_ground_predict(const cs_world_t *w, cs_object *o)
+{
+    if (!w->def.has_ground || !o->contact ||
+        (o->integrator != CS_INTEGRATOR_IMPLICIT_EULER && o->integrator != CS_INTEGRATOR_NEWMARK))
+        return;
+    const double g = w->def.ground_height, dt = w->def.dt, eps = 1e-9 * (1 + fabs(g));
+    const double *gv = w->def.gravity;
+    const double gn = sqrt(gv[0] * gv[0] + gv[1] * gv[1] + gv[2] * gv[2]);
+    for (int i = 0; i < o->n; i++) {
+        const double *v = o->v + 3 * i;
+        if (o->contact[i] != CS_GROUND_FREE || o->mask[3 * i + 2] || o->x[3 * i + 2] > g + eps)
+            continue;
+        o->contact[i] = sqrt(v[0] * v[0] + v[1] * v[1]) > w->def.ground_friction * gn * dt
+                            ? CS_GROUND_SLIDE
+                            : CS_GROUND_STICK;
+    }
+}
+
 static int constrain_ground(const cs_world_t *w, cs_object *o, double s)
 {
     const size_t n3 = (size_t)o->n * 3;
@@ -2516,6 +2534,7 @@ int cs_world_step(cs_world_t *w)
     double t0 = now_ms();
     int rc = CS_OK;
     cs_fracture_clear_step(w);
+    rc = cs_rigid_prestep(w, &st);
     const int n_before = w->n_objects; /* pieces made in this step start stepping next step */
     for (int i = 0; i < n_before; i++) {
         cs_object *o = w->objects[i];
@@ -2751,6 +2770,7 @@ void cs_world_reset(cs_world_t *w)
         memset(o->contact, 0, (size_t)o->n);
         memset(o->ground, 0, (size_t)o->n * 3 * sizeof(double));
         o->elastic_energy_valid = false;
+        o->contact_seen = false;
         cs_cg_forget(&o->cg);
         cs_elastic_reset(o);
         cs_surface_skin(&o->surf, &o->cm, o->x);

@@ -189,6 +189,11 @@ typedef struct cs_object {
     cs_input inputs[CS_MAX_INPUTS];
     int n_inputs;
     int still_steps;
+    /* a deformable–deformable contact pass (rigid.c) has seen the object since it was added
+     * or reset; if not, cs_world_step runs one before its first step (cs_rigid_prestep).
+     * Fracture pieces start with it set: their born pairs take their first contacts after a
+     * step (born_contacts). */
+    bool contact_seen;
     bool contact_pushed; /* a rigid contact pushed its nodes in the last solve: a Newmark
                             object's next step is implicit Euler's, whose response the contact
                             solve modelled (contact_soft.h) */
@@ -287,6 +292,11 @@ int cs_engine_fail(char *err, size_t errlen, int code, const char *fmt, ...)
     __attribute__((format(printf, 4, 5)));
 cs_object *cs_world_find_internal(const cs_world_t *w, cs_object_id id);
 int cs_world_append_object(cs_world_t *w, cs_object *o);
+/* An implicit object's nodes on or below the ground plane that no step has constrained yet (it
+ * was just added or reset): marked sticking or sliding as the next step's ground constraint
+ * will mark them, so that a contact pass before that step (cs_rigid_prestep) sees the object
+ * supported. */
+void cs_world_ground_predict(const cs_world_t *w, cs_object *o);
 void cs_object_free_internal(cs_object *o);
 int cs_object_alloc_state(cs_object *o);
 /* Allocate o->fld for o->cm.n_cells cells, every factor 1. Returns -1 on out of memory. */
