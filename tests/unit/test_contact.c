@@ -1105,7 +1105,8 @@ TEST(contact_stiff_tower_of_three_rests)
      * staggered 3 cm, of steel's density, dropped from 0.3 m apart): they rest as rigid blocks
      * would, each centre where it was placed less the gaps closed and the compression (at
      * most 0.3 mm at 1e7 Pa; until the contact pass ran before the first step, each interface
-     * also sank by the contact slop, 1 % of a cell: cs_rigid_prestep); at
+     * also sank by the contact slop, 1 % of a cell: cs_rigid_prestep; the dropped tower may
+     * still, after its impacts: 0.43 mm since momentum_exact); at
      * 1e7 Pa the upper blocks still creep sideways (the top one 0.5 mm from 2 to 4 s: README,
      * Known limitations). Before the CG's reference was bounded by ‖b‖ (solver.h), the contact
      * impulses on a few nodes made the step's start residual dt² K v many times ‖b‖: at 1e9
@@ -1126,7 +1127,8 @@ TEST(contact_stiff_tower_of_three_rests)
                1e3 * r.drop[2], 1e3 * r.drift[0], 1e3 * r.drift[1], 1e3 * r.drift[2],
                1e3 * r.rattle[0], 1e3 * r.rattle[1], 1e3 * r.rattle[2], 1e3 * r.deep);
         for (int b = 0; b < 3; b++) {
-            const double hi = b * gap + 3e-4;
+            /* dropped, an impact may leave each interface within the contact's slop */
+            const double hi = b * (gap + (gap > 0.01 ? 0.01 * h : 0.0)) + 3e-4;
             ENSURE_MSG(r.drop[b] > -1e-4 && r.drop[b] < hi,
                        "block %d lowered %.3f mm (rigid blocks: %.3f at most)", b,
                        1e3 * r.drop[b], 1e3 * hi);
@@ -1225,5 +1227,53 @@ TEST(contact_objects_placed_touching_start_in_contact)
            "least %.4f mm above the lower one's top\n", 1e3 * least);
     ENSURE_MSG(least > -1e-5, "the added block's bottom went %.3f mm into the lower one",
                -1e3 * least);
+    cs_world_destroy(w);
+}
+
+TEST(contact_free_stiff_object_keeps_gravity)
+{
+    /* A steel-stiff block (2×2×2 cubes of 0.1 m, E 2e11 Pa, ρ 1000 kg/m³) in flight, turning
+     * at 3 rad/s and breathing (a dilatation rate of 0.01 /s, as a contact leaves a stiff
+     * body ringing): its centre must gain g dt of downward velocity every step, to 1e-6 of it
+     * (implicit Euler: the momentum equation alone, whatever the elastic forces do). Its b is
+     * dt f_el, many times the momentum, and CG's residual relative to ‖b‖ left gravity's
+     * whole impulse out: until momentum_exact (world.c) the centre flew on in a straight line
+     * (a steel block turning off an edge rose 11 cm above it, then was thrown kilometres). */
+    const double h = 0.1, dt = cs_world_def_default().dt, g = 9.81;
+    cs_world_def wd = cs_world_def_default();
+    wd.has_ground = false;
+    wd.threads = 1;
+    wd.gravity[0] = wd.gravity[1] = 0;
+    wd.gravity[2] = -g;
+    cs_world_t *w = NULL;
+    char err[256];
+    ENSURE(cs_world_create(&wd, &w, err, sizeof err) == CS_OK);
+    cs_material steel = cs_material_default();
+    steel.young = 2e11;
+    const cs_object_id id =
+        add_box(w, "steel", 2, 2, 2, h, (double[3]){0, 0, 1}, steel, CS_MODEL_COROTATIONAL);
+    cs_object *o = cs_world_find_internal(w, id);
+    ENSURE(o != NULL);
+    double c[3], worst = 0;
+    mass_mean(o, o->x, c);
+    for (int i = 0; i < o->n; i++) {
+        const double *x = o->x + 3 * (size_t)i;
+        const double d[3] = {x[0] - c[0], x[1] - c[1], x[2] - c[2]};
+        o->v[3 * (size_t)i] = -3 * d[1] + 0.01 * d[0];
+        o->v[3 * (size_t)i + 1] = 3 * d[0] + 0.01 * d[1];
+        o->v[3 * (size_t)i + 2] = 0.01 * d[2];
+    }
+    double v0[3];
+    mass_mean(o, o->v, v0);
+    for (int s = 1; s <= 30; s++) {
+        ENSURE(cs_world_step(w) == CS_OK);
+        double v[3];
+        mass_mean(o, o->v, v);
+        worst = fmax(worst, fabs((v[2] - v0[2]) / (-g * dt * s) - 1));
+        worst = fmax(worst, hypot(v[0] - v0[0], v[1] - v0[1]) / (g * dt * s));
+    }
+    printf("    steel block turning in flight: its centre's velocity off gravity's by at most "
+           "%.1e of g t over 30 steps\n", worst);
+    ENSURE_MSG(worst < 1e-6, "the centre's velocity is %.2e of g t off", worst);
     cs_world_destroy(w);
 }
