@@ -1218,15 +1218,22 @@ static void tangent_operator(void *ctx, const double *p, double *y)
     add_penalty_operator(o, o->pcoef, p, y);
 }
 
+/* Whether the operator has drag or curve springs in it (add_spring_operator's terms). */
+static bool springs_in_operator(const cs_object *o)
+{
+    for (int i = 0; o->dcoef != 0 && i < o->n_inputs; i++)
+        if (cs_input_is_spring(&o->inputs[i]) && o->inputs[i].delay <= 0)
+            return true;
+    return false;
+}
+
 /* Block-Jacobi preconditioner of the current operator, inverted. One parallel pass over the
  * nodes scales the elastic blocks, adds the diagonal terms and inverts (drag springs, which
  * touch a few nodes, are added before the inversion in a pass of their own). */
 static void build_preconditioner(cs_object *o)
 {
     const bool damp = o->fld.has_damping && o->ckcoef != 0;
-    bool springs = false;
-    for (int i = 0; o->dcoef != 0 && i < o->n_inputs; i++)
-        springs = springs || (cs_input_is_spring(&o->inputs[i]) && o->inputs[i].delay <= 0);
+    const bool springs = springs_in_operator(o);
     if (!damp && !springs && !o->lf && o->model != CS_MODEL_MSS) {
         /* FEM (cs_elastic_diag_blocks' dispatch): the blocks, their terms and the inversion
          * in one node pass, the same operations as below */
@@ -1415,6 +1422,29 @@ static cs_cg_result solve(const cs_world_t *w, cs_object *o, bool use_mg, cs_mat
     return cs_pcg(&o->cg, A, o, o->blocks, mask, b, x, tol, max_iter, cs_elastic_threads(o));
 }
 
+/* The tangential speed above which a node arriving on the ground slides rather than sticks:
+ * what friction under its own weight stops in a step, μ |g| dt (constrain_ground). */
+static double slide_speed(const cs_world_t *w)
+{
+    const double *gv = w->def.gravity;
+    return w->def.ground_friction * sqrt(gv[0] * gv[0] + gv[1] * gv[1] + gv[2] * gv[2]) *
+           w->def.dt;
+}
+
+void cs_world_ground_predict(const cs_world_t *w, cs_object *o)
+{
+    if (!w->def.has_ground || !o->contact ||
+        (o->integrator != CS_INTEGRATOR_IMPLICIT_EULER && o->integrator != CS_INTEGRATOR_NEWMARK))
+        return;
+    const double g = w->def.ground_height, eps = 1e-9 * (1 + fabs(g)), vs = slide_speed(w);
+    for (int i = 0; i < o->n; i++) {
+        const double *v = o->v + 3 * i;
+        if (o->contact[i] != CS_GROUND_FREE || o->mask[3 * i + 2] || o->x[3 * i + 2] > g + eps)
+            continue;
+        o->contact[i] = sqrt(v[0] * v[0] + v[1] * v[1]) > vs ? CS_GROUND_SLIDE : CS_GROUND_STICK;
+    }
+}
+
 /*
  * Ground contact (seed 000 has no contact model; this is Baraff–Witkin style filtered CG).
  * A node on or below the plane at the start of a step has its normal velocity constrained
@@ -1432,24 +1462,6 @@ static cs_cg_result solve(const cs_world_t *w, cs_object *o, bool use_mg, cs_mat
  * node's velocity, could not hold a stiff body: its bottom nodes stopped and the nodes above
  * pulled them on, so a stiff block slid down slopes well inside the friction cone.)
  */
-void cs_world_ground_predict(const cs_world_t *w, cs_object *o)
-{
-    if (!w->def.has_ground || !o->contact ||
-        (o->integrator != CS_INTEGRATOR_IMPLICIT_EULER && o->integrator != CS_INTEGRATOR_NEWMARK))
-        return;
-    const double g = w->def.ground_height, dt = w->def.dt, eps = 1e-9 * (1 + fabs(g));
-    const double *gv = w->def.gravity;
-    const double gn = sqrt(gv[0] * gv[0] + gv[1] * gv[1] + gv[2] * gv[2]);
-    for (int i = 0; i < o->n; i++) {
-        const double *v = o->v + 3 * i;
-        if (o->contact[i] != CS_GROUND_FREE || o->mask[3 * i + 2] || o->x[3 * i + 2] > g + eps)
-            continue;
-        o->contact[i] = sqrt(v[0] * v[0] + v[1] * v[1]) > w->def.ground_friction * gn * dt
-                            ? CS_GROUND_SLIDE
-                            : CS_GROUND_STICK;
-    }
-}
-
 static int constrain_ground(const cs_world_t *w, cs_object *o, double s)
 {
     const size_t n3 = (size_t)o->n * 3;
@@ -1457,8 +1469,7 @@ static int constrain_ground(const cs_world_t *w, cs_object *o, double s)
     if (!w->def.has_ground)
         return 0;
     const double g = w->def.ground_height, dt = w->def.dt, eps = 1e-9 * (1 + fabs(g));
-    const double mu = w->def.ground_friction, *gv = w->def.gravity;
-    const double gn = sqrt(gv[0] * gv[0] + gv[1] * gv[1] + gv[2] * gv[2]);
+    const double mu = w->def.ground_friction, vs = slide_speed(w);
     int count = 0;
     for (int i = 0; i < o->n; i++) {
         const double z = o->x[3 * i + 2];
@@ -1482,7 +1493,7 @@ static int constrain_ground(const cs_world_t *w, cs_object *o, double s)
         const double *v = o->v + 3 * i;
         const double vt = sqrt(v[0] * v[0] + v[1] * v[1]), fm = sqrt(gr[0] * gr[0] + gr[1] * gr[1]);
         const double F = mu * gr[2];
-        if ((prev == CS_GROUND_SLIDE && (vt > 0 || fm > 0)) || vt > mu * gn * dt) {
+        if ((prev == CS_GROUND_SLIDE && (vt > 0 || fm > 0)) || vt > vs) {
             o->contact[i] = CS_GROUND_SLIDE;
             gr[0] = vt > 0 ? -F * v[0] / vt : F * gr[0] / fm;
             gr[1] = vt > 0 ? -F * v[1] / vt : F * gr[1] / fm;
@@ -2044,9 +2055,8 @@ static void momentum_exact(const cs_object *o, const double *b, double *v1)
     const size_t n3 = (size_t)o->n * 3;
     if (o->n == 0 || memchr(o->smask, 1, n3))
         return;
-    for (int i = 0; o->dcoef != 0 && i < o->n_inputs; i++)
-        if (cs_input_is_spring(&o->inputs[i]) && o->inputs[i].delay <= 0)
-            return;
+    if (springs_in_operator(o))
+        return;
     for (int i = 0; o->penalty > 0 && o->pcoef != 0 && i < o->n; i++)
         if (o->pin[i])
             return;
