@@ -445,8 +445,11 @@ static cs_cg_result pcg(cs_cg_work *w, cs_matvec_fn A, void *ctx, cs_precond_fn 
         ref = fmin(rnorm, bnorm);
     else if (w->stop == CS_CG_STOP_GIVEN)
         ref = w->stop_ref;
+    const bool capped = w->stop != CS_CG_STOP_GIVEN && w->stop_cap > 0 && w->stop_cap < ref;
+    if (capped)
+        ref = w->stop_cap;
     double stop = tol * ref;
-    if (w->stop != CS_CG_STOP_RHS && !(stop >= 1e-12 * bnorm))
+    if ((w->stop != CS_CG_STOP_RHS || capped) && !(stop >= 1e-12 * bnorm))
         stop = 1e-12 * bnorm; /* also a NaN reference */
     res.ref = stop / tol;
     if (nd > 0 && rnorm > stop) /* warm start (cs_cg_guess) */

@@ -29,8 +29,11 @@ typedef void (*cs_matvec_fn)(void *ctx, const double *x, double *y);
  *        wrong by more than gravity's impulse (two 2×2×2 blocks of E = 1e9 Pa resting on
  *        each other: the upper one bounced and was thrown off within 30 steps; 1e11 Pa, both);
  * GIVEN  ‖r‖ ≤ tol·stop_ref (a re-solve of the same step keeps its first reference).
- * START and GIVEN never ask for less than 1e-12·‖b‖ (round-off: a free body's uniform
- * velocity leaves b − A v = 0).
+ * RHS and START references are at most stop_cap where it is > 0: an implicit step with ground
+ * contacts sets it to the norm of b's momentum and external impulse, ‖M v + dt f‖, because
+ * the ground's reactions are read off the residual (world.c, contact_cap).
+ * START, GIVEN and a capped reference never ask for less than 1e-12·‖b‖ (round-off: a free
+ * body's uniform velocity leaves b − A v = 0).
  */
 typedef enum cs_cg_stop { CS_CG_STOP_RHS = 0, CS_CG_STOP_START, CS_CG_STOP_GIVEN } cs_cg_stop;
 
@@ -44,6 +47,7 @@ typedef struct cs_cg_work {
     int n;        /* degrees of freedom (3 per node) */
     cs_cg_stop stop; /* what tol is relative to (above); RHS after cs_cg_work_init */
     double stop_ref; /* GIVEN: the norm */
+    double stop_cap; /* > 0: RHS and START references at most this (above); 0 after init */
     double *r, *z, *p, *q, *zo, *partial;
     /* warm-start history of a sequence of solves (cs_cg_guess); allocated on first use */
     double *hist_prev, *hist_end;
