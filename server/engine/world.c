@@ -1518,14 +1518,12 @@ static int constrain_ground(const cs_world_t *w, cs_object *o, double s)
  * their normal force. A sticking node that needs more than μ fn slides, with μ fn along its
  * reaction; a sliding node whose velocity friction turned back sticks, and one whose friction
  * (posed from the last normal force) is not μ fn (to 1 %) is set to it. With resolve, those
- * changes are made to b, smask and v1 for another solve of this step (a released node is free
- * in it) and the count of changes is returned; without, they hold from the next step on (a
- * node turned back stops here, as friction would have stopped it) and 0 is returned.
- * Re-posed until nothing changes (CS_GROUND_RESOLVES at most), the step's friction keeps to
- * Coulomb's |J_t| ≤ μ J_n for the object as a whole: before session 28 a stiff block landing
- * tilted stopped dead (its landing step's push, inflated by the pull of the held nodes that
- * were leaving the ground, times μ) or was thrown (1e9 Pa at 1000 kg/m³, 6.8 m/s; 2e11 Pa,
- * kilometres).
+ * changes are made to b, smask and v1 for another solve of this step (a released node loses
+ * its friction and tangential hold in it) and the count of changes is returned; without, they
+ * hold from the next step on (a node turned back stops here, as friction would have stopped
+ * it) and 0 is returned. Before session 28 (two re-solves, a released node's friction kept,
+ * friction at the last normal force) a stiff block landing tilted broke Coulomb's bound by
+ * 1–2 m/s in a step or was thrown (2e11 Pa, kilometres).
  */
 static int ground_reactions(const cs_world_t *w, cs_object *o, int contacts, cs_matvec_fn A,
                             double s, bool resolve)
@@ -1546,15 +1544,16 @@ static int ground_reactions(const cs_world_t *w, cs_object *o, int contacts, cs_
         if (!(fn >= 0)) {
             o->contact[i] = CS_GROUND_RELEASED; /* the ground would have to pull */
             gr[2] = 0;
-            if (resolve) {
-                /* free in this step's solve too, without its friction: held, it pulled
-                 * its side down while the ground pushed the other side up, a couple whose
-                 * push, times μ, was the next step's friction */
-                for (int a = 0; a < 3; a++) {
+            if (resolve && (gr[0] != 0 || gr[1] != 0 || c == CS_GROUND_STICK)) {
+                /* no friction where the ground would pull: its friction out of b, its
+                 * tangential dofs free in this step's next solve. (Its normal stays held to
+                 * the step's end: freed, a stiff block's node could end the step below the
+                 * plane, where the projection moves it alone; a dropped tower of 7e10 Pa
+                 * blocks blew apart.) */
+                for (int a = 0; a < 2; a++) {
                     if (o->mask[3 * i + a])
                         continue;
-                    if (a < 2)
-                        b[a] -= s * gr[a];
+                    b[a] -= s * gr[a];
                     o->smask[3 * i + a] = 0;
                 }
                 gr[0] = gr[1] = 0;
@@ -1623,9 +1622,8 @@ static int ground_reactions(const cs_world_t *w, cs_object *o, int contacts, cs_
 }
 
 /* Solves of one step that may follow a change of ground contacts (ground_reactions): 2 until
- * session 28; a landing stiff block can need 5 before its contacts settle (with 2, 4 of 40
- * scratch landings broke Coulomb's bound, one thrown at 12 m/s; with 8, none). Steps without
- * contact changes pay nothing. */
+ * session 28; a landing stiff block's contacts can take 5 to settle. Steps without contact
+ * changes pay nothing. */
 #define CS_GROUND_RESOLVES 8
 
 /* Coulomb friction for a contact node whose downward velocity dvn the ground just removed:
@@ -2119,10 +2117,8 @@ static void momentum_exact(const cs_object *o, const double *b, double *v1)
  * reactions are read off the residual (ground_reactions): the normal force that decides
  * release and sets the next step's friction. A stiff, strained object's b and its step
  * residual are mostly dt f_el, and a fraction of that left those reactions wrong by many
- * times the object's weight. Even with ground_reactions re-posing the contacts until they
- * settle, 12 of 40 scratch landings of stiff 2×2×2 blocks broke Coulomb's bound without this
- * cap (one at 101 m/s), none with it. Relative to the momentum and weight, the reactions are
- * what they are.
+ * times the object's weight (friction of 500 N per node on a 1 kg block after a landing).
+ * Relative to the momentum and weight, the reactions are what they are.
  */
 static double contact_cap(const cs_object *o, double dt)
 {
