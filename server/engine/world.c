@@ -1525,6 +1525,19 @@ static int constrain_ground(const cs_world_t *w, cs_object *o, double s)
  * friction at the last normal force) a stiff block landing tilted broke Coulomb's bound by
  * 1–2 m/s in a step or was thrown (2e11 Pa, kilometres).
  */
+/* A contact node's friction in b (b, gr: its rows) from gr to nf, held dofs of the object
+ * excepted (s: b's factor on forces). */
+static void repose_friction(const cs_object *o, int i, double s, const double nf[2], double *b,
+                            double *gr)
+{
+    for (int a = 0; a < 2; a++) {
+        if (o->mask[3 * i + a])
+            continue;
+        b[a] += s * (nf[a] - gr[a]);
+        gr[a] = nf[a];
+    }
+}
+
 static int ground_reactions(const cs_world_t *w, cs_object *o, int contacts, cs_matvec_fn A,
                             double s, bool resolve)
 {
@@ -1550,12 +1563,10 @@ static int ground_reactions(const cs_world_t *w, cs_object *o, int contacts, cs_
                  * the step's end: freed, a stiff block's node could end the step below the
                  * plane, where the projection moves it alone; a dropped tower of 7e10 Pa
                  * blocks blew apart.) */
-                for (int a = 0; a < 2; a++) {
-                    if (o->mask[3 * i + a])
-                        continue;
-                    b[a] -= s * gr[a];
-                    o->smask[3 * i + a] = 0;
-                }
+                repose_friction(o, i, s, (const double[2]){0, 0}, b, gr);
+                for (int a = 0; a < 2; a++)
+                    if (!o->mask[3 * i + a])
+                        o->smask[3 * i + a] = 0;
                 gr[0] = gr[1] = 0;
                 changes++;
             }
@@ -1569,13 +1580,8 @@ static int ground_reactions(const cs_world_t *w, cs_object *o, int contacts, cs_
             !(v[0] * gr[0] + v[1] * gr[1] > 0)) {
             /* its friction, posed from the last step's normal force, is not μ times this
              * step's (after an impact, many times above it): to it */
-            for (int a = 0; a < 2; a++) {
-                if (o->mask[3 * i + a])
-                    continue;
-                const double na = gr[a] * mu * fn / fm;
-                b[a] += s * (na - gr[a]);
-                gr[a] = na;
-            }
+            repose_friction(o, i, s, (const double[2]){gr[0] * mu * fn / fm, gr[1] * mu * fn / fm},
+                            b, gr);
             changes++;
             continue;
         }
@@ -1608,11 +1614,10 @@ static int ground_reactions(const cs_world_t *w, cs_object *o, int contacts, cs_
             continue;
         }
         changes++;
+        repose_friction(o, i, s, nf, b, gr);
         for (int a = 0; a < 2; a++) {
             if (o->mask[3 * i + a])
                 continue;
-            b[a] += s * (nf[a] - gr[a]);
-            gr[a] = nf[a];
             o->smask[3 * i + a] = nc == CS_GROUND_STICK;
             if (nc == CS_GROUND_STICK)
                 v[a] = 0.0;

@@ -1,6 +1,7 @@
 /*
  * contact_probe.h — how deep a node of one object lies inside another's deformed cells: the
- * penetration measure of the contact tests (test_contact.c, test_contact_born.c).
+ * penetration measure of the contact tests (test_contact.c, test_contact_born.c); and an
+ * object's mass-weighted means (its centre and centre velocity; test_rigid.c too).
  */
 #ifndef CS_TEST_CONTACT_PROBE_H
 #define CS_TEST_CONTACT_PROBE_H
@@ -11,6 +12,16 @@
 
 #include "lattice.h"
 #include "world_internal.h"
+
+/* The mass-weighted mean of a per-node vector u (positions: the centre of mass; velocities:
+ * its velocity). */
+static inline void mass_mean(const cs_object *o, const double *u, double c[3])
+{
+    c[0] = c[1] = c[2] = 0;
+    for (int i = 0; i < o->n; i++)
+        for (int k = 0; k < 3; k++)
+            c[k] += o->m[i] * u[3 * i + k] / o->mass;
+}
 
 /* Local coordinates u of p in the hexahedron X (CS_CORNER order) by Newton on the trilinear
  * map; false if it does not converge. */

@@ -456,14 +456,6 @@ static void set_velocity(cs_world_t *w, cs_object_id id, const double v[3])
 
 /* The mass-weighted mean of a per-node 3-vector field u of o (its x: the centre of mass; its v:
  * the velocity of the centre). */
-static void mass_mean(const cs_object *o, const double *u, double c[3])
-{
-    c[0] = c[1] = c[2] = 0;
-    for (int i = 0; i < o->n; i++)
-        for (int k = 0; k < 3; k++)
-            c[k] += o->m[i] * u[3 * i + k] / o->mass;
-}
-
 /*
  * Without gravity, two soft blocks (2×2×2 cubes of 0.1 m, E 1e5 Pa, 8 kg each) thrown at each
  * other at V each from 0.15 m apart along x, either centred or offset by half a cube in y and

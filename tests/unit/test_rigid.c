@@ -17,6 +17,7 @@
 #include "watertight.h"
 #include "world_internal.h"
 #include "lattice.h"
+#include "contact_probe.h"
 
 /* A box of nx×ny×nz cubes of edge h with its lower corner at `at`. */
 static cs_object_id add_box_i(cs_world_t *w, const char *name, int nx, int ny, int nz,
@@ -1202,16 +1203,10 @@ static bool landing(double young, double rho, double vx, double wy, double *exce
     double pv[3] = {0, 0, 0};
     *excess = *ydrift = 0;
     for (int s = 0; s <= 180 && ok; s++) {
-        const double *x, *v;
-        int n;
-        cs_object_nodes(w, id, NULL, &x, &v, &n);
         const cs_object *o = w->objects[0];
-        double c[3] = {0, 0, 0}, cv[3] = {0, 0, 0};
-        for (int j = 0; j < n; j++)
-            for (int a = 0; a < 3; a++) {
-                c[a] += o->m[j] * x[3 * j + a] / o->mass;
-                cv[a] += o->m[j] * v[3 * j + a] / o->mass;
-            }
+        double c[3], cv[3];
+        mass_mean(o, o->x, c);
+        mass_mean(o, o->v, cv);
         if (s > 0) {
             const double dh = hypot(cv[0] - pv[0], cv[1] - pv[1]);
             const double bound = mu * fmax(cv[2] - pv[2] + g * dt, 0.0);
