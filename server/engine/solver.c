@@ -67,7 +67,7 @@ int cs_cg_guess(cs_cg_work *w, const double *v, double *x)
     if (!w->hist_prev) {
         w->hist_prev = malloc(sz);
         w->hist_end = malloc(sz);
-        const size_t nb = n / CS_DOT_BLOCK + 1, ne = CS_CG_DIRS * (CS_CG_DIRS + 1);
+        const size_t nb = n / CS_DOT_BLOCK + 1, ne = (CS_CG_DIRS + 1) * (CS_CG_DIRS + 2);
         w->gpartial = malloc(nb * ne * sizeof(double));
         bool ok = w->hist_prev && w->hist_end && w->gpartial;
         for (int k = 0; k < CS_CG_DIRS; k++) {
@@ -305,79 +305,107 @@ static void dot2(cs_cg_work *w, const double *r, const double *z, const double *
 
 /*
  * The warm start's Galerkin step: x += D α with D the nd directions of the last steps
- * (cs_cg_guess; masked here), α minimising the A-norm of the error over their span, i.e.
+ * (cs_cg_guess; masked here), preceded by x0 when given (the guess itself, 0 at the held
+ * dofs, with its product q0 = A x0: then x may also be scaled, and x0 + span of the changes
+ * is inside the span searched), α minimising the A-norm of the error over their span, i.e.
  * (Dᵀ A D) α = Dᵀ r, and r −= A D α. The small system in fixed blocks (bit-identical on any
- * thread count), factored by Cholesky over the newest directions that are independent to
- * 1e-10 (older ones that depend on them are dropped). Returns ‖r‖ after (rnorm if no step).
+ * thread count), factored by Cholesky over the directions, x0 and then the newest first,
+ * that are independent of those taken before to 1e-10 (a dependent one is skipped: x0 = 0
+ * from rest, an old change). Returns ‖r‖ after (rnorm if no step).
  */
 static double warm_subspace(cs_cg_work *w, cs_matvec_fn A, void *ctx, const uint8_t *mask,
-                            int nd, double *x, double *r, double rnorm, int threads)
+                            int nd, const double *x0, const double *q0, double *x, double *r,
+                            double rnorm, int threads)
 {
     if (nd > CS_CG_DIRS)
         nd = CS_CG_DIRS;
-    const int n = w->n, nb = (n + CS_DOT_BLOCK - 1) / CS_DOT_BLOCK, ne = nd * (nd + 1);
-    double **D = w->dirs, **Q = w->adirs;
+    const int n = w->n, nb = (n + CS_DOT_BLOCK - 1) / CS_DOT_BLOCK;
+    /* the directions: x0 (the guess itself, its product q0 known) first when given, then
+     * the last steps' changes, newest first */
+    const double *D[CS_CG_DIRS + 1], *Q[CS_CG_DIRS + 1];
+    int nv = 0;
+    if (x0) {
+        D[nv] = x0;
+        Q[nv++] = q0;
+    }
 #pragma omp parallel for num_threads(threads) schedule(static)
     for (int i = 0; i < n; i++)
         if (mask[i])
             for (int k = 0; k < nd; k++)
-                D[k][i] = 0.0;
-    for (int k = 0; k < nd; k++)
-        A(ctx, D[k], Q[k]);
-    /* G = Dᵀ Q (nd × nd) and g = Dᵀ r, one pass */
+                w->dirs[k][i] = 0.0;
+    for (int k = 0; k < nd; k++) {
+        A(ctx, w->dirs[k], w->adirs[k]);
+        D[nv] = w->dirs[k];
+        Q[nv++] = w->adirs[k];
+    }
+    const int ne = nv * (nv + 1);
+    /* G = Dᵀ Q (nv × nv) and g = Dᵀ r, one pass */
 #pragma omp parallel for num_threads(threads) schedule(static) if (nb > 1)
     for (int k = 0; k < nb; k++) {
         const int lo = k * CS_DOT_BLOCK, hi = lo + CS_DOT_BLOCK < n ? lo + CS_DOT_BLOCK : n;
-        double acc[CS_CG_DIRS * (CS_CG_DIRS + 1)] = {0};
+        double acc[(CS_CG_DIRS + 1) * (CS_CG_DIRS + 2)] = {0};
         for (int i = lo; i < hi; i++)
-            for (int a = 0; a < nd; a++) {
+            for (int a = 0; a < nv; a++) {
                 const double da = D[a][i];
-                acc[nd * nd + a] += da * r[i];
-                for (int c = 0; c < nd; c++)
-                    acc[a * nd + c] += da * Q[c][i];
+                acc[nv * nv + a] += da * r[i];
+                for (int c = 0; c < nv; c++)
+                    acc[a * nv + c] += da * Q[c][i];
             }
         memcpy(w->gpartial + (size_t)k * ne, acc, (size_t)ne * sizeof(double));
     }
-    double G[CS_CG_DIRS * (CS_CG_DIRS + 1)] = {0}, L[CS_CG_DIRS * CS_CG_DIRS] = {0};
+    double G[(CS_CG_DIRS + 1) * (CS_CG_DIRS + 2)] = {0};
+    double L[(CS_CG_DIRS + 1) * (CS_CG_DIRS + 1)] = {0};
     for (int k = 0; k < nb; k++)
         for (int e = 0; e < ne; e++)
             G[e] += w->gpartial[(size_t)k * ne + e];
-    const double *g = G + nd * nd;
-    int m = 0; /* Cholesky of the symmetrised G, as far as the pivots stay positive */
-    for (int i = 0; i < nd; i++) {
+    const double *g = G + nv * nv;
+    /* Cholesky of the symmetrised G over the directions, in order, that are independent of
+     * the ones taken before them to 1e-10 (a dependent one is skipped) */
+    int take[CS_CG_DIRS + 1], m = 0;
+    for (int i = 0; i < nv; i++) {
+        double *Li = L + m * nv; /* row m of the factor, if direction i is taken */
         bool ok = isfinite(g[i]);
-        for (int j = 0; j <= i && ok; j++) {
-            double s = 0.5 * (G[i * nd + j] + G[j * nd + i]);
-            for (int k = 0; k < j; k++)
-                s -= L[i * nd + k] * L[j * nd + k];
-            if (j < i)
-                L[i * nd + j] = s / L[j * nd + j];
-            else if (s > 1e-10 * G[i * nd + i] && isfinite(s))
-                L[i * nd + i] = sqrt(s);
-            else
-                ok = false;
+        for (int jj = 0; jj < m && ok; jj++) {
+            const int j = take[jj];
+            double s = 0.5 * (G[i * nv + j] + G[j * nv + i]);
+            for (int k = 0; k < jj; k++)
+                s -= Li[k] * L[jj * nv + k];
+            Li[jj] = s / L[jj * nv + jj];
         }
-        if (!ok)
-            break;
-        m = i + 1;
+        double s = G[i * nv + i];
+        for (int k = 0; k < m && ok; k++)
+            s -= Li[k] * Li[k];
+        if (ok && s > 1e-10 * G[i * nv + i] && isfinite(s)) {
+            Li[m] = sqrt(s);
+            take[m++] = i;
+        } else {
+            for (int k = 0; k <= m; k++)
+                Li[k] = 0.0;
+        }
     }
     if (m == 0)
         return rnorm;
-    double al[CS_CG_DIRS];
+    double al[CS_CG_DIRS + 1];
     for (int i = 0; i < m; i++) {
-        double s = g[i];
+        double s = g[take[i]];
         for (int k = 0; k < i; k++)
-            s -= L[i * nd + k] * al[k];
-        al[i] = s / L[i * nd + i];
+            s -= L[i * nv + k] * al[k];
+        al[i] = s / L[i * nv + i];
     }
     for (int i = m - 1; i >= 0; i--) {
         double s = al[i];
         for (int k = i + 1; k < m; k++)
-            s -= L[k * nd + i] * al[k];
-        al[i] = s / L[i * nd + i];
+            s -= L[k * nv + i] * al[k];
+        al[i] = s / L[i * nv + i];
+    }
+    const double *Dt[CS_CG_DIRS + 1], *Qt[CS_CG_DIRS + 1];
+    for (int a = 0; a < m; a++) {
+        Dt[a] = D[take[a]];
+        Qt[a] = Q[take[a]];
     }
     /* x += D α and r −= Q α at free dofs (0 at held ones), ‖r‖² in the fixed blocks: one
-     * pass (update_xr_at with α = 1 on dx = (D α)_i, dq = (Q α)_i; 1·v is v exactly) */
+     * pass (update_xr_at with α = 1 on dx = (D α)_i, dq = (Q α)_i; 1·v is v exactly). x0 may
+     * be x itself: (D α)_i is read before x_i changes. */
 #pragma omp parallel for num_threads(threads) schedule(static) if (nb > 1)
     for (int k = 0; k < nb; k++) {
         const int lo = k * CS_DOT_BLOCK, hi = lo + CS_DOT_BLOCK < n ? lo + CS_DOT_BLOCK : n;
@@ -385,8 +413,8 @@ static double warm_subspace(cs_cg_work *w, cs_matvec_fn A, void *ctx, const uint
         for (int i = lo; i < hi; i++) {
             double dx = 0, dq = 0;
             for (int a = 0; a < m; a++) {
-                dx += al[a] * D[a][i];
-                dq += al[a] * Q[a][i];
+                dx += al[a] * Dt[a][i];
+                dq += al[a] * Qt[a][i];
             }
             s += update_xr_at(mask, i, 1.0, dx, dq, x, r);
         }
@@ -401,6 +429,16 @@ static double warm_subspace(cs_cg_work *w, cs_matvec_fn A, void *ctx, const uint
 static cs_cg_result pcg(cs_cg_work *w, cs_matvec_fn A, void *ctx, cs_precond_fn B, void *bctx,
                         const uint8_t *mask, const double *b, double *x, double tol,
                         int max_iter, int threads, bool flexible);
+
+/* Whether x is 0 at every held dof (then x is its own free part and A x its product). */
+static bool held_zero(const uint8_t *mask, const double *x, int n, int threads)
+{
+    int nz = 0;
+#pragma omp parallel for num_threads(threads) schedule(static) reduction(| : nz)
+    for (int i = 0; i < n; i++)
+        nz |= mask[i] && x[i] != 0.0;
+    return !nz;
+}
 
 cs_cg_result cs_pcg(cs_cg_work *w, cs_matvec_fn A, void *ctx, const double *inv_blocks,
                     const uint8_t *mask, const double *b, double *x, double tol, int max_iter,
@@ -452,8 +490,12 @@ static cs_cg_result pcg(cs_cg_work *w, cs_matvec_fn A, void *ctx, cs_precond_fn 
     if ((w->stop != CS_CG_STOP_RHS || capped) && !(stop >= 1e-12 * bnorm))
         stop = 1e-12 * bnorm; /* also a NaN reference */
     res.ref = stop / tol;
-    if (nd > 0 && rnorm > stop) /* warm start (cs_cg_guess) */
-        rnorm = warm_subspace(w, A, ctx, mask, nd, x, r, rnorm, threads);
+    if (nd > 0 && rnorm > stop) { /* warm start (cs_cg_guess) */
+        /* x itself joins the span when it is 0 at the held dofs: q = A x is then its
+         * product, so the Galerkin step may also scale the guess, at no product */
+        const bool with_x = held_zero(mask, x, n, threads);
+        rnorm = warm_subspace(w, A, ctx, mask, nd, with_x ? x : NULL, q, x, r, rnorm, threads);
+    }
     B(bctx, r, z);
     double rz = copy_dot(w, r, z, p, n, threads);
     int it = 0;

@@ -37,8 +37,8 @@ typedef void (*cs_matvec_fn)(void *ctx, const double *x, double *y);
  */
 typedef enum cs_cg_stop { CS_CG_STOP_RHS = 0, CS_CG_STOP_START, CS_CG_STOP_GIVEN } cs_cg_stop;
 
-/* Directions of the warm start's subspace (cs_cg_guess); 1 is a line search along the last
- * change. */
+/* Directions of the warm start's subspace (cs_cg_guess), besides the guess itself; 1 searches
+ * the plane of the guess and the last change. */
 #ifndef CS_CG_DIRS
 #define CS_CG_DIRS 4
 #endif
@@ -72,7 +72,8 @@ void cs_cg_work_free(cs_cg_work *w);
  * max_dirs ≤ CS_CG_DIRS, as many as were consecutive), for the next cs_pcg / cs_pcg_ex on this
  * work: that solve first moves x by the combination of them that minimises the A-norm of the
  * error (a Galerkin step on their span: one product per direction and a small dense system;
- * never worse than x = v; with one direction a line search along the last change, which is
+ * when x is 0 at the held dofs, x itself is one more direction, its product the start
+ * residual's, so x may also be scaled at no extra product; never worse than x = v; with one direction a line search along the last change, which is
  * better than the plain extrapolation 2v − v_prev). It remembers v as the next v_prev and
  * forgets the history until cs_cg_record(v_end) is called after the step: a state changed
  * between steps (reset, sleep, a set velocity) no longer matches and starts afresh, and a
