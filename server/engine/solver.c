@@ -227,19 +227,24 @@ static double update_xr(cs_cg_work *w, const uint8_t *mask, double alpha, const 
 }
 
 /* The solve's first pass, after q = A x: r = b − q at free dofs (0 at held ones), returning
- * ‖r‖² and *bb = Σ b_i² over the free dofs, each summed in the fixed blocks of cs_dot. */
+ * ‖r‖² and *bb = Σ b_i² over the free dofs, each summed in the fixed blocks of cs_dot, and
+ * *held0 = whether x is 0 at every held dof (then x is its own free part and q its product:
+ * the warm start's first direction). */
 static double start_residual(cs_cg_work *w, const uint8_t *mask, const double *b,
-                             const double *q, double *r, int n, int threads, double *bb)
+                             const double *q, const double *x, double *r, int n, int threads,
+                             double *bb, bool *held0)
 {
     const int nb = (n + CS_DOT_BLOCK - 1) / CS_DOT_BLOCK;
     double *pr = w->partial, *pb = w->partial + nb;
-#pragma omp parallel for num_threads(threads) schedule(static) if (nb > 1)
+    int nz = 0;
+#pragma omp parallel for num_threads(threads) schedule(static) if (nb > 1) reduction(| : nz)
     for (int k = 0; k < nb; k++) {
         const int lo = k * CS_DOT_BLOCK, hi = lo + CS_DOT_BLOCK < n ? lo + CS_DOT_BLOCK : n;
         double sr = 0, sb = 0;
         for (int i = lo; i < hi; i++) {
             const double bi = mask[i] ? 0.0 : b[i];
             const double ri = mask[i] ? 0.0 : b[i] - q[i];
+            nz |= mask[i] && x[i] != 0.0;
             r[i] = ri;
             sb += bi * bi;
             sr += ri * ri;
@@ -253,6 +258,7 @@ static double start_residual(cs_cg_work *w, const uint8_t *mask, const double *b
         sb += pb[k];
     }
     *bb = sb;
+    *held0 = !nz;
     return sr;
 }
 
@@ -430,15 +436,6 @@ static cs_cg_result pcg(cs_cg_work *w, cs_matvec_fn A, void *ctx, cs_precond_fn 
                         const uint8_t *mask, const double *b, double *x, double tol,
                         int max_iter, int threads, bool flexible);
 
-/* Whether x is 0 at every held dof (then x is its own free part and A x its product). */
-static bool held_zero(const uint8_t *mask, const double *x, int n, int threads)
-{
-    int nz = 0;
-#pragma omp parallel for num_threads(threads) schedule(static) reduction(| : nz)
-    for (int i = 0; i < n; i++)
-        nz |= mask[i] && x[i] != 0.0;
-    return !nz;
-}
 
 cs_cg_result cs_pcg(cs_cg_work *w, cs_matvec_fn A, void *ctx, const double *inv_blocks,
                     const uint8_t *mask, const double *b, double *x, double tol, int max_iter,
@@ -468,7 +465,8 @@ static cs_cg_result pcg(cs_cg_work *w, cs_matvec_fn A, void *ctx, cs_precond_fn 
     /* r = b - A x; ‖r‖ and ‖b‖ over the free dofs in the same pass. */
     A(ctx, x, q);
     double bb;
-    double rnorm = sqrt(start_residual(w, mask, b, q, r, n, threads, &bb));
+    bool held0;
+    double rnorm = sqrt(start_residual(w, mask, b, q, x, r, n, threads, &bb, &held0));
     const double bnorm = sqrt(bb);
     if (bnorm == 0.0) {
         /* b = 0: x = 0 on the free dofs is the solution. */
@@ -493,8 +491,7 @@ static cs_cg_result pcg(cs_cg_work *w, cs_matvec_fn A, void *ctx, cs_precond_fn 
     if (nd > 0 && rnorm > stop) { /* warm start (cs_cg_guess) */
         /* x itself joins the span when it is 0 at the held dofs: q = A x is then its
          * product, so the Galerkin step may also scale the guess, at no product */
-        const bool with_x = held_zero(mask, x, n, threads);
-        rnorm = warm_subspace(w, A, ctx, mask, nd, with_x ? x : NULL, q, x, r, rnorm, threads);
+        rnorm = warm_subspace(w, A, ctx, mask, nd, held0 ? x : NULL, q, x, r, rnorm, threads);
     }
     B(bctx, r, z);
     double rz = copy_dot(w, r, z, p, n, threads);
