@@ -1348,3 +1348,35 @@ TEST(ground_friction_is_coulomb_for_every_model)
         ENSURE_MSG(fabs(stop / want - 1) < tol, "stopped after %.4f m (%.4f)", stop, want);
     }
 }
+
+/* The largest accepted force (max_force) on a 1 kg cube next to another body: the step
+ * diverges (past 1 km/s), is undone, the cube is left at rest where it was (gravity acts in
+ * the step's later substeps), and the step ends.
+ * Before the body-pair search was clamped to the other body's lattice, the contact margin of
+ * the thrown cube (its speed times the substep, hundreds of metres) made that search run for
+ * days: the daemon hung. */
+TEST(rigid_absurd_force_next_to_a_body_diverges_and_returns)
+{
+    cs_world_t *w = world(true, true);
+    char err[256] = "";
+    const double h = 0.1;
+    cs_object_id a = add_box(w, "a", 1, 1, 1, h, (double[3]){0, 0, 0}, cs_material_default(),
+                             false, CS_MODEL_RIGID, NULL, err);
+    cs_object_id b = add_box(w, "b", 2, 1, 1, h, (double[3]){0.12, 0, 0}, cs_material_default(),
+                             false, CS_MODEL_RIGID, NULL, err);
+    ENSURE_MSG(a != CS_NULL_OBJECT && b != CS_NULL_OBJECT, "%s", err);
+    ENSURE(cs_world_step(w) == CS_OK);
+    cs_rigid_state s0, s1;
+    cs_object_rigid_state(w, a, &s0);
+    const double F[3] = {0.999 * cs_world_get_def(w)->max_force, 0, 0};
+    ENSURE(cs_world_apply_force(w, a, s0.position, F, 0, err, sizeof err) == CS_OK);
+    ENSURE(cs_world_step(w) == CS_ERR_DIVERGED);
+    cs_object_rigid_state(w, a, &s1);
+    ENSURE(norm3(s1.velocity) < 1 && norm3(s1.angular_velocity) < 1); /* gravity in later substeps */
+    for (int k = 0; k < 3; k++)
+        ENSURE(isfinite(s1.position[k]) && fabs(s1.position[k] - s0.position[k]) < 1.0);
+    /* and it steps on */
+    for (int i = 0; i < 10; i++)
+        ENSURE(cs_world_step(w) == CS_OK);
+    cs_world_destroy(w);
+}
