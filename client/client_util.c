@@ -5,6 +5,7 @@
 #include "client_util.h"
 
 #include <errno.h>
+#include <stdbool.h>
 #include <inttypes.h>
 #include <math.h>
 #include <stdlib.h>
@@ -16,6 +17,7 @@
 
 #include "cubesim_ack_t.h"
 #include "cubesim_delta_t.h"
+#include "cubesim_pose_t.h"
 #include "cubesim_snapshot_t.h"
 #include "cubesim_status_t.h"
 #include "cubesim_topology_t.h"
@@ -91,7 +93,7 @@ int cs_msg_header(const void *data, int len, cubesim_header_t *h)
     int64_t fp = be64(data);
     if (fp != __cubesim_ack_t_get_hash() && fp != __cubesim_delta_t_get_hash() &&
         fp != __cubesim_snapshot_t_get_hash() && fp != __cubesim_status_t_get_hash() &&
-        fp != __cubesim_topology_t_get_hash())
+        fp != __cubesim_topology_t_get_hash() && fp != __cubesim_pose_t_get_hash())
         return 0;
     if (__cubesim_header_t_decode_array(data, 8, len - 8, h, 1) < 0)
         return 0;
@@ -145,6 +147,20 @@ int cs_seq_table_note(cs_seq_table *tab, const char *channel, const cubesim_head
     t->messages++;
     if (!h)
         return 0;
+    bool known = false;
+    for (int i = 0; i < tab->n_sessions && !known; i++)
+        known = tab->sessions[i] == h->session_id;
+    if (!known) {
+        if (tab->n_sessions == tab->cap_sessions) {
+            int cap = tab->cap_sessions ? 2 * tab->cap_sessions : 4;
+            int64_t *ns = realloc(tab->sessions, (size_t)cap * sizeof *ns);
+            if (!ns)
+                return -1;
+            tab->sessions = ns;
+            tab->cap_sessions = cap;
+        }
+        tab->sessions[tab->n_sessions++] = h->session_id;
+    }
     if (!t->have) {
         t->have = 1;
     } else if (h->session_id != t->session_id) {
@@ -160,11 +176,17 @@ int cs_seq_table_note(cs_seq_table *tab, const char *channel, const cubesim_head
     return 0;
 }
 
+int64_t cs_seq_table_restarts(const cs_seq_table *tab)
+{
+    return tab->n_sessions > 1 ? tab->n_sessions - 1 : 0;
+}
+
 void cs_seq_table_free(cs_seq_table *tab)
 {
     for (int i = 0; i < tab->n; i++)
         free(tab->t[i].channel);
     free(tab->t);
+    free(tab->sessions);
     memset(tab, 0, sizeof *tab);
 }
 

@@ -36,8 +36,8 @@ double cs_mono_s(void);
 /* A random non-zero 63-bit id (getrandom, falling back to time and pid). */
 int64_t cs_random_id(void);
 
-/* If `data` is a message of a type that carries header_t (ack, delta, snapshot, status,
- * topology, by fingerprint), decode its header into *h and return 1; else 0. */
+/* If `data` is a message of a type that carries header_t (ack, delta, pose, snapshot,
+ * status, topology, by fingerprint), decode its header into *h and return 1; else 0. */
 int cs_msg_header(const void *data, int len, cubesim_header_t *h);
 
 /*
@@ -70,10 +70,15 @@ typedef struct cs_seq_track {
 typedef struct cs_seq_table {
     cs_seq_track *t;
     int n, cap;
+    int64_t *sessions; /* every session_id seen, on any channel */
+    int n_sessions, cap_sessions;
 } cs_seq_table;
 
 /* Count one message on `channel` (h NULL: a message without our header). 0, or -1 on OOM. */
 int cs_seq_table_note(cs_seq_table *tab, const char *channel, const cubesim_header_t *h);
+/* Daemon restarts seen: distinct session ids over all channels, less one (each channel's
+ * `restarts` counts the same restart again). */
+int64_t cs_seq_table_restarts(const cs_seq_table *tab);
 void cs_seq_table_free(cs_seq_table *tab);
 
 /* One event of an indexed log. */

@@ -200,11 +200,9 @@ int main(int argc, char **argv)
     lcm_destroy(lcm);
     lcm_eventlog_destroy(lg.log);
 
-    int64_t lost = 0, restarts = 0;
-    for (int i = 0; i < lg.seq.n; i++) {
+    int64_t lost = 0, restarts = cs_seq_table_restarts(&lg.seq);
+    for (int i = 0; i < lg.seq.n; i++)
         lost += lg.seq.t[i].lost;
-        restarts += lg.seq.t[i].restarts;
-    }
     if (!quiet) {
         printf("cubesim-log: %s: %" PRId64 " messages, %" PRId64 " bytes in %.1f s\n", path,
                lg.nevents, lg.bytes, secs);

@@ -52,6 +52,7 @@ typedef struct cs_daemon {
 
     bool paused;
     long long step_budget;  /* > 0: steps left of a "step N" command, then pause */
+    int diverged_run;       /* diverged steps in a row (do_step) */
     long long steps_limit;  /* from --steps/--duration; 0: none */
     long long steps_done;   /* by this process, all epochs */
     int32_t epoch;
@@ -578,10 +579,10 @@ static void apply_inputs(cs_daemon *d, double now)
 /* One physics step and what follows it. Returns false if the run must stop. */
 /* The current frame's deltas (and rigid poses) into the send queue; the clients are then
  * current (d->unpublished cleared) unless memory ran out (warned). */
-static void queue_deltas(cs_daemon *d)
+static void queue_deltas(cs_daemon *d, bool exact)
 {
     sync_context(d);
-    if (cs_bus_queue_deltas(d->bus, d->world, d->scene.publish_epsilon) < 0)
+    if (cs_bus_queue_deltas(d->bus, d->world, exact ? -1.0 : d->scene.publish_epsilon) < 0)
         cs_dlog_warn(&d->log, "deltas", "could not queue deltas (out of memory)");
     else
         d->unpublished = false;
@@ -597,11 +598,19 @@ static void do_step(cs_daemon *d)
     d->period_steps++;
     d->steps_done++;
     publish_topology(d);
-    if (rc == CS_ERR_DIVERGED) {
-        /* The engine undid the step; stepping again would only repeat it. */
+    d->diverged_run = rc == CS_ERR_DIVERGED ? d->diverged_run + 1 : 0;
+    if (rc == CS_ERR_DIVERGED && d->diverged_run == 1) {
+        /* The engine undid the object's step, dropped its inputs and left it at rest where it
+         * was: what made it diverge (one client's absurd force, say) is gone, so the run goes
+         * on for every other client. */
+        cs_dlog_warn(&d->log, NULL,
+                     "step diverged at frame %lld (undone: the object's inputs dropped, "
+                     "left at rest)", (long long)cs_world_frame(d->world));
+    } else if (rc == CS_ERR_DIVERGED) {
+        /* Again without new inputs: stepping on would only repeat it. */
         d->paused = true;
         d->step_budget = 0;
-        cs_dlog_warn(&d->log, NULL, "step diverged at frame %lld (undone): paused",
+        cs_dlog_warn(&d->log, NULL, "step diverged again at frame %lld (undone): paused",
                      (long long)cs_world_frame(d->world));
     } else if (rc == CS_ERR_NOT_CONVERGED) {
         cs_dlog_warn(&d->log, "not converged", "frame %lld: solver did not converge",
@@ -617,7 +626,7 @@ static void do_step(cs_daemon *d)
     double t = cs_world_time(d->world), period = publish_period(d);
     d->unpublished = true;
     if (t + 1e-9 * (period > 0 ? period : 1) >= d->next_publish) {
-        queue_deltas(d);
+        queue_deltas(d, false);
         d->next_publish += period;
         if (d->next_publish <= t)
             d->next_publish = t + period;
@@ -638,7 +647,7 @@ static void do_step(cs_daemon *d)
 static void publish_paused(cs_daemon *d)
 {
     if (d->paused && d->unpublished)
-        queue_deltas(d); /* if out of memory: tried again on the next loop iteration */
+        queue_deltas(d, true); /* if out of memory: tried again on the next loop iteration */
 }
 
 static void publish_status(cs_daemon *d, double now)
@@ -650,7 +659,7 @@ static void publish_status(cs_daemon *d, double now)
     x.step_ms_avg = d->period_steps ? d->period_step_ms / (double)d->period_steps : 0;
     double wall = now - d->period_wall0;
     double sim = cs_world_time(d->world) - d->period_sim0;
-    x.real_time_factor = wall > 0 && sim > 0 ? sim / wall : 0;
+    x.real_time_factor = !d->paused && wall > 0 && sim > 0 ? sim / wall : 0;
     sync_context(d);
     if (cs_bus_publish_status(d->bus, d->world, &x) < 0)
         cs_dlog_warn(&d->log, "status", "could not publish status");
@@ -748,7 +757,7 @@ static int run_loop(cs_daemon *d)
     /* Last words: the final state and a status, then a bounded flush of the outbox. */
     now = cs_dlog_now();
     sync_context(d);
-    cs_bus_queue_deltas(d->bus, d->world, d->scene.publish_epsilon);
+    cs_bus_queue_deltas(d->bus, d->world, -1.0); /* exact, as while paused */
     publish_status(d, now);
     double until = now + 1.0;
     for (;;) {

@@ -10,6 +10,9 @@
 #   rigid_replay_equals_live  replay --export equals the daemon's --export (same faces, within
 #                             publish_epsilon + 2^-24·|x|)
 #   rigid_no_loss             the logger lost no message
+#   rigid_pose_seq_tracked    the logger tracks CUBESIM_POSE's sequence numbers
+#   rigid_diverged_runs_on    a 1e9 N force on the 2 kg box: the step diverges, is undone, and
+#                             the daemon runs on (not paused)
 source "$(dirname "$0")/lib.sh"
 cs_netns_reexec "$@"
 B=$CS_IT_BIN
@@ -44,7 +47,21 @@ sleep 0.2
     >/dev/null || cs_fail rigid_push "force on the rigid box refused"
 "$B/cubesim-push" --lcm "$U" --timeout 3 force bar --at 0.9 0.05 0.9 --force 0 0 20 \
     >/dev/null || cs_fail rigid_push "force on the bar refused"
-sleep 2.0
+sleep 1.0
+# An absurd but accepted force (max_force is 1e9 N) throws the 2 kg box past the speed a body
+# can have (1 km/s): the engine undoes its step, drops its inputs and leaves it at rest. The
+# daemon runs on for the other clients (it used to pause until someone sent resume).
+"$B/cubesim-push" --lcm "$U" --timeout 3 force box --at 0.2 0.05 0.4 --force 0 0 1e9 \
+    >/dev/null || cs_fail rigid_diverged_runs_on "the 1e9 N force was refused"
+sleep 0.5
+st=$(cs_bus --timeout 3 status --count 1)
+if grep -q 'paused=0' <<<"$st" && grep -q 'step diverged at frame .*left at rest' daemon.err \
+    && ! grep -q 'paused' daemon.err; then
+    cs_pass "rigid_diverged_runs_on"
+else
+    cs_fail rigid_diverged_runs_on "status '$(head -1 <<<"$st")', stderr: $(grep -i diverg daemon.err | head -2 | tr '\n' '|')"
+fi
+sleep 0.5
 "$B/cubesim-push" --lcm "$U" --timeout 3 pause >/dev/null
 sleep 0.5
 cs_stop_daemon TERM || cs_fail daemon_stop "exit $CS_DAEMON_RC"
@@ -70,4 +87,7 @@ r=$(obj_close end.obj live.obj $EPS) && cs_pass "rigid_replay_equals_live ($r)" 
     || cs_fail rigid_replay_equals_live "$r $(head -2 replay.err | tr '\n' '|')"
 grep -q '^lost 0 messages' log_a.txt && cs_pass rigid_no_loss \
     || cs_fail rigid_no_loss "$(tr '\n' '|' <log_a.txt)"
+# the logger tracks the poses' sequence numbers (it used to print "(no sequence numbers)")
+grep -Eq '^ +CUBESIM_POSE +[0-9]+ messages +0 lost' log_a.txt && cs_pass rigid_pose_seq_tracked \
+    || cs_fail rigid_pose_seq_tracked "$(grep CUBESIM_POSE log_a.txt)"
 cs_finish

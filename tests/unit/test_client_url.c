@@ -1,6 +1,8 @@
 /*
  * test_client_url.c — cs_client_url (client/client_util.c): a receiving client's udpm URL gets
  * a 4 MiB recv_buf_size unless it names one; other providers and explicit sizes are kept.
+ * And the receive accounting the clients share: cs_msg_header reads every type that carries
+ * header_t (pose_t included), cs_seq_table counts a daemon restart once, not once per channel.
  */
 #include "check.h"
 
@@ -8,6 +10,8 @@
 #include <string.h>
 
 #include "client/client_util.h"
+#include "cubesim_delta_t.h"
+#include "cubesim_pose_t.h"
 
 static int url_is(const char *in, const char *want)
 {
@@ -46,4 +50,53 @@ TEST(client_url_default_and_environment)
     } else {
         unsetenv("LCM_DEFAULT_URL");
     }
+}
+
+/* A pose carries header_t: cubesim-log tracks its sequence numbers (before, CUBESIM_POSE was
+ * "(no sequence numbers)" and a lost pose never asked for a snapshot). */
+TEST(client_msg_header_reads_poses)
+{
+    cubesim_pose_t p;
+    memset(&p, 0, sizeof p);
+    p.header.session_id = 77;
+    p.header.seq = 5;
+    p.header.frame = 9;
+    p.orientation[0] = 1;
+    const int n = cubesim_pose_t_encoded_size(&p);
+    void *buf = malloc((size_t)n);
+    ENSURE(buf && cubesim_pose_t_encode(buf, 0, n, &p) == n);
+    cubesim_header_t h;
+    memset(&h, 0, sizeof h);
+    ENSURE(cs_msg_header(buf, n, &h) == 1);
+    ENSURE(h.session_id == 77 && h.seq == 5 && h.frame == 9);
+    /* truncated, or another type's fingerprint: not ours */
+    ENSURE(cs_msg_header(buf, 7, &h) == 0);
+    ((unsigned char *)buf)[0] ^= 0xff;
+    ENSURE(cs_msg_header(buf, n, &h) == 0);
+    free(buf);
+}
+
+/* One daemon restart seen on three channels is one restart; a gap is lost messages. */
+TEST(client_seq_table_counts_a_restart_once)
+{
+    cs_seq_table tab;
+    memset(&tab, 0, sizeof tab);
+    const char *ch[3] = {"CUBESIM_DELTA", "CUBESIM_STATUS", "CUBESIM_POSE"};
+    cubesim_header_t h;
+    memset(&h, 0, sizeof h);
+    for (int s = 1; s <= 2; s++)
+        for (int k = 0; k < 3; k++) {
+            h.session_id = 1000 + s;
+            for (h.seq = 1; h.seq <= 4; h.seq++)
+                if (!(s == 1 && k == 0 && h.seq == 3)) /* one delta lost */
+                    ENSURE(cs_seq_table_note(&tab, ch[k], &h) == 0);
+        }
+    ENSURE(cs_seq_table_note(&tab, "OTHER", NULL) == 0);
+    ENSURE(cs_seq_table_restarts(&tab) == 1);
+    int64_t lost = 0;
+    for (int i = 0; i < tab.n; i++)
+        lost += tab.t[i].lost;
+    ENSURE(lost == 1);
+    ENSURE(tab.n == 4);
+    cs_seq_table_free(&tab);
 }
