@@ -152,11 +152,10 @@ static void validate_force(cs_bus_t *b, cs_input *x)
     if (x->force_kind != CUBESIM_FORCE_T_POINT && x->force_kind != CUBESIM_FORCE_T_DRAG) {
         snprintf(num, sizeof num, "%d", (int)x->force_kind);
         refuse(b, x, "force: unknown kind %s (0 = point, 1 = drag)", num);
-    } else if (x->object_id < 0) {
-        snprintf(num, sizeof num, "%d", (int)x->object_id);
-        refuse(b, x, "force: invalid object id %s", num);
-    } else if (x->object_id == 0 && (!x->object_name || !x->object_name[0])) {
-        refuse(b, x, "force: no object given (object_id is 0 and object_name empty)%s", "");
+    } else if (x->object_id <= 0 && (!x->object_name || !x->object_name[0])) {
+        /* force_t: by object_id when > 0, else by object_name (a negative id included) */
+        refuse(b, x, "force: no object given (object_id is not > 0 and object_name empty)%s",
+               "");
     } else if (!finite3(x->point)) {
         refuse(b, x, "force: point is not finite%s", "");
     } else if (!isfinite(x->duration)) {
@@ -331,14 +330,10 @@ static bool sculpt_object(cs_bus_t *b, cs_input *x, int32_t object_id, const cha
         snprintf(x->error, sizeof x->error, "daemon out of memory");
         return false;
     }
-    if (object_id < 0) {
-        snprintf(msg, sizeof msg, "%s: invalid object id %d", x->request, (int)object_id);
-        refuse(b, x, "%s", msg);
-        return false;
-    }
-    if (object_id == 0 && !x->object_name[0]) {
-        snprintf(msg, sizeof msg, "%s: no object given (object_id is 0 and object_name empty)",
-                 x->request);
+    /* by object_id when > 0, else by object_name (a negative id included), as the types say */
+    if (object_id <= 0 && !x->object_name[0]) {
+        snprintf(msg, sizeof msg,
+                 "%s: no object given (object_id is not > 0 and object_name empty)", x->request);
         refuse(b, x, "%s", msg);
         return false;
     }
@@ -1106,6 +1101,10 @@ int cs_bus_queue_deltas(cs_bus_t *b, const cs_world_t *w, double eps)
     if (!ids)
         return -1;
     n = cs_world_object_ids(w, ids, n);
+    /* exact (eps < 0): every vertex whose float32 differs from the one last sent, of every
+     * object (settled ones too), and every vertex of a rigid object, whose receivers move
+     * their copies by their own pose arithmetic */
+    const bool exact = eps < 0;
     if (!(eps >= 0) || !isfinite(eps))
         eps = 0;
     double eps2 = eps * eps;
@@ -1126,7 +1125,7 @@ int cs_bus_queue_deltas(cs_bus_t *b, const cs_world_t *w, double eps)
         }
         /* An object moves in the step in which it falls asleep: compare it once more,
          * then skip it until it wakes. */
-        if (info.sleeping && so->settled)
+        if (info.sleeping && so->settled && !exact)
             continue;
         so->settled = info.sleeping;
         /* rigid: a pose moves the record (and the receivers' copies) first; the deltas
@@ -1156,7 +1155,10 @@ int cs_bus_queue_deltas(cs_bus_t *b, const cs_world_t *w, double eps)
             const double *x = v + 3 * j;
             float *s = so->xyz + 3 * j;
             double dx = x[0] - s[0], dy = x[1] - s[1], dz = x[2] - s[2];
-            if (dx * dx + dy * dy + dz * dz > eps2) {
+            const bool send = exact ? rigid || (float)x[0] != s[0] || (float)x[1] != s[1] ||
+                                          (float)x[2] != s[2]
+                                    : dx * dx + dy * dy + dz * dz > eps2;
+            if (send) {
                 s[0] = (float)x[0];
                 s[1] = (float)x[1];
                 s[2] = (float)x[2];

@@ -24,6 +24,8 @@
 #   paused_pause_published     resume, then pause: the log ends at the paused frame, same
 #                              hashes (fails on main unless the pause lands on a publish frame)
 #   paused_replay_verify       the whole log passes cubesim-replay --verify, nothing lost
+#   paused_eps_hashes          the first check again with publish_epsilon 2e-2: the paused
+#                              flush is exact, so the hashes agree (before: both differed)
 source "$(dirname "$0")/lib.sh"
 cs_netns_reexec "$@"
 B=$CS_IT_BIN
@@ -167,4 +169,28 @@ out=$("$B/cubesim-replay" all.lcm --verify 2>&1); rc=$?
 lost=$(sed -n 's/^lost \([0-9]*\) messages.*/\1/p' all.txt)
 [ $rc -eq 0 ] && [ "${lost:-x}" = 0 ] && cs_pass "paused_replay_verify ($(tail -1 <<<"$out" | cut -c1-60))" \
     || cs_fail paused_replay_verify "exit $rc, lost '$lost': $(tail -3 <<<"$out" | tr '\n' '|')"
+
+# The same with a coarse publish_epsilon (2 cm): the pause's flush is exact (every vertex whose
+# float32 changed, every vertex of a rigid object), so the hashes still agree. Before it sent
+# only what moved by more than publish_epsilon, and clients lagged by up to it.
+sed 's/"publish_epsilon": 0,/"publish_epsilon": 2e-2,/' scene.json >scene_eps.json
+start_logger eps; pe=$!
+sleep 0.5
+if cs_start_daemon --scene scene_eps.json --realtime; then
+    "$B/cubesim-push" --lcm "$U" --timeout 5 force stone --at 1.2 0.1 0.1 --force 0 300 300 >/dev/null
+    sleep 0.6
+    "$B/cubesim-push" --lcm "$U" --timeout 5 pause >/dev/null
+    st5=$(wait_paused "")
+    P=$(status_field frame "$st5")
+    N=1; [ $(((P + 1) % GRID)) -eq 0 ] && N=2
+    "$B/cubesim-push" --lcm "$U" --timeout 5 step $N >/dev/null
+    st5=$(wait_paused $((P + N))) || cs_fail paused_eps_hashes "never paused at frame $((P + N))"
+    sleep 0.3
+    stop_logger $pe
+    compare paused_eps_hashes eps "$st5" $((P + N))
+    cs_stop_daemon TERM || cs_fail daemon_stop "exit $CS_DAEMON_RC"
+else
+    cs_fail paused_eps_hashes "daemon did not start: $(head -c 400 daemon.err | tr '\n' '|')"
+    stop_logger $pe
+fi
 cs_finish

@@ -27,7 +27,9 @@ TEST(bus_sculpt_inputs_decoded_and_refused)
     snprintf(url, sizeof url, "file://%s?mode=w", path);
     lcm_t *lw = lcm_create(url);
     ENSURE(lw);
-    cubesim_paint_t pm = {.client_id = 7, .command_id = 1, .object_id = 0, .object_name = "blob",
+    /* object_id not > 0 names the object by object_name, a negative one too (the types say
+     * so; until session 30 a negative id was refused) */
+    cubesim_paint_t pm = {.client_id = 7, .command_id = 1, .object_id = -5, .object_name = "blob",
                           .centre = {0.1, 0.2, 0.3}, .radius = 0.05, .which = 3, .young = 2,
                           .density = 4, .damping = 0};
     ENSURE(cubesim_paint_t_publish(lw, CS_CH_PAINT, &pm) == 0);
@@ -46,7 +48,7 @@ TEST(bus_sculpt_inputs_decoded_and_refused)
     ENSURE(cubesim_pressure_t_publish(lw, CS_CH_PRESSURE, &prm) == 0);
     prm.command_id = 6;
     prm.pressure = 1;
-    prm.object_id = 0;
+    prm.object_id = -1; /* and no name */
     ENSURE(cubesim_pressure_t_publish(lw, CS_CH_PRESSURE, &prm) == 0);
     double p0[3] = {0, 0, 0}, p1[3] = {1, 0, 0}, p2[3] = {1, INFINITY, 0};
     double *rows[3] = {p0, p1, p2};
