@@ -73,6 +73,10 @@ deps:
 
 gen: $(GEN_C)
 
+# The generated sources are kept: otherwise make deletes them as intermediates after a fresh
+# build, and a client cannot compile against build/gen until a second make.
+.SECONDARY: $(GEN_C) $(GEN_H)
+
 $(GEN)/cubesim_%.c $(GEN)/cubesim_%.h: lcmtypes/%.lcm
 	@mkdir -p $(GEN)
 	lcm-gen -c --c-cpath $(GEN) --c-hpath $(GEN) $<

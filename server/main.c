@@ -25,6 +25,7 @@
 #include <time.h>
 
 #include "bus.h"
+#include "client/client_util.h"
 #include "cubesim.h"
 #include "dlog.h"
 #include "mesh.h"
@@ -810,8 +811,20 @@ int main(int argc, char **argv)
     const cs_world_def *wd = cs_world_get_def(d.world);
     if (d.opt.steps)
         d.steps_limit = d.opt.steps;
-    else if (d.opt.duration > 0)
-        d.steps_limit = (long long)ceil(d.opt.duration / wd->dt - 1e-9);
+    else if (d.opt.duration > 0) {
+        /* 1e15 steps (about 500 years of 1/60 s steps at a million a second) is beyond any
+         * run; past 9.2e18 the count would not fit (it used to wrap and run one step) */
+        const double nsteps = ceil(d.opt.duration / wd->dt - 1e-9);
+        if (!(nsteps <= 1e15)) {
+            fprintf(stderr, "cubesimd: --duration %g s is %.3g steps of dt = %g s; at most 1e15 "
+                            "(leave --duration out to run until stopped)\n",
+                    d.opt.duration, nsteps, wd->dt);
+            cs_world_destroy(d.world);
+            cs_scene_free(&d.scene);
+            return 2;
+        }
+        d.steps_limit = (long long)nsteps;
+    }
     if (d.opt.duration > 0 && d.steps_limit < 1)
         d.steps_limit = 1;
     cs_dlog_info(&d.log, "scene %s: %d objects, dt = %g s", d.opt.scene, d.scene.n_objects,
@@ -832,15 +845,19 @@ int main(int argc, char **argv)
                          1e3 * (cs_dlog_now() - t0), st ? st->cg_iterations : -1);
         }
     } else {
-        if (cs_bus_create(d.opt.lcm_url, &d.log, &d.bus, err, sizeof err) != 0) {
-            fprintf(stderr, "cubesimd: %s\n", err);
+        /* the daemon receives too (inputs, bursts of them, a load's long argument): its udpm
+         * socket gets the clients' 4 MiB receive buffer unless the URL names one */
+        char *url = cs_client_url(d.opt.lcm_url);
+        if (!url || cs_bus_create(url, &d.log, &d.bus, err, sizeof err) != 0) {
+            fprintf(stderr, "cubesimd: %s\n", url ? err : "out of memory");
+            free(url);
             cs_world_destroy(d.world);
             cs_scene_free(&d.scene);
             return 2;
         }
-        cs_dlog_info(&d.log, "session %lld on %s, %s", (long long)cs_bus_session_id(d.bus),
-                     d.opt.lcm_url ? d.opt.lcm_url : "LCM's default URL",
+        cs_dlog_info(&d.log, "session %lld on %s, %s", (long long)cs_bus_session_id(d.bus), url,
                      d.opt.realtime ? "real time" : "as fast as possible");
+        free(url);
         rc = run_loop(&d);
     }
     if (write_outputs(&d) != 0 && rc == 0)

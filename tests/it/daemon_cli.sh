@@ -54,6 +54,8 @@ expect_exit2 cli-steps-text "--steps 'ten'" --scene "$S" --steps ten
 expect_exit2 cli-duration-negative "--duration '-1'" --scene "$S" --duration -1
 expect_exit2 cli-duration-nan "--duration 'nan'" --scene "$S" --duration nan
 expect_exit2 cli-steps-and-duration 'exclude each other' --scene "$S" --steps 2 --duration 1
+# a duration whose step count would not fit (it wrapped and ran one step, exit 0)
+expect_exit2 cli-duration-huge 'at most 1e15' --scene "$S" --duration 1e20
 expect_exit2 cli-static-and-steps '--static cannot be combined' --scene "$S" --static --steps 2
 # LCM itself prints a line about an unknown provider: only our last line is checked here.
 err=$(timeout 20 "$D" --quiet --scene "$S" --lcm nosuch://x --steps 1 2>&1 >/dev/null); rc=$?
