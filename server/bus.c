@@ -756,13 +756,19 @@ static cubesim_header_t header(cs_bus_t *b, int64_t *seq)
 
 int cs_bus_ack(cs_bus_t *b, const cs_input *in, bool ok, const char *message)
 {
+    /* one line, whatever a client put in a name: control characters become '?' */
+    char line[512];
+    snprintf(line, sizeof line, "%s", message ? message : "");
+    for (char *p = line; *p; p++)
+        if ((unsigned char)*p < 0x20 || *p == 0x7f)
+            *p = '?';
     cubesim_ack_t a;
     a.header = header(b, &b->seq_ack);
     a.client_id = in->client_id;
     a.command_id = in->command_id;
     a.request = (char *)in->request;
     a.ok = ok ? 1 : 0;
-    a.message = (char *)(message ? message : "");
+    a.message = line;
     return cubesim_ack_t_publish(b->lcm, CS_CH_ACK, &a) < 0 ? -1 : 0;
 }
 

@@ -27,10 +27,11 @@ static void vline(const char *fmt, va_list ap)
 {
     char buf[1024];
     vsnprintf(buf, sizeof buf, fmt, ap);
-    /* One line per event, whatever the message held. */
+    /* One line per event, whatever the message held, and no terminal control sequence from
+     * a client's object name: control characters become '?' */
     for (char *p = buf; *p; p++)
-        if (*p == '\n' || *p == '\r')
-            *p = ' ';
+        if ((unsigned char)*p < 0x20 || *p == 0x7f)
+            *p = '?';
     fprintf(stderr, "cubesimd: %s\n", buf);
 }
 

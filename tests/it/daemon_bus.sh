@@ -73,6 +73,11 @@ expect_refused daemon-inf-point 'not finite' force --name block --point inf,0,0 
 expect_refused daemon-absurd-force 'max_force' force --name block --point 0.05,0.05,0.1 --force 0,0,1e300
 expect_refused daemon-unknown-object-name "no object named 'nosuch'" force --name nosuch --point 0,0,0 --force 0,0,1
 expect_refused daemon-unknown-object-id 'unknown object id 99' force --id 99 --point 0,0,0 --force 0,0,1
+# a name with a newline and a terminal escape: echoed with '?' for each control character, so
+# the ack and the stderr entry stay one line and clear no screen
+expect_refused daemon-control-chars-echoed "no object named 'a\?b\?\[2J'" force --name "$(printf 'a\nb\033[2J')" --point 0,0,0 --force 0,0,1
+# a negative id names the object by its name (force_t: by object_id when > 0, else by name)
+expect_refused daemon-negative-id-by-name "no object named 'nosuch'" force --id -3 --name nosuch --point 0,0,0 --force 0,0,1
 expect_refused daemon-negative-duration 'negative duration' force --name block --point 0,0,0 --force 0,0,1 --duration -1
 expect_refused daemon-bad-drag 'stiffness' force --name block --kind 1 --point 0,0,0 --target 0,0,1 --stiffness -5
 expect_refused daemon-absurd-drag 'max_force' force --name block --kind 1 --point 0.05,0.05,0.1 --target 0.05,0.05,1 --stiffness 1e300
