@@ -287,7 +287,22 @@ cs_object *cs_world_find_internal(const cs_world_t *w, cs_object_id id)
 {
     if (!w || id == CS_NULL_OBJECT)
         return NULL;
-    for (int i = 0; i < w->n_objects; i++)
+    /* objects are kept in increasing id order (ids grow as objects are added, removal keeps
+     * the order, a fracture's rebuilt object keeps its id): binary search, so that walking
+     * every object by id (the bus does, each publish) is not quadratic in a world of
+     * thousands of them */
+    int lo = 0, hi = w->n_objects - 1;
+    while (lo <= hi) {
+        const int mid = lo + (hi - lo) / 2;
+        const cs_object_id m = w->objects[mid]->id;
+        if (m == id)
+            return w->objects[mid];
+        if (m < id)
+            lo = mid + 1;
+        else
+            hi = mid - 1;
+    }
+    for (int i = 0; i < w->n_objects; i++) /* a miss: also in case the order did not hold */
         if (w->objects[i]->id == id)
             return w->objects[i];
     return NULL;

@@ -933,3 +933,50 @@ SLOW_TEST(scene_fuzz_valid_json)
         ENSURE_MSG(parsed > 0 && parsed < n, "%s: %d of %d parsed", files[f], parsed, n);
     }
 }
+
+/* Names are checked and looked up through a hash table: 200 000 materials and 4 000 objects
+ * parse, the last material is found by an object, and a duplicate at the end of either list is
+ * refused naming both places (the pairwise checks before took minutes here, and hours on an
+ * outside reviewer's 400 000 materials). */
+TEST(scene_many_names)
+{
+    const int nm = 200000, no = 4000;
+    size_t cap = (size_t)nm * 24 + (size_t)no * 120 + 256, len = 0;
+    char *j = malloc(cap);
+    ENSURE(j);
+    len += (size_t)sprintf(j + len, "{\"materials\": {");
+    for (int i = 0; i < nm; i++)
+        len += (size_t)sprintf(j + len, "%s\"m%d\": {}", i ? "," : "", i);
+    len += (size_t)sprintf(j + len, "}, \"objects\": [");
+    const size_t objs = len;
+    for (int i = 0; i < no; i++)
+        len += (size_t)sprintf(j + len,
+                               "%s{\"name\": \"o%d\", \"material\": \"m%d\", \"cube_size\": 0.1,"
+                               " \"cells\": {\"origin\": [0, 0, 0], \"ijk\": [[%d, 0, 0]]}}",
+                               i ? "," : "", i, nm - 1 - i, 2 * i);
+    sprintf(j + len, "]}");
+    cs_scene s;
+    char err[512] = "";
+    ENSURE_MSG(cs_scene_parse(j, ".", &s, err, sizeof err) == 0, "%s", err);
+    ENSURE(s.n_objects == no);
+    cs_scene_free(&s);
+    /* a duplicate object at the end */
+    sprintf(j + len, ", {\"name\": \"o17\", \"cube_size\": 0.1, \"cells\": {\"origin\": [0, 0, 0], \"ijk\": [[-5, 0, 0]]}}]}");
+    ENSURE(cs_scene_parse(j, ".", &s, err, sizeof err) != 0);
+    ENSURE_MSG(strstr(err, "duplicate object name 'o17' (also objects[17])"), "%s", err);
+    cs_scene_free(&s);
+    /* an unknown material */
+    sprintf(j + objs, "{\"name\": \"x\", \"material\": \"m200000\"}]}");
+    ENSURE(cs_scene_parse(j, ".", &s, err, sizeof err) != 0);
+    ENSURE_MSG(strstr(err, "unknown material 'm200000'"), "%s", err);
+    cs_scene_free(&s);
+    /* a duplicate material at the end */
+    len = (size_t)sprintf(j, "{\"materials\": {");
+    for (int i = 0; i < nm; i++)
+        len += (size_t)sprintf(j + len, "%s\"m%d\": {}", i ? "," : "", i);
+    sprintf(j + len, ", \"m5\": {}}, \"objects\": []}");
+    ENSURE(cs_scene_parse(j, ".", &s, err, sizeof err) != 0);
+    ENSURE_MSG(strstr(err, "duplicate material"), "%s", err);
+    cs_scene_free(&s);
+    free(j);
+}
