@@ -252,8 +252,9 @@ cs_object_id cs_world_find_object(const cs_world_t *w, const char *name);
 
 /*
  * A point force: `force` [N] acts for `seconds` of simulated time (0: exactly one step) at the
- * material point currently nearest to `point` (world space), spread to the eight corners of its
- * cube by trilinear weights. Refused (CS_ERR_INVALID, message in err) if anything is not
+ * material point currently nearest to `point` (world space): the object's surface vertex
+ * nearest to it, the force spread to the eight corners of that vertex's cube by its trilinear
+ * weights (a point between vertices goes to one of them). Refused (CS_ERR_INVALID, message in err) if anything is not
  * finite, |force| > max_force or seconds < 0.
  */
 int cs_world_apply_force(cs_world_t *w, cs_object_id id, const double point[3],
@@ -347,6 +348,8 @@ int cs_object_surface(const cs_world_t *w, cs_object_id id, const double **verti
 /* 64-bit FNV-1a hash of the surface vertex positions rounded to float: clients compare it. */
 uint64_t cs_object_state_hash(const cs_world_t *w, cs_object_id id);
 
+/* Kinetic and gravity energy with the mass the object moves with: the lumped one, or the
+ * consistent B-spline mass for localframe under central differences. */
 typedef struct cs_energy {
     double kinetic, elastic, gravity; /* [J]; gravity potential relative to z = 0 */
 } cs_energy;
