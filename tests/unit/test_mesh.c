@@ -3,6 +3,7 @@
  * check (common/watertight.c). Mesh files come from scenes/meshes/ (make_meshes.py), found
  * relative to CS_SOURCE_DIR (default: the repository root the tests run from).
  */
+#include <math.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -392,4 +393,32 @@ TEST(watertight_closed_open_flipped_nonmanifold)
     cs_mesh_free(&m);
     ENSURE(!ok);
     ENSURE(r.boundary_edges == 6);
+}
+
+/* The enclosed volume does not depend on where the mesh is: the icosphere moved 1e4, 1e5 and
+ * 1e6 m out keeps its volume to 1e-9 (summed from the origin, the terms cancelled: a 6 cm mesh
+ * 10 km out came out negative, and the scene refused it as inside out). */
+TEST(mesh_volume_far_from_the_origin)
+{
+    char p[512], err[256];
+    cs_mesh m;
+    ENSURE_MSG(cs_mesh_load(mesh_path(p, sizeof p, "icosphere.obj"), &m, err, sizeof err) == 0,
+               "%s", err);
+    const double v0 = cs_mesh_volume(m.v, m.t, m.nt);
+    ENSURE(v0 > 0);
+    double *far = malloc(sizeof(double) * 3 * (size_t)m.nv);
+    ENSURE(far);
+    const double offs[3] = {1e4, 1e5, 1e6};
+    for (int k = 0; k < 3; k++) {
+        for (int i = 0; i < m.nv; i++) {
+            far[3 * i] = m.v[3 * i] + offs[k];
+            far[3 * i + 1] = m.v[3 * i + 1] - offs[k];
+            far[3 * i + 2] = m.v[3 * i + 2] + offs[k];
+        }
+        const double v = cs_mesh_volume(far, m.t, m.nt);
+        ENSURE_MSG(fabs(v - v0) <= 1e-9 * v0, "at %g m: volume %.12g against %.12g", offs[k], v,
+                   v0);
+    }
+    free(far);
+    cs_mesh_free(&m);
 }
