@@ -54,6 +54,7 @@ typedef struct cs_daemon {
     bool paused;
     long long step_budget;  /* > 0: steps left of a "step N" command, then pause */
     int diverged_run;       /* diverged steps in a row (do_step) */
+    bool diverged_stop;     /* a --steps/--duration run ended by diverging twice in a row */
     long long steps_limit;  /* from --steps/--duration; 0: none */
     long long steps_done;   /* by this process, all epochs */
     int32_t epoch;
@@ -607,6 +608,14 @@ static void do_step(cs_daemon *d)
         cs_dlog_warn(&d->log, NULL,
                      "step diverged at frame %lld (undone: the object's inputs dropped, "
                      "left at rest)", (long long)cs_world_frame(d->world));
+    } else if (rc == CS_ERR_DIVERGED && d->steps_limit > 0) {
+        /* Again without new inputs (a scene load too large, say), in a run of --steps or
+         * --duration: no client will resume it, so it ends, exit status 1 (pausing left such
+         * a run waiting for ever) */
+        d->diverged_stop = true;
+        d->steps_limit = d->steps_done;
+        cs_dlog_warn(&d->log, NULL, "step diverged again at frame %lld (undone): run stopped",
+                     (long long)cs_world_frame(d->world));
     } else if (rc == CS_ERR_DIVERGED) {
         /* Again without new inputs: stepping on would only repeat it. */
         d->paused = true;
@@ -772,9 +781,9 @@ static int run_loop(cs_daemon *d)
         now = cs_dlog_now();
     }
     cs_dlog_info(&d->log, "%s after %lld steps (frame %lld, t = %.6g s)",
-                 g_stop ? "stopped by signal" : "done", d->steps_done,
-                 (long long)cs_world_frame(d->world), cs_world_time(d->world));
-    return 0;
+                 g_stop ? "stopped by signal" : d->diverged_stop ? "diverged" : "done",
+                 d->steps_done, (long long)cs_world_frame(d->world), cs_world_time(d->world));
+    return d->diverged_stop ? 1 : 0;
 }
 
 /* ---------------------------------------------------------------- main */

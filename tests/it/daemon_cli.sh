@@ -99,6 +99,21 @@ err=$("$D" --scene "$S" --duration 0.05 2>&1 >/dev/null); rc=$?
 if [ $rc -eq 0 ] && grep -q 'done after 5 steps' <<<"$err"; then cs_pass cli-duration
 else cs_fail cli-duration "exit $rc: $(tail -1 <<<"$err")"; fi
 
+# A scene load that makes every step diverge (1e5 N on a 1 kg rigid cube: past 1 km/s in a
+# step): a --steps run ends with exit 1 after the second diverged step (it used to pause and
+# wait for a resume no client would send).
+cat >"$CS_TMP/diverge.json" <<'JSON'
+{ "objects": [ { "name": "b", "model": "rigid", "box": { "min": [0, 0, 0], "size": [0.1, 0.1, 0.1] },
+  "loads": [ { "min": [-1, -1, -1], "max": [1, 1, 1], "force": [1e5, 0, 0] } ] } ] }
+JSON
+err=$(timeout 20 "$D" --scene "$CS_TMP/diverge.json" --steps 5 2>&1 >/dev/null); rc=$?
+if [ $rc -eq 1 ] && grep -q 'diverged again at frame 2 (undone): run stopped' <<<"$err" \
+    && grep -q 'diverged after 2 steps' <<<"$err"; then
+    cs_pass cli-diverged-run-ends
+else
+    cs_fail cli-diverged-run-ends "exit $rc: $(tr '\n' '|' <<<"$err" | tail -c 300)"
+fi
+
 # --realtime paces steps to the wall clock: 30 steps of 0.01 s take about 0.3 s (not much less).
 t0=$(date +%s.%N)
 "$D" --scene "$S" --quiet --realtime --steps 30 2>/dev/null; rc=$?
