@@ -39,7 +39,7 @@
 #define SC_MAX_PER_AXIS 1024       /* cubes along one axis of a box, cell set or mesh */
 #define SC_MAX_CELLS (1 << 24)     /* cubes in one box or cell set */
 #define SC_MAX_FILE (64L << 20)    /* scene file bytes */
-#define SC_MAX_INDEX (1 << 24)     /* |i|, |j|, |k| of an explicit cell */
+#define SC_MAX_INDEX ((1 << 20) - 2) /* |i|, |j|, |k| of an explicit cell (the engine's lattice) */
 
 struct cs_scene_object_store {
     char *name;

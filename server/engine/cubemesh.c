@@ -144,7 +144,8 @@ int cs_cubemesh_build(cs_cubemesh *cm, double h, const double origin[3], const i
         const int32_t *q = ijk + 3 * c;
         for (int a = 0; a < 3; a++) {
             if (q[a] <= -CS_IJK_LIMIT + 1 || q[a] >= CS_IJK_LIMIT - 1) {
-                snprintf(err, errlen, "cell %d index %d out of range", c, (int)q[a]);
+                snprintf(err, errlen, "cell %d index %d out of range (|index| <= %d)", c, (int)q[a],
+                     CS_IJK_LIMIT - 2);
                 goto fail;
             }
         }

@@ -980,3 +980,24 @@ TEST(scene_many_names)
     cs_scene_free(&s);
     free(j);
 }
+
+/* The parser's cell index range is the engine's lattice (|index| ≤ 2²⁰ − 2): an index just
+ * inside parses and instantiates, one just outside is refused by the parser, naming the field
+ * (the parser allowed 2²⁴ and the engine then refused it without saying the range). */
+TEST(scene_cell_index_range_is_the_engines)
+{
+    char err[512] = "", j[256];
+    cs_scene s;
+    snprintf(j, sizeof j, "{\"objects\": [{\"name\": \"c\", \"cube_size\": 0.1, \"cells\": "
+                          "{\"origin\": [0, 0, 0], \"ijk\": [[%d, 0, 0]]}}]}", (1 << 20) - 2);
+    ENSURE_MSG(cs_scene_parse(j, ".", &s, err, sizeof err) == 0, "%s", err);
+    cs_world_t *w = NULL;
+    ENSURE_MSG(cs_scene_instantiate(&s, &w, err, sizeof err) == 0, "%s", err);
+    cs_world_destroy(w);
+    cs_scene_free(&s);
+    snprintf(j, sizeof j, "{\"objects\": [{\"name\": \"c\", \"cube_size\": 0.1, \"cells\": "
+                          "{\"origin\": [0, 0, 0], \"ijk\": [[%d, 0, 0]]}}]}", (1 << 20) - 1);
+    ENSURE(cs_scene_parse(j, ".", &s, err, sizeof err) != 0);
+    ENSURE_MSG(strstr(err, "objects[0].cells.ijk[0][0]") && strstr(err, "1048574"), "%s", err);
+    cs_scene_free(&s);
+}
