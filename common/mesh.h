@@ -40,6 +40,9 @@ void cs_mesh_transform(cs_mesh *m, double scale, const double rotation_deg[3],
  * gltf, ...). Each piece becomes one mesh/node named names[i] (OBJ: one `g` group per piece).
  * Returns 0, or -1 with a message.
  */
+/* 0 if assimp has an exporter for the extension of path (what cs_mesh_export would use), else
+ * -1: checked before a run, so a bad --export fails at once rather than at its end. */
+int cs_mesh_export_format(const char *path);
 int cs_mesh_export(const char *path, const cs_mesh *pieces, const char *const *names, int n,
                    char *err, size_t errlen);
 

@@ -539,6 +539,12 @@ static void identity(struct aiMatrix4x4 *m)
     m->a1 = m->b2 = m->c3 = m->d4 = 1;
 }
 
+int cs_mesh_export_format(const char *path)
+{
+    char fmt[64];
+    return path && format_for(path, fmt, sizeof fmt) == 0 ? 0 : -1;
+}
+
 int cs_mesh_export(const char *path, const cs_mesh *pieces, const char *const *names, int n,
                    char *err, size_t errlen)
 {

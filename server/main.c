@@ -23,6 +23,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
+#include <unistd.h>
 
 #include "bus.h"
 #include "client/client_util.h"
@@ -167,6 +168,28 @@ static int parse_cli(int argc, char **argv, options *o)
     if (o->static_solve && (o->steps || o->duration > 0 || o->realtime))
         return bad_cli("--static cannot be combined with --steps, --duration or --realtime%s%s",
                        "", "");
+    /* outputs are written at the end of a run: what can be known now is checked now */
+    if (o->export_path && cs_mesh_export_format(o->export_path) != 0) {
+        const char *dot = strrchr(o->export_path, '.');
+        return bad_cli("--export '%s': no assimp exporter for the extension '%s'",
+                       o->export_path, dot ? dot : "(none)");
+    }
+    const char *outs[2] = {o->export_path, o->dump_nodes};
+    for (int k = 0; k < 2; k++) {
+        if (!outs[k])
+            continue;
+        char dir[4096];
+        snprintf(dir, sizeof dir, "%s", outs[k]);
+        char *slash = strrchr(dir, '/');
+        if (slash)
+            slash[slash == dir ? 1 : 0] = 0;
+        else
+            snprintf(dir, sizeof dir, ".");
+        if (access(dir, W_OK) != 0)
+            return bad_cli(k ? "--dump-nodes: cannot write in '%s': %s"
+                             : "--export: cannot write in '%s': %s",
+                           dir, strerror(errno));
+    }
     return 0;
 }
 

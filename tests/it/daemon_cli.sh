@@ -54,6 +54,10 @@ expect_exit2 cli-steps-text "--steps 'ten'" --scene "$S" --steps ten
 expect_exit2 cli-duration-negative "--duration '-1'" --scene "$S" --duration -1
 expect_exit2 cli-duration-nan "--duration 'nan'" --scene "$S" --duration nan
 expect_exit2 cli-steps-and-duration 'exclude each other' --scene "$S" --steps 2 --duration 1
+# outputs that cannot be written are refused before the run, not after it
+expect_exit2 cli-export-unknown-format "no assimp exporter for the extension '.off'" --scene "$S" --steps 1 --export "$CS_TMP/x.off"
+expect_exit2 cli-export-missing-dir "--export: cannot write in '$CS_TMP/nodir'" --scene "$S" --steps 1 --export "$CS_TMP/nodir/x.obj"
+expect_exit2 cli-dump-missing-dir "--dump-nodes: cannot write in '$CS_TMP/nodir'" --scene "$S" --steps 1 --dump-nodes "$CS_TMP/nodir/x.csv"
 # a duration whose step count would not fit (it wrapped and ran one step, exit 0)
 expect_exit2 cli-duration-huge 'at most 1e15' --scene "$S" --duration 1e20
 expect_exit2 cli-static-and-steps '--static cannot be combined' --scene "$S" --static --steps 2
