@@ -695,6 +695,22 @@ int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *i
                 o->n_fixed_nodes++;
                 break;
             }
+    /* a fixed box that holds no node is a mistake the user cannot see (a plane at x = 0.3
+     * misses nodes at 0.30000000000000004): refused, as a load box that holds nothing is */
+    for (int b = 0; b < def->n_fixed; b++) {
+        bool any = false;
+        for (int i = 0; i < o->n && !any; i++)
+            any = in_box(&def->fixed[b], o->cm.node_rest + 3 * i);
+        if (!any) {
+            const cs_aabb *f = &def->fixed[b];
+            rc = cs_engine_fail(err, errlen, CS_ERR_INVALID,
+                                "fixed[%d] (%g %g %g to %g %g %g) holds no node of the object "
+                                "(grow it by a fraction of the cube size around the nodes)",
+                                b, f->min[0], f->min[1], f->min[2], f->max[0], f->max[1],
+                                f->max[2]);
+            goto fail;
+        }
+    }
     /* the stability limits with the scene's fields and penalty springs */
     if (explicit_integ) {
         const double wm = cs_elastic_max_omega(def->model, &def->material, def->cube_size);

@@ -564,3 +564,35 @@ SLOW_TEST(world_static_small_load_meets_its_round_off_floor)
     const double d_ti = q * L * L * L * L / (8 * E * I) + q * L * L / (2 * (5.0 / 6) * (E / 2) * A);
     ENSURE_MSG(fabs(-tip8 / d_ti - 1) < 0.02, "tip %.6g m against Timoshenko %.6g m", -tip8, d_ti);
 }
+
+/* A fixed box that holds no node is refused, naming the box (a zero-thickness plane at
+ * x = 0.3 misses the nodes at 3 × 0.1 = 0.30000000000000004: it was accepted and held
+ * nothing, and the object fell); one a hair thicker holds the plane of nodes. */
+TEST(world_fixed_box_holding_nothing_refused)
+{
+    cs_world_def wd = cs_world_def_default();
+    cs_world_t *w;
+    ENSURE(cs_world_create(&wd, &w, NULL, 0) == CS_OK);
+    int32_t *ijk = cs_box_cells(4, 1, 1);
+    cs_object_def d = cs_object_def_default();
+    d.name = "bar";
+    d.cube_size = 0.1;
+    d.geometry = CS_GEOMETRY_CELLS;
+    d.cells_ijk = ijk;
+    d.n_cells = 4;
+    cs_aabb fix = {{0.3, -1, -1}, {0.3, 1, 1}};
+    d.fixed = &fix;
+    d.n_fixed = 1;
+    cs_object_id id;
+    char err[256] = "";
+    ENSURE(cs_world_add_object(w, &d, &id, err, sizeof err) == CS_ERR_INVALID);
+    ENSURE_MSG(strstr(err, "fixed[0]") && strstr(err, "holds no node") && !strchr(err, '\n'),
+               "%s", err);
+    fix.min[0] = 0.3 - 1e-9;
+    fix.max[0] = 0.3 + 1e-9;
+    ENSURE_MSG(cs_world_add_object(w, &d, &id, err, sizeof err) == CS_OK, "%s", err);
+    cs_object_info info;
+    ENSURE(cs_object_get_info(w, id, &info) == CS_OK && info.n_fixed_nodes == 4);
+    free(ijk);
+    cs_world_destroy(w);
+}
