@@ -122,6 +122,21 @@ int cs_parse_int(const char *s, long lo, long hi, long *out)
     return 0;
 }
 
+/* Room for one more of n items of `size` bytes in *arr (capacity *cap, doubled from `first`);
+ * 0, or -1 out of memory (*arr unchanged). */
+static int grow(void **arr, int n, int *cap, size_t size, int first)
+{
+    if (n < *cap)
+        return 0;
+    const int c = *cap ? 2 * *cap : first;
+    void *p = realloc(*arr, (size_t)c * size);
+    if (!p)
+        return -1;
+    *arr = p;
+    *cap = c;
+    return 0;
+}
+
 int cs_seq_table_note(cs_seq_table *tab, const char *channel, const cubesim_header_t *h)
 {
     cs_seq_track *t = NULL;
@@ -129,14 +144,8 @@ int cs_seq_table_note(cs_seq_table *tab, const char *channel, const cubesim_head
         if (!strcmp(tab->t[i].channel, channel))
             t = &tab->t[i];
     if (!t) {
-        if (tab->n == tab->cap) {
-            int cap = tab->cap ? 2 * tab->cap : 8;
-            cs_seq_track *nt = realloc(tab->t, (size_t)cap * sizeof *nt);
-            if (!nt)
-                return -1;
-            tab->t = nt;
-            tab->cap = cap;
-        }
+        if (grow((void **)&tab->t, tab->n, &tab->cap, sizeof *tab->t, 8))
+            return -1;
         t = &tab->t[tab->n];
         memset(t, 0, sizeof *t);
         t->channel = strdup(channel);
@@ -151,14 +160,9 @@ int cs_seq_table_note(cs_seq_table *tab, const char *channel, const cubesim_head
     for (int i = 0; i < tab->n_sessions && !known; i++)
         known = tab->sessions[i] == h->session_id;
     if (!known) {
-        if (tab->n_sessions == tab->cap_sessions) {
-            int cap = tab->cap_sessions ? 2 * tab->cap_sessions : 4;
-            int64_t *ns = realloc(tab->sessions, (size_t)cap * sizeof *ns);
-            if (!ns)
-                return -1;
-            tab->sessions = ns;
-            tab->cap_sessions = cap;
-        }
+        if (grow((void **)&tab->sessions, tab->n_sessions, &tab->cap_sessions,
+                 sizeof *tab->sessions, 4))
+            return -1;
         tab->sessions[tab->n_sessions++] = h->session_id;
     }
     if (!t->have) {

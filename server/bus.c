@@ -756,12 +756,9 @@ static cubesim_header_t header(cs_bus_t *b, int64_t *seq)
 
 int cs_bus_ack(cs_bus_t *b, const cs_input *in, bool ok, const char *message)
 {
-    /* one line, whatever a client put in a name: control characters become '?' */
-    char line[512];
+    char line[512]; /* one line, whatever a client put in a name */
     snprintf(line, sizeof line, "%s", message ? message : "");
-    for (char *p = line; *p; p++)
-        if ((unsigned char)*p < 0x20 || *p == 0x7f)
-            *p = '?';
+    cs_dlog_one_line(line);
     cubesim_ack_t a;
     a.header = header(b, &b->seq_ack);
     a.client_id = in->client_id;

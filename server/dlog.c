@@ -23,15 +23,18 @@ int64_t cs_dlog_utime(void)
     return (int64_t)ts.tv_sec * 1000000 + ts.tv_nsec / 1000;
 }
 
+void cs_dlog_one_line(char *s)
+{
+    for (char *p = s; *p; p++)
+        if ((unsigned char)*p < 0x20 || *p == 0x7f)
+            *p = '?';
+}
+
 static void vline(const char *fmt, va_list ap)
 {
     char buf[1024];
     vsnprintf(buf, sizeof buf, fmt, ap);
-    /* One line per event, whatever the message held, and no terminal control sequence from
-     * a client's object name: control characters become '?' */
-    for (char *p = buf; *p; p++)
-        if ((unsigned char)*p < 0x20 || *p == 0x7f)
-            *p = '?';
+    cs_dlog_one_line(buf); /* one line per event, whatever the message held */
     fprintf(stderr, "cubesimd: %s\n", buf);
 }
 

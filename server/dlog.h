@@ -36,6 +36,10 @@ void cs_dlog_info(cs_dlog *l, const char *fmt, ...) __attribute__((format(printf
 /* A problem that does not stop the daemon, rate-limited per key (NULL key: never limited). */
 void cs_dlog_warn(cs_dlog *l, const char *key, const char *fmt, ...)
     __attribute__((format(printf, 3, 4)));
+/* Make s one printable line in place: every control character (newline, ESC, ...) becomes
+ * '?', so a client's object name cannot split a line or reach a terminal raw. Used for the
+ * log's lines and the acks' messages. */
+void cs_dlog_one_line(char *s);
 /* Print the "N more ... suppressed" summaries of windows that have ended (call now and then). */
 void cs_dlog_flush(cs_dlog *l);
 

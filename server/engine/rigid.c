@@ -277,6 +277,16 @@ static int mass_properties(cs_object *o, cs_rigid *rb)
         }
     rb->mass = M;
     rb->n_cells = cm->n_cells;
+    for (int a = 0; a < 3; a++) {
+        rb->ijk_lo[a] = INT32_MAX;
+        rb->ijk_hi[a] = INT32_MIN;
+    }
+    for (int c = 0; c < cm->n_cells; c++)
+        for (int a = 0; a < 3; a++) {
+            const int32_t v = cm->cell_ijk[3 * (size_t)c + a];
+            rb->ijk_lo[a] = v < rb->ijk_lo[a] ? v : rb->ijk_lo[a];
+            rb->ijk_hi[a] = v > rb->ijk_hi[a] ? v : rb->ijk_hi[a];
+        }
     rb->n_nodes = o->n;
     rb->inv_mass = 1.0 / rb->mass;
     memcpy(rb->com_rest, C, sizeof C);
@@ -1158,15 +1168,6 @@ static int body_pair(const cs_world_t *w, cs_rigid_world *rw, int ia, int ib)
     const double hA = A->cm.h, hB = B->cm.h;
     const double reach = 0.5 * sqrt(3.0) * (hA + hB) + margin;
     const int start = rw->nc;
-    /* B's lattice bounds: the search box around a cube of A is clamped to them (a body thrown
-     * at absurd speed has a margin of kilometres, and its box of lattice points would not
-     * end; nor would it fit an int) */
-    double bmin[3] = {INFINITY, INFINITY, INFINITY}, bmax[3] = {-INFINITY, -INFINITY, -INFINITY};
-    for (int32_t cb = 0; cb < B->cm.n_cells; cb++)
-        for (int a = 0; a < 3; a++) {
-            bmin[a] = fmin(bmin[a], B->cm.cell_ijk[3 * cb + a]);
-            bmax[a] = fmax(bmax[a], B->cm.cell_ijk[3 * cb + a]);
-        }
     for (int32_t ca = 0; ca < A->cm.n_cells; ca++) {
         double xa[3], d[3], X[3];
         cell_centre_world(A, ca, xa);
@@ -1185,8 +1186,10 @@ static int body_pair(const cs_world_t *w, cs_rigid_world *rw, int ia, int ib)
         const double rc = reach / hB;
         int lo[3], hi[3];
         for (int a = 0; a < 3; a++) {
-            lo[a] = (int)ceil(fmax(u[a] - rc, bmin[a] - 1));
-            hi[a] = (int)floor(fmin(u[a] + rc, bmax[a] + 1));
+            /* clamped to B's cells (a body thrown at absurd speed has a margin of
+             * kilometres: its box of lattice points would not end, nor fit an int) */
+            lo[a] = (int)ceil(fmax(u[a] - rc, B->rb->ijk_lo[a] - 1.0));
+            hi[a] = (int)floor(fmin(u[a] + rc, B->rb->ijk_hi[a] + 1.0));
         }
         for (int i = lo[0]; i <= hi[0]; i++)
             for (int j = lo[1]; j <= hi[1]; j++)

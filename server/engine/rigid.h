@@ -25,6 +25,7 @@ typedef struct cs_rigid {
     double com_rest[3];            /* C: centre of mass in the rest (lattice) frame */
     double I_body[9], I_body_inv[9]; /* inertia about C, rest-frame axes */
     double radius;                 /* max |X − C| over the nodes */
+    int32_t ijk_lo[3], ijk_hi[3];  /* the cells' lattice bounds (the contact search's box) */
     double q[4];                   /* orientation, w x y z */
     double R[9];                   /* its matrix, row-major */
     double c[3];                   /* centre of mass, world */

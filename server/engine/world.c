@@ -3093,32 +3093,28 @@ int cs_object_energy(const cs_world_t *w, cs_object_id id, cs_energy *e)
     const cs_object *o = cs_world_find_internal(w, id);
     if (!o || !e)
         return CS_ERR_UNKNOWN_OBJECT;
-    double ek = kinetic_energy(o, o->v), eg = 0;
+    cs_object *mo = (cs_object *)o; /* the cache is not part of the observable state */
+    /* localframe under central differences moves with its consistent (B-spline) mass: the
+     * energy it conserves is ½ vᵀM v with that M, and gravity acts on its rows (the lumped
+     * measure swung by 70–120 % after an impulse, an outside review found) */
+    const double *mrow = cs_elastic_mass_rows(o);
+    const bool consistent = mrow && o->integrator == CS_INTEGRATOR_CENTRAL_DIFFERENCE;
+    const double *mg = consistent ? mrow : o->m;
+    double ek = -1, eg = 0;
+    double *mv = consistent ? calloc((size_t)o->n * 3, sizeof *mv) : NULL;
+    if (mv) {
+        cs_elastic_apply_M(mo, o->v, mv, 1.0);
+        ek = 0;
+        for (int d = 0; d < 3 * o->n; d++)
+            ek += 0.5 * o->v[d] * mv[d];
+        free(mv);
+    }
+    if (ek < 0)
+        ek = kinetic_energy(o, o->v); /* lumped (or out of memory for the product) */
     for (int i = 0; i < o->n; i++) {
         const double *x = o->x + 3 * i;
-        eg -= o->m[i] * (w->def.gravity[0] * x[0] + w->def.gravity[1] * x[1] +
-                         w->def.gravity[2] * x[2]);
-    }
-    cs_object *mo = (cs_object *)o; /* the cache is not part of the observable state */
-    const double *mrow = cs_elastic_mass_rows(o);
-    if (mrow && o->integrator == CS_INTEGRATOR_CENTRAL_DIFFERENCE) {
-        /* localframe under central differences moves with its consistent (B-spline) mass:
-         * the energy it conserves is ½ vᵀM v with that M, and gravity acts on its rows (the
-         * lumped measure swung by 70–120 % after an impulse, an outside review found) */
-        double *mv = calloc((size_t)o->n * 3, sizeof *mv);
-        if (mv) {
-            cs_elastic_apply_M(mo, o->v, mv, 1.0);
-            ek = 0;
-            for (int d = 0; d < 3 * o->n; d++)
-                ek += 0.5 * o->v[d] * mv[d];
-            free(mv);
-        }
-        eg = 0;
-        for (int i = 0; i < o->n; i++) {
-            const double *x = o->x + 3 * i;
-            eg -= mrow[i] * (w->def.gravity[0] * x[0] + w->def.gravity[1] * x[1] +
-                             w->def.gravity[2] * x[2]);
-        }
+        eg -= mg[i] * (w->def.gravity[0] * x[0] + w->def.gravity[1] * x[1] +
+                       w->def.gravity[2] * x[2]);
     }
     if (o->rb) {
         ek = cs_rigid_kinetic_energy(o);
