@@ -3706,7 +3706,8 @@ static void cell_centre(const cs_object *o, int32_t c, double p[3])
 
 /* §2.3: label the cells within `radius` of cell `centre` by the side of the plane through its
  * centre with normal n on which their centres lie (+ on the positive side and on the plane). */
-static int8_t *plane_labels(const cs_object *o, int32_t centre, const double n[3], double radius)
+static int8_t *plane_labels(const cs_object *o, int32_t centre, const double n[3], double radius,
+                            bool centre_below)
 {
     const int nc = o->cm.n_cells;
     int8_t *label = calloc((size_t)nc, 1);
@@ -3721,10 +3722,14 @@ static int8_t *plane_labels(const cs_object *o, int32_t centre, const double n[3
         double d[3] = {p[0] - c0[0], p[1] - c0[1], p[2] - c0[2]};
         if (d[0] * d[0] + d[1] * d[1] + d[2] * d[2] > r2)
             continue;
-        label[c] = d[0] * n[0] + d[1] * n[1] + d[2] * n[2] >= 0 ? 1 : -1;
+        const double dn = d[0] * n[0] + d[1] * n[1] + d[2] * n[2];
+        label[c] = (centre_below ? dn > 0 : dn >= 0) ? 1 : -1;
     }
     return label;
 }
+
+/* Overstressed cubes tried per object and step whose event separates nothing, at most. */
+#define CS_FRACTURE_EMPTY_TRIES 16
 
 static double effective_radius(const cs_object *o, double radius)
 {
@@ -3746,7 +3751,10 @@ int cs_fracture_after_step(cs_world_t *w, cs_object *o)
     /* The stress test reads the FEM rotations; models other than FEM do not keep them. */
     if (o->model != CS_MODEL_LINEAR && o->model != CS_MODEL_COROTATIONAL)
         cs_fem_update_rotations(&o->fem, o->x);
-    for (int k = 0; k < w->def.max_fractures; k++) {
+    /* An event that separates nothing does not count against max_fractures (empty ones are
+     * bounded on their own: every try marks at least its cube done). */
+    int events = 0, empty = 0;
+    while (events < w->def.max_fractures && empty < CS_FRACTURE_EMPTY_TRIES) {
         int best = -1;
         double best_sig = 0, best_dir[3] = {0, 0, 0};
         for (int c = 0; c < nc; c++) {
@@ -3766,7 +3774,7 @@ int cs_fracture_after_step(cs_world_t *w, cs_object *o)
             rc = CS_ERR_NOMEM;
             break;
         }
-        int8_t *label = plane_labels(o, best, best_dir, effective_radius(o, 0));
+        int8_t *label = plane_labels(o, best, best_dir, effective_radius(o, 0), false);
         if (!label) {
             rc = CS_ERR_NOMEM;
             break;
@@ -3777,6 +3785,22 @@ int cs_fracture_after_step(cs_world_t *w, cs_object *o)
         int cut = 0;
         rc = fracture_event(w, o, label, true, best, best_dir, best_sig, &cut);
         free(label);
+        if (rc == CS_OK && cut == 0 && w->n_objects == n_objects) {
+            /* The plane through the cube's centre keeps the cube (and the cubes in its plane)
+             * on the + side; where no joined neighbour lies on the - side (a cube against a
+             * free or already cut face, such as a bar's end layer against its support) the
+             * crack belongs on the cube's other side. */
+            if (!(label = plane_labels(o, best, best_dir, effective_radius(o, 0), true))) {
+                rc = CS_ERR_NOMEM;
+                break;
+            }
+            rc = fracture_event(w, o, label, true, best, best_dir, best_sig, &cut);
+            free(label);
+        }
+        if (cut > 0)
+            events++;
+        else
+            empty++;
         if (rc != CS_OK || w->n_objects != n_objects)
             break; /* pieces renumbered o's cells: the rest waits for the next step */
     }
@@ -3818,7 +3842,7 @@ int cs_world_fracture(cs_world_t *w, cs_object_id id, const double point[3],
             best = c;
         }
     }
-    int8_t *label = plane_labels(o, best, n, effective_radius(o, radius));
+    int8_t *label = plane_labels(o, best, n, effective_radius(o, radius), false);
     if (!label)
         return cs_engine_fail(err, errlen, CS_ERR_NOMEM, "out of memory");
     int cut = 0;

@@ -12,6 +12,7 @@
 
 #include "check.h"
 #include "cubesim.h"
+#include "scene.h"
 #include "topo.h"
 #include "watertight.h"
 
@@ -611,3 +612,52 @@ TEST(fracture_refuses_bad_arguments)
     cs_world_destroy(w);
 }
 
+
+/* A cantilever under gravity is most stressed in its root layer, whose cubes have no joined
+ * neighbour on the fixed side: the plane through such a cube's centre, with the cube on its +
+ * side, separates nothing. That empty event must not use up max_fractures (with 1 it did, the
+ * same cube was picked again every step and the beam never broke), and the crack belongs on
+ * the cube's other side: the root breaks, as it does with a larger budget. */
+static int root_break_step(int max_fractures, double *x_crack)
+{
+    char json[1024];
+    snprintf(json, sizeof json,
+             "{\"max_fractures\": %d, \"solver\": {\"threads\": 1}, \"objects\": [{\"name\": \"br\","
+             " \"cube_size\": 0.05, \"fracture\": true, \"material\": {\"young\": 2e4,"
+             " \"strength\": 3000}, \"box\": {\"min\": [0,0,0], \"size\": [0.8,0.1,0.1]},"
+             " \"fixed\": [{\"min\": [-0.001,-1,-1], \"max\": [0.001,1,1]}]}]}",
+             max_fractures);
+    cs_scene s;
+    char err[512];
+    if (cs_scene_parse(json, NULL, &s, err, sizeof err) != 0)
+        return -2;
+    cs_world_t *w = NULL;
+    const int rc = cs_scene_instantiate(&s, &w, err, sizeof err);
+    cs_scene_free(&s);
+    if (rc != 0)
+        return -2;
+    int when = -1;
+    for (int step = 0; step < 120 && when < 0; step++) {
+        if (cs_world_step(w) != CS_OK)
+            break;
+        int ne;
+        const cs_event *ev = cs_world_events(w, &ne);
+        for (int i = 0; i < ne; i++)
+            if (ev[i].kind == CS_EVENT_FRACTURE && ev[i].faces_cut > 0 && when < 0) {
+                when = step;
+                *x_crack = ev[i].point[0];
+            }
+    }
+    cs_world_destroy(w);
+    return when;
+}
+
+TEST(fracture_budget_of_one_is_not_spent_by_an_empty_event)
+{
+    double x1 = NAN, x4 = NAN;
+    const int s1 = root_break_step(1, &x1), s4 = root_break_step(4, &x4);
+    ENSURE_MSG(s4 >= 0, "the beam never broke with max_fractures 4 (%d)", s4);
+    ENSURE_MSG(s1 == s4, "max_fractures 1 broke at step %d, 4 at step %d", s1, s4);
+    /* the crack is the plane between the root layer and the next: x = h */
+    ENSURE_MSG(fabs(x1 - 0.05) < 0.026 && fabs(x4 - 0.05) < 0.026, "cracks at x = %g and %g", x1, x4);
+}
