@@ -3728,9 +3728,6 @@ static int8_t *plane_labels(const cs_object *o, int32_t centre, const double n[3
     return label;
 }
 
-/* Overstressed cubes tried per object and step whose event separates nothing, at most. */
-#define CS_FRACTURE_EMPTY_TRIES 16
-
 static double effective_radius(const cs_object *o, double radius)
 {
     double r = radius > 0 ? radius : o->fracture_radius;
@@ -3751,10 +3748,7 @@ int cs_fracture_after_step(cs_world_t *w, cs_object *o)
     /* The stress test reads the FEM rotations; models other than FEM do not keep them. */
     if (o->model != CS_MODEL_LINEAR && o->model != CS_MODEL_COROTATIONAL)
         cs_fem_update_rotations(&o->fem, o->x);
-    /* An event that separates nothing does not count against max_fractures (empty ones are
-     * bounded on their own: every try marks at least its cube done). */
-    int events = 0, empty = 0;
-    while (events < w->def.max_fractures && empty < CS_FRACTURE_EMPTY_TRIES) {
+    for (int k = 0; k < w->def.max_fractures; k++) {
         int best = -1;
         double best_sig = 0, best_dir[3] = {0, 0, 0};
         for (int c = 0; c < nc; c++) {
@@ -3797,10 +3791,6 @@ int cs_fracture_after_step(cs_world_t *w, cs_object *o)
             rc = fracture_event(w, o, label, true, best, best_dir, best_sig, &cut);
             free(label);
         }
-        if (cut > 0)
-            events++;
-        else
-            empty++;
         if (rc != CS_OK || w->n_objects != n_objects)
             break; /* pieces renumbered o's cells: the rest waits for the next step */
     }

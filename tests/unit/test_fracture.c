@@ -615,9 +615,9 @@ TEST(fracture_refuses_bad_arguments)
 
 /* A cantilever under gravity is most stressed in its root layer, whose cubes have no joined
  * neighbour on the fixed side: the plane through such a cube's centre, with the cube on its +
- * side, separates nothing. That empty event must not use up max_fractures (with 1 it did, the
- * same cube was picked again every step and the beam never broke), and the crack belongs on
- * the cube's other side: the root breaks, as it does with a larger budget. */
+ * side, separates nothing. With max_fractures 1 that empty event used up the budget, the same
+ * cube was picked again every step and the beam never broke; the crack belongs on the cube's
+ * other side: the root breaks, at the same step as with a larger budget. */
 static int root_break_step(int max_fractures, double *x_crack)
 {
     char json[1024];
