@@ -313,6 +313,229 @@ static int cmp_lattice(const void *pa, const void *pb)
     return (a->idx > b->idx) - (a->idx < b->idx);
 }
 
+typedef struct {
+    int32_t lo, hi, cell, corner; /* corner: 3 * triangle + the edge's first corner */
+} cell_half_edge;
+
+static int cmp_half_edge(const void *pa, const void *pb)
+{
+    const cell_half_edge *a = pa, *b = pb;
+    if (a->lo != b->lo)
+        return a->lo < b->lo ? -1 : 1;
+    if (a->hi != b->hi)
+        return a->hi < b->hi ? -1 : 1;
+    if (a->cell != b->cell)
+        return a->cell < b->cell ? -1 : 1;
+    return (a->corner > b->corner) - (a->corner < b->corner);
+}
+
+static int32_t uf_find(int32_t *parent, int32_t i)
+{
+    while (parent[i] != i) {
+        parent[i] = parent[parent[i]];
+        i = parent[i];
+    }
+    return i;
+}
+
+static void uf_union(int32_t *parent, int32_t a, int32_t b)
+{
+    a = uf_find(parent, a);
+    b = uf_find(parent, b);
+    if (a != b)
+        parent[a > b ? a : b] = a < b ? a : b;
+}
+
+/* The corner of triangle `tri` at vertex `vert` (the triangle has it). */
+static int32_t corner_at(const int32_t *t, int32_t tri, int32_t vert)
+{
+    for (int k = 0; k < 3; k++)
+        if (t[3 * (size_t)tri + k] == vert)
+            return 3 * tri + k;
+    return 3 * tri;
+}
+
+/*
+ * Welded by lattice point alone, the boundary of cells that touch only along an edge uses that
+ * edge four times, and of cells that touch only at a corner puts two cones at one vertex. Cells
+ * meet through faces: around an edge of four faces, the two of the same cell are paired (each
+ * cell's boundary stays its own), every other edge pairs its two triangles; the triangle
+ * corners at a vertex joined through paired edges form one fan, and each further fan of a
+ * vertex gets a copy of it (appended after the nu vertices). A manifold boundary has one fan per
+ * vertex and comes out unchanged. *v grows if needed; returns the new vertex count, -1 if out of
+ * memory.
+ */
+static int64_t split_cell_fans(double **v, size_t nu, int32_t *t, size_t ntri,
+                               const int32_t *tcell)
+{
+    const size_t nc = 3 * ntri;
+    cell_half_edge *he = malloc((nc + 1) * sizeof *he);
+    int32_t *parent = malloc((nc + 1) * sizeof *parent);
+    int32_t *copy = malloc((nc + 1) * sizeof *copy);
+    uint8_t *claimed = calloc(nu + 1, 1);
+    int64_t total = -1;
+    if (!he || !parent || !copy || !claimed)
+        goto out;
+    for (size_t c = 0; c < nc; c++) {
+        const int32_t a = t[c], b = t[c - c % 3 + (c % 3 + 1) % 3];
+        he[c] = (cell_half_edge){a < b ? a : b, a < b ? b : a, tcell[c / 3], (int32_t)c};
+        parent[c] = (int32_t)c;
+        copy[c] = -1;
+    }
+    qsort(he, nc, sizeof *he, cmp_half_edge);
+    for (size_t i = 0; i < nc;) {
+        size_t j = i + 1;
+        while (j < nc && he[j].lo == he[i].lo && he[j].hi == he[i].hi)
+            j++;
+        /* 2: one pair; 4: two cells' pairs, sorted by cell */
+        if (j - i == 2 || (j - i == 4 && he[i].cell == he[i + 1].cell &&
+                           he[i + 2].cell == he[i + 3].cell))
+            for (size_t k = i; k < j; k += 2) {
+                const int32_t t1 = he[k].corner / 3, t2 = he[k + 1].corner / 3;
+                uf_union(parent, corner_at(t, t1, he[k].lo), corner_at(t, t2, he[k].lo));
+                uf_union(parent, corner_at(t, t1, he[k].hi), corner_at(t, t2, he[k].hi));
+            }
+        i = j;
+    }
+    size_t n_new = nu;
+    for (size_t c = 0; c < nc; c++) {
+        const int32_t r = uf_find(parent, (int32_t)c);
+        if (copy[r] < 0) {
+            if (!claimed[t[c]]) {
+                claimed[t[c]] = 1;
+                copy[r] = t[c];
+            } else {
+                copy[r] = (int32_t)n_new++;
+            }
+        }
+    }
+    if (n_new > nu) {
+        if (n_new > INT32_MAX / 4)
+            goto out;
+        double *nv = realloc(*v, n_new * 3 * sizeof *nv);
+        if (!nv)
+            goto out;
+        *v = nv;
+        for (size_t c = 0; c < nc; c++) {
+            const int32_t r = uf_find(parent, (int32_t)c);
+            if ((size_t)copy[r] >= nu)
+                memcpy(*v + 3 * (size_t)copy[r], *v + 3 * (size_t)t[c], 3 * sizeof **v);
+        }
+        for (size_t c = 0; c < nc; c++)
+            t[c] = copy[uf_find(parent, (int32_t)c)];
+    }
+    total = (int64_t)n_new;
+out:
+    free(he);
+    free(parent);
+    free(copy);
+    free(claimed);
+    return total;
+}
+
+/* Triangle `tri` or one split off it (sib chains them) with the directed edge a -> b: its
+ * index and the edge's first corner in *k, or -1. */
+static int32_t tri_with_edge(const int32_t *t, const int32_t *sib, int32_t tri, int32_t a,
+                             int32_t b, int *k)
+{
+    for (; tri >= 0; tri = sib[tri])
+        for (int m = 0; m < 3; m++)
+            if (t[3 * (size_t)tri + m] == a && t[3 * (size_t)tri + (m + 1) % 3] == b) {
+                *k = m;
+                return tri;
+            }
+    return -1;
+}
+
+/*
+ * An edge whose two cells' fans are joined at both of its ends (the cells also meet through
+ * faces on either side of the edge's ends) is still used four times after split_cell_fans: no
+ * vertex copy separates its two uses. Each cell's pair of triangles on it then gets its own
+ * vertex at the edge's midpoint, both triangles split there. *v, *t and *tcell grow; *nu and
+ * *ntri are updated. Returns 0, or -1 if out of memory.
+ */
+static int split_shared_edges(double **v, size_t *nu, int32_t **t, int32_t **tcell, size_t *ntri)
+{
+    const size_t nc = 3 * *ntri;
+    cell_half_edge *he = malloc((nc + 1) * sizeof *he);
+    if (!he)
+        return -1;
+    for (size_t c = 0; c < nc; c++) {
+        const int32_t a = (*t)[c], b = (*t)[c - c % 3 + (c % 3 + 1) % 3];
+        he[c] = (cell_half_edge){a < b ? a : b, a < b ? b : a, (*tcell)[c / 3], (int32_t)c};
+    }
+    qsort(he, nc, sizeof *he, cmp_half_edge);
+    size_t groups = 0;
+    for (size_t i = 0; i < nc;) {
+        size_t j = i + 1;
+        while (j < nc && he[j].lo == he[i].lo && he[j].hi == he[i].hi)
+            j++;
+        if (j - i == 4 && he[i].cell == he[i + 1].cell && he[i + 2].cell == he[i + 3].cell)
+            he[groups++] = he[i], he[groups++] = he[i + 1], he[groups++] = he[i + 2],
+            he[groups++] = he[i + 3];
+        i = j;
+    }
+    groups /= 4;
+    int rc = 0;
+    if (groups > 0) {
+        const size_t nt_new = *ntri + 4 * groups, nv_new = *nu + 2 * groups;
+        int32_t *sib = NULL;
+        double *nv = NULL;
+        int32_t *nt = NULL, *ncell = NULL;
+        if (nt_new > INT32_MAX / 4 || nv_new > INT32_MAX / 4 ||
+            !(nv = realloc(*v, nv_new * 3 * sizeof *nv)))
+            goto oom;
+        *v = nv;
+        if (!(nt = realloc(*t, nt_new * 3 * sizeof *nt)))
+            goto oom;
+        *t = nt;
+        if (!(ncell = realloc(*tcell, nt_new * sizeof *ncell)))
+            goto oom;
+        *tcell = ncell;
+        if (!(sib = malloc(nt_new * sizeof *sib)))
+            goto oom;
+        for (size_t i = 0; i < nt_new; i++)
+            sib[i] = -1;
+        size_t n_t = *ntri, n_v = *nu;
+        for (size_t g = 0; g < groups; g++)
+            for (int half = 0; half < 2; half++) {
+                const cell_half_edge *e = &he[4 * g + 2 * half];
+                const int32_t m = (int32_t)n_v++;
+                for (int q = 0; q < 3; q++)
+                    nv[3 * (size_t)m + q] = 0.5 * (nv[3 * (size_t)e->lo + q] + nv[3 * (size_t)e->hi + q]);
+                for (int side = 0; side < 2; side++) {
+                    const int32_t orig = e[side].corner / 3;
+                    int k;
+                    int32_t tri = tri_with_edge(nt, sib, orig, e->lo, e->hi, &k);
+                    if (tri < 0)
+                        tri = tri_with_edge(nt, sib, orig, e->hi, e->lo, &k);
+                    if (tri < 0)
+                        continue; /* cannot happen: the edge is on one of them */
+                    int32_t *tt = nt + 3 * (size_t)tri;
+                    const int32_t a = tt[k], b = tt[(k + 1) % 3], c = tt[(k + 2) % 3];
+                    /* (a, b, c) -> (a, m, c) here and (m, b, c) appended */
+                    tt[0] = a, tt[1] = m, tt[2] = c;
+                    int32_t *tn = nt + 3 * n_t;
+                    tn[0] = m, tn[1] = b, tn[2] = c;
+                    ncell[n_t] = ncell[tri];
+                    sib[n_t] = sib[tri];
+                    sib[tri] = (int32_t)n_t;
+                    n_t++;
+                }
+            }
+        *ntri = n_t;
+        *nu = n_v;
+        free(sib);
+        goto done;
+oom:
+        free(sib);
+        rc = -1;
+    }
+done:
+    free(he);
+    return rc;
+}
+
 int cs_surface_of_cells(const cs_cubemesh *cm, int sub, double **verts, int *nv,
                         int32_t **tris, int *nt, char *err, size_t errlen)
 {
@@ -341,8 +564,9 @@ int cs_surface_of_cells(const cs_cubemesh *cm, int sub, double **verts, int *nv,
     lattice_pt *pts = malloc((quads * 4 + 1) * sizeof *pts);
     int32_t *t = malloc((quads * 2 + 1) * 3 * sizeof *t);
     int32_t *remap = malloc((quads * 4 + 1) * sizeof *remap);
+    int32_t *tcell = malloc((quads * 2 + 1) * sizeof *tcell);
     double *v = NULL;
-    if (!pts || !t || !remap)
+    if (!pts || !t || !remap || !tcell)
         goto oom;
     size_t np = 0, ntri = 0;
     for (int c = 0; c < cm->n_cells; c++) {
@@ -377,6 +601,7 @@ int cs_surface_of_cells(const cs_cubemesh *cm, int sub, double **verts, int *nv,
                     int32_t *tt = t + 3 * ntri;
                     tt[0] = i0, tt[1] = i1, tt[2] = i2;
                     tt[3] = i0, tt[4] = i2, tt[5] = i3;
+                    tcell[ntri] = tcell[ntri + 1] = c;
                     ntri += 2;
                 }
         }
@@ -403,6 +628,15 @@ int cs_surface_of_cells(const cs_cubemesh *cm, int sub, double **verts, int *nv,
         t[i] = remap[t[i]];
     free(pts);
     free(remap);
+    pts = NULL;
+    remap = NULL;
+    const int64_t n_split = split_cell_fans(&v, nu, t, ntri, tcell);
+    if (n_split < 0)
+        goto oom;
+    nu = (size_t)n_split;
+    if (split_shared_edges(&v, &nu, &t, &tcell, &ntri) != 0)
+        goto oom;
+    free(tcell);
     *verts = v;
     *tris = t;
     *nv = (int)nu;
@@ -412,6 +646,7 @@ oom:
     free(pts);
     free(t);
     free(remap);
+    free(tcell);
     free(v);
     snprintf(err, errlen, "surface of cells: out of memory");
     return -1;

@@ -62,7 +62,9 @@ void cs_surface_skin_point(const cs_cubemesh *cm, const double *node_pos, int32_
 /*
  * The boundary of a cell set as a closed triangle surface: every cell face not shared with
  * another cell, split into two triangles, subdivided into `sub`×`sub` quads (sub >= 1),
- * vertices welded. Outputs are malloc'd; the caller frees them.
+ * vertices welded where that keeps the surface manifold: cells meeting only along an edge or at
+ * a corner keep their own vertex copies there (and, where no copy separates an edge's two
+ * cells, a vertex per cell at the edge's midpoint). Outputs are malloc'd; the caller frees them.
  */
 int cs_surface_of_cells(const cs_cubemesh *cm, int sub, double **verts, int *nv,
                         int32_t **tris, int *nt, char *err, size_t errlen);

@@ -661,3 +661,38 @@ TEST(fracture_budget_of_one_is_not_spent_by_an_empty_event)
     /* the crack is the plane between the root layer and the next: x = h */
     ENSURE_MSG(fabs(x1 - 0.05) < 0.026 && fabs(x4 - 0.05) < 0.026, "cracks at x = %g and %g", x1, x4);
 }
+
+/* Cells that meet only along an edge (here with cells on both sides of the edge's ends, so
+ * their boundary needs a vertex at the edge's midpoint per cell, surface.c) cut down to single
+ * cubes: closed pieces, volume kept, as for a box. */
+TEST(fracture_exhaustive_cuts_of_cells_meeting_along_an_edge)
+{
+    static const int32_t sets[2][12][3] = {
+        /* 2x2x3 with the middle layer's (1,0) and (0,1) missing */
+        {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {1, 1, 0}, {0, 0, 1}, {1, 1, 1},
+         {0, 0, 2}, {1, 0, 2}, {0, 1, 2}, {1, 1, 2}},
+        /* 3x3x2 minus (1,0,0) and (0,1,0): joined above the edge only */
+        {{0, 0, 0}, {2, 0, 0}, {1, 1, 0}, {2, 1, 0}, {0, 2, 0}, {1, 2, 0}, {2, 2, 0},
+         {0, 0, 1}, {1, 0, 1}, {0, 1, 1}, {1, 1, 1}, {2, 2, 1}}};
+    const int counts[2] = {10, 12};
+    for (int s = 0; s < 2; s++) {
+        cs_world_def wd = cs_world_def_default();
+        wd.gravity[2] = 0;
+        cs_world_t *w = NULL;
+        ENSURE(cs_world_create(&wd, &w, NULL, 0) == CS_OK);
+        cs_object_def od = cs_object_def_default();
+        od.name = "cells";
+        od.cube_size = 0.05;
+        od.fracture = true;
+        od.cells_ijk = &sets[s][0][0];
+        od.n_cells = counts[s];
+        cs_object_id id;
+        char err[256];
+        ENSURE_MSG(cs_world_add_object(w, &od, &id, err, sizeof err) == CS_OK, "%s", err);
+        char why[256];
+        ENSURE_MSG(world_pieces_ok(w, counts[s] * 0.05 * 0.05 * 0.05, 1e-12, why, sizeof why),
+                   "set %d at rest: %s", s, why);
+        exhaustive_cuts(w, &sets[s][0][0], counts[s], 0, VOLUME_TOL, NULL, NULL);
+        cs_world_destroy(w);
+    }
+}
