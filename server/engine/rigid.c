@@ -138,6 +138,8 @@ typedef struct cs_rigid_world {
     struct dgrid *grid; /* broad phase against a deformable object (deformable_grid) */
     cs_soft_resp **soft; /* per deformable object in contact (soft_prepare) */
     int n_soft, cap_soft;
+    int *soft_map;      /* soft's index + 1 by object id (soft_find), 0 empty; cap_map slots */
+    int cap_map;
     uint64_t step;      /* cs_rigid_step calls so far */
     cs_soft_resp *cur;  /* the object's whose contacts are being made */
     struct soft_contact *sc; /* deformable against deformable (soft_contacts) */
@@ -709,6 +711,7 @@ void cs_rigid_world_free(cs_world_t *w)
         free(rw->soft[i]);
     }
     free(rw->soft);
+    free(rw->soft_map);
     free(rw->sc);
     free(rw->sc_version);
     free(rw->sbox);
@@ -1504,23 +1507,69 @@ static void bounce_positions(const cs_world_t *w, cs_rigid_world *rw)
     }
 }
 
+static uint32_t id_hash(cs_object_id id)
+{
+    return id * 2654435761u;
+}
+
+/* File rw->soft[i] in rw->soft_map under its object's id. */
+static void soft_map_put(cs_rigid_world *rw, int i)
+{
+    const uint32_t mask = (uint32_t)rw->cap_map - 1;
+    uint32_t h = id_hash(rw->soft[i]->id) & mask;
+    while (rw->soft_map[h])
+        h = (h + 1) & mask;
+    rw->soft_map[h] = i + 1;
+}
+
+/* rw->soft_map refiled with cap slots (a power of two, > rw->n_soft). */
+static int soft_map_build(cs_rigid_world *rw, int cap)
+{
+    if (cap != rw->cap_map) {
+        int *m = realloc(rw->soft_map, (size_t)cap * sizeof *m);
+        if (!m)
+            return -1;
+        rw->soft_map = m;
+        rw->cap_map = cap;
+    }
+    memset(rw->soft_map, 0, (size_t)cap * sizeof *rw->soft_map);
+    for (int i = 0; i < rw->n_soft; i++)
+        soft_map_put(rw, i);
+    return 0;
+}
+
+/* The record of object id in rw->soft, NULL if none. */
+static cs_soft_resp *soft_find(const cs_rigid_world *rw, cs_object_id id)
+{
+    const uint32_t mask = (uint32_t)rw->cap_map - 1;
+    for (uint32_t h = id_hash(id) & mask; rw->cap_map > 0 && rw->soft_map[h];
+         h = (h + 1) & mask)
+        if (rw->soft[rw->soft_map[h] - 1]->id == id)
+            return rw->soft[rw->soft_map[h] - 1];
+    return NULL;
+}
+
 /* D's response to this step's impulses (contact_soft.h), made on the first contact search
  * of the step that reaches D and kept through the step's substeps, into rw->cur for the
  * contacts about to be made. Returns 0 or -1 (out of memory). */
 static int soft_prepare(const cs_world_t *w, cs_rigid_world *rw, cs_object *D, bool iso)
 {
-    cs_soft_resp *r = NULL;
-    for (int i = 0; i < rw->n_soft && !r; i++)
-        if (rw->soft[i]->id == D->id)
-            r = rw->soft[i];
+    /* (found through a hash on the id: a search of the list made a step with thousands of
+     * objects in contact quadratic in their number) */
+    cs_soft_resp *r = soft_find(rw, D->id);
     if (!r) {
+        if (2 * (rw->n_soft + 1) > rw->cap_map &&
+            soft_map_build(rw, rw->cap_map ? 2 * rw->cap_map : 16) != 0)
+            return -1;
         cs_soft_resp **g = room_for_one(rw->soft, rw->n_soft, &rw->cap_soft, sizeof *g, 4);
         if (!g)
             return -1;
         rw->soft = g;
         if (!(r = calloc(1, sizeof *r)))
             return -1;
+        r->id = D->id; /* (cs_soft_prepare sets it too; the map files it under it now) */
         rw->soft[rw->n_soft++] = r;
+        soft_map_put(rw, rw->n_soft - 1);
     }
     if (cs_soft_prepare(r, D, w->def.dt, rw->step, iso, w->def.ground_friction) != 0)
         return -1;
@@ -3411,6 +3460,8 @@ int cs_rigid_step(cs_world_t *w, cs_step_stats *st)
         free(rw->soft[i]);
     }
     rw->n_soft = kept_soft;
+    if (rw->cap_map > 0 && soft_map_build(rw, rw->cap_map) != 0)
+        return CS_ERR_NOMEM;
     if (cs_rigid_sync(w) != CS_OK || wake_near_movers(w, rw) != CS_OK)
         return CS_ERR_NOMEM;
     const double dt = w->def.dt, gn = sqrt(dot3(w->def.gravity, w->def.gravity));
