@@ -1054,6 +1054,21 @@ int32_t cs_bus_queue_snapshot(cs_bus_t *b, const cs_world_t *w, bool coalesce)
 
 /* ---------------------------------------------------------------- deltas */
 
+/* A rigid object's vertex moved by a pose is resent only beyond eps + CS_POSE_ROUND·(|x_r| +
+ * |x|) (largest coordinates of its reference copy and of where it is): √3·2⁻²³, twice the
+ * float32 rounding of both (cs_bus_queue_deltas). */
+#define CS_POSE_ROUND (1.7320508075688772 * 0x1p-23)
+
+static double max_abs3(const double *x)
+{
+    return fmax(fabs(x[0]), fmax(fabs(x[1]), fabs(x[2])));
+}
+
+static double max_abs3f(const float *x)
+{
+    return fmax(fabs((double)x[0]), fmax(fabs((double)x[1]), fabs((double)x[2])));
+}
+
 static int enc_pose(void *buf, int off, int max, const void *m)
 {
     return cubesim_pose_t_encode(buf, off, max, m);
@@ -1063,8 +1078,9 @@ static int enc_pose(void *buf, int off, int max, const void *m)
  * The pose of a rigid object (lcmtypes/pose_t.lcm). The first after a snapshot or topology
  * change is a reference, sent after the object's deltas of that frame (the record, then up to
  * date, is the reference copy); later ones, sent before the deltas, move the record by
- * cs_pose_transform exactly as the receivers do, so the deltas that follow (vertices still
- * off by more than epsilon) keep the bound. Returns 0, or -1 out of memory.
+ * cs_pose_transform exactly as the receivers do, so the deltas that follow (vertices that
+ * moved in the body frame by more than epsilon, followed by a new reference) keep the bound.
+ * Returns 0, or -1 out of memory.
  */
 static int queue_pose(cs_bus_t *b, sent_object *so, const cs_object_info *info,
                       const cs_rigid_state *rs)
@@ -1136,6 +1152,7 @@ int cs_bus_queue_deltas(cs_bus_t *b, const cs_world_t *w, double eps)
         cs_rigid_state rs;
         const bool rigid = info.model == CS_MODEL_RIGID &&
                            cs_object_rigid_state(w, ids[i], &rs) == CS_OK;
+        const bool posed = rigid && so->has_ref && !exact;
         if (rigid && so->has_ref && queue_pose(b, so, &info, &rs) != 0) {
             free(ids);
             return -1;
@@ -1158,9 +1175,23 @@ int cs_bus_queue_deltas(cs_bus_t *b, const cs_world_t *w, double eps)
             const double *x = v + 3 * j;
             float *s = so->xyz + 3 * j;
             double dx = x[0] - s[0], dy = x[1] - s[1], dz = x[2] - s[2];
+            double tol2 = eps2;
+            if (posed) {
+                /* the record is the pose applied to the float32 reference copy: it carries
+                 * that copy's rounding and its own (each at most 2^-24 |x| per coordinate)
+                 * even where the vertex did not move in the body frame. A vertex is sent
+                 * only when it moved in the body frame by more than eps: beyond eps plus
+                 * twice those roundings (room for the double arithmetic). Comparing the
+                 * floats alone sent every vertex of a moving rigid body every frame at
+                 * publish_epsilon 0, and at any epsilon below a float32 step of its
+                 * coordinates (far from the origin). */
+                const float *r = so->ref_xyz + 3 * j;
+                const double tol = eps + CS_POSE_ROUND * (max_abs3f(r) + max_abs3(x));
+                tol2 = tol * tol;
+            }
             const bool send = exact ? rigid || (float)x[0] != s[0] || (float)x[1] != s[1] ||
                                           (float)x[2] != s[2]
-                                    : dx * dx + dy * dy + dz * dz > eps2;
+                                    : dx * dx + dy * dy + dz * dz > tol2;
             if (send) {
                 s[0] = (float)x[0];
                 s[1] = (float)x[1];
@@ -1170,6 +1201,11 @@ int cs_bus_queue_deltas(cs_bus_t *b, const cs_world_t *w, double eps)
                 m++;
             }
         }
+        /* a rigid object's vertices that moved in its body frame: the record with them
+         * becomes the new reference (a reference pose after these deltas), or the next pose,
+         * which starts from the reference, would undo them and they would go again */
+        if (posed && m > 0)
+            so->has_ref = false;
         /* no reference yet (first motion after a snapshot or topology change): the
          * record, brought up to date by this frame's deltas, becomes it, at this pose */
         if (rigid && !so->has_ref && m == 0 && queue_pose(b, so, &info, &rs) != 0) {

@@ -147,9 +147,12 @@ int32_t cs_bus_last_snapshot_id(const cs_bus_t *b);
 
 /*
  * Queue the deltas of one publish frame: per awake object, the surface vertices farther than
- * eps [m] from what was last sent; eps < 0: exact (a paused daemon's flush): every vertex
- * whose float32 differs from the one last sent, settled objects included, and every vertex of
- * a rigid object. Returns the number of delta messages queued, or -1. If an
+ * eps [m] from what was last sent; for a rigid object, its pose first and then only the
+ * vertices that moved in its body frame by more than eps (beyond the float32 rounding its
+ * pose arithmetic carries: README "CUBESIM_POSE"), followed by a new reference pose; eps < 0:
+ * exact (a paused daemon's flush): every vertex whose float32 differs from the one last sent,
+ * settled objects included, and every vertex of a rigid object. Returns the number of delta
+ * messages queued, or -1. If an
  * object's topology or vertex count no longer matches what was sent (or it is new), a
  * snapshot is queued instead.
  */

@@ -43,7 +43,9 @@
  *
  * Deformable objects against each other (soft_contacts), once per step after the bodies: a
  * node of one in (or just outside) a deformed cell of the other against that cell's nearest
- * exposed face, both sides answering as above; only pairs whose boxes overlap.
+ * exposed face, both sides answering as above; only pairs whose boxes overlap, found by a
+ * broad phase (broadphase.h, a hierarchical grid: n log n in the objects, where testing every
+ * pair made a step with 8 000 objects take 0.7–2 s) and taken in the order of their indices.
  *
  * Impact fracture: when the contact force (impulse/dt) on a body with fracture enabled exceeds
  * strength·h² and twice its weight, the body's cube mesh is solved statically (linear FEM,
@@ -59,6 +61,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "broadphase.h"
 #include "contact_soft.h"
 #include "elastic.h"
 #include "mat3.h"
@@ -135,12 +138,22 @@ typedef struct cs_rigid_world {
     struct dgrid *grid; /* broad phase against a deformable object (deformable_grid) */
     cs_soft_resp **soft; /* per deformable object in contact (soft_prepare) */
     int n_soft, cap_soft;
+    int *soft_map;      /* soft's index + 1 by object id (soft_find), 0 empty; cap_map slots */
+    int cap_map;
     uint64_t step;      /* cs_rigid_step calls so far */
     cs_soft_resp *cur;  /* the object's whose contacts are being made */
     struct soft_contact *sc; /* deformable against deformable (soft_contacts) */
     int nsc, cap_sc;
     double *sbox;       /* soft_contacts: 7 per object, its box and fastest node's speed */
     int cap_sbox;
+    /* their broad phase (soft_candidates, wake_near_movers): each object's box grown by its
+     * reach (6 per object), object indices by kin (kord), the pairs found (cand, 2 each) */
+    cs_bp bp;
+    double *gbox;
+    int *kord;
+    int cap_gbox;
+    int32_t *cand;
+    int n_cand, cap_cand;
     /* the last soft_contacts pass's impulses are still on the node velocities of rw->sc's
      * objects (cs_rigid_drop_pending): until the step after frame pending_frame; each
      * object's topology version then (sc_version, 2 per contact) */
@@ -698,9 +711,14 @@ void cs_rigid_world_free(cs_world_t *w)
         free(rw->soft[i]);
     }
     free(rw->soft);
+    free(rw->soft_map);
     free(rw->sc);
     free(rw->sc_version);
     free(rw->sbox);
+    free(rw->gbox);
+    free(rw->kord);
+    free(rw->cand);
+    cs_bp_free(&rw->bp);
     free(rw);
     w->rigid = NULL;
 }
@@ -1489,23 +1507,69 @@ static void bounce_positions(const cs_world_t *w, cs_rigid_world *rw)
     }
 }
 
+static uint32_t id_hash(cs_object_id id)
+{
+    return id * 2654435761u;
+}
+
+/* File rw->soft[i] in rw->soft_map under its object's id. */
+static void soft_map_put(cs_rigid_world *rw, int i)
+{
+    const uint32_t mask = (uint32_t)rw->cap_map - 1;
+    uint32_t h = id_hash(rw->soft[i]->id) & mask;
+    while (rw->soft_map[h])
+        h = (h + 1) & mask;
+    rw->soft_map[h] = i + 1;
+}
+
+/* rw->soft_map refiled with cap slots (a power of two, > rw->n_soft). */
+static int soft_map_build(cs_rigid_world *rw, int cap)
+{
+    if (cap != rw->cap_map) {
+        int *m = realloc(rw->soft_map, (size_t)cap * sizeof *m);
+        if (!m)
+            return -1;
+        rw->soft_map = m;
+        rw->cap_map = cap;
+    }
+    memset(rw->soft_map, 0, (size_t)cap * sizeof *rw->soft_map);
+    for (int i = 0; i < rw->n_soft; i++)
+        soft_map_put(rw, i);
+    return 0;
+}
+
+/* The record of object id in rw->soft, NULL if none. */
+static cs_soft_resp *soft_find(const cs_rigid_world *rw, cs_object_id id)
+{
+    const uint32_t mask = (uint32_t)rw->cap_map - 1;
+    for (uint32_t h = id_hash(id) & mask; rw->cap_map > 0 && rw->soft_map[h];
+         h = (h + 1) & mask)
+        if (rw->soft[rw->soft_map[h] - 1]->id == id)
+            return rw->soft[rw->soft_map[h] - 1];
+    return NULL;
+}
+
 /* D's response to this step's impulses (contact_soft.h), made on the first contact search
  * of the step that reaches D and kept through the step's substeps, into rw->cur for the
  * contacts about to be made. Returns 0 or -1 (out of memory). */
 static int soft_prepare(const cs_world_t *w, cs_rigid_world *rw, cs_object *D, bool iso)
 {
-    cs_soft_resp *r = NULL;
-    for (int i = 0; i < rw->n_soft && !r; i++)
-        if (rw->soft[i]->id == D->id)
-            r = rw->soft[i];
+    /* (found through a hash on the id: a search of the list made a step with thousands of
+     * objects in contact quadratic in their number) */
+    cs_soft_resp *r = soft_find(rw, D->id);
     if (!r) {
+        if (2 * (rw->n_soft + 1) > rw->cap_map &&
+            soft_map_build(rw, rw->cap_map ? 2 * rw->cap_map : 16) != 0)
+            return -1;
         cs_soft_resp **g = room_for_one(rw->soft, rw->n_soft, &rw->cap_soft, sizeof *g, 4);
         if (!g)
             return -1;
         rw->soft = g;
         if (!(r = calloc(1, sizeof *r)))
             return -1;
+        r->id = D->id; /* (cs_soft_prepare sets it too; the map files it under it now) */
         rw->soft[rw->n_soft++] = r;
+        soft_map_put(rw, rw->n_soft - 1);
     }
     if (cs_soft_prepare(r, D, w->def.dt, rw->step, iso, w->def.ground_friction) != 0)
         return -1;
@@ -2441,11 +2505,222 @@ static void pair_restitution(cs_rigid_world *rw, double v_bounce)
     }
 }
 
+/* Whether soft_contacts looks at o at all. */
+static bool soft_takes_part(const cs_object *o)
+{
+    return o->model != CS_MODEL_RIGID && o->n > 0 && o->cm.n_cells > 0;
+}
+
+/*
+ * Objects i < j of soft_contacts (their boxes and speeds in rw->sbox): their contacts, if their
+ * boxes, grown by the distance they can close in a step, overlap and they are not both asleep;
+ * the record of kin whose boxes are apart. Nothing happens for any other pair
+ * (soft_candidates relies on it). Returns 0, or -1 when out of memory.
+ */
+static int soft_pair(cs_world_t *w, cs_rigid_world *rw, int i, int j, double v_rest)
+{
+    const double dt = w->def.dt;
+    cs_object *A = w->objects[i], *B = w->objects[j];
+    if (!soft_takes_part(A) || !soft_takes_part(B) || (A->sleeping && B->sleeping))
+        return 0;
+    const double *alo = rw->sbox + 7 * i, *ahi = alo + 3, va = alo[6];
+    const double *blo = rw->sbox + 7 * j, *bhi = blo + 3, vb = blo[6];
+    const double margin = dt * (va + vb) + 0.05 * fmin(A->cm.h, B->cm.h);
+    double olo[3], ohi[3];
+    bool over = true;
+    for (int a = 0; a < 3; a++) {
+        olo[a] = fmax(alo[a], blo[a]) - margin;
+        ohi[a] = fmin(ahi[a], bhi[a]) + margin;
+        over = over && olo[a] <= ohi[a];
+    }
+    bool born = false; /* kin never apart: only their born pairs */
+    if (A->kin == B->kin) {
+        /* pieces of one object: born touching across their crack (each crack node on the
+         * other's cell face), so they take the whole search only once their boxes have been
+         * apart; until then their born pairs (born_contacts) */
+        const int ka = kin_apart(A, B->id), kb = kin_apart(B, A->id);
+        if (!over) {
+            if ((!ka && kin_add(A, B->id) != 0) || (!kb && kin_add(B, A->id) != 0))
+                return -1;
+            born_drop(A, B->id);
+            born_drop(B, A->id);
+            return 0;
+        }
+        if (!ka && !kb) { /* (a piece inherits its parent's list, not its kin) */
+            /* mass-spring pieces take none: a contact impulse turned a small one inside out
+             * (its cube has zero energy in its mirror image) */
+            if (A->model == CS_MODEL_MSS || B->model == CS_MODEL_MSS)
+                return 0;
+            born = true;
+        }
+    }
+    if (!over)
+        return 0;
+    if (soft_prepare(w, rw, A, true) != 0)
+        return -1;
+    cs_soft_resp *SA = rw->cur;
+    if (soft_prepare(w, rw, B, true) != 0)
+        return -1;
+    cs_soft_resp *SB = rw->cur;
+    SA->two_level = SB->two_level = true;
+    if (born) {
+        if (born_contacts(rw, dt, v_rest, A, B, SA, SB, olo, ohi, margin) != 0 ||
+            born_contacts(rw, dt, v_rest, B, A, SB, SA, olo, ohi, margin) != 0)
+            return -1;
+    } else if (soft_nodes_in_cells(rw, A, B, SA, SB, olo, ohi, blo, bhi, margin) != 0 ||
+               soft_nodes_in_cells(rw, B, A, SB, SA, olo, ohi, alo, ahi, margin) != 0) {
+        return -1;
+    }
+    return 0;
+}
+
+/* Append pair (i, j) to rw->cand. */
+static int push_cand(cs_rigid_world *rw, int i, int j)
+{
+    if (rw->n_cand == rw->cap_cand) {
+        const int cap = rw->cap_cand ? 2 * rw->cap_cand : 256;
+        int32_t *g = realloc(rw->cand, (size_t)cap * 2 * sizeof *g);
+        if (!g)
+            return -1;
+        rw->cand = g;
+        rw->cap_cand = cap;
+    }
+    rw->cand[2 * rw->n_cand] = i < j ? i : j;
+    rw->cand[2 * rw->n_cand + 1] = i < j ? j : i;
+    rw->n_cand++;
+    return 0;
+}
+
+static int cmp_pair(const void *x, const void *y)
+{
+    const int32_t *a = x, *b = y;
+    if (a[0] != b[0])
+        return (a[0] > b[0]) - (a[0] < b[0]);
+    return (a[1] > b[1]) - (a[1] < b[1]);
+}
+
+/* Orders object indices by kin, then index (soft_candidates). */
+static int cmp_kin(const void *x, const void *y, void *ctx)
+{
+    const cs_world_t *w = ctx;
+    const int a = *(const int *)x, b = *(const int *)y;
+    const cs_object_id ka = w->objects[a]->kin, kb = w->objects[b]->kin;
+    if (ka != kb)
+        return ka < kb ? -1 : 1;
+    return (a > b) - (a < b);
+}
+
+/* Room in rw->gbox and rw->kord for n objects. */
+static int gbox_room(cs_rigid_world *rw, int n)
+{
+    if (n <= rw->cap_gbox)
+        return 0;
+    double *g = realloc(rw->gbox, (size_t)n * 6 * sizeof *g);
+    if (g)
+        rw->gbox = g;
+    int *k = g ? realloc(rw->kord, (size_t)n * sizeof *k) : NULL;
+    if (!k)
+        return -1;
+    rw->kord = k;
+    rw->cap_gbox = n;
+    return 0;
+}
+
+/*
+ * Box i of rw->sbox grown by grow on every side into rw->gbox (for the broad phase), with
+ * room for the rounding of the tests it stands for: 1e-9 of its coordinates' size, far above
+ * the few units in the last place those tests' sums can differ by. False (and a NaN box) if
+ * the grown box is not finite.
+ */
+static bool grown_box(cs_rigid_world *rw, int i, double grow)
+{
+    const double *s = rw->sbox + 7 * i;
+    double *g = rw->gbox + 6 * i;
+    for (int a = 0; a < 3; a++) {
+        const double slack = 1e-9 * (fabs(s[a]) + fabs(s[3 + a]) + grow);
+        g[a] = s[a] - grow - slack;
+        g[3 + a] = s[3 + a] + grow + slack;
+        if (!isfinite(g[a]) || !isfinite(g[3 + a])) {
+            g[0] = NAN;
+            return false;
+        }
+    }
+    return true;
+}
+
+/*
+ * The pairs i < j soft_pair has anything to do for, into rw->cand in (i, j) order, the order
+ * all pairs were taken in before (their impulses are applied in turn, so the order is part of
+ * the result): those whose boxes may overlap, found by the broad phase (broadphase.h) on each
+ * object's box grown by 2 dt v + 0.1 h (soft_pair's test grows both boxes by
+ * dt (va + vb) + 0.05 min(ha, hb), so the sum of the two growths covers it); every pair of
+ * an object whose box or speed is not finite (soft_pair's own test decides those); and the
+ * pairs of kin that soft_pair records as apart or whose born pairs it drops, when their boxes
+ * are apart (each kin, a fracture's pieces, with each other: as many as before). Returns 0,
+ * or -1 when out of memory.
+ */
+static int soft_candidates(cs_world_t *w, cs_rigid_world *rw)
+{
+    const int n = w->n_objects;
+    const double dt = w->def.dt;
+    rw->n_cand = 0;
+    if (gbox_room(rw, n) != 0)
+        return -1;
+    int n_part = 0;
+    for (int i = 0; i < n; i++) {
+        const cs_object *o = w->objects[i];
+        if (!soft_takes_part(o)) {
+            rw->gbox[6 * i] = NAN;
+            continue;
+        }
+        rw->kord[n_part++] = i;
+        if (grown_box(rw, i, 2 * dt * rw->sbox[7 * i + 6] + 0.1 * o->cm.h))
+            continue;
+        for (int j = 0; j < n; j++) /* not finite */
+            if (j != i && soft_takes_part(w->objects[j]) && push_cand(rw, i, j) != 0)
+                return -1;
+    }
+    if (cs_bp_find(&rw->bp, rw->gbox, 6, n) != 0)
+        return -1;
+    for (int k = 0; k < rw->bp.n_pairs; k++)
+        if (push_cand(rw, rw->bp.pairs[2 * k], rw->bp.pairs[2 * k + 1]) != 0)
+            return -1;
+    qsort_r(rw->kord, (size_t)n_part, sizeof *rw->kord, cmp_kin, w);
+    for (int g0 = 0, g1; g0 < n_part; g0 = g1) {
+        const cs_object_id kin = w->objects[rw->kord[g0]]->kin;
+        for (g1 = g0 + 1; g1 < n_part && w->objects[rw->kord[g1]]->kin == kin; g1++)
+            ;
+        for (int p = g0; p < g1; p++)
+            for (int q = p + 1; q < g1; q++) {
+                cs_object *A = w->objects[rw->kord[p]], *B = w->objects[rw->kord[q]];
+                if (A->sleeping && B->sleeping)
+                    continue;
+                if ((!kin_apart(A, B->id) || !kin_apart(B, A->id) || born_find(A, B->id) ||
+                     born_find(B, A->id)) &&
+                    push_cand(rw, rw->kord[p], rw->kord[q]) != 0)
+                    return -1;
+            }
+    }
+    qsort(rw->cand, (size_t)rw->n_cand, 2 * sizeof *rw->cand, cmp_pair);
+    int m = 0;
+    for (int k = 0; k < rw->n_cand; k++) {
+        if (m > 0 && rw->cand[2 * k] == rw->cand[2 * m - 2] &&
+            rw->cand[2 * k + 1] == rw->cand[2 * m - 1])
+            continue;
+        rw->cand[2 * m] = rw->cand[2 * k];
+        rw->cand[2 * m + 1] = rw->cand[2 * k + 1];
+        m++;
+    }
+    rw->n_cand = m;
+    return 0;
+}
+
 /*
  * Contacts between deformable objects, once per step after the rigid bodies' (the same
  * sequential impulses, their own solve): only pairs whose boxes, grown by the distance they can
- * close in a step, overlap, and not both asleep; each object's nodes in the overlap against
- * the other's cells. Returns CS_OK or CS_ERR_NOMEM.
+ * close in a step, overlap, and not both asleep (soft_pair, for the pairs soft_candidates
+ * finds, in (i, j) order); each object's nodes in the overlap against the other's cells.
+ * Returns CS_OK or CS_ERR_NOMEM.
  */
 static int soft_contacts(cs_world_t *w, cs_rigid_world *rw, cs_step_stats *st)
 {
@@ -2469,64 +2744,17 @@ static int soft_contacts(cs_world_t *w, cs_rigid_world *rw, cs_step_stats *st)
         if (o->model != CS_MODEL_RIGID && o->n > 0)
             object_box(o, rw->sbox + 7 * i, rw->sbox + 7 * i + 3, rw->sbox + 7 * i + 6);
     }
-    for (int i = 0; i < w->n_objects; i++) {
-        cs_object *A = w->objects[i];
-        if (A->model == CS_MODEL_RIGID || A->n == 0 || A->cm.n_cells == 0)
-            continue;
-        const double *alo = rw->sbox + 7 * i, *ahi = alo + 3, va = alo[6];
-        for (int j = i + 1; j < w->n_objects; j++) {
-            cs_object *B = w->objects[j];
-            if (B->model == CS_MODEL_RIGID || B->n == 0 || B->cm.n_cells == 0 ||
-                (A->sleeping && B->sleeping))
-                continue;
-            const double *blo = rw->sbox + 7 * j, *bhi = blo + 3, vb = blo[6];
-            const double margin = dt * (va + vb) + 0.05 * fmin(A->cm.h, B->cm.h);
-            double olo[3], ohi[3];
-            bool over = true;
-            for (int a = 0; a < 3; a++) {
-                olo[a] = fmax(alo[a], blo[a]) - margin;
-                ohi[a] = fmin(ahi[a], bhi[a]) + margin;
-                over = over && olo[a] <= ohi[a];
-            }
-            bool born = false; /* kin never apart: only their born pairs */
-            if (A->kin == B->kin) {
-                /* pieces of one object: born touching across their crack (each crack node
-                 * on the other's cell face), so they take the whole search only once their
-                 * boxes have been apart; until then their born pairs (born_contacts) */
-                const int ka = kin_apart(A, B->id), kb = kin_apart(B, A->id);
-                if (!over) {
-                    if ((!ka && kin_add(A, B->id) != 0) || (!kb && kin_add(B, A->id) != 0))
-                        return CS_ERR_NOMEM;
-                    born_drop(A, B->id);
-                    born_drop(B, A->id);
-                    continue;
-                }
-                if (!ka && !kb) { /* (a piece inherits its parent's list, not its kin) */
-                    /* mass-spring pieces take none: a contact impulse turned a small one
-                     * inside out (its cube has zero energy in its mirror image) */
-                    if (A->model == CS_MODEL_MSS || B->model == CS_MODEL_MSS)
-                        continue;
-                    born = true;
-                }
-            }
-            if (!over)
-                continue;
-            if (soft_prepare(w, rw, A, true) != 0)
-                return CS_ERR_NOMEM;
-            cs_soft_resp *SA = rw->cur;
-            if (soft_prepare(w, rw, B, true) != 0)
-                return CS_ERR_NOMEM;
-            cs_soft_resp *SB = rw->cur;
-            SA->two_level = SB->two_level = true;
-            if (born) {
-                if (born_contacts(rw, dt, v_rest, A, B, SA, SB, olo, ohi, margin) != 0 ||
-                    born_contacts(rw, dt, v_rest, B, A, SB, SA, olo, ohi, margin) != 0)
+    if (w->object_pairs_all) { /* (tests: every pair, as before the broad phase) */
+        for (int i = 0; i < w->n_objects; i++)
+            for (int j = i + 1; j < w->n_objects; j++)
+                if (soft_pair(w, rw, i, j, v_rest) != 0)
                     return CS_ERR_NOMEM;
-            } else if (soft_nodes_in_cells(rw, A, B, SA, SB, olo, ohi, blo, bhi, margin) != 0 ||
-                       soft_nodes_in_cells(rw, B, A, SB, SA, olo, ohi, alo, ahi, margin) != 0) {
+    } else {
+        if (soft_candidates(w, rw) != 0)
+            return CS_ERR_NOMEM;
+        for (int k = 0; k < rw->n_cand; k++)
+            if (soft_pair(w, rw, rw->cand[2 * k], rw->cand[2 * k + 1], v_rest) != 0)
                 return CS_ERR_NOMEM;
-            }
-        }
     }
     if (rw->nsc == 0)
         return CS_OK;
@@ -3072,14 +3300,39 @@ static int substep(cs_world_t *w, cs_rigid_world *rw, bool last, cs_step_stats *
     return rc;
 }
 
+/* Sleeping object s wakes if mover m may reach it (wake_near_movers; their boxes and speeds
+ * in rw->sbox, the speed −1 for an object taking no part, 0 for a sleeping one). */
+static void wake_pair(cs_world_t *w, cs_rigid_world *rw, int m, int s)
+{
+    const double dt = w->def.dt;
+    const cs_object *M = w->objects[m];
+    const double *mb = rw->sbox + 7 * m;
+    if (mb[6] <= 0)
+        return;
+    cs_object *S = w->objects[s];
+    const double *sb = rw->sbox + 7 * s;
+    if (!S->sleeping || sb[6] < 0 || S->n_fixed_nodes == S->n ||
+        (M->model == CS_MODEL_RIGID && S->model == CS_MODEL_RIGID))
+        return;
+    const double g = dt * mb[6] + 0.05 * fmin(M->cm.h, S->cm.h);
+    bool near = true;
+    for (int a = 0; a < 3; a++)
+        near = near && mb[a] - g <= sb[3 + a] && mb[3 + a] + g >= sb[a];
+    if (!near)
+        return;
+    S->sleeping = false;
+    S->still_steps = 0;
+}
+
 /*
  * A sleeping object that a moving neighbour may leave or reach wakes, when one of the two is
  * deformable (rigid pairs: substep's sort-and-sweep). Contacts only wake what they push, so a
  * box asleep on a soft block that was then dragged away stayed in the air, and so did a soft
  * block asleep on anything that moved out from under it. Moving: a node faster than twice the
  * sleep speed; near: the two boxes of nodes, the mover's grown by how far it goes in the step
- * and 5 % of the smaller cube edge, overlap. Run after the deformable objects' steps, whose
- * velocities are then their motion (after the contact solve they also hold its impulses).
+ * and 5 % of the smaller cube edge, overlap (wake_pair, for the pairs the broad phase finds).
+ * Run after the deformable objects' steps, whose velocities are then their motion (after the
+ * contact solve they also hold its impulses).
  */
 static int wake_near_movers(cs_world_t *w, cs_rigid_world *rw)
 {
@@ -3106,26 +3359,41 @@ static int wake_near_movers(cs_world_t *w, cs_rigid_world *rw)
         else
             moving++;
     }
-    for (int m = 0; m < w->n_objects && moving > 0; m++) {
-        const cs_object *M = w->objects[m];
-        const double *mb = rw->sbox + 7 * m;
-        if (mb[6] <= 0)
+    if (moving == 0)
+        return CS_OK;
+    if (w->object_pairs_all) { /* (tests: every pair, as before the broad phase) */
+        for (int m = 0; m < w->n_objects; m++)
+            for (int s = 0; s < w->n_objects; s++)
+                wake_pair(w, rw, m, s);
+        return CS_OK;
+    }
+    /* the broad phase on the movers' boxes grown by the most wake_pair grows them, and the
+     * sleepers' as they are (which of them wake does not depend on the order) */
+    if (gbox_room(rw, w->n_objects) != 0)
+        return CS_ERR_NOMEM;
+    rw->n_cand = 0;
+    for (int i = 0; i < w->n_objects; i++) {
+        const cs_object *o = w->objects[i];
+        const double *b = rw->sbox + 7 * i;
+        const bool mover = !(b[6] <= 0);
+        if (!mover && !(o->sleeping && b[6] >= 0 && o->n_fixed_nodes != o->n)) {
+            rw->gbox[6 * i] = NAN;
             continue;
-        for (int s = 0; s < w->n_objects; s++) {
-            cs_object *S = w->objects[s];
-            const double *sb = rw->sbox + 7 * s;
-            if (!S->sleeping || sb[6] < 0 || S->n_fixed_nodes == S->n ||
-                (M->model == CS_MODEL_RIGID && S->model == CS_MODEL_RIGID))
-                continue;
-            const double g = dt * mb[6] + 0.05 * fmin(M->cm.h, S->cm.h);
-            bool near = true;
-            for (int a = 0; a < 3; a++)
-                near = near && mb[a] - g <= sb[3 + a] && mb[3 + a] + g >= sb[a];
-            if (!near)
-                continue;
-            S->sleeping = false;
-            S->still_steps = 0;
         }
+        if (grown_box(rw, i, mover ? dt * b[6] + 0.05 * o->cm.h : 0))
+            continue;
+        for (int j = 0; j < w->n_objects; j++) /* not finite: wake_pair decides */
+            if (j != i && push_cand(rw, i, j) != 0)
+                return CS_ERR_NOMEM;
+    }
+    if (cs_bp_find(&rw->bp, rw->gbox, 6, w->n_objects) != 0)
+        return CS_ERR_NOMEM;
+    for (int k = 0; k < rw->bp.n_pairs; k++)
+        if (push_cand(rw, rw->bp.pairs[2 * k], rw->bp.pairs[2 * k + 1]) != 0)
+            return CS_ERR_NOMEM;
+    for (int k = 0; k < rw->n_cand; k++) {
+        wake_pair(w, rw, rw->cand[2 * k], rw->cand[2 * k + 1]);
+        wake_pair(w, rw, rw->cand[2 * k + 1], rw->cand[2 * k]);
     }
     return CS_OK;
 }
@@ -3192,6 +3460,8 @@ int cs_rigid_step(cs_world_t *w, cs_step_stats *st)
         free(rw->soft[i]);
     }
     rw->n_soft = kept_soft;
+    if (rw->cap_map > 0 && soft_map_build(rw, rw->cap_map) != 0)
+        return CS_ERR_NOMEM;
     if (cs_rigid_sync(w) != CS_OK || wake_near_movers(w, rw) != CS_OK)
         return CS_ERR_NOMEM;
     const double dt = w->def.dt, gn = sqrt(dot3(w->def.gravity, w->def.gravity));

@@ -274,6 +274,9 @@ struct cs_world {
      * its cells and nodes filed in a grid for the contact search (CS_BROADPHASE_BODIES; the
      * tests set 0 and INT_MAX to compare both paths) */
     int broadphase_min_bodies;
+    /* rigid.c: deformable objects' pairs (soft_contacts, wake_near_movers) all tested, as
+     * before their broad phase (false; the tests set it to compare both) */
+    bool object_pairs_all;
     /* The lagged preconditioner's rule (cs_pc_lag): rebuild when a cell turned by more than
      * pc_lag_angle [rad] since the build (0: every step, as before the lag) or after
      * pc_lag_steps steps; CS_PC_LAG_ANGLE and CS_PC_LAG_STEPS unless a test sets them. */
