@@ -12,7 +12,15 @@
  *
  * Export: a scene built by hand (one aiMesh and one child node per piece, one empty material),
  * handed to aiExportScene and freed here — it was never assimp's, so aiReleaseImport must not
- * see it. The exporter id follows the extension.
+ * see it. The exporter id follows the extension. Normals: assimp's OBJ and STL exporters make
+ * their own when a mesh has none (OBJ smooth vertex normals, STL face normals), and both run
+ * on our shared vertices as if each belonged to one triangle: a vertex kept the normal of the
+ * last face written through it (on a box, two of every three corner normals pointed along the
+ * wrong axis, and STL wrote wrong face normals). For those formats each triangle gets its own
+ * three corners carrying its geometric normal (flat shading, what STL holds and what glTF
+ * viewers must compute when normals are absent); OBJ still writes every position once (the
+ * exporter welds equal positions) and every distinct normal once, so its faces stay joined.
+ * The other formats get shared vertices and no normals, as a viewer then computes them.
  */
 #include "mesh.h"
 
@@ -508,6 +516,7 @@ static void free_scene(struct aiScene *sc)
                     free(am->mFaces[f].mIndices);
             free(am->mFaces);
             free(am->mVertices);
+            free(am->mNormals);
             free(am);
         }
         free(sc->mMeshes);
@@ -531,6 +540,33 @@ static void free_scene(struct aiScene *sc)
         free(root);
     }
     free(sc);
+}
+
+/* Exporters that write normals and make their own when a mesh has none (see the top). */
+static int writes_normals(const char *fmt)
+{
+    return !strcmp(fmt, "obj") || !strcmp(fmt, "objnomtl") || !strcmp(fmt, "stl") ||
+           !strcmp(fmt, "stlb");
+}
+
+/* The unit normal of triangle f of pc (counter-clockwise seen from its front), or 0 if it has
+ * no area. */
+static struct aiVector3D face_normal(const cs_mesh *pc, int f)
+{
+    const double *a = pc->v + 3 * (size_t)pc->t[3 * f], *b = pc->v + 3 * (size_t)pc->t[3 * f + 1],
+                 *c = pc->v + 3 * (size_t)pc->t[3 * f + 2];
+    const double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]},
+                 w[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+    double n[3] = {u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2],
+                   u[0] * w[1] - u[1] * w[0]};
+    const double len = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    struct aiVector3D r = {0, 0, 0};
+    if (len > 0 && isfinite(len)) {
+        r.x = (ai_real)(n[0] / len);
+        r.y = (ai_real)(n[1] / len);
+        r.z = (ai_real)(n[2] / len);
+    }
+    return r;
 }
 
 static void identity(struct aiMatrix4x4 *m)
@@ -559,12 +595,23 @@ int cs_mesh_export(const char *path, const cs_mesh *pieces, const char *const *n
                  dot ? dot : "(none)");
         return -1;
     }
-    for (int p = 0; p < n; p++)
+    const int flat = writes_normals(fmt);
+    for (int p = 0; p < n; p++) {
+        if (pieces[p].nv > INT32_MAX / 3 || pieces[p].nt > INT32_MAX / 3) {
+            snprintf(err, errlen, "export '%s': piece %d is too large", path, p);
+            return -1;
+        }
         for (int k = 0; k < 3 * pieces[p].nv; k++)
             if (!isfinite(pieces[p].v[k])) {
                 snprintf(err, errlen, "export '%s': piece %d has a non-finite vertex", path, p);
                 return -1;
             }
+        for (int k = 0; k < 3 * pieces[p].nt; k++)
+            if (pieces[p].t[k] < 0 || pieces[p].t[k] >= pieces[p].nv) {
+                snprintf(err, errlen, "export '%s': piece %d has a bad vertex index", path, p);
+                return -1;
+            }
+    }
     struct aiScene *sc = calloc(1, sizeof *sc);
     if (!sc)
         goto oom;
@@ -597,12 +644,15 @@ int cs_mesh_export(const char *path, const cs_mesh *pieces, const char *const *n
         am->mPrimitiveTypes = aiPrimitiveType_TRIANGLE;
         am->mMaterialIndex = 0;
         set_name(&am->mName, name);
-        am->mVertices = calloc((size_t)(pc->nv ? pc->nv : 1), sizeof *am->mVertices);
+        /* flat: three corners of its own per triangle, carrying its normal */
+        const size_t nverts = flat ? 3 * (size_t)pc->nt : (size_t)pc->nv;
+        am->mVertices = calloc(nverts ? nverts : 1, sizeof *am->mVertices);
+        am->mNormals = flat ? calloc(nverts ? nverts : 1, sizeof *am->mNormals) : NULL;
         am->mFaces = calloc((size_t)(pc->nt ? pc->nt : 1), sizeof *am->mFaces);
-        if (!am->mVertices || !am->mFaces)
+        if (!am->mVertices || !am->mFaces || (flat && !am->mNormals))
             goto oom;
-        am->mNumVertices = (unsigned)pc->nv;
-        for (int i = 0; i < pc->nv; i++) {
+        am->mNumVertices = (unsigned)nverts;
+        for (size_t i = 0; !flat && i < nverts; i++) {
             am->mVertices[i].x = (ai_real)pc->v[3 * i];
             am->mVertices[i].y = (ai_real)pc->v[3 * i + 1];
             am->mVertices[i].z = (ai_real)pc->v[3 * i + 2];
@@ -613,8 +663,20 @@ int cs_mesh_export(const char *path, const cs_mesh *pieces, const char *const *n
             if (!am->mFaces[f].mIndices)
                 goto oom;
             am->mFaces[f].mNumIndices = 3;
-            for (int c = 0; c < 3; c++)
-                am->mFaces[f].mIndices[c] = (unsigned)pc->t[3 * f + c];
+            const struct aiVector3D nrm = flat ? face_normal(pc, f) : (struct aiVector3D){0, 0, 0};
+            for (int c = 0; c < 3; c++) {
+                const int32_t v = pc->t[3 * f + c];
+                if (!flat) {
+                    am->mFaces[f].mIndices[c] = (unsigned)v;
+                    continue;
+                }
+                const size_t corner = 3 * (size_t)f + (size_t)c;
+                am->mVertices[corner].x = (ai_real)pc->v[3 * (size_t)v];
+                am->mVertices[corner].y = (ai_real)pc->v[3 * (size_t)v + 1];
+                am->mVertices[corner].z = (ai_real)pc->v[3 * (size_t)v + 2];
+                am->mNormals[corner] = nrm;
+                am->mFaces[f].mIndices[c] = (unsigned)corner;
+            }
         }
         struct aiNode *node = calloc(1, sizeof *node);
         root->mChildren[p] = node;
