@@ -54,6 +54,33 @@ void cs_mesh_free(cs_mesh *m)
     m->nv = m->nt = 0;
 }
 
+const char *cs_msg_path(const char *s, char *buf, size_t n)
+{
+    static const char cut[] = "\xe2\x80\xa6"; /* U+2026 (...), where the start was cut */
+    if (!buf || n == 0)
+        return "";
+    if (!s)
+        s = "(null)";
+    const size_t len = strlen(s);
+    size_t from = 0, k = 0;
+    if (len > n - 1 && n > sizeof cut) {
+        /* keep the end: as many bytes as fit behind the mark, from a character's first byte,
+         * and from a '/' if one comes soon (whole folder names rather than a piece of one) */
+        from = len - (n - sizeof cut);
+        while (from < len && ((unsigned char)s[from] & 0xc0) == 0x80)
+            from++;
+        const char *slash = memchr(s + from, '/', len - from);
+        if (slash && slash - (s + from) <= 40)
+            from = (size_t)(slash - s);
+        memcpy(buf, cut, sizeof cut - 1);
+        k = sizeof cut - 1;
+    }
+    for (size_t i = from; i < len && k < n - 1; i++)
+        buf[k++] = ((unsigned char)s[i] < 0x20 || s[i] == 0x7f) ? '?' : s[i];
+    buf[k] = '\0';
+    return buf;
+}
+
 typedef struct {
     const double *v;
     int32_t idx;
@@ -146,21 +173,23 @@ static int weld_and_clean(cs_mesh *m)
 /* The import itself (in the child process of cs_mesh_load). */
 static int load_direct(const char *path, cs_mesh *out, char *err, size_t errlen)
 {
+    char shown[CS_MSG_PATH + 1]; /* path as messages show it */
+    cs_msg_path(path, shown, sizeof shown);
     memset(out, 0, sizeof *out);
     struct stat st;
     if (stat(path, &st) != 0) {
         if (errno == ENOENT)
-            snprintf(err, errlen, "mesh '%s': no such file", path);
+            snprintf(err, errlen, "mesh '%s': no such file", shown);
         else
-            snprintf(err, errlen, "mesh '%s': %s", path, strerror(errno));
+            snprintf(err, errlen, "mesh '%s': %s", shown, strerror(errno));
         return -1;
     }
     if (!S_ISREG(st.st_mode)) {
-        snprintf(err, errlen, "mesh '%s': not a regular file", path);
+        snprintf(err, errlen, "mesh '%s': not a regular file", shown);
         return -1;
     }
     if (st.st_size == 0) {
-        snprintf(err, errlen, "mesh '%s': empty file", path);
+        snprintf(err, errlen, "mesh '%s': empty file", shown);
         return -1;
     }
     const struct aiScene *sc =
@@ -169,7 +198,7 @@ static int load_direct(const char *path, cs_mesh *out, char *err, size_t errlen)
                                aiProcess_ValidateDataStructure);
     if (!sc) {
         const char *why = aiGetErrorString();
-        snprintf(err, errlen, "mesh '%s': assimp: %s", path, why && *why ? why : "unreadable");
+        snprintf(err, errlen, "mesh '%s': assimp: %s", shown, why && *why ? why : "unreadable");
         /* assimp messages may end in a newline; keep the message one line */
         for (char *p = err; *p; p++)
             if (*p == '\n' || *p == '\r')
@@ -187,12 +216,12 @@ static int load_direct(const char *path, cs_mesh *out, char *err, size_t errlen)
     }
     if (nt == 0) {
         aiReleaseImport(sc);
-        snprintf(err, errlen, "mesh '%s': no triangles", path);
+        snprintf(err, errlen, "mesh '%s': no triangles", shown);
         return -1;
     }
     if (nv > INT32_MAX / 3 || nt > INT32_MAX / 3) {
         aiReleaseImport(sc);
-        snprintf(err, errlen, "mesh '%s': too large (%zu vertices, %zu triangles)", path, nv, nt);
+        snprintf(err, errlen, "mesh '%s': too large (%zu vertices, %zu triangles)", shown, nv, nt);
         return -1;
     }
     out->v = malloc(nv * 3 * sizeof(double));
@@ -200,7 +229,7 @@ static int load_direct(const char *path, cs_mesh *out, char *err, size_t errlen)
     if (!out->v || !out->t) {
         aiReleaseImport(sc);
         cs_mesh_free(out);
-        snprintf(err, errlen, "mesh '%s': out of memory", path);
+        snprintf(err, errlen, "mesh '%s': out of memory", shown);
         return -1;
     }
     int vbase = 0, tcount = 0;
@@ -213,7 +242,7 @@ static int load_direct(const char *path, cs_mesh *out, char *err, size_t errlen)
             if (!isfinite(x) || !isfinite(y) || !isfinite(z)) {
                 aiReleaseImport(sc);
                 cs_mesh_free(out);
-                snprintf(err, errlen, "mesh '%s': vertex %u of mesh %u is not finite", path, k,
+                snprintf(err, errlen, "mesh '%s': vertex %u of mesh %u is not finite", shown, k,
                          i);
                 return -1;
             }
@@ -229,7 +258,7 @@ static int load_direct(const char *path, cs_mesh *out, char *err, size_t errlen)
                 if (fc->mIndices[c] >= am->mNumVertices) {
                     aiReleaseImport(sc);
                     cs_mesh_free(out);
-                    snprintf(err, errlen, "mesh '%s': face %u of mesh %u has a bad index", path,
+                    snprintf(err, errlen, "mesh '%s': face %u of mesh %u has a bad index", shown,
                              f, i);
                     return -1;
                 }
@@ -244,12 +273,12 @@ static int load_direct(const char *path, cs_mesh *out, char *err, size_t errlen)
     out->nt = tcount;
     if (weld_and_clean(out) != 0) {
         cs_mesh_free(out);
-        snprintf(err, errlen, "mesh '%s': out of memory", path);
+        snprintf(err, errlen, "mesh '%s': out of memory", shown);
         return -1;
     }
     if (out->nt == 0) {
         cs_mesh_free(out);
-        snprintf(err, errlen, "mesh '%s': no triangles (all degenerate)", path);
+        snprintf(err, errlen, "mesh '%s': no triangles (all degenerate)", shown);
         return -1;
     }
     return 0;
@@ -346,10 +375,12 @@ static void import_child(const char *path, int fd)
 
 int cs_mesh_load(const char *path, cs_mesh *out, char *err, size_t errlen)
 {
+    char shown[CS_MSG_PATH + 1]; /* path as messages show it */
+    cs_msg_path(path, shown, sizeof shown);
     memset(out, 0, sizeof *out);
     int fds[2];
     if (pipe(fds) != 0) {
-        snprintf(err, errlen, "mesh '%s': cannot start the importer: %s", path, strerror(errno));
+        snprintf(err, errlen, "mesh '%s': cannot start the importer: %s", shown, strerror(errno));
         return -1;
     }
     fflush(NULL);
@@ -357,7 +388,7 @@ int cs_mesh_load(const char *path, cs_mesh *out, char *err, size_t errlen)
     if (pid < 0) {
         close(fds[0]);
         close(fds[1]);
-        snprintf(err, errlen, "mesh '%s': cannot start the importer: %s", path, strerror(errno));
+        snprintf(err, errlen, "mesh '%s': cannot start the importer: %s", shown, strerror(errno));
         return -1;
     }
     if (pid == 0) {
@@ -389,7 +420,7 @@ int cs_mesh_load(const char *path, cs_mesh *out, char *err, size_t errlen)
             out->t = malloc((size_t)hdr[2] * 3 * sizeof *out->t);
             if (!out->v || !out->t) {
                 cs_mesh_free(out);
-                snprintf(err, errlen, "mesh '%s': out of memory", path);
+                snprintf(err, errlen, "mesh '%s': out of memory", shown);
                 rc = 1;
             } else {
                 out->nv = hdr[1];
@@ -412,12 +443,12 @@ int cs_mesh_load(const char *path, cs_mesh *out, char *err, size_t errlen)
     cs_mesh_free(out);
     if (rc == -2)
         snprintf(err, errlen, "mesh '%s': the importer took longer than %d s and was stopped",
-                 path, IMPORT_SECONDS);
+                 shown, IMPORT_SECONDS);
     else if (rc == -1 && WIFSIGNALED(status))
-        snprintf(err, errlen, "mesh '%s': the importer died (%s) reading this file", path,
+        snprintf(err, errlen, "mesh '%s': the importer died (%s) reading this file", shown,
                  strsignal(WTERMSIG(status)));
     else if (rc == -1)
-        snprintf(err, errlen, "mesh '%s': the importer ended without a result", path);
+        snprintf(err, errlen, "mesh '%s': the importer ended without a result", shown);
     return -1;
 }
 
@@ -584,31 +615,33 @@ int cs_mesh_export_format(const char *path)
 int cs_mesh_export(const char *path, const cs_mesh *pieces, const char *const *names, int n,
                    char *err, size_t errlen)
 {
+    char shown[CS_MSG_PATH + 1]; /* path as messages show it */
+    cs_msg_path(path, shown, sizeof shown);
     if (n <= 0) {
-        snprintf(err, errlen, "export '%s': nothing to write", path);
+        snprintf(err, errlen, "export '%s': nothing to write", shown);
         return -1;
     }
     char fmt[64];
     if (format_for(path, fmt, sizeof fmt) != 0) {
-        const char *dot = strrchr(path, '.');
-        snprintf(err, errlen, "export '%s': no assimp exporter for extension '%s'", path,
+        const char *dot = strrchr(shown, '.');
+        snprintf(err, errlen, "export '%s': no assimp exporter for extension '%s'", shown,
                  dot ? dot : "(none)");
         return -1;
     }
     const int flat = writes_normals(fmt);
     for (int p = 0; p < n; p++) {
         if (pieces[p].nv > INT32_MAX / 3 || pieces[p].nt > INT32_MAX / 3) {
-            snprintf(err, errlen, "export '%s': piece %d is too large", path, p);
+            snprintf(err, errlen, "export '%s': piece %d is too large", shown, p);
             return -1;
         }
         for (int k = 0; k < 3 * pieces[p].nv; k++)
             if (!isfinite(pieces[p].v[k])) {
-                snprintf(err, errlen, "export '%s': piece %d has a non-finite vertex", path, p);
+                snprintf(err, errlen, "export '%s': piece %d has a non-finite vertex", shown, p);
                 return -1;
             }
         for (int k = 0; k < 3 * pieces[p].nt; k++)
             if (pieces[p].t[k] < 0 || pieces[p].t[k] >= pieces[p].nv) {
-                snprintf(err, errlen, "export '%s': piece %d has a bad vertex index", path, p);
+                snprintf(err, errlen, "export '%s': piece %d has a bad vertex index", shown, p);
                 return -1;
             }
     }
@@ -695,7 +728,7 @@ int cs_mesh_export(const char *path, const cs_mesh *pieces, const char *const *n
     free_scene(sc);
     if (rc != aiReturn_SUCCESS) {
         const char *why = aiGetErrorString();
-        snprintf(err, errlen, "export '%s': assimp (%s): %s", path, fmt,
+        snprintf(err, errlen, "export '%s': assimp (%s): %s", shown, fmt,
                  why && *why ? why : "failed");
         for (char *q = err; *q; q++)
             if (*q == '\n' || *q == '\r')
@@ -705,6 +738,6 @@ int cs_mesh_export(const char *path, const cs_mesh *pieces, const char *const *n
     return 0;
 oom:
     free_scene(sc);
-    snprintf(err, errlen, "export '%s': out of memory", path);
+    snprintf(err, errlen, "export '%s': out of memory", shown);
     return -1;
 }

@@ -325,6 +325,46 @@ TEST(mesh_export_round_trips)
     ENSURE_MSG(strstr(err, "no assimp exporter"), "%s", err);
 }
 
+/* ---------------------------------------------------------------- paths in messages */
+
+/* cs_msg_path: whole when it fits; else "…" and the end, from a '/' near the cut, never inside a
+ * UTF-8 character; control bytes '?'. cs_mesh_load names a long missing path that way. */
+TEST(mesh_msg_path_keeps_the_file_name)
+{
+    char b[32], big[CS_MSG_PATH + 1], err[400];
+    ENSURE(!strcmp(cs_msg_path("meshes/ball.obj", b, sizeof b), "meshes/ball.obj"));
+    ENSURE(!strcmp(cs_msg_path("a\nb\tc\x7f.obj", b, sizeof b), "a?b?c?.obj"));
+    ENSURE(!strcmp(cs_msg_path(NULL, b, sizeof b), "(null)"));
+    ENSURE(!strcmp(cs_msg_path("abc", b, 1), ""));
+    /* 31 bytes fit: "…" (3 bytes) then from the '/' before "deep" */
+    cs_msg_path("/home/someone/projects/sim/deep/dir/mesh.obj", b, sizeof b);
+    ENSURE_MSG(!strcmp(b, "\xe2\x80\xa6/sim/deep/dir/mesh.obj"), "%s", b);
+    /* no '/' near the cut: the end as it is, but from a character's first byte */
+    char u[256] = "";
+    for (int i = 0; i < 100; i++)
+        strcat(u, "\xc3\xa9"); /* é */
+    strcat(u, "x.obj");
+    for (size_t n = 9; n < 40; n++) {
+        char c[40];
+        cs_msg_path(u, c, n);
+        size_t l = strlen(c);
+        ENSURE_MSG(l <= n - 1 && !strncmp(c, "\xe2\x80\xa6", 3) &&
+                       ((unsigned char)c[3] & 0xc0) != 0x80 && !strcmp(c + l - 5, "x.obj"),
+                   "n = %zu: '%s'", n, c);
+    }
+    /* a 400-byte path to a missing file: the message fits and names the file */
+    char path[420] = "/tmp";
+    while (strlen(path) < 380)
+        strcat(path, "/a_folder_on_the_way");
+    strcat(path, "/wanted.obj");
+    cs_mesh m;
+    ENSURE(cs_mesh_load(path, &m, err, sizeof err) == -1);
+    ENSURE_MSG(strlen(err) < sizeof err - 1 && strstr(err, "\xe2\x80\xa6/a_folder_on_the_way/") &&
+                   strstr(err, "/wanted.obj': no such file") &&
+                   strlen(cs_msg_path(path, big, sizeof big)) <= CS_MSG_PATH,
+               "%s", err);
+}
+
 /* ---------------------------------------------------------------- exported normals */
 
 /* The unit normal of triangle (a, b, c), counter-clockwise seen from its front. */
