@@ -20,6 +20,18 @@ typedef struct cs_mesh {
 
 void cs_mesh_free(cs_mesh *m);
 
+/* The longest file path (bytes) a one-line message shows whole; a longer one shows its end. */
+#define CS_MSG_PATH 160
+
+/*
+ * A file path as one-line messages show it, in buf (n bytes): whole if it fits, else its end —
+ * the file name and the folders nearest it — behind a "…" that marks the cut
+ * ("…/deep/dir/mesh.obj": from a '/' when one is near the cut, never inside a UTF-8
+ * character). Control bytes become '?'; NULL reads "(null)". Returns buf. The messages of
+ * cs_mesh_load and cs_mesh_export name their file this way, at most CS_MSG_PATH bytes.
+ */
+const char *cs_msg_path(const char *s, char *buf, size_t n);
+
 /*
  * Load every mesh of a file assimp reads (OBJ, STL, PLY, OFF, glTF, ...), merged into one,
  * node transforms applied, triangulated, identical vertices welded (by exact position after

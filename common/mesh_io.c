@@ -12,7 +12,15 @@
  *
  * Export: a scene built by hand (one aiMesh and one child node per piece, one empty material),
  * handed to aiExportScene and freed here — it was never assimp's, so aiReleaseImport must not
- * see it. The exporter id follows the extension.
+ * see it. The exporter id follows the extension. Normals: assimp's OBJ and STL exporters make
+ * their own when a mesh has none (OBJ smooth vertex normals, STL face normals), and both run
+ * on our shared vertices as if each belonged to one triangle: a vertex kept the normal of the
+ * last face written through it (on a box, two of every three corner normals pointed along the
+ * wrong axis, and STL wrote wrong face normals). For those formats each triangle gets its own
+ * three corners carrying its geometric normal (flat shading, what STL holds and what glTF
+ * viewers must compute when normals are absent); OBJ still writes every position once (the
+ * exporter welds equal positions) and every distinct normal once, so its faces stay joined.
+ * The other formats get shared vertices and no normals, as a viewer then computes them.
  */
 #include "mesh.h"
 
@@ -44,6 +52,33 @@ void cs_mesh_free(cs_mesh *m)
     m->v = NULL;
     m->t = NULL;
     m->nv = m->nt = 0;
+}
+
+const char *cs_msg_path(const char *s, char *buf, size_t n)
+{
+    static const char cut[] = "\xe2\x80\xa6"; /* U+2026 (...), where the start was cut */
+    if (!buf || n == 0)
+        return "";
+    if (!s)
+        s = "(null)";
+    const size_t len = strlen(s);
+    size_t from = 0, k = 0;
+    if (len > n - 1 && n > sizeof cut) {
+        /* keep the end: as many bytes as fit behind the mark, from a character's first byte,
+         * and from a '/' if one comes soon (whole folder names rather than a piece of one) */
+        from = len - (n - sizeof cut);
+        while (from < len && ((unsigned char)s[from] & 0xc0) == 0x80)
+            from++;
+        const char *slash = memchr(s + from, '/', len - from);
+        if (slash && slash - (s + from) <= 40)
+            from = (size_t)(slash - s);
+        memcpy(buf, cut, sizeof cut - 1);
+        k = sizeof cut - 1;
+    }
+    for (size_t i = from; i < len && k < n - 1; i++)
+        buf[k++] = ((unsigned char)s[i] < 0x20 || s[i] == 0x7f) ? '?' : s[i];
+    buf[k] = '\0';
+    return buf;
 }
 
 typedef struct {
@@ -138,21 +173,23 @@ static int weld_and_clean(cs_mesh *m)
 /* The import itself (in the child process of cs_mesh_load). */
 static int load_direct(const char *path, cs_mesh *out, char *err, size_t errlen)
 {
+    char shown[CS_MSG_PATH + 1]; /* path as messages show it */
+    cs_msg_path(path, shown, sizeof shown);
     memset(out, 0, sizeof *out);
     struct stat st;
     if (stat(path, &st) != 0) {
         if (errno == ENOENT)
-            snprintf(err, errlen, "mesh '%s': no such file", path);
+            snprintf(err, errlen, "mesh '%s': no such file", shown);
         else
-            snprintf(err, errlen, "mesh '%s': %s", path, strerror(errno));
+            snprintf(err, errlen, "mesh '%s': %s", shown, strerror(errno));
         return -1;
     }
     if (!S_ISREG(st.st_mode)) {
-        snprintf(err, errlen, "mesh '%s': not a regular file", path);
+        snprintf(err, errlen, "mesh '%s': not a regular file", shown);
         return -1;
     }
     if (st.st_size == 0) {
-        snprintf(err, errlen, "mesh '%s': empty file", path);
+        snprintf(err, errlen, "mesh '%s': empty file", shown);
         return -1;
     }
     const struct aiScene *sc =
@@ -161,7 +198,7 @@ static int load_direct(const char *path, cs_mesh *out, char *err, size_t errlen)
                                aiProcess_ValidateDataStructure);
     if (!sc) {
         const char *why = aiGetErrorString();
-        snprintf(err, errlen, "mesh '%s': assimp: %s", path, why && *why ? why : "unreadable");
+        snprintf(err, errlen, "mesh '%s': assimp: %s", shown, why && *why ? why : "unreadable");
         /* assimp messages may end in a newline; keep the message one line */
         for (char *p = err; *p; p++)
             if (*p == '\n' || *p == '\r')
@@ -179,12 +216,12 @@ static int load_direct(const char *path, cs_mesh *out, char *err, size_t errlen)
     }
     if (nt == 0) {
         aiReleaseImport(sc);
-        snprintf(err, errlen, "mesh '%s': no triangles", path);
+        snprintf(err, errlen, "mesh '%s': no triangles", shown);
         return -1;
     }
     if (nv > INT32_MAX / 3 || nt > INT32_MAX / 3) {
         aiReleaseImport(sc);
-        snprintf(err, errlen, "mesh '%s': too large (%zu vertices, %zu triangles)", path, nv, nt);
+        snprintf(err, errlen, "mesh '%s': too large (%zu vertices, %zu triangles)", shown, nv, nt);
         return -1;
     }
     out->v = malloc(nv * 3 * sizeof(double));
@@ -192,7 +229,7 @@ static int load_direct(const char *path, cs_mesh *out, char *err, size_t errlen)
     if (!out->v || !out->t) {
         aiReleaseImport(sc);
         cs_mesh_free(out);
-        snprintf(err, errlen, "mesh '%s': out of memory", path);
+        snprintf(err, errlen, "mesh '%s': out of memory", shown);
         return -1;
     }
     int vbase = 0, tcount = 0;
@@ -205,7 +242,7 @@ static int load_direct(const char *path, cs_mesh *out, char *err, size_t errlen)
             if (!isfinite(x) || !isfinite(y) || !isfinite(z)) {
                 aiReleaseImport(sc);
                 cs_mesh_free(out);
-                snprintf(err, errlen, "mesh '%s': vertex %u of mesh %u is not finite", path, k,
+                snprintf(err, errlen, "mesh '%s': vertex %u of mesh %u is not finite", shown, k,
                          i);
                 return -1;
             }
@@ -221,7 +258,7 @@ static int load_direct(const char *path, cs_mesh *out, char *err, size_t errlen)
                 if (fc->mIndices[c] >= am->mNumVertices) {
                     aiReleaseImport(sc);
                     cs_mesh_free(out);
-                    snprintf(err, errlen, "mesh '%s': face %u of mesh %u has a bad index", path,
+                    snprintf(err, errlen, "mesh '%s': face %u of mesh %u has a bad index", shown,
                              f, i);
                     return -1;
                 }
@@ -236,12 +273,12 @@ static int load_direct(const char *path, cs_mesh *out, char *err, size_t errlen)
     out->nt = tcount;
     if (weld_and_clean(out) != 0) {
         cs_mesh_free(out);
-        snprintf(err, errlen, "mesh '%s': out of memory", path);
+        snprintf(err, errlen, "mesh '%s': out of memory", shown);
         return -1;
     }
     if (out->nt == 0) {
         cs_mesh_free(out);
-        snprintf(err, errlen, "mesh '%s': no triangles (all degenerate)", path);
+        snprintf(err, errlen, "mesh '%s': no triangles (all degenerate)", shown);
         return -1;
     }
     return 0;
@@ -338,10 +375,12 @@ static void import_child(const char *path, int fd)
 
 int cs_mesh_load(const char *path, cs_mesh *out, char *err, size_t errlen)
 {
+    char shown[CS_MSG_PATH + 1]; /* path as messages show it */
+    cs_msg_path(path, shown, sizeof shown);
     memset(out, 0, sizeof *out);
     int fds[2];
     if (pipe(fds) != 0) {
-        snprintf(err, errlen, "mesh '%s': cannot start the importer: %s", path, strerror(errno));
+        snprintf(err, errlen, "mesh '%s': cannot start the importer: %s", shown, strerror(errno));
         return -1;
     }
     fflush(NULL);
@@ -349,7 +388,7 @@ int cs_mesh_load(const char *path, cs_mesh *out, char *err, size_t errlen)
     if (pid < 0) {
         close(fds[0]);
         close(fds[1]);
-        snprintf(err, errlen, "mesh '%s': cannot start the importer: %s", path, strerror(errno));
+        snprintf(err, errlen, "mesh '%s': cannot start the importer: %s", shown, strerror(errno));
         return -1;
     }
     if (pid == 0) {
@@ -381,7 +420,7 @@ int cs_mesh_load(const char *path, cs_mesh *out, char *err, size_t errlen)
             out->t = malloc((size_t)hdr[2] * 3 * sizeof *out->t);
             if (!out->v || !out->t) {
                 cs_mesh_free(out);
-                snprintf(err, errlen, "mesh '%s': out of memory", path);
+                snprintf(err, errlen, "mesh '%s': out of memory", shown);
                 rc = 1;
             } else {
                 out->nv = hdr[1];
@@ -404,12 +443,12 @@ int cs_mesh_load(const char *path, cs_mesh *out, char *err, size_t errlen)
     cs_mesh_free(out);
     if (rc == -2)
         snprintf(err, errlen, "mesh '%s': the importer took longer than %d s and was stopped",
-                 path, IMPORT_SECONDS);
+                 shown, IMPORT_SECONDS);
     else if (rc == -1 && WIFSIGNALED(status))
-        snprintf(err, errlen, "mesh '%s': the importer died (%s) reading this file", path,
+        snprintf(err, errlen, "mesh '%s': the importer died (%s) reading this file", shown,
                  strsignal(WTERMSIG(status)));
     else if (rc == -1)
-        snprintf(err, errlen, "mesh '%s': the importer ended without a result", path);
+        snprintf(err, errlen, "mesh '%s': the importer ended without a result", shown);
     return -1;
 }
 
@@ -508,6 +547,7 @@ static void free_scene(struct aiScene *sc)
                     free(am->mFaces[f].mIndices);
             free(am->mFaces);
             free(am->mVertices);
+            free(am->mNormals);
             free(am);
         }
         free(sc->mMeshes);
@@ -533,6 +573,33 @@ static void free_scene(struct aiScene *sc)
     free(sc);
 }
 
+/* Exporters that write normals and make their own when a mesh has none (see the top). */
+static int writes_normals(const char *fmt)
+{
+    return !strcmp(fmt, "obj") || !strcmp(fmt, "objnomtl") || !strcmp(fmt, "stl") ||
+           !strcmp(fmt, "stlb");
+}
+
+/* The unit normal of triangle f of pc (counter-clockwise seen from its front), or 0 if it has
+ * no area. */
+static struct aiVector3D face_normal(const cs_mesh *pc, int f)
+{
+    const double *a = pc->v + 3 * (size_t)pc->t[3 * f], *b = pc->v + 3 * (size_t)pc->t[3 * f + 1],
+                 *c = pc->v + 3 * (size_t)pc->t[3 * f + 2];
+    const double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]},
+                 w[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+    double n[3] = {u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2],
+                   u[0] * w[1] - u[1] * w[0]};
+    const double len = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    struct aiVector3D r = {0, 0, 0};
+    if (len > 0 && isfinite(len)) {
+        r.x = (ai_real)(n[0] / len);
+        r.y = (ai_real)(n[1] / len);
+        r.z = (ai_real)(n[2] / len);
+    }
+    return r;
+}
+
 static void identity(struct aiMatrix4x4 *m)
 {
     memset(m, 0, sizeof *m);
@@ -548,23 +615,36 @@ int cs_mesh_export_format(const char *path)
 int cs_mesh_export(const char *path, const cs_mesh *pieces, const char *const *names, int n,
                    char *err, size_t errlen)
 {
+    char shown[CS_MSG_PATH + 1]; /* path as messages show it */
+    cs_msg_path(path, shown, sizeof shown);
     if (n <= 0) {
-        snprintf(err, errlen, "export '%s': nothing to write", path);
+        snprintf(err, errlen, "export '%s': nothing to write", shown);
         return -1;
     }
     char fmt[64];
     if (format_for(path, fmt, sizeof fmt) != 0) {
-        const char *dot = strrchr(path, '.');
-        snprintf(err, errlen, "export '%s': no assimp exporter for extension '%s'", path,
+        const char *dot = strrchr(shown, '.');
+        snprintf(err, errlen, "export '%s': no assimp exporter for extension '%s'", shown,
                  dot ? dot : "(none)");
         return -1;
     }
-    for (int p = 0; p < n; p++)
+    const int flat = writes_normals(fmt);
+    for (int p = 0; p < n; p++) {
+        if (pieces[p].nv > INT32_MAX / 3 || pieces[p].nt > INT32_MAX / 3) {
+            snprintf(err, errlen, "export '%s': piece %d is too large", shown, p);
+            return -1;
+        }
         for (int k = 0; k < 3 * pieces[p].nv; k++)
             if (!isfinite(pieces[p].v[k])) {
-                snprintf(err, errlen, "export '%s': piece %d has a non-finite vertex", path, p);
+                snprintf(err, errlen, "export '%s': piece %d has a non-finite vertex", shown, p);
                 return -1;
             }
+        for (int k = 0; k < 3 * pieces[p].nt; k++)
+            if (pieces[p].t[k] < 0 || pieces[p].t[k] >= pieces[p].nv) {
+                snprintf(err, errlen, "export '%s': piece %d has a bad vertex index", shown, p);
+                return -1;
+            }
+    }
     struct aiScene *sc = calloc(1, sizeof *sc);
     if (!sc)
         goto oom;
@@ -597,12 +677,15 @@ int cs_mesh_export(const char *path, const cs_mesh *pieces, const char *const *n
         am->mPrimitiveTypes = aiPrimitiveType_TRIANGLE;
         am->mMaterialIndex = 0;
         set_name(&am->mName, name);
-        am->mVertices = calloc((size_t)(pc->nv ? pc->nv : 1), sizeof *am->mVertices);
+        /* flat: three corners of its own per triangle, carrying its normal */
+        const size_t nverts = flat ? 3 * (size_t)pc->nt : (size_t)pc->nv;
+        am->mVertices = calloc(nverts ? nverts : 1, sizeof *am->mVertices);
+        am->mNormals = flat ? calloc(nverts ? nverts : 1, sizeof *am->mNormals) : NULL;
         am->mFaces = calloc((size_t)(pc->nt ? pc->nt : 1), sizeof *am->mFaces);
-        if (!am->mVertices || !am->mFaces)
+        if (!am->mVertices || !am->mFaces || (flat && !am->mNormals))
             goto oom;
-        am->mNumVertices = (unsigned)pc->nv;
-        for (int i = 0; i < pc->nv; i++) {
+        am->mNumVertices = (unsigned)nverts;
+        for (size_t i = 0; !flat && i < nverts; i++) {
             am->mVertices[i].x = (ai_real)pc->v[3 * i];
             am->mVertices[i].y = (ai_real)pc->v[3 * i + 1];
             am->mVertices[i].z = (ai_real)pc->v[3 * i + 2];
@@ -613,8 +696,20 @@ int cs_mesh_export(const char *path, const cs_mesh *pieces, const char *const *n
             if (!am->mFaces[f].mIndices)
                 goto oom;
             am->mFaces[f].mNumIndices = 3;
-            for (int c = 0; c < 3; c++)
-                am->mFaces[f].mIndices[c] = (unsigned)pc->t[3 * f + c];
+            const struct aiVector3D nrm = flat ? face_normal(pc, f) : (struct aiVector3D){0, 0, 0};
+            for (int c = 0; c < 3; c++) {
+                const int32_t v = pc->t[3 * f + c];
+                if (!flat) {
+                    am->mFaces[f].mIndices[c] = (unsigned)v;
+                    continue;
+                }
+                const size_t corner = 3 * (size_t)f + (size_t)c;
+                am->mVertices[corner].x = (ai_real)pc->v[3 * (size_t)v];
+                am->mVertices[corner].y = (ai_real)pc->v[3 * (size_t)v + 1];
+                am->mVertices[corner].z = (ai_real)pc->v[3 * (size_t)v + 2];
+                am->mNormals[corner] = nrm;
+                am->mFaces[f].mIndices[c] = (unsigned)corner;
+            }
         }
         struct aiNode *node = calloc(1, sizeof *node);
         root->mChildren[p] = node;
@@ -633,7 +728,7 @@ int cs_mesh_export(const char *path, const cs_mesh *pieces, const char *const *n
     free_scene(sc);
     if (rc != aiReturn_SUCCESS) {
         const char *why = aiGetErrorString();
-        snprintf(err, errlen, "export '%s': assimp (%s): %s", path, fmt,
+        snprintf(err, errlen, "export '%s': assimp (%s): %s", shown, fmt,
                  why && *why ? why : "failed");
         for (char *q = err; *q; q++)
             if (*q == '\n' || *q == '\r')
@@ -643,6 +738,6 @@ int cs_mesh_export(const char *path, const cs_mesh *pieces, const char *const *n
     return 0;
 oom:
     free_scene(sc);
-    snprintf(err, errlen, "export '%s': out of memory", path);
+    snprintf(err, errlen, "export '%s': out of memory", shown);
     return -1;
 }

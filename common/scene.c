@@ -122,18 +122,36 @@ static int names_add(sc_names *t, const char *k, int v)
 
 /* ---------------------------------------------------------------- messages and paths */
 
-/* Copy at most 40 bytes of s for a one-line message: control bytes become '?'. */
-static const char *show(const char *s, char buf[48])
+/* How much of a name or other word from the file a message shows whole (bytes), and of the
+ * scene file's own path. File paths in messages (meshes: CS_MSG_PATH, mesh.h) keep their end
+ * when cut, names their start. The bounds keep both paths of the longest message that names
+ * them and a name — "SCENE: objects[N] 'NAME': mesh 'MESH' is refused: WHY" — within the
+ * daemon's 400-byte load acknowledgement (120 + 64 + 160 + 40 bytes of framing); only WHY
+ * may be cut, and only when all three are at their bounds. */
+#define SC_SHOW_NAME 64
+#define SC_SHOW_SCENE 120
+
+/* s for a one-line message: whole up to SC_SHOW_NAME bytes, else its start and "…" (cut
+ * between UTF-8 characters); control bytes become '?'. */
+static const char *show(const char *s, char buf[SC_SHOW_NAME + 1])
 {
-    size_t n = 0;
+    static const char cut[] = "\xe2\x80\xa6"; /* U+2026 */
     if (!s)
         s = "(null)";
-    for (; s[n] && n < 40; n++)
-        buf[n] = ((unsigned char)s[n] < 0x20 || s[n] == 0x7f) ? '?' : s[n];
-    if (s[n]) {
-        buf[n - 3] = buf[n - 2] = buf[n - 1] = '.';
+    const size_t len = strlen(s);
+    size_t keep = len, k = 0;
+    if (len > SC_SHOW_NAME) {
+        keep = SC_SHOW_NAME - (sizeof cut - 1);
+        while (keep > 0 && ((unsigned char)s[keep] & 0xc0) == 0x80)
+            keep--; /* s[keep] continues a character: drop all of it */
     }
-    buf[n] = '\0';
+    for (size_t i = 0; i < keep; i++)
+        buf[k++] = ((unsigned char)s[i] < 0x20 || s[i] == 0x7f) ? '?' : s[i];
+    if (keep < len) {
+        memcpy(buf + k, cut, sizeof cut - 1);
+        k += sizeof cut - 1;
+    }
+    buf[k] = '\0';
     return buf;
 }
 
@@ -164,7 +182,7 @@ static void pathf(char out[SC_PATH], const char *fmt, ...)
 
 static void join_key(char out[SC_PATH], const char *parent, const char *key)
 {
-    char b[48];
+    char b[SC_SHOW_NAME + 1];
     if (parent && parent[0])
         pathf(out, "%s.%s", parent, show(key, b));
     else
@@ -504,7 +522,7 @@ static int parse_world(sc_ctx *c, const cJSON *root, cs_scene *s)
             return -1;
         const cJSON *pc = cJSON_GetObjectItemCaseSensitive(o, "preconditioner");
         if (pc) {
-            char b[48];
+            char b[SC_SHOW_NAME + 1];
             if (!cJSON_IsString(pc))
                 return fail(c, "solver.preconditioner", "expected a string, got %s",
                             type_name(pc));
@@ -515,7 +533,7 @@ static int parse_world(sc_ctx *c, const cJSON *root, cs_scene *s)
         }
         const cJSON *rt = cJSON_GetObjectItemCaseSensitive(o, "relative_to");
         if (rt) {
-            char b[48];
+            char b[SC_SHOW_NAME + 1];
             if (!cJSON_IsString(rt))
                 return fail(c, "solver.relative_to", "expected a string, got %s", type_name(rt));
             if (cs_cg_relative_from_name(rt->valuestring, &w->cg_relative_to) != 0)
@@ -682,7 +700,7 @@ static int parse_mesh(sc_ctx *c, const cJSON *mesh, const char *path, const char
 {
     static const char *const keys[] = {"file", "scale", "position", "rotation_deg", NULL};
     double scale = 1, pos[3] = {0, 0, 0}, rot[3] = {0, 0, 0};
-    char p[SC_PATH], b1[48], b2[48];
+    char p[SC_PATH], b1[SC_SHOW_NAME + 1], b2[CS_MSG_PATH + 1];
     if (check_keys(c, mesh, path, keys))
         return -1;
     join_key(p, path, "file");
@@ -753,18 +771,19 @@ static int parse_mesh(sc_ctx *c, const cJSON *mesh, const char *path, const char
     if (closed != 1) {
         cs_mesh_free(&m);
         return fail(c, "", "objects[%d] '%s': mesh '%s' is refused: %s", index, show(name, b1),
-                    show(fname, b2), msg);
+                    cs_msg_path(fname, b2, sizeof b2), msg);
     }
     if (cs_subdivide_edges(&m.v, &m.nv, &m.t, &m.nt, h, msg, sizeof msg) != 0) {
         cs_mesh_free(&m);
         return fail(c, "", "objects[%d] '%s': mesh '%s': %s", index, show(name, b1),
-                    show(fname, b2), msg);
+                    cs_msg_path(fname, b2, sizeof b2), msg);
     }
     /* Subdivision must keep the surface closed (§3.3); check rather than trust. */
     if (cs_watertight_check(m.v, m.nv, m.t, m.nt, &rep, msg, sizeof msg) != 1) {
         cs_mesh_free(&m);
         return fail(c, "", "objects[%d] '%s': mesh '%s' is no longer closed after edge "
-                    "subdivision: %s", index, show(name, b1), show(fname, b2), msg);
+                    "subdivision: %s", index, show(name, b1), cs_msg_path(fname, b2, sizeof b2),
+                    msg);
     }
     st->mesh_v = m.v;
     st->mesh_t = m.t;
@@ -876,7 +895,7 @@ static int parse_field_entry(sc_ctx *c, const cJSON *e, const char *path, void *
         {"centre", "radius"}, {"min", "max"}, {"from", "to"}, {"centre", "radius"}};
     static const char *const geo_keys[] = {"centre", "radius", "min", "max", "from", "to"};
     cs_field_region *r = item;
-    char p[SC_PATH], b[48];
+    char p[SC_PATH], b[SC_SHOW_NAME + 1];
     join_key(p, path, "shape");
     const cJSON *sh = cJSON_GetObjectItemCaseSensitive(e, "shape");
     if (!sh)
@@ -952,7 +971,7 @@ static int parse_fields(sc_ctx *c, const cJSON *obj, const char *path, cs_object
 /* "constraints": "remove" (default) or "penalty"; "penalty_stiffness" [N/m] (penalty only). */
 static int parse_constraints(sc_ctx *c, const cJSON *o, const char *path, cs_object_def *d)
 {
-    char p[SC_PATH], b[48];
+    char p[SC_PATH], b[SC_SHOW_NAME + 1];
     const cJSON *it = cJSON_GetObjectItemCaseSensitive(o, "constraints");
     if (it) {
         join_key(p, path, "constraints");
@@ -986,7 +1005,7 @@ static int parse_object(sc_ctx *c, const cJSON *o, int index, const char *base_d
                                        "fracture", "fracture_radius", "box", "mesh", "cells",
                                        "fixed", "loads", "fields", "constraints",
                                        "penalty_stiffness", NULL};
-    char path[SC_PATH], p[SC_PATH], b[48];
+    char path[SC_PATH], p[SC_PATH], b[SC_SHOW_NAME + 1];
     join_index(path, "objects", index);
     if (!cJSON_IsObject(o))
         return fail(c, path, "expected an object, got %s", type_name(o));
@@ -1134,7 +1153,7 @@ static int parse_error(sc_ctx *c, const char *json, const char *at)
     }
     if (len == 0)
         return fail(c, "", "malformed JSON at line 1, column 1: the text is empty");
-    char near[48];
+    char near[SC_SHOW_NAME + 1];
     char tmp[24];
     snprintf(tmp, sizeof tmp, "%.20s", json + off);
     if (off >= len)
@@ -1215,9 +1234,11 @@ int cs_scene_load(const char *path, cs_scene *out, char *err, size_t errlen)
         sc_defaults(out);
     if (!path || !out)
         return fail(c, "", "no scene path or output given");
+    char shown[SC_SHOW_SCENE + 1]; /* the path as its messages name it */
+    cs_msg_path(path, shown, sizeof shown);
     FILE *f = fopen(path, "rb");
     if (!f)
-        return fail(c, path, "cannot open: %s", strerror(errno));
+        return fail(c, shown, "cannot open: %s", strerror(errno));
     char *text = NULL;
     size_t len = 0, cap = 0;
     for (;;) {
@@ -1227,7 +1248,7 @@ int cs_scene_load(const char *path, cs_scene *out, char *err, size_t errlen)
             if (!t) {
                 free(text);
                 fclose(f);
-                return fail(c, path, "out of memory reading the file");
+                return fail(c, shown, "out of memory reading the file");
             }
             text = t;
         }
@@ -1238,26 +1259,26 @@ int cs_scene_load(const char *path, cs_scene *out, char *err, size_t errlen)
         if ((long)len > SC_MAX_FILE) {
             free(text);
             fclose(f);
-            return fail(c, path, "larger than %ld bytes: not a scene", SC_MAX_FILE);
+            return fail(c, shown, "larger than %ld bytes: not a scene", SC_MAX_FILE);
         }
     }
     int rerr = ferror(f);
     fclose(f);
     if (rerr) {
         free(text);
-        return fail(c, path, "read error");
+        return fail(c, shown, "read error");
     }
     text[len] = '\0';
     if (memchr(text, '\0', len)) {
         free(text);
-        return fail(c, path, "contains a NUL byte: not a JSON text");
+        return fail(c, shown, "contains a NUL byte: not a JSON text");
     }
 
     /* Meshes are found relative to the scene file's folder. */
     char *dir = strdup(path);
     if (!dir) {
         free(text);
-        return fail(c, path, "out of memory");
+        return fail(c, shown, "out of memory");
     }
     char *slash = strrchr(dir, '/');
     if (slash == dir)
@@ -1272,14 +1293,14 @@ int cs_scene_load(const char *path, cs_scene *out, char *err, size_t errlen)
     free(dir);
     free(text);
     if (rc != 0)
-        return fail(c, path, "%s", msg);
+        return fail(c, shown, "%s", msg);
     return 0;
 }
 
 int cs_scene_instantiate(const cs_scene *s, cs_world_t **out, char *err, size_t errlen)
 {
     sc_ctx ctx = {err, errlen}, *c = &ctx;
-    char msg[400], b[48];
+    char msg[400], b[SC_SHOW_NAME + 1];
     cs_world_t *w = NULL;
     if (out)
         *out = NULL;

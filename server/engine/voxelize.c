@@ -15,8 +15,18 @@
  * 4h gives exactly 4×4×4 cells. Inside cells are found by flood-filling the outside from a
  * one-cell padded border through the 6-neighbour faces; a face is closed to the flood if a
  * triangle lies within tol of it (a flat box test), which is how surfaces lying on
- * lattice planes still wall the inside off. Kept = overlapped cells + cells the flood did not
- * reach. Every surface point then lies in a kept cell up to tol.
+ * lattice planes still wall the inside off. What the flood did not reach falls into connected
+ * components (joined through the same open faces), and each is classified by the winding
+ * number of the surface about its first cell's centre (seed_windings: signed crossings of a
+ * ray, exact and consistent on edges and vertices): a component the surface does not wind
+ * around (0) is a cavity — the inside of a closed inner shell wound inward — and is emptied
+ * like the outside. So a hollow body keeps its cavity empty, a solid inside the cavity
+ * (winding 1 again) is kept, and overlapping outward parts (2) stay solid. A closed surface
+ * that is not an oriented cycle (triangles of a shell wound both ways) has no winding
+ * number; the parity of the crossings decides for it. Kept = overlapped cells + the unreached
+ * components the surface winds around. Every surface point then lies in a kept cell up to tol
+ * (across a triangle the winding number changes, so one side of a wall on a lattice plane is
+ * kept).
  */
 #include "voxelize.h"
 
@@ -38,6 +48,12 @@ typedef struct {
 static int cmp_i64(const void *pa, const void *pb)
 {
     int64_t a = *(const int64_t *)pa, b = *(const int64_t *)pb;
+    return (a > b) - (a < b);
+}
+
+static int cmp_u64(const void *pa, const void *pb)
+{
+    uint64_t a = *(const uint64_t *)pa, b = *(const uint64_t *)pb;
     return (a > b) - (a < b);
 }
 
@@ -277,32 +293,37 @@ double cs_voxel_tolerance(double h, const double *verts, int nv)
     return tol;
 }
 
-/* Edges used by an odd number of triangles (sorted (lo,hi) pairs), or -1 on out of memory: a
- * closed surface, manifold or not, uses every edge an even number of times. Counted here
- * rather than with common/watertight.c so the engine library does not link against common. */
-static int count_boundary_edges(const int32_t *tris, int nt)
+/* How a triangle list closes, or -1 on out of memory: *odd counts the edges used by an odd
+ * number of triangles (a closed surface, manifold or not, uses every edge an even number of
+ * times), *unbalanced the edges not used as often in one direction as in the other (a closed
+ * surface whose triangles are all wound the same way, outward or inward, has none: it is an
+ * oriented cycle and has a winding number). Counted here rather than with common/watertight.c
+ * so the engine library does not link against common. */
+static int edge_census(const int32_t *tris, int nt, int *odd, int *unbalanced)
 {
-    int64_t *e = malloc((size_t)(nt ? nt : 1) * 3 * sizeof *e);
+    /* (lo, hi) in the high bits, the direction in the lowest; indices are >= 0 (checked) */
+    uint64_t *e = malloc((size_t)(nt ? nt : 1) * 3 * sizeof *e);
     if (!e)
         return -1;
     int ne = 0;
     for (int t = 0; t < nt; t++)
         for (int k = 0; k < 3; k++) {
-            int64_t a = tris[3 * t + k], b = tris[3 * t + (k + 1) % 3];
+            uint64_t a = (uint32_t)tris[3 * t + k], b = (uint32_t)tris[3 * t + (k + 1) % 3];
             if (a != b)
-                e[ne++] = a < b ? (a << 32) | b : (b << 32) | a;
+                e[ne++] = a < b ? a << 33 | b << 1 : b << 33 | a << 1 | 1;
         }
-    qsort(e, (size_t)ne, sizeof *e, cmp_i64);
-    int boundary = 0;
+    qsort(e, (size_t)ne, sizeof *e, cmp_u64);
+    *odd = *unbalanced = 0;
     for (int i = 0; i < ne;) {
-        int j = i + 1;
-        while (j < ne && e[j] == e[i])
-            j++;
-        boundary += (j - i) % 2; /* odd use: a boundary modulo 2 (1, or a fin on 2) */
+        int j = i, up = 0;
+        for (; j < ne && e[j] >> 1 == e[i] >> 1; j++)
+            up += (int)(e[j] & 1);
+        *odd += (j - i) % 2; /* odd use: a boundary modulo 2 (1, or a fin on 2) */
+        *unbalanced += 2 * up != j - i;
         i = j;
     }
     free(e);
-    return boundary;
+    return 0;
 }
 
 int cs_mesh_surface_check(const double *verts, int nv, const int32_t *tris, int nt, char *err,
@@ -381,7 +402,165 @@ int cs_mesh_surface_check(const double *verts, int nv, const int32_t *tris, int 
     return 0;
 }
 
-enum { F_SURF = 1, F_BLOCK_X = 2, F_BLOCK_Y = 4, F_BLOCK_Z = 8, F_OUT = 16 };
+enum { F_SURF = 1, F_BLOCK_X = 2, F_BLOCK_Y = 4, F_BLOCK_Z = 8, F_OUT = 16, F_SEEN = 32 };
+
+/* The padded cell grid of one voxelization: cell (i, j, k), each index in [-1, n], at
+ * vg_at(G, i, j, k); the flood's work list grows on demand. */
+typedef struct {
+    uint8_t *g;
+    int n[3];
+    size_t px, py;
+    size_t *stack;
+    size_t cap;
+} vgrid;
+
+static size_t vg_at(const vgrid *G, int i, int j, int k)
+{
+    return ((size_t)(k + 1) * G->py + (size_t)(j + 1)) * G->px + (size_t)(i + 1);
+}
+
+/* Set mark on seed and on every cell reachable from it through faces no triangle closes
+ * (F_BLOCK_*) into cells with none of the bits of stop (which holds mark): the cells that can
+ * be joined without crossing the surface. 0, or -1 on out of memory. */
+static int vg_flood(vgrid *G, size_t seed, uint8_t mark, uint8_t stop)
+{
+    static const int nb[6][3] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0},
+                                 {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
+    size_t top = 0;
+    G->g[seed] |= mark;
+    G->stack[top++] = seed;
+    while (top) {
+        size_t s = G->stack[--top];
+        int i = (int)(s % G->px) - 1, j = (int)((s / G->px) % G->py) - 1,
+            k = (int)(s / (G->px * G->py)) - 1;
+        for (int q = 0; q < 6; q++) {
+            int a = i + nb[q][0], b = j + nb[q][1], c = k + nb[q][2];
+            if (a < -1 || b < -1 || c < -1 || a > G->n[0] || b > G->n[1] || c > G->n[2])
+                continue;
+            size_t ns = vg_at(G, a, b, c);
+            if (G->g[ns] & stop)
+                continue;
+            int ax = q / 2;
+            size_t owner = (q % 2 == 0) ? s : ns; /* the lower of the two cells owns the face */
+            if (G->g[owner] & (F_BLOCK_X << ax))
+                continue;
+            if (top == G->cap) {
+                size_t *grown = realloc(G->stack, 2 * G->cap * sizeof *grown);
+                if (!grown)
+                    return -1;
+                G->stack = grown;
+                G->cap *= 2;
+            }
+            G->g[ns] |= mark;
+            G->stack[top++] = ns;
+        }
+    }
+    return 0;
+}
+
+/* One connected set of cells the outside flood did not reach (no triangle in them, none on
+ * the faces joining them), named by its first cell in scan order (k, then j, then i). */
+typedef struct {
+    int i, j, k;
+    size_t at;     /* its grid index */
+    int winding;   /* signed crossings of the ray from its centre towards +x */
+    int crossings; /* all crossings of that ray */
+} vseed;
+
+/* Orientation of p against the directed edge a->b in the (u, v) plane, exact (integers below
+ * 2^29: products below 2^58), ties broken by simulation of simplicity with p moved to
+ * p + (eps, eps^2): o(a,b,p') = o(a,b,p) - eps (b_v - a_v) + eps^2 (b_u - a_u). So it is
+ * antisymmetric in a, b, never 0 unless a = b, and the signs of all edges are those of one
+ * real point: every crossing of a closed surface by the ray is counted once. */
+static int orient_sos(const int64_t *a, const int64_t *b, const int64_t *p, int64_t *o)
+{
+    *o = (b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0]);
+    if (*o)
+        return *o > 0 ? 1 : -1;
+    if (b[1] != a[1])
+        return a[1] > b[1] ? 1 : -1;
+    if (b[0] != a[0])
+        return b[0] > a[0] ? 1 : -1;
+    return 0;
+}
+
+/*
+ * Winding number (signed crossings) and crossing count of the ray from each seed's cell centre
+ * towards +x, over all triangles at once. The triangles' (y, z) are rounded to a lattice of
+ * q = h / 2^S (cell centres lie on it) and the crossing tests run on those integers exactly;
+ * x stays as it is. That moves the surface by at most q/sqrt(2) < h/2 - tol, and a seed's
+ * centre is at least h/2 - tol from every triangle (its cell overlaps none), so neither the
+ * winding number at the centre nor the side of the centre a crossing lies on can change.
+ * seeds are sorted by (k, j) (scan order). -1 on out of memory.
+ */
+static int seed_windings(const double *verts, int nv, const int32_t *tris, int nt, double h,
+                         const double origin[3], const int n[3], vseed *seeds, int ns)
+{
+    int nmax = n[1] > n[2] ? n[1] : n[2], S = 20;
+    while (S > 1 && ((int64_t)nmax + 2) << S > (int64_t)1 << 29)
+        S--;
+    int64_t *qv = malloc((size_t)nv * 2 * sizeof *qv);
+    if (!qv)
+        return -1;
+    const double scale = ldexp(1.0, S) / h;
+    for (int v = 0; v < nv; v++)
+        for (int a = 0; a < 2; a++)
+            qv[2 * v + a] = llround((verts[3 * v + 1 + a] - origin[1 + a]) * scale);
+    const int64_t half = (int64_t)1 << (S - 1); /* centre of row j: (2j + 1) half */
+    for (int t = 0; t < nt; t++) {
+        const int32_t *tr = tris + 3 * (size_t)t;
+        const int64_t *A = qv + 2 * tr[0], *B = qv + 2 * tr[1], *C = qv + 2 * tr[2];
+        int r0[2], r1[2];
+        for (int a = 0; a < 2; a++) {
+            int64_t lo = A[a], hi = A[a];
+            lo = B[a] < lo ? B[a] : lo, hi = B[a] > hi ? B[a] : hi;
+            lo = C[a] < lo ? C[a] : lo, hi = C[a] > hi ? C[a] : hi;
+            /* rows whose centre (2r + 1) half lies in [lo, hi] */
+            int64_t f = lo / half + (lo % half > 0); /* ceil(lo / half), lo >= 0 */
+            r0[a] = (int)(f / 2);                      /* 2 r0 + 1 >= f */
+            r1[a] = (int)((hi / half - 1) >= 0 ? (hi / half - 1) / 2 : -1);
+            if (r0[a] < 0)
+                r0[a] = 0;
+            if (r1[a] > n[1 + a] - 1)
+                r1[a] = n[1 + a] - 1;
+        }
+        if (r0[0] > r1[0] || r0[1] > r1[1])
+            continue;
+        const double xa = verts[3 * tr[0]] - origin[0], xb = verts[3 * tr[1]] - origin[0],
+                     xc = verts[3 * tr[2]] - origin[0];
+        for (int k = r0[1]; k <= r1[1]; k++)
+            for (int j = r0[0]; j <= r1[0]; j++) {
+                /* first seed of row (j, k) */
+                int lo = 0, hi = ns;
+                while (lo < hi) {
+                    int mid = lo + (hi - lo) / 2;
+                    if (seeds[mid].k < k || (seeds[mid].k == k && seeds[mid].j < j))
+                        lo = mid + 1;
+                    else
+                        hi = mid;
+                }
+                if (lo == ns || seeds[lo].k != k || seeds[lo].j != j)
+                    continue;
+                const int64_t P[2] = {(2 * (int64_t)j + 1) * half, (2 * (int64_t)k + 1) * half};
+                int64_t oab, obc, oca;
+                int sab = orient_sos(A, B, P, &oab), sbc = orient_sos(B, C, P, &obc),
+                    sca = orient_sos(C, A, P, &oca);
+                if (sab == 0 || sab != sbc || sab != sca)
+                    continue; /* the ray misses this triangle */
+                /* where it crosses: barycentric weights of P, all of one sign, sum != 0 */
+                const double wa = (double)obc, wb = (double)oca, wc = (double)oab;
+                const double x = (wa * xa + wb * xb + wc * xc) / (wa + wb + wc);
+                for (int s = lo; s < ns && seeds[s].k == k && seeds[s].j == j; s++)
+                    if (x > (seeds[s].i + 0.5) * h) {
+                        /* counter-clockwise in (y, z): the normal points towards +x */
+                        seeds[s].winding += sab;
+                        seeds[s].crossings++;
+                    }
+            }
+    }
+    free(qv);
+    return 0;
+}
 
 int cs_voxelize(const double *verts, int nv, const int32_t *tris, int nt, double h,
                 double origin[3], int32_t **ijk, int *n_cells, char *err, size_t errlen)
@@ -406,8 +585,8 @@ int cs_voxelize(const double *verts, int nv, const int32_t *tris, int nt, double
             snprintf(err, errlen, "voxelize: triangle %d has a bad vertex index", i / 3);
             return -1;
         }
-    int boundary = count_boundary_edges(tris, nt);
-    if (boundary < 0) {
+    int boundary = 0, unbalanced = 0;
+    if (edge_census(tris, nt, &boundary, &unbalanced) != 0) {
         snprintf(err, errlen, "voxelize: out of memory");
         return -1;
     }
@@ -415,8 +594,8 @@ int cs_voxelize(const double *verts, int nv, const int32_t *tris, int nt, double
         snprintf(err, errlen, "mesh is not closed: %d boundary edges", boundary);
         return -1;
     }
-    /* Non-manifold, misoriented or inside-out closed meshes are still well defined here: the
-     * flood fill does not look at orientation. Only an open surface is refused. */
+    /* Non-manifold, misoriented or inside-out closed meshes are still well defined here (see
+     * the winding rule below). Only an open surface is refused. */
     double lo[3], hi[3];
     for (int k = 0; k < 3; k++)
         lo[k] = hi[k] = verts[k];
@@ -493,50 +672,42 @@ int cs_voxelize(const double *verts, int nv, const int32_t *tris, int nt, double
                     }
                 }
     }
-    /* flood the outside from the padding corner through open faces of non-surface cells */
-    size_t *stack = malloc(1024 * sizeof *stack);
-    size_t cap = 1024, top = 0;
-    if (!stack) {
-        free(g);
-        snprintf(err, errlen, "voxelize: out of memory");
-        return -1;
-    }
-    const size_t start = GI(-1, -1, -1);
-    g[start] |= F_OUT;
-    stack[top++] = start;
-    while (top) {
-        size_t s = stack[--top];
-        int i = (int)(s % (size_t)px) - 1, j = (int)((s / (size_t)px) % (size_t)py) - 1,
-            k = (int)(s / ((size_t)px * py)) - 1;
-        /* neighbour (di) and the cell whose + face separates them */
-        const int nb[6][3] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
-        for (int q = 0; q < 6; q++) {
-            int a = i + nb[q][0], b = j + nb[q][1], c = k + nb[q][2];
-            if (a < -1 || b < -1 || c < -1 || a > n[0] || b > n[1] || c > n[2])
-                continue;
-            size_t ns = GI(a, b, c);
-            if (g[ns] & (F_OUT | F_SURF))
-                continue;
-            int ax = q / 2;
-            size_t owner = (q % 2 == 0) ? s : ns; /* the lower of the two cells */
-            if (g[owner] & (F_BLOCK_X << ax))
-                continue;
-            if (top == cap) {
-                size_t *ns_stack = realloc(stack, 2 * cap * sizeof *stack);
-                if (!ns_stack) {
-                    free(stack);
-                    free(g);
-                    snprintf(err, errlen, "voxelize: out of memory");
-                    return -1;
-                }
-                stack = ns_stack;
-                cap *= 2;
+    vgrid G = {g, {n[0], n[1], n[2]}, (size_t)px, (size_t)py, malloc(1024 * sizeof(size_t)),
+               1024};
+    vseed *seeds = NULL;
+    int n_seeds = 0, cap_seeds = 0;
+    if (!G.stack)
+        goto oom;
+    /* the outside: flooded from the padding corner through open faces of non-surface cells */
+    if (vg_flood(&G, GI(-1, -1, -1), F_OUT, F_OUT | F_SURF) != 0)
+        goto oom;
+    /* What it did not reach falls into components (each flooded once, named by its first
+     * cell); a component is solid if the surface winds around it, else a cavity. */
+    for (int k = 0; k < n[2]; k++)
+        for (int j = 0; j < n[1]; j++)
+            for (int i = 0; i < n[0]; i++) {
+                const size_t at = GI(i, j, k);
+                if (g[at] & (F_OUT | F_SURF | F_SEEN))
+                    continue;
+                if (grow((void **)&seeds, &cap_seeds, n_seeds + 1, sizeof *seeds) != 0 ||
+                    vg_flood(&G, at, F_SEEN, F_SEEN | F_OUT | F_SURF) != 0)
+                    goto oom;
+                seeds[n_seeds++] = (vseed){i, j, k, at, 0, 0};
             }
-            g[ns] |= F_OUT;
-            stack[top++] = ns;
+    if (n_seeds > 0) {
+        if (seed_windings(verts, nv, tris, nt, h, origin, n, seeds, n_seeds) != 0)
+            goto oom;
+        for (int s = 0; s < n_seeds; s++) {
+            /* an oriented surface: inside where its winding number is not 0 (nested shells,
+             * overlapping parts, a whole mesh inside out); one whose triangles are not all
+             * wound alike has only a parity */
+            const int inside = unbalanced ? seeds[s].crossings % 2 : seeds[s].winding != 0;
+            if (!inside && vg_flood(&G, seeds[s].at, F_OUT, F_OUT | F_SURF) != 0)
+                goto oom;
         }
     }
-    free(stack);
+    free(seeds);
+    free(G.stack);
     int count = 0;
     for (int k = 0; k < n[2]; k++)
         for (int j = 0; j < n[1]; j++)
@@ -566,4 +737,10 @@ int cs_voxelize(const double *verts, int nv, const int32_t *tris, int nt, double
     *ijk = out;
     *n_cells = count;
     return 0;
+oom:
+    free(seeds);
+    free(G.stack);
+    free(g);
+    snprintf(err, errlen, "voxelize: out of memory");
+    return -1;
 }

@@ -30,7 +30,9 @@ int cs_mesh_surface_check(const double *verts, int nv, const int32_t *tris, int 
 /*
  * Seed 000 §2.1: cut the mesh's axis-aligned bounding box into cubes of edge h and keep every
  * cube that intersects a triangle (exact separating-axis test) or lies inside the closed
- * surface. The mesh must be closed (see common/watertight.h); an open one is refused with
+ * surface: where its winding number is not 0 (a cavity, inside a closed inner shell wound
+ * inward, is outside; a mesh whose shells are not all consistently wound: an odd number of
+ * crossings). The mesh must be closed (see common/watertight.h); an open one is refused with
  * CS_ERR_GEOMETRY-style -1 and a message. Outputs a malloc'd list of (i,j,k) and the lattice
  * origin (the bounding box's min corner).
  */

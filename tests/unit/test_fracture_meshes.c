@@ -76,6 +76,8 @@ typedef struct shape {
     double h[3];        /* cube sizes, largest first; 0 = unused */
     int n_cut_sizes;    /* the exhaustive cut runs on the first n_cut_sizes sizes only */
     double cut_vol_tol; /* asserted bound on the cut runs' volume error (see cut_case) */
+    double hollow;      /* > 0: a cavity, the mesh again scaled by this about the origin and
+                           turned inward (a second, inner shell); 0: solid */
 } shape;
 
 /*
@@ -85,21 +87,25 @@ typedef struct shape {
  */
 static const shape shapes[] = {
     /* 24, 192, 1536 cells */
-    {"box", SHAPE_BOX, NULL, 1, {0.2, 0.15, 0.1}, {0.05, 0.025, 0.0125}, 2, 1e-9},
+    {"box", SHAPE_BOX, NULL, 1, {0.2, 0.15, 0.1}, {0.05, 0.025, 0.0125}, 2, 1e-9, 0},
     /* icosphere r = 0.1 m, 320 triangles: 64, 408, 2728 cells */
-    {"icosphere", SHAPE_REPO_MESH, "icosphere.obj", 1, {0}, {0.05, 0.025, 0.0125}, 2, 0.0015},
+    {"icosphere", SHAPE_REPO_MESH, "icosphere.obj", 1, {0}, {0.05, 0.025, 0.0125}, 2, 0.0015,
+     0},
     /* torus R = 0.1 m, r = 0.04 m, 1024 triangles: 88, 592, 2317 cells */
-    {"torus", SHAPE_REPO_MESH, "torus.obj", 1, {0}, {0.04, 0.02, 0.0125}, 2, 0.003},
+    {"torus", SHAPE_REPO_MESH, "torus.obj", 1, {0}, {0.04, 0.02, 0.0125}, 2, 0.003, 0},
     /* twisted star prism, 0.2 × 0.2 × 0.12 m, 260 triangles: 65, 348, 1956 cells */
-    {"star", SHAPE_REPO_MESH, "star.obj", 1, {0}, {0.04, 0.02, 0.01}, 2, 0.008},
+    {"star", SHAPE_REPO_MESH, "star.obj", 1, {0}, {0.04, 0.02, 0.01}, 2, 0.008, 0},
     /* HUMAN.blend: 4.69 × 1.58 × 10.7 units, scaled to 0.094 × 0.032 × 0.214 m, 8560
      * triangles: 226, 582, 1919 cells */
     {"human", SHAPE_SYSTEM_MESH, "BLEND/HUMAN.blend", 0.02, {0}, {0.012, 0.008, 0.005}, 2,
-     0.0012},
+     0.0012, 0},
     /* TheThing: 0.99 × 0.46 × 0.46 units, scaled to 0.198 × 0.092 × 0.092 m, 2656 triangles:
      * 219, 808, 3423 cells */
     {"thing", SHAPE_SYSTEM_MESH, "Ogre/TheThing/Mesh.mesh.xml", 0.2, {0}, {0.02, 0.012, 0.007},
-     2, 0.01},
+     2, 0.01, 0},
+    /* a hollow ball: the icosphere scaled to r = 0.15 m with an inward copy of r = 0.075 m
+     * (HOLLOW_CELLS: cells whose cube lies wholly in the cavity, none kept) */
+    {"hollow", SHAPE_REPO_MESH, "icosphere.obj", 1.5, {0}, {0.04, 0.025, 0.02}, 2, 0.003, 0.5},
 };
 #define N_SHAPES ((int)(sizeof shapes / sizeof shapes[0]))
 
@@ -546,6 +552,47 @@ static const char *source_dir(void)
     return root && *root ? root : CS_SOURCE_DIR;
 }
 
+/* A mesh shape's surface, placed (scale about the origin) and, for a hollow shape, with its
+ * inner shell appended: the same triangles scaled by sh->hollow and reversed. 0, or -1 with
+ * err. */
+static int shape_mesh(const shape *sh, cs_mesh *m, char *err, size_t errlen)
+{
+    char path[600];
+    if (sh->kind == SHAPE_REPO_MESH)
+        snprintf(path, sizeof path, "%s/scenes/meshes/%s", source_dir(), sh->file);
+    else
+        snprintf(path, sizeof path, "%s/%s", MODELS_DIR, sh->file);
+    if (cs_mesh_load(path, m, err, errlen) != 0) {
+        if (sh->kind == SHAPE_SYSTEM_MESH) {
+            size_t l = strlen(err);
+            snprintf(err + l, errlen - l, " (install assimp-testmodels: make deps)");
+        }
+        return -1;
+    }
+    double zero[3] = {0, 0, 0};
+    cs_mesh_transform(m, sh->scale, zero, zero);
+    if (sh->hollow > 0) {
+        double *v = realloc(m->v, (size_t)m->nv * 6 * sizeof *v);
+        int32_t *t = v ? realloc(m->t, (size_t)m->nt * 6 * sizeof *t) : NULL;
+        if (v)
+            m->v = v;
+        if (!v || !t) {
+            cs_mesh_free(m);
+            snprintf(err, errlen, "out of memory");
+            return -1;
+        }
+        m->t = t;
+        for (int i = 0; i < 3 * m->nv; i++)
+            v[3 * m->nv + i] = sh->hollow * v[i];
+        for (int i = 0; i < m->nt; i++)
+            for (int c = 0; c < 3; c++)
+                t[3 * (m->nt + i) + c] = m->nv + t[3 * i + 2 - c];
+        m->nv *= 2;
+        m->nt *= 2;
+    }
+    return 0;
+}
+
 /* Hash of original lattice cells -> index into setup.cells (open addressing). */
 typedef struct cell_map {
     int32_t *key; /* 3 per slot */
@@ -633,21 +680,10 @@ static int setup_make(setup *s, const shape *sh, double h, char *err, size_t err
         for (int a = 0; a < 3; a++)
             d.cells_origin[a] = -0.5 * sh->box_size[a];
     } else {
-        char path[600];
-        if (sh->kind == SHAPE_REPO_MESH)
-            snprintf(path, sizeof path, "%s/scenes/meshes/%s", source_dir(), sh->file);
-        else
-            snprintf(path, sizeof path, "%s/%s", MODELS_DIR, sh->file);
-        if (cs_mesh_load(path, &m, err, errlen) != 0) {
+        if (shape_mesh(sh, &m, err, errlen) != 0) {
             setup_free(s);
-            if (sh->kind == SHAPE_SYSTEM_MESH) {
-                size_t l = strlen(err);
-                snprintf(err + l, errlen - l, " (install assimp-testmodels: make deps)");
-            }
             return -1;
         }
-        double zero[3] = {0, 0, 0};
-        cs_mesh_transform(&m, sh->scale, zero, zero);
         d.geometry = CS_GEOMETRY_MESH;
         d.mesh_vertices = m.v;
         d.n_mesh_vertices = m.nv;
@@ -1033,12 +1069,14 @@ TEST(fracture_meshes_random_torus) { random_runs("torus"); }
 TEST(fracture_meshes_random_star) { random_runs("star"); }
 TEST(fracture_meshes_random_human) { random_runs("human"); }
 TEST(fracture_meshes_random_thing) { random_runs("thing"); }
+TEST(fracture_meshes_random_hollow) { random_runs("hollow"); }
 TEST(fracture_meshes_cut_box) { cut_runs("box"); }
 TEST(fracture_meshes_cut_icosphere) { cut_runs("icosphere"); }
 TEST(fracture_meshes_cut_torus) { cut_runs("torus"); }
 TEST(fracture_meshes_cut_star) { cut_runs("star"); }
 TEST(fracture_meshes_cut_human) { cut_runs("human"); }
 TEST(fracture_meshes_cut_thing) { cut_runs("thing"); }
+TEST(fracture_meshes_cut_hollow) { cut_runs("hollow"); }
 
 /* ---------------------------------------------------------------- the harness, checked */
 
@@ -1219,21 +1257,40 @@ TEST(fracture_meshes_harness_setup)
                 if (fabs(s.volume - vb) > 1e-12 * vb)
                     run_fail(&r, -1, "surface volume %.17g, box %.17g", s.volume, vb);
             } else {
-                char path[600];
                 cs_mesh m;
-                if (sh->kind == SHAPE_REPO_MESH)
-                    snprintf(path, sizeof path, "%s/scenes/meshes/%s", source_dir(), sh->file);
-                else
-                    snprintf(path, sizeof path, "%s/%s", MODELS_DIR, sh->file);
-                if (cs_mesh_load(path, &m, err, sizeof err) == 0) {
-                    double zero[3] = {0, 0, 0};
-                    cs_mesh_transform(&m, sh->scale, zero, zero);
+                if (shape_mesh(sh, &m, err, sizeof err) == 0) {
                     double vm = cs_mesh_volume(m.v, m.t, m.nt);
                     if (fabs(s.volume - vm) > VOLUME_REL_TOL * vm)
                         run_fail(&r, -1, "engine rest surface encloses %.17g, the file %.17g",
                                  s.volume, vm);
                     cs_mesh_free(&m);
                 }
+            }
+            if (sh->hollow > 0) {
+                /* the cavity is empty: no cell wholly inside the inner shell (radius
+                 * hollow * scale * 0.1 about the origin, the icosphere's chord error 1 %) */
+                const double r_in = 0.99 * sh->hollow * sh->scale * 0.1;
+                int in_cavity = 0, lattice = 0;
+                for (int c = 0; c < s.n_cells; c++) {
+                    double d2 = 0;
+                    for (int a = 0; a < 3; a++) {
+                        double x = s.origin[a] + h * (s.cells[3 * c + a] + 0.5);
+                        d2 += x * x;
+                    }
+                    in_cavity += sqrt(d2) + 0.5 * sqrt(3.0) * h < r_in;
+                }
+                /* and the lattice has such cells: the cavity is there to be kept empty */
+                const int m = (int)ceil(0.2 * sh->scale / h) + 1;
+                for (int a = 0; a < m; a++)
+                    for (int b = 0; b < m; b++)
+                        for (int c = 0; c < m; c++) {
+                            double x = s.origin[0] + h * (a + 0.5), y = s.origin[1] + h * (b + 0.5),
+                                   z = s.origin[2] + h * (c + 0.5);
+                            lattice += sqrt(x * x + y * y + z * z) + 0.5 * sqrt(3.0) * h < r_in;
+                        }
+                if (in_cavity || lattice == 0)
+                    run_fail(&r, -1, "%d cells lie wholly inside the cavity (%d lattice cells "
+                             "do)", in_cavity, lattice);
             }
             /* each cell's faces: at most 3 interior ones going +axis */
             if (s.n_faces > 3 * s.n_cells || s.n_faces < s.n_cells - 1)

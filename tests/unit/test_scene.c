@@ -634,6 +634,124 @@ TEST(scene_mesh_errors)
     ENSURE_MSG(contains(err, "objects[0].mesh.file") && contains(err, "gone.obj"), "%s", err);
 }
 
+/* dir/d0/d1/... with folders of `each` 'a'..'z' characters until the path is at least `len`
+ * bytes (the folders made if make), then "/" name: the whole path in out. */
+static int deep_path(char *out, size_t n, const char *dir, size_t len, size_t each, int make,
+                     const char *name)
+{
+    snprintf(out, n, "%s", dir);
+    for (int d = 0; strlen(out) + 1 + strlen(name) < len; d++) {
+        size_t l = strlen(out);
+        if (l + each + 2 >= n)
+            return -1;
+        out[l] = '/';
+        for (size_t i = 0; i < each; i++)
+            out[l + 1 + i] = (char)('a' + (d + (int)i) % 26);
+        out[l + 1 + each] = '\0';
+        if (make && mkdir(out, 0700) != 0)
+            return -1;
+    }
+    size_t l = strlen(out);
+    snprintf(out + l, n - l, "/%s", name);
+    return 0;
+}
+
+/* Remove what deep_path made under dir (the file, then the folders, deepest first). */
+static void deep_remove(char *path, const char *dir)
+{
+    unlink(path);
+    for (char *slash = strrchr(path, '/'); slash && strlen(path) > strlen(dir);
+         slash = strrchr(path, '/')) {
+        *slash = '\0';
+        if (strlen(path) > strlen(dir))
+            rmdir(path);
+    }
+}
+
+/*
+ * Messages name the file that failed, however long its path (the review: paths were cut to
+ * their first 40 bytes, so a long one lost its file name). A mesh path of 300 bytes, missing
+ * and refused (open), and a scene file 150 bytes deep naming a 330-byte mesh path: the
+ * message fits the daemon's 400-byte load acknowledgement and holds the file name, the field
+ * and the reason, with the cut start marked "…"; paths that fit are whole; control bytes in a
+ * path become '?'; a long object name keeps 60 bytes and more of its start.
+ */
+TEST(scene_long_paths_name_the_file)
+{
+    char dir[] = "/tmp/cs_scene_XXXXXX";
+    ENSURE(mkdtemp(dir) != NULL);
+    char mesh[600], json[1400], err[400]; /* the daemon's load acknowledgement: err[400] */
+    cs_scene s;
+    /* missing, 300 bytes */
+    ENSURE(deep_path(mesh, sizeof mesh, dir, 300, 50, 0, "the_missing_mesh.obj") == 0);
+    ENSURE(strlen(mesh) >= 300);
+    snprintf(json, sizeof json, "{\"objects\": [{\"name\": \"m\", \"mesh\": {\"file\": \"%s\"}}]}",
+             mesh);
+    int rc = cs_scene_parse(json, dir, &s, err, sizeof err);
+    ENSURE(rc == -1);
+    ENSURE_MSG(good_message(err, sizeof err) && contains(err, "objects[0].mesh.file") &&
+                   contains(err, "/the_missing_mesh.obj': no such file") &&
+                   contains(err, "\xe2\x80\xa6/"),
+               "%s", err);
+
+    /* refused (open), 300 bytes, the folders made */
+    ENSURE(deep_path(mesh, sizeof mesh, dir, 300, 50, 1, "an_open_cube.obj") == 0);
+    ENSURE(write_cube_obj(mesh, 1) == 0);
+    snprintf(json, sizeof json,
+             "{\"objects\": [{\"name\": \"lid\", \"mesh\": {\"file\": \"%s\"}}]}", mesh);
+    rc = cs_scene_parse(json, dir, &s, err, sizeof err);
+    deep_remove(mesh, dir);
+    ENSURE(rc == -1);
+    ENSURE_MSG(good_message(err, sizeof err) && contains(err, "objects[0] 'lid'") &&
+                   contains(err, "/an_open_cube.obj' is refused: ") &&
+                   contains(err, "boundary edges"),
+               "%s", err);
+
+    /* a scene file 150 bytes deep naming (relative to its folder) a missing 330-byte path */
+    char scene[600], rel[600];
+    ENSURE(deep_path(scene, sizeof scene, dir, 150, 40, 1, "scene.json") == 0);
+    ENSURE(deep_path(rel, sizeof rel, "x", 330, 60, 0, "far_away_mesh.obj") == 0);
+    snprintf(json, sizeof json,
+             "{\"objects\": [{\"name\": \"%s\", \"mesh\": {\"file\": \"%s\"}}]}",
+             "a_rather_long_object_name_that_says_what_it_is_and_then_some_more_", rel);
+    ENSURE(write_text(scene, json) == 0);
+    rc = cs_scene_load(scene, &s, err, sizeof err);
+    deep_remove(scene, dir);
+    ENSURE(rc == -1);
+    ENSURE_MSG(good_message(err, sizeof err) &&
+                   contains(err, "/scene.json: objects[0].mesh.file") &&
+                   contains(err, "/far_away_mesh.obj': no such file"),
+               "%s", err);
+
+    /* a path that fits is whole; control bytes are '?' */
+    rc = cs_scene_parse("{\"objects\": [{\"name\": \"m\", \"mesh\": {\"file\": "
+                        "\"sub/bad\\nna\\tme.obj\"}}]}",
+                        dir, &s, err, sizeof err);
+    ENSURE(rc == -1);
+    char want[200];
+    snprintf(want, sizeof want, "mesh '%s/sub/bad?na?me.obj': no such file", dir);
+    ENSURE_MSG(good_message(err, sizeof err) && contains(err, want) && !strchr(err, '\t'), "%s",
+               err);
+
+    /* a long object name (named twice): its first 60 bytes and the cut marked */
+    char name[201];
+    for (int i = 0; i < 200; i++)
+        name[i] = (char)('A' + i % 26);
+    name[200] = '\0';
+    snprintf(json, sizeof json,
+             "{\"objects\": [{\"name\": \"%s\", \"box\": {\"min\": [0, 0, 0], "
+             "\"size\": [1, 1, 1]}}, {\"name\": \"%s\", \"box\": {\"min\": [0, 0, 0], "
+             "\"size\": [1, 1, 1]}}]}",
+             name, name);
+    rc = cs_scene_parse(json, dir, &s, err, sizeof err);
+    ENSURE(rc == -1);
+    rmdir(dir);
+    name[60] = '\0';
+    ENSURE_MSG(good_message(err, sizeof err) && contains(err, name) &&
+                   contains(err, "\xe2\x80\xa6"),
+               "%s", err);
+}
+
 /* A closed, consistently oriented mesh wound clockwise (enclosed volume < 0, as DirectX .x
  * files import) is turned outward; a closed non-manifold one is refused, naming the problem. */
 TEST(scene_mesh_inside_out_turned_outward)
