@@ -832,11 +832,14 @@ int main(int argc, char **argv)
 
     char err[512] = "";
     if (load_scene(d.opt.scene, &d.scene, &d.world, err, sizeof err) != 0) {
-        /* cs_scene_load's messages usually begin with the path already. */
-        if (strncmp(err, d.opt.scene, strlen(d.opt.scene)) == 0)
+        /* cs_scene_load's messages usually begin with the path already, as cs_msg_path
+         * shows it (a long one cut to its end, 120 bytes). */
+        char shown[121];
+        cs_msg_path(d.opt.scene, shown, sizeof shown);
+        if (strncmp(err, shown, strlen(shown)) == 0)
             fprintf(stderr, "cubesimd: %s\n", err);
         else
-            fprintf(stderr, "cubesimd: scene %s: %s\n", d.opt.scene, err);
+            fprintf(stderr, "cubesimd: scene %s: %s\n", shown, err);
         return 2;
     }
     d.have_scene = true;

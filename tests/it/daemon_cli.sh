@@ -58,6 +58,13 @@ expect_exit2 cli-steps-and-duration 'exclude each other' --scene "$S" --steps 2 
 expect_exit2 cli-export-unknown-format "no assimp exporter for the extension '.off'" --scene "$S" --steps 1 --export "$CS_TMP/x.off"
 expect_exit2 cli-export-missing-dir "--export: cannot write in '$CS_TMP/nodir'" --scene "$S" --steps 1 --export "$CS_TMP/nodir/x.obj"
 expect_exit2 cli-dump-missing-dir "--dump-nodes: cannot write in '$CS_TMP/nodir'" --scene "$S" --steps 1 --dump-nodes "$CS_TMP/nodir/x.csv"
+# a scene path longer than messages show whole: named once, by its end (it was printed whole and
+# then again cut)
+LONGD="$CS_TMP/$(printf 'd%.0s' {1..70})/$(printf 'e%.0s' {1..70})"
+mkdir -p "$LONGD" && sed 's/"young": 1e4/"young": "hard"/' "$S" >"$LONGD/long_scene.json"
+expect_exit2 cli-long-scene-path '…/e+/long_scene.json: materials.m.young' --scene "$LONGD/long_scene.json"
+n=$(timeout 20 "$D" --scene "$LONGD/long_scene.json" 2>&1 >/dev/null | grep -o 'long_scene.json' | wc -l)
+[ "$n" -eq 1 ] && cs_pass cli-long-scene-path-once || cs_fail cli-long-scene-path-once "named $n times"
 # a duration whose step count would not fit (it wrapped and ran one step, exit 0)
 expect_exit2 cli-duration-huge 'at most 1e15' --scene "$S" --duration 1e20
 expect_exit2 cli-static-and-steps '--static cannot be combined' --scene "$S" --static --steps 2
