@@ -890,7 +890,7 @@ static bool seg_tri(const double p[3], const double q[3], const double *a, const
  * coordinates, the lattice point plus a random delta fixed per lattice point, chosen so that
  * it does not cross the surface).
  */
-/* A vertex of the mesh's own triangles lying exactly on node's lattice point (meshes made of
+/* A vertex of the mesh's own triangles lying on node's lattice point (meshes made of
  * cube faces have them), or -1: the closing surface must end on it, not beside it. Where the
  * mesh was split there, the copy used by a triangle of a cell attached to `cell` (sharing a
  * node with it) is preferred; cell < 0 takes any. With `exact` (partially opened faces: the
@@ -903,7 +903,12 @@ static int32_t surface_vertex_at(const surf_edit *e, int32_t node, int32_t cell,
     const cs_object *o = e->o;
     const cs_cubemesh *cm = &o->cm;
     const cs_surface *s = &o->surf;
-    const double *p = cm->node_rest + 3 * (size_t)node, tol = 1e-9 * cm->h;
+    const double *p = cm->node_rest + 3 * (size_t)node;
+    /* meshes come from files in float32: a vertex meant to lie on the lattice point is there
+     * to float precision (2^-24 of its coordinates; a closing vertex beside it, 3e-9 m away at
+     * 0.1 m, collapsed onto it on the bus), so the tolerance of cs_voxel_tolerance */
+    const double pm = fmax(fabs(p[0]), fmax(fabs(p[1]), fabs(p[2])));
+    const double tol = fmin(1e-4 * cm->h, fmax(1e-9 * cm->h, 0x1p-20 * pm));
     int32_t li[3], any = -1, near = -1;
     for (int k = 0; k < 3; k++)
         li[k] = (int32_t)llround((p[k] - cm->origin[k]) / cm->h);

@@ -696,3 +696,76 @@ TEST(fracture_exhaustive_cuts_of_cells_meeting_along_an_edge)
         cs_world_destroy(w);
     }
 }
+
+/* A mesh read from a float32 file has its vertices on lattice points only to float precision
+ * (a lattice-aligned cavity [0.05, 0.15]³ in a 0.2 m cube of h = 0.025: its edge midpoints
+ * after subdivision sit 3e-9 m off x = 0.1). The closing surface of a cut through them must end
+ * on those vertices: it made a corner vertex beside one, and the two became one point on the
+ * bus (float32), two zero-area triangles per piece in cubesim-replay --verify. */
+TEST(fracture_closing_ends_on_float32_mesh_vertices)
+{
+    static const int quad[12][3] = {{0, 2, 3}, {0, 3, 1}, {4, 5, 7}, {4, 7, 6}, {0, 1, 5}, {0, 5, 4},
+                                    {2, 6, 7}, {2, 7, 3}, {0, 4, 6}, {0, 6, 2}, {1, 3, 7}, {1, 7, 5}};
+    double v[16 * 3];
+    int32_t t[24 * 3];
+    for (int s = 0; s < 2; s++) {
+        const double lo = s ? 0.05 : 0.0, size = s ? 0.1 : 0.2;
+        for (int i = 0; i < 8; i++) {
+            v[3 * (8 * s + i)] = (float)(lo + (i % 2) * size);
+            v[3 * (8 * s + i) + 1] = (float)(lo + (i / 2 % 2) * size);
+            v[3 * (8 * s + i) + 2] = (float)(lo + (i / 4) * size);
+        }
+        for (int f = 0; f < 12; f++) { /* the inner shell wound inward */
+            t[3 * (12 * s + f)] = 8 * s + quad[f][0];
+            t[3 * (12 * s + f) + 1] = 8 * s + quad[f][s ? 2 : 1];
+            t[3 * (12 * s + f) + 2] = 8 * s + quad[f][s ? 1 : 2];
+        }
+    }
+    for (int cuts = 1; cuts <= 3; cuts++) {
+        cs_world_def wd = cs_world_def_default();
+        wd.gravity[2] = 0;
+        cs_world_t *w = NULL;
+        ENSURE(cs_world_create(&wd, &w, NULL, 0) == CS_OK);
+        cs_object_def od = cs_object_def_default();
+        od.name = "hollow";
+        od.cube_size = 0.025;
+        od.fracture = true;
+        od.geometry = CS_GEOMETRY_MESH;
+        od.mesh_vertices = v;
+        od.n_mesh_vertices = 16;
+        od.mesh_triangles = t;
+        od.n_mesh_triangles = 24;
+        cs_object_id id;
+        char err[256];
+        ENSURE_MSG(cs_world_add_object(w, &od, &id, err, sizeof err) == CS_OK, "%s", err);
+        for (int c = 0; c < cuts; c++) {
+            double p[3] = {0.1, 0.1, 0.1}, n[3] = {0, 0, 0};
+            p[c] = 0.11;
+            n[c] = 1;
+            cs_object_id ids[64];
+            const int no = cs_world_object_ids(w, ids, 64);
+            for (int o = 0; o < no; o++)
+                ENSURE_MSG(cs_world_fracture(w, ids[o], p, n, 0.5, err, sizeof err) == CS_OK, "%s", err);
+        }
+        cs_object_id ids[64];
+        const int no = cs_world_object_ids(w, ids, 64);
+        ENSURE(no >= 2);
+        for (int o = 0; o < no; o++) {
+            const double *pv;
+            const int32_t *pt;
+            int nv, nt;
+            cs_object_surface(w, ids[o], &pv, &nv, &pt, &nt);
+            double *f = malloc((size_t)nv * 3 * sizeof *f);
+            ENSURE(f);
+            for (int k = 0; k < 3 * nv; k++)
+                f[k] = (float)pv[k];
+            cs_watertight_report rep;
+            const int ok = cs_watertight_check(f, nv, pt, nt, &rep, err, sizeof err);
+            free(f);
+            if (!ok)
+                cs_world_destroy(w);
+            ENSURE_MSG(ok, "%d cuts, piece %d of %d in float32: %s", cuts, o, no, err);
+        }
+        cs_world_destroy(w);
+    }
+}
