@@ -908,7 +908,7 @@ static int32_t surface_vertex_at(const surf_edit *e, int32_t node, int32_t cell,
      * to float precision (2^-24 of its coordinates; a closing vertex beside it, 3e-9 m away at
      * 0.1 m, collapsed onto it on the bus), so the tolerance of cs_voxel_tolerance */
     const double pm = fmax(fabs(p[0]), fmax(fabs(p[1]), fabs(p[2])));
-    const double tol = fmin(1e-4 * cm->h, fmax(1e-9 * cm->h, 0x1p-20 * pm));
+    const double tol = fmin(1e-4 * cm->h, fmax(1e-9 * cm->h, 0x1p-22 * pm));
     int32_t li[3], any = -1, near = -1;
     for (int k = 0; k < 3; k++)
         li[k] = (int32_t)llround((p[k] - cm->origin[k]) / cm->h);
