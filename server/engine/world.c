@@ -335,6 +335,40 @@ static int check_material(const cs_material *m, char *err, size_t errlen)
     return CS_OK;
 }
 
+/*
+ * The scales double arithmetic must hold (world_internal.h CS_MIN_SCALE): a node's mass, a
+ * cube's stiffness and, for a rigid body, a cube's moment of inertia. Each is a product of
+ * fields inside their own ranges, so each can still overflow, underflow or lose every digit
+ * of its squares: density 1e-300 or cube_size 1e±300 ran to NaN (or to nothing at all) with
+ * exit status 0.
+ */
+static int check_scales(const cs_object_def *def, char *err, size_t errlen)
+{
+    const cs_material *m = &def->material;
+    const double h = def->cube_size, node_mass = m->density * h * h * h / 8;
+    if (!(node_mass >= CS_MIN_SCALE && node_mass <= CS_MAX_SCALE))
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID,
+                              "density %g kg/m^3 and cube_size %g m give nodes of %g kg "
+                              "(density*cube_size^3/8), outside [%g, %g] kg where double "
+                              "arithmetic holds the step's momenta and energies",
+                              m->density, h, node_mass, CS_MIN_SCALE, CS_MAX_SCALE);
+    const double k = m->young * h;
+    if (def->model != CS_MODEL_RIGID && !(k >= CS_MIN_SCALE && k <= CS_MAX_SCALE))
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID,
+                              "young %g Pa and cube_size %g m give cubes of stiffness %g N/m "
+                              "(young*cube_size), outside [%g, %g] N/m where double arithmetic "
+                              "holds the elastic forces",
+                              m->young, h, k, CS_MIN_SCALE, CS_MAX_SCALE);
+    const double inertia = node_mass * 8 * h * h / 6;
+    if (def->model == CS_MODEL_RIGID && !(inertia >= CS_MIN_SCALE && inertia <= CS_MAX_SCALE))
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID,
+                              "density %g kg/m^3 and cube_size %g m give a rigid cube a moment of "
+                              "inertia of %g kg m^2 (density*cube_size^5/6), outside [%g, %g] "
+                              "where its inverse can be computed",
+                              m->density, h, inertia, CS_MIN_SCALE, CS_MAX_SCALE);
+    return CS_OK;
+}
+
 static bool in_box(const cs_aabb *b, const double p[3])
 {
     return p[0] >= b->min[0] && p[0] <= b->max[0] && p[1] >= b->min[1] && p[1] <= b->max[1] &&
@@ -347,10 +381,15 @@ static const int FACE_CORNERS[6][4] = {
 };
 
 /* DESIGN.md: a load's total force is spread over the exposed faces whose centres lie in its
- * box, a quarter of each face's share to each of its corners. */
-static int apply_loads(cs_object *o, const cs_object_def *def, char *err, size_t errlen)
+ * box, a quarter of each face's share to each of its corners. A load that alone gives one of
+ * its nodes more than CS_MAX_STEP_SPEED in one step of dt (its share over the node's mass) is
+ * refused. Needs the masses (cs_object_lump_mass); o->f is scratch here. */
+static int apply_loads(cs_object *o, const cs_object_def *def, double dt, char *err,
+                       size_t errlen)
 {
     const cs_cubemesh *cm = &o->cm;
+    double *share = o->f; /* this load's force per node, for the speed check */
+    memset(share, 0, (size_t)o->n * 3 * sizeof *share);
     for (int l = 0; l < def->n_loads; l++) {
         const cs_load *ld = &def->loads[l];
         if (!finite3(ld->force) || !finite3(ld->box.min) || !finite3(ld->box.max))
@@ -377,8 +416,10 @@ static int apply_loads(cs_object *o, const cs_object_def *def, char *err, size_t
                     }
                     for (int k = 0; k < 4; k++) {
                         int32_t node = cm->cell_nodes[8 * c + FACE_CORNERS[f][k]];
-                        for (int a = 0; a < 3; a++)
+                        for (int a = 0; a < 3; a++) {
                             o->f_const[3 * node + a] += ld->force[a] / (4.0 * count);
+                            share[3 * node + a] += ld->force[a] / (4.0 * count);
+                        }
                     }
                 }
             }
@@ -386,6 +427,27 @@ static int apply_loads(cs_object *o, const cs_object_def *def, char *err, size_t
                 return cs_engine_fail(err, errlen, CS_ERR_INVALID,
                             "loads[%d]: no exposed cube face centre lies in its box", l);
         }
+        double worst = 0;
+        int at = -1;
+        for (int i = 0; i < o->n; i++) {
+            const double *q = share + 3 * (size_t)i;
+            const double dv = dt * hypot(hypot(q[0], q[1]), q[2]) / o->m[i];
+            if (!(dv <= worst)) { /* NaN or inf too */
+                worst = dv;
+                at = i;
+            }
+        }
+        memset(share, 0, (size_t)o->n * 3 * sizeof *share);
+        if (at >= 0 && !(worst <= CS_MAX_STEP_SPEED))
+            return cs_engine_fail(err, errlen, CS_ERR_INVALID,
+                                  "loads[%d]: the force (%g, %g, %g) N gives the node at (%g, "
+                                  "%g, %g) (%g kg) %g m/s in one step of %g s, beyond the speed "
+                                  "of light (%g m/s), where no step means anything",
+                                  l, ld->force[0], ld->force[1], ld->force[2],
+                                  cm->node_rest[3 * (size_t)at],
+                                  cm->node_rest[3 * (size_t)at + 1],
+                                  cm->node_rest[3 * (size_t)at + 2], o->m[at], worst, dt,
+                                  CS_MAX_STEP_SPEED);
     }
     return CS_OK;
 }
@@ -526,10 +588,23 @@ int cs_object_check_stability(const cs_object *o, double dt, const char *what, c
 {
     const bool expl = o->integrator == CS_INTEGRATOR_SYMPLECTIC_EULER ||
                       o->integrator == CS_INTEGRATOR_VERLET;
-    if (o->model == CS_MODEL_RIGID || o->omega2_plain <= 0 ||
-        (!expl && o->integrator != CS_INTEGRATOR_CENTRAL_DIFFERENCE))
+    if (o->model == CS_MODEL_RIGID || o->omega2_plain <= 0)
         return CS_OK;
     const double wk2 = cs_elastic_object_omega2(o, o->omega2_plain, false);
+    if (!expl && o->integrator != CS_INTEGRATOR_CENTRAL_DIFFERENCE) {
+        /* implicit steps: the masses must survive the round-off of dt²K (CS_MAX_OMEGA_DT2) */
+        if (!(wk2 * dt * dt <= CS_MAX_OMEGA_DT2))
+            return cs_engine_fail(err, errlen, CS_ERR_INVALID,
+                                  "%s'%s' is too stiff for its mass at dt %g s: (omega_max*dt)^2 "
+                                  "= %.3g is above %g, where its nodes' mass is lost in the "
+                                  "round-off of the stiffness (young %g Pa, density %g kg/m^3, "
+                                  "cube_size %g m%s): raise density or cube_size, or lower "
+                                  "young or dt",
+                                  what, o->name, dt, wk2 * dt * dt, CS_MAX_OMEGA_DT2,
+                                  o->mat.young, o->mat.density, o->cm.h,
+                                  wk2 > o->omega2_plain * (1 + 1e-12) ? ", with its fields" : "");
+        return CS_OK;
+    }
     if (!expl) {
         const double limit = 2.0 / sqrt(wk2);
         if (dt > limit)
@@ -598,6 +673,9 @@ int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *i
         return cs_engine_fail(err, errlen, CS_ERR_INVALID, "cube_size must be > 0 m, got %g",
                     def->cube_size);
     int rc = check_material(&def->material, err, errlen);
+    if (rc)
+        return rc;
+    rc = check_scales(def, err, errlen);
     if (rc)
         return rc;
     if (explicit_integ) {
@@ -682,7 +760,7 @@ int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *i
     for (int i = 0; i < o->n; i++)
         for (int a = 0; a < 3; a++)
             o->f_const[3 * i + a] = o->m[i] * w->def.gravity[a];
-    rc = apply_loads(o, def, err, errlen);
+    rc = apply_loads(o, def, w->def.dt, err, errlen);
     if (rc)
         goto fail;
     for (int i = 0; i < o->n; i++)
@@ -711,14 +789,16 @@ int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *i
             goto fail;
         }
     }
-    /* the stability limits with the scene's fields and penalty springs */
-    if (explicit_integ) {
+    /* the stability limits (and the implicit steps' precision limit) with the scene's fields
+     * and penalty springs */
+    if (integ == CS_INTEGRATOR_CENTRAL_DIFFERENCE) {
+        if (cd_omega2(def, &o->omega2_plain) != 0) {
+            rc = cs_engine_fail(err, errlen, CS_ERR_NOMEM, "out of memory");
+            goto fail;
+        }
+    } else if (def->model != CS_MODEL_RIGID) {
         const double wm = cs_elastic_max_omega(def->model, &def->material, def->cube_size);
         o->omega2_plain = wm * wm;
-    } else if (integ == CS_INTEGRATOR_CENTRAL_DIFFERENCE &&
-               cd_omega2(def, &o->omega2_plain) != 0) {
-        rc = cs_engine_fail(err, errlen, CS_ERR_NOMEM, "out of memory");
-        goto fail;
     }
     rc = cs_object_check_stability(o, w->def.dt, "", err, errlen);
     if (rc)

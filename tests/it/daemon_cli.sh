@@ -118,6 +118,23 @@ else
     cs_fail cli-diverged-run-ends "exit $rc: $(tr '\n' '|' <<<"$err" | tail -c 300)"
 fi
 
+# Values inside each field's range that cannot work together are refused at load, exit 2,
+# one line naming the fields (the outside review's scenes ran to NaN or did nothing, exit 0).
+absurd() { # absurd NAME OBJECT-FIELDS: a 2x1x1 box of 0.1 m cubes with those fields
+    printf '{ "ground": {}, "objects": [ { "name": "b", %s, "box": { "min": [0, 0, 0.5], "size": [%s] } } ] }\n' \
+        "$2" "${3:-0.2, 0.1, 0.1}" >"$CS_TMP/$1.json"
+}
+absurd density '"material": { "density": 1e-300 }'
+absurd cube_huge '"cube_size": 1e300' '1e300, 1e300, 1e300'
+absurd cube_tiny '"cube_size": 1e-300' '1e-300, 1e-300, 1e-300'
+absurd too_light '"material": { "density": 1e-13 }'
+absurd load '"loads": [ { "min": [-1, -1, -1], "max": [1, 1, 1], "force": [1e100, 0, 0] } ]'
+expect_exit2 scene-density-tiny "density 1e-300 kg/m\^3 and cube_size 0.1 m give nodes of 1.25e-304 kg" --scene "$CS_TMP/density.json" --steps 1
+expect_exit2 scene-cube-size-huge "cube_size 1e\+300 m give nodes of inf kg" --scene "$CS_TMP/cube_huge.json" --steps 1
+expect_exit2 scene-cube-size-tiny "cube_size 1e-300 m give nodes of 0 kg" --scene "$CS_TMP/cube_tiny.json" --steps 1
+expect_exit2 scene-too-stiff-for-its-mass "'b' is too stiff for its mass at dt" --scene "$CS_TMP/too_light.json" --steps 1
+expect_exit2 scene-load-past-light-speed "loads\[0\]: the force \(1e\+100, 0, 0\) N .* beyond the speed of light" --scene "$CS_TMP/load.json" --steps 1
+
 # --realtime paces steps to the wall clock: 30 steps of 0.01 s take about 0.3 s (not much less).
 t0=$(date +%s.%N)
 "$D" --scene "$S" --quiet --realtime --steps 30 2>/dev/null; rc=$?
