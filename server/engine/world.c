@@ -1847,12 +1847,20 @@ static void add_solve_stats(cs_step_stats *st, cs_cg_result r)
  * differences): positions (x += dt v1, or x_end when the step computed them: Newmark), ground
  * projection, finish_step, and the stage times t[0..4] (inputs, rotations, right-hand side,
  * solve) and solve statistics into st. el_end, if finite, is the elastic energy at x_end,
- * kept as the object's cached energy unless the ground projection moved a node. */
-static void end_solved_step(const cs_world_t *w, cs_object *o, cs_step_stats *st,
-                            const double t[5], cs_cg_result r, const double *x_end, double el_end)
+ * kept as the object's cached energy unless the ground projection moved a node.
+ *
+ * Returns CS_ERR_DIVERGED, with the positions as they were, when the new state is not finite
+ * although v1 was: x + dt·v1 can overflow, and the ground's friction squares the tangential
+ * speed (7e155 N on a block resting on the ground: NaN from a finite v1,
+ * world_nonfinite_state_after_the_solve_is_undone). Such a state used to be kept, and NaN
+ * speeds then passed the sleep test: the object could sleep, never stepped again, and the
+ * run end with exit status 0. (o->b, the right-hand side, is scratch by now.) */
+static int end_solved_step(const cs_world_t *w, cs_object *o, cs_step_stats *st,
+                           const double t[5], cs_cg_result r, const double *x_end, double el_end)
 {
     const size_t n3 = (size_t)o->n * 3;
     const double dt = w->def.dt;
+    memcpy(o->b, o->x, n3 * sizeof(double));
     if (x_end)
         memcpy(o->x, x_end, n3 * sizeof(double));
     else
@@ -1860,6 +1868,11 @@ static void end_solved_step(const cs_world_t *w, cs_object *o, cs_step_stats *st
             o->x[d] += dt * o->v1[d];
     memcpy(o->v, o->v1, n3 * sizeof(double));
     const int moved = ground_project(w, o);
+    if (!all_finite(o->x, n3) || !all_finite(o->v, n3)) {
+        memcpy(o->x, o->b, n3 * sizeof(double));
+        o->elastic_energy_valid = false;
+        return CS_ERR_DIVERGED;
+    }
     o->elastic_energy = el_end;
     o->elastic_energy_valid = x_end && isfinite(el_end) && moved == 0;
     const double t5 = now_ms();
@@ -1871,6 +1884,7 @@ static void end_solved_step(const cs_world_t *w, cs_object *o, cs_step_stats *st
     st->ms_post += t5 - t[4];
     add_solve_stats(st, r);
     st->objects_stepped++;
+    return CS_OK;
 }
 
 /* ---------------------------------------------------------------- active regions */
@@ -2380,7 +2394,9 @@ static int step_implicit(cs_world_t *w, cs_object *o, cs_step_stats *st, bool tr
             o->cg.stop_ref = rr.ref;
         }
         t4 = now_ms();
-        if (!all_finite(o->v1, n3)) {
+        /* A right-hand side whose norm overflows stops CG before its first iteration with the
+         * guess and "converged" (inf <= inf): relres is then NaN, and the step diverged. */
+        if (!all_finite(o->v1, n3) || !isfinite(rr.relres)) {
             o->fem.cell_active = NULL;
             o->cg.stop = CS_CG_STOP_RHS;
             o->cg.stop_cap = 0;
@@ -2438,8 +2454,9 @@ static int step_implicit(cs_world_t *w, cs_object *o, cs_step_stats *st, bool tr
             return step_implicit(w, o, st, false);
         }
     }
-    end_solved_step(w, o, st, (const double[5]){t0, t1, t2, t3, t4}, r, trap ? o->cg.zo : NULL,
-                    el_end);
+    if (end_solved_step(w, o, st, (const double[5]){t0, t1, t2, t3, t4}, r,
+                        trap ? o->cg.zo : NULL, el_end) != CS_OK)
+        return CS_ERR_DIVERGED;
     if (!o->sleeping)
         cs_cg_record(&o->cg, o->v);
     return CS_OK;
@@ -2568,15 +2585,14 @@ static int step_central_difference(cs_world_t *w, cs_object *o, cs_step_stats *s
         r.iterations += rr.iterations;
         r.relres = rr.relres;
         r.converged = rr.converged;
-        if (!all_finite(o->v1, n3))
+        if (!all_finite(o->v1, n3) || !isfinite(rr.relres)) /* see step_implicit */
             return CS_ERR_DIVERGED;
         if (ground_reactions(w, o, contacts, cd_operator, 2.0 * dt,
                              round < CS_GROUND_RESOLVES) == 0)
             break;
     }
     double t4 = now_ms();
-    end_solved_step(w, o, st, (const double[5]){t0, t1, t2, t3, t4}, r, NULL, NAN);
-    return CS_OK;
+    return end_solved_step(w, o, st, (const double[5]){t0, t1, t2, t3, t4}, r, NULL, NAN);
 }
 
 /* ---------------------------------------------------------------- explicit steps */

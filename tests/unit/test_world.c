@@ -12,6 +12,7 @@
 #include "check.h"
 #include "cubesim.h"
 #include "lattice.h"
+#include "world_internal.h"
 
 typedef struct beam {
     cs_world_t *w;
@@ -792,4 +793,61 @@ TEST(world_refuses_load_past_light_speed)
     ENSURE(add_block(w, "b", CS_MODEL_COROTATIONAL, mat, 0.1, 2, 1, 1, 0.5,
                      (double[3]){1e9, 0, 0}, &id, err, sizeof err) == CS_OK);
     cs_world_destroy(w);
+}
+
+/*
+ * A step that leaves a non-finite state is undone and reported (CS_ERR_DIVERGED), never kept.
+ * Constant forces are set on the object's nodes directly here, as the scene loader did with
+ * the loads it now refuses (world_refuses_load_past_light_speed), on a block resting on the
+ * ground:
+ *  - 7e155 N: the first step gives 7.5e153 m/s, the second's solve a finite 1.4e154 m/s
+ *    whose square in the ground friction overflows: NaN velocities, which that step kept
+ *    and returned CS_OK (the next step's solve then diverged);
+ *  - 1e200 N: the right-hand side's norm overflows, and CG stopped before its first iteration
+ *    with its guess, "converged" (inf <= inf): the block stayed where it was, CS_OK, every
+ *    step (the 1e200 N scene load of the outside review gave NaN the same way, whose NaN
+ *    speeds then passed the sleep test: the object slept and was never stepped again).
+ */
+TEST(world_nonfinite_state_after_the_solve_is_undone)
+{
+    const double F[2] = {7e155, 1e200};
+    for (int k = 0; k < 2; k++) {
+        cs_world_def wd = cs_world_def_default();
+        wd.has_ground = true;
+        wd.threads = 1;
+        cs_world_t *w;
+        ENSURE(cs_world_create(&wd, &w, NULL, 0) == CS_OK);
+        cs_object_id id;
+        char err[512] = "";
+        ENSURE(add_block(w, "b", CS_MODEL_COROTATIONAL, cs_material_default(), 0.1, 2, 1, 1,
+                         0.0, NULL, &id, err, sizeof err) == CS_OK);
+        cs_object *o = cs_world_find_internal(w, id);
+        for (int i = 0; i < o->n; i++)
+            o->f_const[3 * i] += F[k] / o->n;
+        int rc[3], diverged = 0;
+        bool undone = true;
+        const double *X, *x, *v;
+        int n;
+        for (int s = 0; s < 3; s++) {
+            cs_object_nodes(w, id, &X, &x, &v, &n);
+            double before[36];
+            ENSURE(n == 12);
+            memcpy(before, x, sizeof before);
+            rc[s] = cs_world_step(w);
+            ENSURE_MSG(state_finite(w, id), "F %g: step %d returned %d with a non-finite state",
+                       F[k], s, rc[s]);
+            if (rc[s] == CS_ERR_DIVERGED) {
+                diverged++;
+                cs_object_nodes(w, id, &X, &x, &v, &n);
+                for (int i = 0; i < 36; i++)
+                    undone = undone && x[i] == before[i] && v[i] == 0;
+            }
+        }
+        ENSURE_MSG(k == 0 ? rc[0] == CS_OK && rc[1] == CS_ERR_DIVERGED
+                          : diverged == 3,
+                   "F %g: steps returned %d %d %d", F[k], rc[0], rc[1], rc[2]);
+        ENSURE_MSG(undone, "F %g: a diverged step was not undone", F[k]);
+        ENSURE(!o->sleeping);
+        cs_world_destroy(w);
+    }
 }
