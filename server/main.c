@@ -54,8 +54,8 @@ typedef struct cs_daemon {
 
     bool paused;
     long long step_budget;  /* > 0: steps left of a "step N" command, then pause */
-    int diverged_run;       /* diverged steps in a row (do_step) */
-    bool diverged_stop;     /* a --steps/--duration run ended by diverging twice in a row */
+    int diverged_run;       /* diverged steps since the last accepted input (do_step) */
+    bool diverged_stop;     /* a --steps/--duration run ended by a second diverged step */
     long long steps_limit;  /* from --steps/--duration; 0: none */
     long long steps_done;   /* by this process, all epochs */
     int32_t epoch;
@@ -583,6 +583,8 @@ static void apply_inputs(cs_daemon *d, double now)
                 apply_command(d, &in, now, msg, sizeof msg);
             else
                 apply_sculpt(d, &in, msg, sizeof msg);
+            if (!msg[0])
+                d->diverged_run = 0; /* a client changed the world: its next divergence is new */
             char key[48];
             snprintf(key, sizeof key, "refused input, client %lld", (long long)in.client_id);
             if (msg[0])
@@ -623,7 +625,12 @@ static void do_step(cs_daemon *d)
     d->period_steps++;
     d->steps_done++;
     publish_topology(d);
-    d->diverged_run = rc == CS_ERR_DIVERGED ? d->diverged_run + 1 : 0;
+    /* Counted since the last accepted input, not reset by a step that did not diverge: a
+     * step from rest can succeed where the next, from the speed it gave, diverges again (a
+     * scene load of 600 m/s per step on a rigid body, whose limit is 1 km/s: frames 2, 4, 6,
+     * ... diverged, never two in a row, and a --steps run ended with exit status 0). */
+    if (rc == CS_ERR_DIVERGED)
+        d->diverged_run++;
     if (rc == CS_ERR_DIVERGED && d->diverged_run == 1) {
         /* The engine undid the object's step, dropped its inputs and left it at rest where it
          * was: what made it diverge (one client's absurd force, say) is gone, so the run goes

@@ -118,6 +118,19 @@ else
     cs_fail cli-diverged-run-ends "exit $rc: $(tr '\n' '|' <<<"$err" | tail -c 300)"
 fi
 
+# The same when the divergence alternates: 36 000 N on a 1 kg rigid cube gives it 600 m/s per
+# step, so each step from rest succeeds and the next, past 1 km/s, diverges (frames 2, 4, 6,
+# ...). Divergences count since the last input, not in a row: the run ends at frame 4 (before
+# session 31 it diverged every other step and a --steps 6 run ended with exit 0).
+sed 's/1e5, 0, 0/36000, 0, 0/' "$CS_TMP/diverge.json" >"$CS_TMP/alternate.json"
+err=$(timeout 20 "$D" --scene "$CS_TMP/alternate.json" --steps 6 2>&1 >/dev/null); rc=$?
+if [ $rc -eq 1 ] && grep -q 'step diverged at frame 2 (undone' <<<"$err" \
+    && grep -q 'diverged again at frame 4 (undone): run stopped' <<<"$err"; then
+    cs_pass cli-alternating-divergence-ends
+else
+    cs_fail cli-alternating-divergence-ends "exit $rc: $(tr '\n' '|' <<<"$err" | tail -c 300)"
+fi
+
 # Values inside each field's range that cannot work together are refused at load, exit 2,
 # one line naming the fields (the outside review's scenes ran to NaN or did nothing, exit 0).
 absurd() { # absurd NAME OBJECT-FIELDS: a 2x1x1 box of 0.1 m cubes with those fields
