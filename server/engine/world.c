@@ -675,6 +675,13 @@ int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *i
     int rc = check_material(&def->material, err, errlen);
     if (rc)
         return rc;
+    if (def->model == CS_MODEL_MSS && def->material.poisson > CS_MSS_MAX_POISSON)
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID,
+                              "model 'mss' takes poisson up to %g, got %g: its correction forces "
+                              "grow as 1/(1 - 2 poisson) and are not a potential's gradient, so "
+                              "near incompressibility its implicit steps gain energy and blow up "
+                              "(use corotational or linear)",
+                              CS_MSS_MAX_POISSON, def->material.poisson);
     rc = check_scales(def, err, errlen);
     if (rc)
         return rc;

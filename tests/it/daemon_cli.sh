@@ -141,11 +141,13 @@ absurd density '"material": { "density": 1e-300 }'
 absurd cube_huge '"cube_size": 1e300' '1e300, 1e300, 1e300'
 absurd cube_tiny '"cube_size": 1e-300' '1e-300, 1e-300, 1e-300'
 absurd too_light '"material": { "density": 1e-13 }'
+absurd mss_nu '"model": "mss", "material": { "poisson": 0.49999 }'
 absurd load '"loads": [ { "min": [-1, -1, -1], "max": [1, 1, 1], "force": [1e100, 0, 0] } ]'
 expect_exit2 scene-density-tiny "density 1e-300 kg/m\^3 and cube_size 0.1 m give nodes of 1.25e-304 kg" --scene "$CS_TMP/density.json" --steps 1
 expect_exit2 scene-cube-size-huge "cube_size 1e\+300 m give nodes of inf kg" --scene "$CS_TMP/cube_huge.json" --steps 1
 expect_exit2 scene-cube-size-tiny "cube_size 1e-300 m give nodes of 0 kg" --scene "$CS_TMP/cube_tiny.json" --steps 1
 expect_exit2 scene-too-stiff-for-its-mass "'b' is too stiff for its mass at dt" --scene "$CS_TMP/too_light.json" --steps 1
+expect_exit2 scene-mss-near-incompressible "model 'mss' takes poisson up to 0.45, got 0.49999" --scene "$CS_TMP/mss_nu.json" --steps 1
 expect_exit2 scene-load-past-light-speed "loads\[0\]: the force \(1e\+100, 0, 0\) N .* beyond the speed of light" --scene "$CS_TMP/load.json" --steps 1
 
 # --realtime paces steps to the wall clock: 30 steps of 0.01 s take about 0.3 s (not much less).
