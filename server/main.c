@@ -818,6 +818,26 @@ static int run_loop(cs_daemon *d)
 
 /* ---------------------------------------------------------------- main */
 
+/* For a static solve that failed: the object nearest incompressibility, if any is near it
+ * (ν ≥ 0.49), where cubes lock and the solves' conditioning grows as 1/(1 − 2ν) (README
+ * "Statics"), as "; object 'name' has poisson ν: ...", else "". */
+static void static_hint(const cs_world_t *w, char *out, size_t len)
+{
+    const int n = cs_world_object_ids(w, NULL, 0);
+    cs_object_id *ids = n > 0 ? malloc((size_t)n * sizeof *ids) : NULL;
+    cs_object_info best = {0}, info;
+    const int m = ids ? cs_world_object_ids(w, ids, n) : 0;
+    for (int i = 0; i < m && i < n; i++)
+        if (cs_object_get_info(w, ids[i], &info) == CS_OK && info.model != CS_MODEL_RIGID &&
+            info.n_fixed_nodes > 0 && info.material.poisson > best.material.poisson)
+            best = info;
+    free(ids);
+    if (best.name && best.material.poisson >= 0.49)
+        snprintf(out, len, "; object '%.40s' has poisson %g: near incompressibility its cubes "
+                 "lock and its solves need far more iterations (README \"Statics\")",
+                 best.name, best.material.poisson);
+}
+
 int main(int argc, char **argv)
 {
     cs_daemon d;
@@ -875,9 +895,11 @@ int main(int argc, char **argv)
         int sr = cs_world_solve_static(d.world);
         const cs_step_stats *st = cs_world_last_stats(d.world);
         if (sr != CS_OK) {
-            cs_dlog_warn(&d.log, NULL, "static solve: %s (residual %.3g after %d iterations)",
-                         cs_status_str(sr), st ? st->cg_residual : NAN,
-                         st ? st->cg_iterations : -1);
+            char hint[200] = "";
+            static_hint(d.world, hint, sizeof hint);
+            cs_dlog_warn(&d.log, NULL, "static solve: %s (residual %.3g of the loads after %d "
+                         "iterations)%s", cs_status_str(sr), st ? st->cg_residual : NAN,
+                         st ? st->cg_iterations : -1, hint);
             rc = 1;
         } else {
             cs_dlog_info(&d.log, "static solve converged in %.1f ms (%d iterations)",
