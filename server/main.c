@@ -54,8 +54,8 @@ typedef struct cs_daemon {
 
     bool paused;
     long long step_budget;  /* > 0: steps left of a "step N" command, then pause */
-    int diverged_run;       /* diverged steps in a row (do_step) */
-    bool diverged_stop;     /* a --steps/--duration run ended by diverging twice in a row */
+    int diverged_run;       /* diverged steps since the last accepted input (do_step) */
+    bool diverged_stop;     /* a --steps/--duration run ended by a second diverged step */
     long long steps_limit;  /* from --steps/--duration; 0: none */
     long long steps_done;   /* by this process, all epochs */
     int32_t epoch;
@@ -583,6 +583,8 @@ static void apply_inputs(cs_daemon *d, double now)
                 apply_command(d, &in, now, msg, sizeof msg);
             else
                 apply_sculpt(d, &in, msg, sizeof msg);
+            if (!msg[0])
+                d->diverged_run = 0; /* a client changed the world: its next divergence is new */
             char key[48];
             snprintf(key, sizeof key, "refused input, client %lld", (long long)in.client_id);
             if (msg[0])
@@ -623,7 +625,12 @@ static void do_step(cs_daemon *d)
     d->period_steps++;
     d->steps_done++;
     publish_topology(d);
-    d->diverged_run = rc == CS_ERR_DIVERGED ? d->diverged_run + 1 : 0;
+    /* Counted since the last accepted input, not reset by a step that did not diverge: a
+     * step from rest can succeed where the next, from the speed it gave, diverges again (a
+     * scene load of 600 m/s per step on a rigid body, whose limit is 1 km/s: frames 2, 4, 6,
+     * ... diverged, never two in a row, and a --steps run ended with exit status 0). */
+    if (rc == CS_ERR_DIVERGED)
+        d->diverged_run++;
     if (rc == CS_ERR_DIVERGED && d->diverged_run == 1) {
         /* The engine undid the object's step, dropped its inputs and left it at rest where it
          * was: what made it diverge (one client's absurd force, say) is gone, so the run goes
@@ -811,6 +818,26 @@ static int run_loop(cs_daemon *d)
 
 /* ---------------------------------------------------------------- main */
 
+/* For a static solve that failed: the object nearest incompressibility, if any is near it
+ * (ν ≥ 0.49), where cubes lock and the solves' conditioning grows as 1/(1 − 2ν) (README
+ * "Statics"), as "; object 'name' has poisson ν: ...", else "". */
+static void static_hint(const cs_world_t *w, char *out, size_t len)
+{
+    const int n = cs_world_object_ids(w, NULL, 0);
+    cs_object_id *ids = n > 0 ? malloc((size_t)n * sizeof *ids) : NULL;
+    cs_object_info best = {0}, info;
+    const int m = ids ? cs_world_object_ids(w, ids, n) : 0;
+    for (int i = 0; i < m && i < n; i++)
+        if (cs_object_get_info(w, ids[i], &info) == CS_OK && info.model != CS_MODEL_RIGID &&
+            info.n_fixed_nodes > 0 && info.material.poisson > best.material.poisson)
+            best = info;
+    free(ids);
+    if (best.name && best.material.poisson >= 0.49)
+        snprintf(out, len, "; object '%.40s' has poisson %g: near incompressibility its cubes "
+                 "lock and its solves need far more iterations (README \"Statics\")",
+                 best.name, best.material.poisson);
+}
+
 int main(int argc, char **argv)
 {
     cs_daemon d;
@@ -871,9 +898,11 @@ int main(int argc, char **argv)
         int sr = cs_world_solve_static(d.world);
         const cs_step_stats *st = cs_world_last_stats(d.world);
         if (sr != CS_OK) {
-            cs_dlog_warn(&d.log, NULL, "static solve: %s (residual %.3g after %d iterations)",
-                         cs_status_str(sr), st ? st->cg_residual : NAN,
-                         st ? st->cg_iterations : -1);
+            char hint[200] = "";
+            static_hint(d.world, hint, sizeof hint);
+            cs_dlog_warn(&d.log, NULL, "static solve: %s (residual %.3g of the loads after %d "
+                         "iterations)%s", cs_status_str(sr), st ? st->cg_residual : NAN,
+                         st ? st->cg_iterations : -1, hint);
             rc = 1;
         } else {
             cs_dlog_info(&d.log, "static solve converged in %.1f ms (%d iterations)",

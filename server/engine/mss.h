@@ -61,6 +61,28 @@
 #include "cubemesh.h"
 #include "fem.h"
 
+/*
+ * The largest Poisson ratio the element is offered at (cs_world_add_object refuses more;
+ * README "The mass-spring model"). Its correction forces grow as ν → 0.5: the face-force
+ * balance A = (1−4c)I + 4cJ has the eigenvalue 1 + 8c = 2 − 4ν along (1,1,1), so A⁻¹ and
+ * with it c·B (the correction's response, (1−4ν)/(8(1−2ν)) on a uniform stretch) grow as
+ * 1/(1 − 2ν). At rest that is only the bulk stiffness the continuum has too (a cube's
+ * dilation eigenvalue E·h/(2(1−2ν))), but the forces are not a potential's gradient beyond
+ * first order, and their non-potential part grows with them: the implicit steps' symmetrized
+ * tangent ("Stiffness" above) of a cube whose corners are moved at random by 2–20 % of h
+ * turns indefinite from ν ≈ 0.445–0.455 on (2000 draws per ν; semi-definite in all of them
+ * up to 0.44, and up to 0.4 at 50 %), and an implicit step with an indefinite tangent throws
+ * the object. Measured (session 31, implicit Euler, dt 1/60 s): a 10×2×2 cantilever of 5 cm
+ * cubes at E 1e6 Pa blew up (kinetic energy 1e5 J) from ν = 0.49; standing on the ground, a
+ * 2×2×6 column of 0.1 m cubes at E 1e5 Pa gained 2.4 J and did not come to rest at 0.47 and
+ * was thrown about with 1e19 J at 0.48, a 4×4×4 block at 3e4 Pa with 1e15 J at 0.48; at 0.45
+ * and 0.46 they settled and slept without gaining energy (test_mss.c). Strains of order 1
+ * (a 10×2×2 cantilever of 5 cm cubes at E 1e4 Pa hanging under its own weight) gain energy
+ * from ν = 0.3 on, bounded (+0.4 J at 0.3, +32 J at 0.4, +186 J at 0.45 on 2.5 J), none up to
+ * 0.25, where c = 0 and the element is its springs alone.
+ */
+#define CS_MSS_MAX_POISSON 0.45
+
 #define CS_MSS_STATE 178 /* per cell: 16 springs × (n, g), 3 axes, K_s·S (3 × 24), r_a (24), I⁻¹ (9) */
 
 typedef struct cs_mss {

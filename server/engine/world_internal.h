@@ -21,6 +21,35 @@
 #define CS_MIN_DT 1e-6 /* [s]: the smallest world dt accepted */
 
 /*
+ * Scales an object must keep for double arithmetic to work (cs_world_add_object; README
+ * "Limits that protect the daemon"). Squares and products of momenta, forces and energies
+ * summed over up to 2^24 cubes must stay far inside double's 1e±308: a node's mass ρh³/8, a
+ * cube's stiffness E·h and (rigid bodies, whose inertia is inverted through its determinant)
+ * a cube's moment of inertia ρh⁵/6 lie in [CS_MIN_SCALE, CS_MAX_SCALE] in SI units. Nothing
+ * physical comes near (an electron is 1e-30 kg, the observable universe 1e53 kg); density
+ * 1e-300 (node mass 1e-304 kg: every squared momentum underflows to 0 and CG divides 0 by 0)
+ * and cube_size 1e300 or 1e-300 (h³ overflows to inf or underflows to 0) do not.
+ */
+#define CS_MIN_SCALE 1e-80
+#define CS_MAX_SCALE 1e80
+/*
+ * An implicit step solves (M + dt²K) v = b: where a node's mass m is below the round-off of
+ * dt²·k (ω²dt² = dt²k/m above 1/ε = 4.5e15) it is lost, and with it gravity, momentum and
+ * the ground's reactions (measured, session 31: blocks of 1 to 64 cubes landing on the ground
+ * were thrown 10 m to 1e9 m from (ω_max·dt)² = 1e15 on, none below 7e14). Refused above
+ * this, a step of 1e7 periods of the stiffest cube mode; steel at 1 mm cubes and dt 1/60 s is
+ * at 7e10, diamond at 0.1 mm at 6e13.
+ */
+#define CS_MAX_OMEGA_DT2 1e14
+/*
+ * A scene load that gives a node more than the speed of light in one step (dt·|f|/m) is
+ * refused: nothing the engine computes means anything there, and 1e100–1e200 N loads on a
+ * 2 kg block gave NaN (the ground friction's |v|² overflowed) or slid it 1e94 m sideways on
+ * round-off.
+ */
+#define CS_MAX_STEP_SPEED 299792458.0 /* [m/s] */
+
+/*
  * Inputs. FORCE: a constant force at a material point. DRAG: a spring (stiffness) from the
  * material point to `target`. CURVE: one segment of a drag along a polyline (seed 001 §4.1):
  * after `delay` steps the target moves from `target` to `target1` in `steps_total` steps
@@ -181,8 +210,8 @@ typedef struct cs_object {
      * build_preconditioner do; central differences' cd_operator too, with 2dt²). An explicit
      * integrator must keep dt below 2·sqrt(m/k_p): cs_object_check_stability refuses it. */
     cs_fields fld;
-    double omega2_plain;   /* explicit / central differences: ω²max of the plain material
-                              (fields and penalty not included); 0 for other integrators */
+    double omega2_plain;   /* ω²max of the plain material (fields and penalty not included),
+                              for the stability and precision limits; 0 for rigid bodies */
     double mass;
     cs_cg_work cg;
     struct cs_mg *mg;      /* multigrid hierarchy (mg.h), built on first use; NULL otherwise */
