@@ -1258,7 +1258,10 @@ TEST(ground_landing_stiff_blocks_are_not_thrown)
      * spins) and bounds how many break the bound by more than 0.2 m/s (a quarter) and their
      * energy (not thrown). Measured in scratch runs released 4, 5 and 6 cm up (150 steps;
      * over 0.2 m/s / worst): 77edff0 28 of 40 / 1.5e9 m/s at 5 cm; 9996ccc 12, 10, 11 / 1.66,
-     * 1.10, 3.00; session 29 6, 6, 7 / 1.07, 1.94, 2.19. */
+     * 1.10, 3.00; session 29 6, 6, 7 / 1.07, 1.94, 2.19; session 30's main 10, 6, 7 / 1.00,
+     * 0.68, 2.19; session 31 (nodes reaching the ground during a step held in its solve,
+     * world.c ground_arrivals) 3, 0, 0 / 0.30, 0.19, 0.13, and here 1 of 40, energy at most
+     * 1.0545 of the start's (was 10 of 40 allowed, 25 % gain). */
     const double young[] = {1e5, 1e7, 1e9, 1e10, 2e11}, rho[] = {1000, 7800};
     const double spin[][2] = {{0.5, 3}, {2, 8}, {1, -6}, {0, 5}};
     int over = 0, n = 0;
@@ -1288,12 +1291,12 @@ TEST(ground_landing_stiff_blocks_are_not_thrown)
     printf("    %d of %d landings over Coulomb's bound by more than 0.2 m/s; worst %.3f m/s; "
            "kinetic + potential energy at most %.4f of the start's\n",
            over, n, worst, gain);
-    ENSURE_MSG(over <= 10, "%d of %d landings broke Coulomb's bound by more than 0.2 m/s", over,
+    ENSURE_MSG(over <= 4, "%d of %d landings broke Coulomb's bound by more than 0.2 m/s", over,
                n);
     /* thrown (77edff0: 6.8 m/s, kilometres) is many times the start's energy; landings of
-     * spinning stiff blocks gain up to 10 % (session 29, not traced: README Known
-     * limitations) */
-    ENSURE_MSG(gain <= 1.25, "a landing gained energy: %.4f of the start's", gain);
+     * spinning stiff blocks gained up to 10 % (session 29), 5.5 % since session 31 (not
+     * traced: README Known limitations) */
+    ENSURE_MSG(gain <= 1.10, "a landing gained energy: %.4f of the start's", gain);
 }
 
 TEST(ground_friction_is_coulomb_for_every_model)
