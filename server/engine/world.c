@@ -1850,15 +1850,15 @@ static bool all_finite(const double *a, size_t n)
  * the step: no NaN, but no energy, momentum or next step either). */
 static bool state_finite(const cs_object *o)
 {
-    const size_t n3 = 3 * (size_t)o->n;
-    if (!all_finite(o->x, n3) || !all_finite(o->v, n3))
-        return false;
-    double ke = 0;
+    /* one pass: a NaN or infinite velocity makes m v² so (masses are positive), a NaN or
+     * infinite position the sum of the positions (as does a sum past 1e308: absurd anyway) */
+    double ke = 0, sx = 0;
     for (int i = 0; i < o->n; i++) {
-        const double *v = o->v + 3 * (size_t)i;
+        const double *v = o->v + 3 * (size_t)i, *x = o->x + 3 * (size_t)i;
         ke += o->m[i] * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+        sx += x[0] + x[1] + x[2];
     }
-    return isfinite(ke);
+    return isfinite(ke) && isfinite(sx);
 }
 
 /* The implicit Euler operator (M + dt C + dt² K [+ dt² springs]) with Rayleigh damping
