@@ -37,7 +37,10 @@
 #define SC_PATH 320                /* longest JSON path we print */
 #define SC_MAX_NAME 255            /* object name bytes (the engine's limit) */
 #define SC_MAX_PER_AXIS 1024       /* cubes along one axis of a box, cell set or mesh */
-#define SC_MAX_CELLS (1 << 24)     /* cubes in one box or cell set */
+/* cubes in one box or cell set, and in all of a scene's boxes and cell sets: a deformable cube
+ * costs the daemon about 1.7 kB (a 2-million-cube box took 3.3 GB), so 2^22 is about 7 GB;
+ * 2^24 (until session 31) would have taken 28 GB and the out-of-memory killer the daemon */
+#define SC_MAX_CELLS (1 << 22)
 #define SC_MAX_FILE (64L << 20)    /* scene file bytes */
 #define SC_MAX_INDEX ((1 << 20) - 2) /* |i|, |j|, |k| of an explicit cell (the engine's lattice) */
 
@@ -1207,12 +1210,22 @@ int cs_scene_parse(const char *json, const char *base_dir, cs_scene *out, char *
         }
     }
     int i = 0;
+    double cubes = 0; /* of the boxes and cell sets so far */
     for (const cJSON *o = objs->child; o; o = o->next, i++) {
         /* Count the object before parsing so cs_scene_free releases its partial storage. */
         out->n_objects = i + 1;
         if (parse_object(c, o, i, base_dir, mats, &mat_index, &obj_index, &out->objects[i],
                          &out->store[i]))
             goto done;
+        if (out->objects[i].geometry == CS_GEOMETRY_CELLS)
+            cubes += out->objects[i].n_cells;
+        if (cubes > SC_MAX_CELLS) {
+            char p[SC_PATH];
+            pathf(p, "objects[%d]", i);
+            fail(c, p, "the scene's boxes and cell sets hold %.0f cubes with this one; at most "
+                       "%d in all (about 7 GB)", cubes, SC_MAX_CELLS);
+            goto done;
+        }
     }
     rc = 0;
 done:

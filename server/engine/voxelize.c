@@ -37,6 +37,9 @@
 
 
 #define CS_VOX_MAX_CELLS 2e7
+/* cubes a mesh may fill: the scene's bound on boxes and cell sets (common/scene.c), about
+ * 1.7 kB each in the daemon */
+#define CS_VOX_MAX_KEPT (1 << 22)
 #define CS_SUBDIV_MAX_TRIS 50000000
 
 /* ---------------------------------------------------------------- subdivision (§3.3) */
@@ -713,6 +716,14 @@ int cs_voxelize(const double *verts, int nv, const int32_t *tris, int nt, double
         for (int j = 0; j < n[1]; j++)
             for (int i = 0; i < n[0]; i++)
                 count += !(g[GI(i, j, k)] & F_OUT);
+    if (count > CS_VOX_MAX_KEPT) {
+        free(g);
+        snprintf(err, errlen,
+                 "voxelize: cube size h = %g m fills the mesh with %d cubes; at most %d (about "
+                 "7 GB in the daemon): choose a larger cube_size",
+                 h, count, CS_VOX_MAX_KEPT);
+        return -1;
+    }
     int32_t *out = malloc((size_t)(count ? count : 1) * 3 * sizeof *out);
     if (!out) {
         free(g);

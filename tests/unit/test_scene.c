@@ -1119,3 +1119,34 @@ TEST(scene_cell_index_range_is_the_engines)
     ENSURE_MSG(strstr(err, "objects[0].cells.ijk[0][0]") && strstr(err, "1048574"), "%s", err);
     cs_scene_free(&s);
 }
+
+/* A scene's boxes and cell sets hold at most 2^22 cubes, one by one and together (about 7 GB
+ * in the daemon at 1.7 kB a cube). 2^24 per box was allowed before, 28 GB: more than this
+ * machine has, and the out-of-memory killer ends the daemon. Refused while parsing, naming
+ * the object. */
+TEST(scene_cube_count_is_bounded_in_all)
+{
+    char err[512] = "";
+    cs_scene s;
+    /* one box of 1024 × 1024 × 5 = 5.2 million cubes */
+    const char *one = "{\"objects\": [{\"name\": \"a\", \"cube_size\": 0.01, \"box\": "
+                      "{\"min\": [0, 0, 0], \"size\": [10.24, 10.24, 0.05]}}]}";
+    ENSURE(cs_scene_parse(one, ".", &s, err, sizeof err) != 0);
+    ENSURE_MSG(strstr(err, "objects[0].box") && strstr(err, "5242880 cubes") &&
+                   strstr(err, "4194304"), "%s", err);
+    cs_scene_free(&s);
+    /* two of 1024 × 1024 × 3 = 3.1 million each: each allowed, not both */
+    const char *two = "{\"objects\": [{\"name\": \"a\", \"cube_size\": 0.01, \"box\": "
+                      "{\"min\": [0, 0, 0], \"size\": [10.24, 10.24, 0.03]}}, {\"name\": \"b\", "
+                      "\"cube_size\": 0.01, \"box\": {\"min\": [0, 0, 1], \"size\": "
+                      "[10.24, 10.24, 0.03]}}]}";
+    ENSURE(cs_scene_parse(two, ".", &s, err, sizeof err) != 0);
+    ENSURE_MSG(strstr(err, "objects[1]") && strstr(err, "6291456 cubes") && !strchr(err, '\n'),
+               "%s", err);
+    cs_scene_free(&s);
+    const char *ok = "{\"objects\": [{\"name\": \"a\", \"cube_size\": 0.01, \"box\": "
+                     "{\"min\": [0, 0, 0], \"size\": [10.24, 10.24, 0.04]}}]}";
+    ENSURE_MSG(cs_scene_parse(ok, ".", &s, err, sizeof err) == 0, "%s", err);
+    ENSURE(s.n_objects == 1 && s.objects[0].n_cells == 1 << 22);
+    cs_scene_free(&s);
+}

@@ -1059,3 +1059,23 @@ TEST(voxelize_cavity_mass_through_the_world)
     }
     cs_mesh_free(&m);
 }
+
+/* A mesh fills at most 2^22 cubes (as a scene's boxes and cell sets: about 7 GB in the
+ * daemon); a 1 m cube at h = 1/170 (4 913 000 cubes) was voxelized whole before, and the
+ * world built from it would have taken 8 GB. */
+TEST(voxelize_refuses_more_cubes_than_the_daemon_holds)
+{
+    cs_mesh m;
+    box_mesh(&m, (double[3]){0, 0, 0}, (double[3]){1, 1, 1});
+    int32_t *ijk = NULL;
+    int n = 0;
+    double origin[3];
+    char err[256] = "";
+    ENSURE(cs_voxelize(m.v, m.nv, m.t, m.nt, 1.0 / 170, origin, &ijk, &n, err, sizeof err) != 0);
+    ENSURE_MSG(strstr(err, "4913000 cubes") && strstr(err, "4194304"), "%s", err);
+    ENSURE(!ijk);
+    ENSURE(cs_voxelize(m.v, m.nv, m.t, m.nt, 1.0 / 160, origin, &ijk, &n, err, sizeof err) == 0);
+    ENSURE_MSG(n == 160 * 160 * 160, "%d cubes", n);
+    free(ijk);
+    cs_mesh_free(&m);
+}
