@@ -279,7 +279,8 @@ static int find(cs_bp *bp, const double *box, size_t stride, int n)
                     }
         }
     }
-    qsort(bp->pairs, (size_t)bp->n_pairs, 2 * sizeof *bp->pairs, cmp_pair);
+    if (bp->n_pairs > 0) /* (pairs is NULL until the first one) */
+        qsort(bp->pairs, (size_t)bp->n_pairs, 2 * sizeof *bp->pairs, cmp_pair);
     return 0;
 }
 

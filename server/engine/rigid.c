@@ -2685,7 +2685,8 @@ static int soft_candidates(cs_world_t *w, cs_rigid_world *rw)
     for (int k = 0; k < rw->bp.n_pairs; k++)
         if (push_cand(rw, rw->bp.pairs[2 * k], rw->bp.pairs[2 * k + 1]) != 0)
             return -1;
-    qsort_r(rw->kord, (size_t)n_part, sizeof *rw->kord, cmp_kin, w);
+    if (n_part > 0)
+        qsort_r(rw->kord, (size_t)n_part, sizeof *rw->kord, cmp_kin, w);
     for (int g0 = 0, g1; g0 < n_part; g0 = g1) {
         const cs_object_id kin = w->objects[rw->kord[g0]]->kin;
         for (g1 = g0 + 1; g1 < n_part && w->objects[rw->kord[g1]]->kin == kin; g1++)
@@ -2701,7 +2702,8 @@ static int soft_candidates(cs_world_t *w, cs_rigid_world *rw)
                     return -1;
             }
     }
-    qsort(rw->cand, (size_t)rw->n_cand, 2 * sizeof *rw->cand, cmp_pair);
+    if (rw->n_cand > 0) /* (cand is NULL until the first pair: qsort's pointer must not be) */
+        qsort(rw->cand, (size_t)rw->n_cand, 2 * sizeof *rw->cand, cmp_pair);
     int m = 0;
     for (int k = 0; k < rw->n_cand; k++) {
         if (m > 0 && rw->cand[2 * k] == rw->cand[2 * m - 2] &&
