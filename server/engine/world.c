@@ -1810,10 +1810,11 @@ static int ground_arrivals(const cs_world_t *w, cs_object *o, bool trap)
     /* Only the lowest layer of them at once: a small stiff block that falls through its own
      * height in a step has every node's free flight end below the plane, and holding them
      * all there flattened it (a 2 mm steel block dropped 1 mm took 1e3 J); with the lowest
-     * held the solve stops the others, and those still arriving are held in the next round. */
+     * held the solve stops the others, and those still arriving are held in the next round.
+     * (The second pass runs only when the first found one.) */
     double zlow = INFINITY;
     int count = 0;
-    for (int pass = 0; pass < 2; pass++)
+    for (int pass = 0; pass < 2 && (pass == 0 || zlow < INFINITY); pass++)
         for (int i = 0; i < o->n; i++) {
             const size_t d = 3 * (size_t)i + 2;
             if (o->smask[d] || o->contact[i] != CS_GROUND_FREE)
@@ -1937,15 +1938,24 @@ static int end_solved_step(const cs_world_t *w, cs_object *o, cs_step_stats *st,
 {
     const size_t n3 = (size_t)o->n * 3;
     const double dt = w->def.dt;
-    memcpy(o->b, o->x, n3 * sizeof(double));
-    if (x_end)
-        memcpy(o->x, x_end, n3 * sizeof(double));
-    else
-        for (size_t d = 0; d < n3; d++)
-            o->x[d] += dt * o->v1[d];
-    memcpy(o->v, o->v1, n3 * sizeof(double));
+    /* one pass: the old positions kept, the new state written and checked (state_finite's
+     * sums); the ground's projection may change it again, and then it is checked again */
+    double ke = 0, sx = 0;
+    for (int i = 0; i < o->n; i++) {
+        double v2 = 0;
+        for (int a = 0; a < 3; a++) {
+            const size_t d = 3 * (size_t)i + a;
+            const double v1 = o->v1[d];
+            o->b[d] = o->x[d];
+            o->x[d] = x_end ? x_end[d] : o->x[d] + dt * v1;
+            o->v[d] = v1;
+            sx += o->x[d];
+            v2 += v1 * v1;
+        }
+        ke += o->m[i] * v2;
+    }
     const int moved = ground_project(w, o);
-    if (!state_finite(o)) {
+    if (!(isfinite(ke) && isfinite(sx)) || (moved > 0 && !state_finite(o))) {
         memcpy(o->x, o->b, n3 * sizeof(double));
         o->elastic_energy_valid = false;
         return CS_ERR_DIVERGED;
@@ -2406,6 +2416,7 @@ static int step_implicit(cs_world_t *w, cs_object *o, cs_step_stats *st, bool tr
     active_hold(o);
     double t3 = now_ms(), t4 = t3, *av = NULL;
     int ground_rounds = 0;
+    bool landed = false; /* Newmark: a node reached the ground in this step */
     cs_cg_result r = {0, 0, 1, 0};
     /* The tolerance is relative to ‖b − A v1‖ at the guess above (w->def.cg_relative_to):
      * the Δv form's right-hand side; a re-solve of this step keeps that reference. */
@@ -2488,15 +2499,11 @@ static int step_implicit(cs_world_t *w, cs_object *o, cs_step_stats *st, bool tr
         if (again && w->def.has_ground) {
             const int arrived = ground_arrivals(w, o, trap);
             if (arrived > 0 && trap) {
-                /* Newmark: a landing step is implicit Euler's, as after a rigid contact's
-                 * push (holding the arrivals inside the trapezoidal step slowed a stiff block
-                 * sliding down a slope by 4 % against Coulomb's law) */
-                add_solve_stats(st, r);
-                st->newmark_redone++;
-                o->fem.cell_active = NULL;
-                o->cg.stop = CS_CG_STOP_RHS;
-                o->cg.stop_cap = 0;
-                return step_implicit(w, o, st, false);
+                /* Newmark: a landing step is implicit Euler's (below), as after a rigid
+                 * contact's push (holding the arrivals inside the trapezoidal step slowed a
+                 * stiff block sliding down a slope by 4 % against Coulomb's law) */
+                landed = true;
+                break;
             }
             if (arrived > 0) {
                 if (contacts == 0)
@@ -2540,14 +2547,20 @@ static int step_implicit(cs_world_t *w, cs_object *o, cs_step_stats *st, bool tr
          * a slack of it alone sent every corotational first step (and half the linear ones, on
          * round-off) to implicit Euler, which cost an impulse's response 3–28 % of its modal
          * amplitudes (an outside review against its own trapezoidal integration). */
-        double *x1 = o->cg.zo, work = 0;
-        for (size_t d = 0; d < n3; d++) {
-            x1[d] = o->x[d] + (o->smask[d] ? dt * o->v1[d] : 0.5 * dt * (o->v[d] + o->v1[d]));
-            work += o->f[d] * (x1[d] - o->x[d]);
+        bool redo = landed;
+        if (!redo) {
+            double *x1 = o->cg.zo, work = 0;
+            for (size_t d = 0; d < n3; d++) {
+                x1[d] = o->x[d] +
+                        (o->smask[d] ? dt * o->v1[d] : 0.5 * dt * (o->v[d] + o->v1[d]));
+                work += o->f[d] * (x1[d] - o->x[d]);
+            }
+            el_end = cs_elastic_energy(o, x1);
+            const double e_end = kinetic_energy(o, o->v1) + el_end;
+            redo = !(e_end <=
+                     e_start + work + CS_NEWMARK_GUARD * fmax(e_start, fabs(work)) + 1e-300);
         }
-        el_end = cs_elastic_energy(o, x1);
-        const double e_end = kinetic_energy(o, o->v1) + el_end;
-        if (!(e_end <= e_start + work + CS_NEWMARK_GUARD * fmax(e_start, fabs(work)) + 1e-300)) {
+        if (redo) {
             add_solve_stats(st, r);
             st->newmark_redone++;
             return step_implicit(w, o, st, false);
