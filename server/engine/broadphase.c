@@ -67,20 +67,25 @@ static uint64_t cell_key(int level, const int32_t c[3])
            (uint64_t)c[1] << BP_BITS | (uint64_t)c[2];
 }
 
-static int push_pair(cs_bp *bp, int32_t i, int32_t j)
+int cs_pair_push(int32_t **pairs, int *n, int *cap, int32_t i, int32_t j)
 {
-    if (bp->n_pairs == bp->cap_pairs) {
-        const int cap = bp->cap_pairs ? 2 * bp->cap_pairs : 256;
-        int32_t *g = realloc(bp->pairs, (size_t)cap * 2 * sizeof *g);
+    if (*n == *cap) {
+        const int c = *cap ? 2 * *cap : 256;
+        int32_t *g = realloc(*pairs, (size_t)c * 2 * sizeof *g);
         if (!g)
             return -1;
-        bp->pairs = g;
-        bp->cap_pairs = cap;
+        *pairs = g;
+        *cap = c;
     }
-    bp->pairs[2 * bp->n_pairs] = i < j ? i : j;
-    bp->pairs[2 * bp->n_pairs + 1] = i < j ? j : i;
-    bp->n_pairs++;
+    (*pairs)[2 * *n] = i < j ? i : j;
+    (*pairs)[2 * *n + 1] = i < j ? j : i;
+    (*n)++;
     return 0;
+}
+
+static int push_pair(cs_bp *bp, int32_t i, int32_t j)
+{
+    return cs_pair_push(&bp->pairs, &bp->n_pairs, &bp->cap_pairs, i, j);
 }
 
 static int cmp_double(const void *x, const void *y)
@@ -97,7 +102,7 @@ static int cmp_entry(const void *x, const void *y)
     return (a->box > b->box) - (a->box < b->box);
 }
 
-static int cmp_pair(const void *x, const void *y)
+int cs_pair_cmp(const void *x, const void *y)
 {
     const int32_t *a = x, *b = y;
     if (a[0] != b[0])
@@ -280,7 +285,7 @@ static int find(cs_bp *bp, const double *box, size_t stride, int n)
         }
     }
     if (bp->n_pairs > 0) /* (pairs is NULL until the first one) */
-        qsort(bp->pairs, (size_t)bp->n_pairs, 2 * sizeof *bp->pairs, cmp_pair);
+        qsort(bp->pairs, (size_t)bp->n_pairs, 2 * sizeof *bp->pairs, cs_pair_cmp);
     return 0;
 }
 

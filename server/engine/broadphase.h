@@ -41,6 +41,12 @@ typedef struct cs_bp {
  */
 int cs_bp_find(cs_bp *bp, const double *box, size_t stride, int n);
 
+/* A growing list of pairs (i, j), 2 int32 each, stored as (min, max): append one (the array
+ * doubles from 256 pairs). Returns 0, or -1 when out of memory (the list unchanged). */
+int cs_pair_push(int32_t **pairs, int *n, int *cap, int32_t i, int32_t j);
+/* qsort order of such pairs: by the first index, then the second. */
+int cs_pair_cmp(const void *x, const void *y);
+
 /* Frees bp's arrays (not bp); it may be used again after. */
 void cs_bp_free(cs_bp *bp);
 

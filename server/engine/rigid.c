@@ -2577,26 +2577,7 @@ static int soft_pair(cs_world_t *w, cs_rigid_world *rw, int i, int j, double v_r
 /* Append pair (i, j) to rw->cand. */
 static int push_cand(cs_rigid_world *rw, int i, int j)
 {
-    if (rw->n_cand == rw->cap_cand) {
-        const int cap = rw->cap_cand ? 2 * rw->cap_cand : 256;
-        int32_t *g = realloc(rw->cand, (size_t)cap * 2 * sizeof *g);
-        if (!g)
-            return -1;
-        rw->cand = g;
-        rw->cap_cand = cap;
-    }
-    rw->cand[2 * rw->n_cand] = i < j ? i : j;
-    rw->cand[2 * rw->n_cand + 1] = i < j ? j : i;
-    rw->n_cand++;
-    return 0;
-}
-
-static int cmp_pair(const void *x, const void *y)
-{
-    const int32_t *a = x, *b = y;
-    if (a[0] != b[0])
-        return (a[0] > b[0]) - (a[0] < b[0]);
-    return (a[1] > b[1]) - (a[1] < b[1]);
+    return cs_pair_push(&rw->cand, &rw->n_cand, &rw->cap_cand, i, j);
 }
 
 /* Orders object indices by kin, then index (soft_candidates). */
@@ -2703,7 +2684,7 @@ static int soft_candidates(cs_world_t *w, cs_rigid_world *rw)
             }
     }
     if (rw->n_cand > 0) /* (cand is NULL until the first pair: qsort's pointer must not be) */
-        qsort(rw->cand, (size_t)rw->n_cand, 2 * sizeof *rw->cand, cmp_pair);
+        qsort(rw->cand, (size_t)rw->n_cand, 2 * sizeof *rw->cand, cs_pair_cmp);
     int m = 0;
     for (int k = 0; k < rw->n_cand; k++) {
         if (m > 0 && rw->cand[2 * k] == rw->cand[2 * m - 2] &&
