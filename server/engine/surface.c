@@ -329,6 +329,22 @@ static int cmp_half_edge(const void *pa, const void *pb)
     return (a->corner > b->corner) - (a->corner < b->corner);
 }
 
+/* The triangles' 3·ntri edges, each named by its first corner, sorted by (lo, hi, cell,
+ * corner): an edge's uses come together, a cell's side by side. malloc'd, or NULL. */
+static cell_half_edge *sorted_half_edges(const int32_t *t, size_t ntri, const int32_t *tcell)
+{
+    const size_t nc = 3 * ntri;
+    cell_half_edge *he = malloc((nc + 1) * sizeof *he);
+    if (!he)
+        return NULL;
+    for (size_t c = 0; c < nc; c++) {
+        const int32_t a = t[c], b = t[c - c % 3 + (c % 3 + 1) % 3];
+        he[c] = (cell_half_edge){a < b ? a : b, a < b ? b : a, tcell[c / 3], (int32_t)c};
+    }
+    qsort(he, nc, sizeof *he, cmp_half_edge);
+    return he;
+}
+
 static int32_t uf_find(int32_t *parent, int32_t i)
 {
     while (parent[i] != i) {
@@ -369,7 +385,7 @@ static int64_t split_cell_fans(double **v, size_t nu, int32_t *t, size_t ntri,
                                const int32_t *tcell)
 {
     const size_t nc = 3 * ntri;
-    cell_half_edge *he = malloc((nc + 1) * sizeof *he);
+    cell_half_edge *he = sorted_half_edges(t, ntri, tcell);
     int32_t *parent = malloc((nc + 1) * sizeof *parent);
     int32_t *copy = malloc((nc + 1) * sizeof *copy);
     uint8_t *claimed = calloc(nu + 1, 1);
@@ -377,12 +393,9 @@ static int64_t split_cell_fans(double **v, size_t nu, int32_t *t, size_t ntri,
     if (!he || !parent || !copy || !claimed)
         goto out;
     for (size_t c = 0; c < nc; c++) {
-        const int32_t a = t[c], b = t[c - c % 3 + (c % 3 + 1) % 3];
-        he[c] = (cell_half_edge){a < b ? a : b, a < b ? b : a, tcell[c / 3], (int32_t)c};
         parent[c] = (int32_t)c;
         copy[c] = -1;
     }
-    qsort(he, nc, sizeof *he, cmp_half_edge);
     for (size_t i = 0; i < nc;) {
         size_t j = i + 1;
         while (j < nc && he[j].lo == he[i].lo && he[j].hi == he[i].hi)
@@ -457,14 +470,9 @@ static int32_t tri_with_edge(const int32_t *t, const int32_t *sib, int32_t tri, 
 static int split_shared_edges(double **v, size_t *nu, int32_t **t, int32_t **tcell, size_t *ntri)
 {
     const size_t nc = 3 * *ntri;
-    cell_half_edge *he = malloc((nc + 1) * sizeof *he);
+    cell_half_edge *he = sorted_half_edges(*t, *ntri, *tcell);
     if (!he)
         return -1;
-    for (size_t c = 0; c < nc; c++) {
-        const int32_t a = (*t)[c], b = (*t)[c - c % 3 + (c % 3 + 1) % 3];
-        he[c] = (cell_half_edge){a < b ? a : b, a < b ? b : a, (*tcell)[c / 3], (int32_t)c};
-    }
-    qsort(he, nc, sizeof *he, cmp_half_edge);
     size_t groups = 0;
     for (size_t i = 0; i < nc;) {
         size_t j = i + 1;
