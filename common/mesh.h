@@ -22,6 +22,8 @@ void cs_mesh_free(cs_mesh *m);
 
 /* The longest file path (bytes) a one-line message shows whole; a longer one shows its end. */
 #define CS_MSG_PATH 160
+/* ... and the scene file's own path, which messages put in front of a mesh's (scene.c) */
+#define CS_MSG_SCENE_PATH 120
 
 /*
  * A file path as one-line messages show it, in buf (n bytes): whole if it fits, else its end —

@@ -37,10 +37,9 @@
 #define SC_PATH 320                /* longest JSON path we print */
 #define SC_MAX_NAME 255            /* object name bytes (the engine's limit) */
 #define SC_MAX_PER_AXIS 1024       /* cubes along one axis of a box, cell set or mesh */
-/* cubes in one box or cell set, and in all of a scene's boxes and cell sets: a deformable cube
- * costs the daemon about 1.7 kB (a 2-million-cube box took 3.3 GB), so 2^22 is about 7 GB;
- * 2^24 (until session 31) would have taken 28 GB and the out-of-memory killer the daemon */
-#define SC_MAX_CELLS (1 << 22)
+/* cubes in one box or cell set, and in all of a scene's boxes and cell sets (2^24 until session
+ * 31 would have taken 28 GB and the out-of-memory killer the daemon) */
+#define SC_MAX_CELLS CS_MAX_SCENE_CUBES
 #define SC_MAX_FILE (64L << 20)    /* scene file bytes */
 #define SC_MAX_INDEX ((1 << 20) - 2) /* |i|, |j|, |k| of an explicit cell (the engine's lattice) */
 
@@ -132,7 +131,7 @@ static int names_add(sc_names *t, const char *k, int v)
  * daemon's 400-byte load acknowledgement (120 + 64 + 160 + 40 bytes of framing); only WHY
  * may be cut, and only when all three are at their bounds. */
 #define SC_SHOW_NAME 64
-#define SC_SHOW_SCENE 120
+#define SC_SHOW_SCENE CS_MSG_SCENE_PATH
 
 /* s for a one-line message: whole up to SC_SHOW_NAME bytes, else its start and "…" (cut
  * between UTF-8 characters); control bytes become '?'. */

@@ -860,8 +860,8 @@ int main(int argc, char **argv)
     char err[512] = "";
     if (load_scene(d.opt.scene, &d.scene, &d.world, err, sizeof err) != 0) {
         /* cs_scene_load's messages usually begin with the path already, as cs_msg_path
-         * shows it (a long one cut to its end, 120 bytes). */
-        char shown[121];
+         * shows it (a long one cut to its end). */
+        char shown[CS_MSG_SCENE_PATH + 1];
         cs_msg_path(d.opt.scene, shown, sizeof shown);
         if (strncmp(err, shown, strlen(shown)) == 0)
             fprintf(stderr, "cubesimd: %s\n", err);

@@ -190,6 +190,11 @@ typedef enum cs_preconditioner {
 } cs_preconditioner;
 #define CS_MG_AUTO_CELLS 2048
 
+/* Cubes a scene's boxes and cell sets may hold together, and a mesh may fill (the scene
+ * parser and the voxelizer refuse more): a deformable cube costs the daemon about 1.7 kB, so
+ * this is about 7 GB. */
+#define CS_MAX_SCENE_CUBES (1 << 22)
+
 /* Parse "auto", "jacobi", "multigrid"; returns 0 and sets *out, or -1. */
 int cs_preconditioner_from_name(const char *name, cs_preconditioner *out);
 

@@ -30,6 +30,8 @@
  */
 #include "voxelize.h"
 
+#include "cubesim.h"
+
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -37,9 +39,7 @@
 
 
 #define CS_VOX_MAX_CELLS 2e7
-/* cubes a mesh may fill: the scene's bound on boxes and cell sets (common/scene.c), about
- * 1.7 kB each in the daemon */
-#define CS_VOX_MAX_KEPT (1 << 22)
+#define CS_VOX_MAX_KEPT CS_MAX_SCENE_CUBES /* cubes a mesh may fill */
 #define CS_SUBDIV_MAX_TRIS 50000000
 
 /* ---------------------------------------------------------------- subdivision (§3.3) */
