@@ -33,6 +33,9 @@ void cs_mesh_free(cs_mesh *m);
  * cs_mesh_load and cs_mesh_export name their file this way, at most CS_MSG_PATH bytes.
  */
 const char *cs_msg_path(const char *s, char *buf, size_t n);
+/* The same for any text from a file: with `path`, as cs_msg_path; without, a name or word
+ * keeps its start, the "…" after it. */
+const char *cs_msg_text(const char *s, char *buf, size_t n, int path);
 
 /*
  * Load every mesh of a file assimp reads (OBJ, STL, PLY, OFF, glTF, ...), merged into one,

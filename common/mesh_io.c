@@ -54,31 +54,47 @@ void cs_mesh_free(cs_mesh *m)
     m->nv = m->nt = 0;
 }
 
-const char *cs_msg_path(const char *s, char *buf, size_t n)
+const char *cs_msg_text(const char *s, char *buf, size_t n, int path)
 {
-    static const char cut[] = "\xe2\x80\xa6"; /* U+2026 (...), where the start was cut */
+    static const char cut[] = "\xe2\x80\xa6"; /* U+2026 (...), where the text was cut */
     if (!buf || n == 0)
         return "";
     if (!s)
         s = "(null)";
     const size_t len = strlen(s);
-    size_t from = 0, k = 0;
+    size_t from = 0, to = len, k = 0;
     if (len > n - 1 && n > sizeof cut) {
-        /* keep the end: as many bytes as fit behind the mark, from a character's first byte,
-         * and from a '/' if one comes soon (whole folder names rather than a piece of one) */
-        from = len - (n - sizeof cut);
-        while (from < len && ((unsigned char)s[from] & 0xc0) == 0x80)
-            from++;
-        const char *slash = memchr(s + from, '/', len - from);
-        if (slash && slash - (s + from) <= 40)
-            from = (size_t)(slash - s);
-        memcpy(buf, cut, sizeof cut - 1);
-        k = sizeof cut - 1;
+        if (path) {
+            /* keep the end: as many bytes as fit behind the mark, from a character's first
+             * byte, and from a '/' if one comes soon (whole folder names, not a piece) */
+            from = len - (n - sizeof cut);
+            while (from < len && ((unsigned char)s[from] & 0xc0) == 0x80)
+                from++;
+            const char *slash = memchr(s + from, '/', len - from);
+            if (slash && slash - (s + from) <= 40)
+                from = (size_t)(slash - s);
+            memcpy(buf, cut, sizeof cut - 1);
+            k = sizeof cut - 1;
+        } else {
+            /* keep the start, up to a character's first byte, the mark after it */
+            to = n - sizeof cut;
+            while (to > 0 && ((unsigned char)s[to] & 0xc0) == 0x80)
+                to--;
+        }
     }
-    for (size_t i = from; i < len && k < n - 1; i++)
+    for (size_t i = from; i < to && k < n - 1; i++)
         buf[k++] = ((unsigned char)s[i] < 0x20 || s[i] == 0x7f) ? '?' : s[i];
+    if (to < len) {
+        memcpy(buf + k, cut, sizeof cut - 1);
+        k += sizeof cut - 1;
+    }
     buf[k] = '\0';
     return buf;
+}
+
+const char *cs_msg_path(const char *s, char *buf, size_t n)
+{
+    return cs_msg_text(s, buf, n, 1);
 }
 
 typedef struct {

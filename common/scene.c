@@ -137,24 +137,7 @@ static int names_add(sc_names *t, const char *k, int v)
  * between UTF-8 characters); control bytes become '?'. */
 static const char *show(const char *s, char buf[SC_SHOW_NAME + 1])
 {
-    static const char cut[] = "\xe2\x80\xa6"; /* U+2026 */
-    if (!s)
-        s = "(null)";
-    const size_t len = strlen(s);
-    size_t keep = len, k = 0;
-    if (len > SC_SHOW_NAME) {
-        keep = SC_SHOW_NAME - (sizeof cut - 1);
-        while (keep > 0 && ((unsigned char)s[keep] & 0xc0) == 0x80)
-            keep--; /* s[keep] continues a character: drop all of it */
-    }
-    for (size_t i = 0; i < keep; i++)
-        buf[k++] = ((unsigned char)s[i] < 0x20 || s[i] == 0x7f) ? '?' : s[i];
-    if (keep < len) {
-        memcpy(buf + k, cut, sizeof cut - 1);
-        k += sizeof cut - 1;
-    }
-    buf[k] = '\0';
-    return buf;
+    return cs_msg_text(s, buf, SC_SHOW_NAME + 1, 0);
 }
 
 static int fail(sc_ctx *c, const char *path, const char *fmt, ...)
