@@ -906,7 +906,8 @@ static int32_t surface_vertex_at(const surf_edit *e, int32_t node, int32_t cell,
     const double *p = cm->node_rest + 3 * (size_t)node;
     /* meshes come from files in float32: a vertex meant to lie on the lattice point is there
      * to float precision (2^-24 of its coordinates; a closing vertex beside it, 3e-9 m away at
-     * 0.1 m, collapsed onto it on the bus), so the tolerance of cs_voxel_tolerance */
+     * 0.1 m, collapsed onto it on the bus): 4 times that rounding of the point's largest
+     * coordinate, within cs_voxel_tolerance's bounds (1e-9 h to 1e-4 h) */
     const double pm = fmax(fabs(p[0]), fmax(fabs(p[1]), fabs(p[2])));
     const double tol = fmin(1e-4 * cm->h, fmax(1e-9 * cm->h, 0x1p-22 * pm));
     int32_t li[3], any = -1, near = -1;
