@@ -1313,3 +1313,33 @@ int cs_scene_instantiate(const cs_scene *s, cs_world_t **out, char *err, size_t 
     *out = w;
     return 0;
 }
+
+int cs_scene_coarse_object(const cs_scene *s, const cs_world_t *w, int i, char *msg, size_t n)
+{
+    if (!s || !w || i < 0 || i >= s->n_objects)
+        return 0;
+    const cs_object_def *o = &s->objects[i];
+    cs_object_info info;
+    const cs_object_id id = cs_world_find_object(w, o->name);
+    if (o->geometry != CS_GEOMETRY_MESH || id == CS_NULL_OBJECT ||
+        cs_object_get_info(w, id, &info) != CS_OK)
+        return 0;
+    const double mv = cs_mesh_volume(o->mesh_vertices, o->mesh_triangles, o->n_mesh_triangles);
+    if (!(mv > 0) || !(info.volume >= CS_SCENE_COARSE_RATIO * mv))
+        return 0;
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (int v = 0; v < o->n_mesh_vertices; v++)
+        for (int a = 0; a < 3; a++) {
+            lo[a] = fmin(lo[a], o->mesh_vertices[3 * v + a]);
+            hi[a] = fmax(hi[a], o->mesh_vertices[3 * v + a]);
+        }
+    char b[SC_SHOW_NAME + 1];
+    snprintf(msg, n,
+             "objects[%d] '%s': its %d cube%s of %g m hold%s %.3g m^3, %.3g times the %.3g m^3 "
+             "its mesh encloses (%.3g x %.3g x %.3g m): cube_size is coarse for this mesh, its "
+             "mass and stiffness are the cubes'",
+             i, show(o->name, b), info.n_cells, info.n_cells == 1 ? "" : "s", info.cube_size,
+             info.n_cells == 1 ? "s" : "", info.volume, info.volume / mv, mv, hi[0] - lo[0],
+             hi[1] - lo[1], hi[2] - lo[2]);
+    return 1;
+}

@@ -202,4 +202,22 @@ if [ $rc -eq 1 ] && grep -q "static solve: not converged (residual 1 of the load
 else
     cs_fail static-near-incompressible-jacobi-fails-fast "exit $rc: $(tr '\n' '|' <<<"$err" | tail -c 300)"
 fi
+# a mesh under cubes far larger than it runs, and says so in one line: one 1 m cube holds 250
+# times the icosphere's 0.004 m^3 (its mass and stiffness are the cube's); cubes that fit it
+# say nothing, and neither do the shipped scenes
+sed 's/"cube_size": 0.05/"cube_size": 1.0/' <(mesh_scene "$CS_ROOT/scenes/meshes/icosphere.obj") >"$CS_TMP/coarse.json"
+err=$(timeout 30 "$D" --quiet --scene "$CS_TMP/coarse.json" --steps 2 2>&1 >/dev/null); rc=$?
+if [ $rc -eq 0 ] && [ "$(grep -c . <<<"$err")" -eq 1 ] &&
+   grep -q "^cubesimd: objects\[0\] 'thing': its 1 cube of 1 m holds 1 m^3, .* times the 0.00405 m^3 its mesh encloses (0.2 x 0.2 x 0.2 m): cube_size is coarse" <<<"$err"; then
+    cs_pass scene-coarse-mesh-warned
+else
+    cs_fail scene-coarse-mesh-warned "exit $rc, stderr: ${err//$'\n'/ | }"
+fi
+mesh_scene "$CS_ROOT/scenes/meshes/icosphere.obj" >"$CS_TMP/fine.json"
+quiet_scenes=""
+for sc in "$CS_TMP/fine.json" "$CS_ROOT"/scenes/*.json; do
+    err=$(timeout 60 "$D" --quiet --scene "$sc" --steps 1 2>&1 >/dev/null)
+    grep -q "is coarse" <<<"$err" && quiet_scenes+=" $(basename "$sc")"
+done
+[ -z "$quiet_scenes" ] && cs_pass scene-fitting-meshes-not-warned || cs_fail scene-fitting-meshes-not-warned "warned:$quiet_scenes"
 cs_finish

@@ -610,6 +610,53 @@ TEST(scene_mesh_placed_and_subdivided)
     cs_scene_free(&s);
 }
 
+/* A mesh voxelized with cubes much larger than it is reported, naming the object and both
+ * volumes (a crossed cube is kept whole: 8 cubes of 0.15 m, 0.027 m^3, for a 0.2 m cube of
+ * 0.008 m^3); cubes that fit it are not, and neither are boxes. */
+TEST(scene_coarse_mesh_is_reported)
+{
+    char dir[] = "/tmp/cs_scene_XXXXXX";
+    ENSURE(mkdtemp(dir) != NULL);
+    char obj[340], scene[340], err[512], msg[512];
+    snprintf(obj, sizeof obj, "%s/cube.obj", dir);
+    snprintf(scene, sizeof scene, "%s/s.json", dir);
+    ENSURE(write_cube_obj(obj, 0) == 0);
+    const double sizes[2] = {0.15, 0.05};
+    for (int k = 0; k < 2; k++) {
+        char text[600];
+        snprintf(text, sizeof text,
+                 "{\"objects\": [{\"name\": \"box\", \"cube_size\": 0.3, \"box\": {\"min\": "
+                 "[5, 0, 0], \"size\": [0.3, 0.3, 0.3]}}, {\"name\": \"c\", \"cube_size\": %g,"
+                 " \"mesh\": {\"file\": \"cube.obj\", \"scale\": 0.2}}]}",
+                 sizes[k]);
+        ENSURE(write_text(scene, text) == 0);
+        cs_scene s;
+        cs_world_t *w = NULL;
+        ENSURE_MSG(cs_scene_load(scene, &s, err, sizeof err) == 0, "%s", err);
+        ENSURE_MSG(cs_scene_instantiate(&s, &w, err, sizeof err) == 0, "%s", err);
+        msg[0] = '\0';
+        const int box = cs_scene_coarse_object(&s, w, 0, msg, sizeof msg);
+        const int mesh = cs_scene_coarse_object(&s, w, 1, msg, sizeof msg);
+        const int none = cs_scene_coarse_object(&s, w, 2, msg, sizeof msg) +
+                         cs_scene_coarse_object(&s, NULL, 1, msg, sizeof msg);
+        cs_world_destroy(w);
+        cs_scene_free(&s);
+        ENSURE(box == 0 && none == 0);
+        if (k == 0) {
+            ENSURE_MSG(mesh == 1, "8 cubes of 0.15 m for a 0.2 m cube not reported");
+            ENSURE_MSG(strstr(msg, "objects[1] 'c': its 8 cubes of 0.15 m hold 0.027 m^3, 3.37 "
+                                   "times the 0.008 m^3") != NULL &&
+                           strstr(msg, "cube_size is coarse") != NULL,
+                       "message: %s", msg);
+        } else {
+            ENSURE_MSG(mesh == 0, "64 cubes that fill the mesh reported: %s", msg);
+        }
+    }
+    unlink(scene);
+    unlink(obj);
+    rmdir(dir);
+}
+
 TEST(scene_mesh_errors)
 {
     char dir[] = "/tmp/cs_scene_XXXXXX";
