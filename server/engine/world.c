@@ -1665,6 +1665,8 @@ static void repose_friction(const cs_object *o, int i, double s, const double nf
     }
 }
 
+#define CS_GROUND_NET_FLOOR 0.25 /* friction scale's floor: ground_reactions */
+
 static int ground_reactions(const cs_world_t *w, cs_object *o, int contacts, cs_matvec_fn A,
                             double s, bool resolve)
 {
@@ -1673,6 +1675,25 @@ static int ground_reactions(const cs_world_t *w, cs_object *o, int contacts, cs_
     const double mu = w->def.ground_friction;
     double *av = o->cg.q; /* scratch: the solve is done */
     A(o, o->v1, av);
+    /* What the ground pushes with (contacts) and what the released nodes it still holds down
+     * pull with (held through the step, ground_reactions below): the net is the normal force
+     * the object gets, and friction is bounded by μ times it, each node's share scaled by
+     * net / push. μ times the pushing nodes' force alone let a block that landed on its face
+     * while its other edge lifted stop dead: pull and push a couple of 24 times its weight,
+     * and the push's friction took 1.55 m/s in a step where Coulomb allows 0.47. The scale
+     * is at least CS_GROUND_NET_FLOOR: where push and pull nearly cancel their difference is
+     * not known to better than a fraction of them (a block with (ω dt)² = 2.8e13, whose
+     * couples are 1000 times its weight, slid on without friction at 0 and went unstable). */
+    double push = 0, pull = 0;
+    for (int i = 0; i < o->n; i++) {
+        const uint8_t c = o->contact[i];
+        const double fz = (av[3 * i + 2] - o->b[3 * i + 2]) / s;
+        if ((c == CS_GROUND_SLIDE || c == CS_GROUND_STICK) && fz > 0)
+            push += fz;
+        else if (c == CS_GROUND_RELEASED && o->smask[3 * i + 2] && !o->mask[3 * i + 2] && fz < 0)
+            pull -= fz;
+    }
+    const double net = push > 0 && pull > 0 ? fmax(push - pull, CS_GROUND_NET_FLOOR * push) / push : 1.0;
     int changes = 0;
     for (int i = 0; i < o->n; i++) {
         const uint8_t c = o->contact[i];
@@ -1680,7 +1701,7 @@ static int ground_reactions(const cs_world_t *w, cs_object *o, int contacts, cs_
             continue;
         double *gr = o->ground + 3 * i, *v = o->v1 + 3 * i, *b = o->b + 3 * i;
         const double *ax = av + 3 * i;
-        const double fn = (ax[2] - b[2]) / s;
+        const double fn = (ax[2] - b[2]) / s, fnf = net * fn; /* fnf: its share for friction */
         if (!(fn >= 0)) {
             o->contact[i] = CS_GROUND_RELEASED; /* the ground would have to pull */
             gr[2] = 0;
@@ -1703,11 +1724,11 @@ static int ground_reactions(const cs_world_t *w, cs_object *o, int contacts, cs_
         double nf[2] = {0, 0};
         uint8_t nc;
         const double fm = sqrt(gr[0] * gr[0] + gr[1] * gr[1]);
-        if (c == CS_GROUND_SLIDE && resolve && fm > 0 && fabs(fm - mu * fn) > 0.01 * mu * fn &&
+        if (c == CS_GROUND_SLIDE && resolve && fm > 0 && fabs(fm - mu * fnf) > 0.01 * mu * fnf &&
             !(v[0] * gr[0] + v[1] * gr[1] > 0)) {
             /* its friction, posed from the last step's normal force, is not μ times this
              * step's (after an impact, many times above it): to it */
-            repose_friction(o, i, s, (const double[2]){gr[0] * mu * fn / fm, gr[1] * mu * fn / fm},
+            repose_friction(o, i, s, (const double[2]){gr[0] * mu * fnf / fm, gr[1] * mu * fnf / fm},
                             b, gr);
             changes++;
             continue;
@@ -1718,11 +1739,11 @@ static int ground_reactions(const cs_world_t *w, cs_object *o, int contacts, cs_
             for (int a = 0; a < 2; a++)
                 ft[a] = o->mask[3 * i + a] ? 0.0 : (ax[a] - b[a]) / s;
             const double t = sqrt(ft[0] * ft[0] + ft[1] * ft[1]);
-            if (t <= mu * fn)
+            if (t <= mu * fnf)
                 continue;
             nc = CS_GROUND_SLIDE;
-            nf[0] = t > 0 ? mu * fn * ft[0] / t : 0.0;
-            nf[1] = t > 0 ? mu * fn * ft[1] / t : 0.0;
+            nf[0] = t > 0 ? mu * fnf * ft[0] / t : 0.0;
+            nf[1] = t > 0 ? mu * fnf * ft[1] / t : 0.0;
         } else if (v[0] * gr[0] + v[1] * gr[1] > 0) {
             nc = CS_GROUND_STICK; /* friction turned it back */
         } else {
