@@ -124,6 +124,15 @@ void cs_cg_record(cs_cg_work *w, const double *v_end)
     w->hist_valid = true;
 }
 
+void cs_cg_map_history(cs_cg_work *w, void (*map)(void *ctx, double *u), void *ctx)
+{
+    if (!w->hist_prev)
+        return;
+    map(ctx, w->hist_prev);
+    for (int k = 0; k < w->ndirs && k < CS_CG_DIRS; k++)
+        map(ctx, w->dirs[k]);
+}
+
 void cs_cg_forget(cs_cg_work *w)
 {
     w->hist_valid = w->dir_ready = false;

@@ -84,6 +84,10 @@ void cs_cg_work_free(cs_cg_work *w);
 int cs_cg_guess(cs_cg_work *w, const double *v, double *x);
 void cs_cg_record(cs_cg_work *w, const double *v_end);
 void cs_cg_forget(cs_cg_work *w);
+/* Apply map(ctx, u) in place to the history's velocity vectors (the last start, v_prev, and
+ * the changes it holds): for a state that was transformed between steps by the same linear
+ * map (a free body's turn, world.c), so that the next guess's changes are the solves' own. */
+void cs_cg_map_history(cs_cg_work *w, void (*map)(void *ctx, double *u), void *ctx);
 
 /* Invert each 3×3 block in place (9 per node); a singular block becomes its diagonal inverse. */
 void cs_invert_blocks(double *blocks, int n_nodes);

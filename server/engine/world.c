@@ -25,6 +25,7 @@
 
 #include "elastic.h"
 #include "localframe.h"
+#include "mat3.h"
 #include "mg.h"
 #include "rigid.h"
 #include "voxelize.h"
@@ -1942,6 +1943,350 @@ static void add_solve_stats(cs_step_stats *st, cs_cg_result r)
         st->converged = false;
 }
 
+#define FREE_ROTATION_ITERS 4 /* fixed-point iterations of the midpoint rotation */
+
+/* R = exp(s [ω]×) (Rodrigues); the identity for s|ω| = 0. */
+static void rotation_exp(const double om[3], double s, double R[9])
+{
+    const double th = s * sqrt(om[0] * om[0] + om[1] * om[1] + om[2] * om[2]);
+    if (!(th > 0)) {
+        const double I3[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+        memcpy(R, I3, sizeof I3);
+        return;
+    }
+    const double k[3] = {s * om[0] / th, s * om[1] / th, s * om[2] / th};
+    const double c = cos(th), sn = sin(th), cc = 1 - c;
+    R[0] = c + k[0] * k[0] * cc;
+    R[1] = k[0] * k[1] * cc - k[2] * sn;
+    R[2] = k[0] * k[2] * cc + k[1] * sn;
+    R[3] = k[1] * k[0] * cc + k[2] * sn;
+    R[4] = c + k[1] * k[1] * cc;
+    R[5] = k[1] * k[2] * cc - k[0] * sn;
+    R[6] = k[2] * k[0] * cc - k[1] * sn;
+    R[7] = k[2] * k[1] * cc + k[0] * sn;
+    R[8] = c + k[2] * k[2] * cc;
+}
+
+/* om = R I⁻¹ Rᵀ L, I⁻¹ = Ia / det: the angular velocity of momentum L once the body (inertia
+ * I) has turned by R. */
+static void rotated_inverse_inertia(const double R[9], const double Ia[9], double det,
+                                    const double L[3], double om[3])
+{
+    double RtL[3], IRtL[3];
+    for (int a = 0; a < 3; a++)
+        RtL[a] = R[a] * L[0] + R[3 + a] * L[1] + R[6 + a] * L[2];
+    for (int a = 0; a < 3; a++)
+        IRtL[a] = (Ia[3 * a] * RtL[0] + Ia[3 * a + 1] * RtL[1] + Ia[3 * a + 2] * RtL[2]) / det;
+    for (int a = 0; a < 3; a++)
+        om[a] = R[3 * a] * IRtL[0] + R[3 * a + 1] * IRtL[1] + R[3 * a + 2] * IRtL[2];
+}
+
+/* The rigid part of velocity field v on the nodes at o->x: the centre of mass c, its velocity
+ * vc, the angular momentum L about c, the inertia I about c (its adjugate Ia and determinant
+ * det: I⁻¹ = Ia / det) and ω = I⁻¹ L. */
+typedef struct rigid_fit {
+    double c[3], vc[3], L[3], I[9], Ia[9], det, om[3];
+} rigid_fit;
+
+/* False if it cannot be had (no mass, a singular or non-finite inertia). */
+static bool fit_rigid(const cs_object *o, const double *v, rigid_fit *f)
+{
+    double mass = 0;
+    memset(f, 0, sizeof *f);
+    for (int i = 0; i < o->n; i++) {
+        mass += o->m[i];
+        for (int a = 0; a < 3; a++) {
+            f->c[a] += o->m[i] * o->x[3 * (size_t)i + a];
+            f->vc[a] += o->m[i] * v[3 * (size_t)i + a];
+        }
+    }
+    if (!(mass > 0))
+        return false;
+    for (int a = 0; a < 3; a++) {
+        f->c[a] /= mass;
+        f->vc[a] /= mass;
+    }
+    for (int i = 0; i < o->n; i++) {
+        const double *xi = o->x + 3 * (size_t)i, *vi = v + 3 * (size_t)i, m = o->m[i];
+        const double r[3] = {xi[0] - f->c[0], xi[1] - f->c[1], xi[2] - f->c[2]};
+        const double u[3] = {vi[0] - f->vc[0], vi[1] - f->vc[1], vi[2] - f->vc[2]};
+        f->L[0] += m * (r[1] * u[2] - r[2] * u[1]);
+        f->L[1] += m * (r[2] * u[0] - r[0] * u[2]);
+        f->L[2] += m * (r[0] * u[1] - r[1] * u[0]);
+        const double r2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
+        for (int a = 0; a < 3; a++)
+            for (int b = 0; b < 3; b++)
+                f->I[3 * a + b] += m * ((a == b ? r2 : 0.0) - r[a] * r[b]);
+    }
+    f->det = cs_mat3_adjugate(f->I, f->Ia);
+    if (!(f->det > 0) || !isfinite(f->det))
+        return false;
+    for (int a = 0; a < 3; a++)
+        f->om[a] = (f->Ia[3 * a] * f->L[0] + f->Ia[3 * a + 1] * f->L[1] +
+                    f->Ia[3 * a + 2] * f->L[2]) / f->det;
+    return isfinite(f->om[0] + f->om[1] + f->om[2]);
+}
+
+/* The angle |ω| dt the rigid part of v turns by in a step (0 if it cannot be had). */
+static double rigid_turn(const cs_object *o, const double *v, double dt)
+{
+    rigid_fit f;
+    if (!fit_rigid(o, v, &f))
+        return 0;
+    return dt * sqrt(f.om[0] * f.om[0] + f.om[1] * f.om[1] + f.om[2] * f.om[2]);
+}
+
+/* Whether the object's model is invariant under rotation (a turn of its rigid part costs it
+ * nothing): what free_body_rotation and relinearize_turn are for. */
+static bool turns_freely(const cs_object *o)
+{
+    return o->model == CS_MODEL_COROTATIONAL || o->model == CS_MODEL_LOCALFRAME ||
+           o->model == CS_MODEL_MSS;
+}
+
+/* Whether nothing holds the object in this step's solve: no held, ground-contact or frozen
+ * dof (smask) and no penalty pin. */
+static bool held_by_nothing(const cs_object *o)
+{
+    for (size_t d = 0; d < (size_t)o->n * 3; d++)
+        if (o->smask[d])
+            return false;
+    for (int i = 0; o->pin && i < o->n; i++)
+        if (o->pin[i])
+            return false;
+    return true;
+}
+
+/*
+ * The centrifugal force of a free body's turn, added to its step's right-hand side (sign +1)
+ * or taken out again (−1) as s·dt·f_cf. free_body_rotation turns the rigid part of the
+ * solved velocity after the solve, which gives every node its centripetal acceleration
+ * −ω × (ω × r) without a force; in the body's turning frame that is the centrifugal force
+ * f_i = −m_i ω × (ω × r_i), and the solve must feel it for the body to stretch as much as
+ * its stiffness lets it: a 1 kPa jelly spun at 6 rad/s bulges by ρ ω² r²/E, 36 % of its
+ * radius, a steel-stiff one by 1e-7 (without it every free body spun as if rigid). Its
+ * torque about c, the part Euler's equations give the rigid motion (which the turn handles),
+ * is taken out: f_i −= m_i α × r_i with I α = Σ r_i × f_i, so the force moves neither the
+ * centre nor the angular momentum. ω from the state the step starts from (x, v), so the same
+ * force is added and taken out. False (b unchanged) if it cannot be had.
+ */
+static bool turn_centrifugal(const cs_world_t *w, cs_object *o, double sign)
+{
+    rigid_fit f;
+    if (!fit_rigid(o, o->v, &f))
+        return false;
+    const double *om = f.om, w2 = om[0] * om[0] + om[1] * om[1] + om[2] * om[2];
+    const double dt = w->def.dt, s = sign * dt;
+    if (!(dt * sqrt(w2) >= 1e-9))
+        return false;
+    /* the torque of −m ω × (ω × r) = m (ω² r − (ω·r) ω) about c, then α = I⁻¹ τ */
+    double tau[3] = {0, 0, 0}, al[3] = {0, 0, 0};
+    for (int pass = 0; pass < 2; pass++) {
+        if (pass == 1)
+            for (int a = 0; a < 3; a++)
+                al[a] = (f.Ia[3 * a] * tau[0] + f.Ia[3 * a + 1] * tau[1] +
+                         f.Ia[3 * a + 2] * tau[2]) / f.det;
+        for (int i = 0; i < o->n; i++) {
+            const double *xi = o->x + 3 * (size_t)i, m = o->m[i];
+            const double r[3] = {xi[0] - f.c[0], xi[1] - f.c[1], xi[2] - f.c[2]};
+            const double wr = om[0] * r[0] + om[1] * r[1] + om[2] * r[2];
+            double fc[3];
+            for (int a = 0; a < 3; a++)
+                fc[a] = m * (w2 * r[a] - wr * om[a]);
+            if (pass == 0) {
+                tau[0] += r[1] * fc[2] - r[2] * fc[1];
+                tau[1] += r[2] * fc[0] - r[0] * fc[2];
+                tau[2] += r[0] * fc[1] - r[1] * fc[0];
+                continue;
+            }
+            const double ar[3] = {al[1] * r[2] - al[2] * r[1], al[2] * r[0] - al[0] * r[2],
+                                  al[0] * r[1] - al[1] * r[0]};
+            for (int a = 0; a < 3; a++)
+                o->b[3 * (size_t)i + a] += s * (fc[a] - m * ar[a]);
+        }
+    }
+    return true;
+}
+
+/*
+ * A second Newton iteration of the implicit Euler step, for a body the ground holds at some
+ * dofs (nothing held by the scene) whose rigid part turns by at least CS_NEWTON_TURN in the
+ * step: the first solve was linearized at the step's start, where a turn costs nothing, so
+ * x + dt v1 left the body stretched by about (ω dt)²/2 — a block pivoting on an edge at 8
+ * rad/s (60 Hz) gained 0.9 % of strain in a few steps and threw it out horizontally when its
+ * face landed. Linearized again at x1 = x + dt v1 (its rotations, K₁ and force there), the
+ * step's equation M (u − v) = dt (f_ext + f(x + dt u) − C u) becomes
+ * (M + dt C + dt² K₁) u = b + dt (f(x1) − f(x)) + dt² K₁ v1, b the first solve's right-hand
+ * side (its ground impulses included); the caller solves that again with the same held dofs,
+ * so the ground's reactions and friction are posed for it. Returns true if b and the
+ * operator were changed (false: not such a step, or out of memory).
+ */
+#define CS_NEWTON_TURN 0.02 /* rad per step: a stretch of 2e-4 */
+static bool relinearize_turn(const cs_world_t *w, cs_object *o)
+{
+    if (!turns_freely(o) || held_by_nothing(o))
+        return false;
+    const size_t n3 = (size_t)o->n * 3;
+    for (size_t d = 0; d < n3; d++)
+        if (o->mask[d])
+            return false;
+    for (int i = 0; o->pin && i < o->n; i++)
+        if (o->pin[i])
+            return false;
+    const double dt = w->def.dt;
+    if (!(rigid_turn(o, o->v1, dt) >= CS_NEWTON_TURN))
+        return false;
+    double *fx = malloc(n3 * sizeof *fx), *f1 = malloc(n3 * sizeof *f1),
+           *x1 = malloc(n3 * sizeof *x1);
+    if (!fx || !f1 || !x1) {
+        free(fx);
+        free(f1);
+        free(x1);
+        return false;
+    }
+    cs_elastic_force(o, o->x, fx, NULL); /* at the start's rotations, as b's */
+    for (size_t d = 0; d < n3; d++)
+        x1[d] = o->x[d] + dt * o->v1[d];
+    cs_elastic_update(o, x1);
+    cs_elastic_force(o, x1, f1, NULL);
+    cs_elastic_apply_K(o, o->v1, x1); /* K₁ v1 (x1 no longer needed) */
+    for (size_t d = 0; d < n3; d++)
+        o->b[d] += dt * (f1[d] - fx[d]) + dt * dt * x1[d];
+    free(fx);
+    free(f1);
+    free(x1);
+    build_preconditioner(o);
+    return true;
+}
+
+/*
+ * The rigid part of a free body's implicit Euler step, moved along its rotation instead of
+ * its tangents. x1 = x + dt v1 moves every node along the tangent of its circle, which
+ * stretches a spinning body by (ω dt)²/2 per step: the step's operator, linearized at the
+ * start's rotations, sees an infinitesimal rotation as free and cannot pull that back, so a
+ * body spinning at ω dt = 0.1 (6 rad/s at 60 Hz) flew 0.5–0.9 % inflated for as long as it
+ * spun, whatever its stiffness — a steel-stiff 0.2 m block carried 250 times its kinetic
+ * energy as strain and gave some back when it landed (README Known limitations, session 31).
+ * Here, for a body nothing holds in the step (no held, ground-contact, arrival or frozen dof,
+ * no penalty pin) of a rotation-invariant model (corotational, localframe, mss; a linear
+ * object must inflate under rotation, that is the model), v1 is split about the centre of
+ * mass c into its mean vc, the rotation ω = I⁻¹L of its angular momentum L (I the nodes'
+ * inertia about c) and the rest, d = v1 − vc − ω × r (r = x − c; d carries neither momentum):
+ * x1 = c + dt vc + r1, r1 = R r + dt d, R the turn of the step (below), and the velocity the
+ * body leaves with is v1 = vc + ω' × r1 + R d, its deformation turned with it and
+ * ω' = I₁⁻¹ (L − Σ m r1 × R d) (I₁ the inertia of the r1), so that momentum and angular
+ * momentum are kept to round-off. The turn gives each node its centripetal acceleration
+ * without a force: the solve felt the centrifugal force instead (turn_centrifugal). A body
+ * that turns by less than 1e-9 rad in the step is left to x + dt v1 (at rest, sliding), and
+ * so is one a node of which would end below the ground. Writes x1 into x_out and v1 in place,
+ * and the turn into R; false (v1 unchanged) if the step is not such a body's. Fixed order
+ * (one thread): the result does not depend on the thread count.
+ */
+static bool free_body_rotation(const cs_world_t *w, cs_object *o, double *x_out, double R[9])
+{
+    rigid_fit f;
+    if (!turns_freely(o) || !held_by_nothing(o) || !fit_rigid(o, o->v1, &f))
+        return false;
+    const double dt = w->def.dt, *x = o->x, *c = f.c, *vc = f.vc, *L = f.L, *Ia = f.Ia;
+    const double det = f.det, *om = f.om;
+    double *v = o->v1;
+    if (!(dt * sqrt(om[0] * om[0] + om[1] * om[1] + om[2] * om[2]) >= 1e-9))
+        return false;
+    /* R = exp(dt [ωm]×), ωm the rotation at the step's midpoint orientation Rh = exp(dt/2
+     * [ωm]×): ωm = Rh I⁻¹ Rhᵀ L, by fixed-point iteration from ω (time-reversible: a tumbling
+     * body's energy stays bounded; turning by ω itself pumped the intermediate-axis tumble of
+     * stab_spin_tumbling_block by 55 % over 10 000 steps) */
+    double Rh[9], om1[3] = {0, 0, 0}, om_m[3] = {om[0], om[1], om[2]};
+    for (int it = 0; it < FREE_ROTATION_ITERS; it++) {
+        rotation_exp(om_m, 0.5 * dt, Rh);
+        rotated_inverse_inertia(Rh, Ia, det, L, om_m);
+    }
+    rotation_exp(om_m, dt, R);
+    /* two passes: the positions, refused if one would end below the ground (where x + dt v1
+     * did not: ground_arrivals held every node that did, and a held node ends this function
+     * above), with their inertia I' about the new centre and the angular momentum Ld of the
+     * turned deformation velocities; then the velocities, ω' = I'⁻¹ (L − Ld), which keeps the
+     * momentum and the angular momentum exactly (what the nodes carry is what the solve left) */
+    double I1[9] = {0}, Ld[3] = {0, 0, 0};
+    for (int pass = 0; pass < 2; pass++) {
+        if (pass == 1) {
+            double Ia1[9];
+            const double det1 = cs_mat3_adjugate(I1, Ia1);
+            if (!(det1 > 0) || !isfinite(det1))
+                return false;
+            const double Lr[3] = {L[0] - Ld[0], L[1] - Ld[1], L[2] - Ld[2]};
+            for (int a = 0; a < 3; a++)
+                om1[a] = (Ia1[3 * a] * Lr[0] + Ia1[3 * a + 1] * Lr[1] + Ia1[3 * a + 2] * Lr[2]) /
+                         det1;
+        }
+        for (int i = 0; i < o->n; i++) {
+            const double *xi = x + 3 * (size_t)i;
+            double *vi = v + 3 * (size_t)i;
+            const double r[3] = {xi[0] - c[0], xi[1] - c[1], xi[2] - c[2]};
+            const double d[3] = {vi[0] - vc[0] - (om[1] * r[2] - om[2] * r[1]),
+                                 vi[1] - vc[1] - (om[2] * r[0] - om[0] * r[2]),
+                                 vi[2] - vc[2] - (om[0] * r[1] - om[1] * r[0])};
+            double Rr[3], Rd[3];
+            for (int a = 0; a < 3; a++) {
+                Rr[a] = R[3 * a] * r[0] + R[3 * a + 1] * r[1] + R[3 * a + 2] * r[2];
+                Rd[a] = R[3 * a] * d[0] + R[3 * a + 1] * d[1] + R[3 * a + 2] * d[2];
+            }
+            /* the node's place about the new centre c + dt vc */
+            const double r1[3] = {Rr[0] + dt * d[0], Rr[1] + dt * d[1], Rr[2] + dt * d[2]};
+            if (pass == 0) {
+                double *xo = x_out + 3 * (size_t)i;
+                for (int a = 0; a < 3; a++)
+                    xo[a] = c[a] + dt * vc[a] + r1[a];
+                if (w->def.has_ground && xo[2] < w->def.ground_height)
+                    return false;
+                const double m = o->m[i], q2 = r1[0] * r1[0] + r1[1] * r1[1] + r1[2] * r1[2];
+                for (int a = 0; a < 3; a++)
+                    for (int b = 0; b < 3; b++)
+                        I1[3 * a + b] += m * ((a == b ? q2 : 0.0) - r1[a] * r1[b]);
+                Ld[0] += m * (r1[1] * Rd[2] - r1[2] * Rd[1]);
+                Ld[1] += m * (r1[2] * Rd[0] - r1[0] * Rd[2]);
+                Ld[2] += m * (r1[0] * Rd[1] - r1[1] * Rd[0]);
+                continue;
+            }
+            const double wr[3] = {om1[1] * r1[2] - om1[2] * r1[1],
+                                  om1[2] * r1[0] - om1[0] * r1[2],
+                                  om1[0] * r1[1] - om1[1] * r1[0]};
+            for (int a = 0; a < 3; a++)
+                vi[a] = vc[a] + wr[a] + Rd[a];
+        }
+    }
+    return true;
+}
+
+/* A velocity field u turned with a free body (free_body_rotation's R): u = ū + R (u − ū), ū
+ * its mass-weighted mean. What the warm start's history gets (cs_cg_map_history), so that the
+ * changes the next guess searches are the solves' own, not the turn's. */
+typedef struct turn_ctx {
+    const cs_object *o;
+    const double *R;
+} turn_ctx;
+
+static void turn_velocities(void *ctx, double *u)
+{
+    const turn_ctx *t = ctx;
+    const cs_object *o = t->o;
+    const double *R = t->R;
+    double mass = 0, uc[3] = {0, 0, 0};
+    for (int i = 0; i < o->n; i++) {
+        mass += o->m[i];
+        for (int a = 0; a < 3; a++)
+            uc[a] += o->m[i] * u[3 * (size_t)i + a];
+    }
+    for (int a = 0; a < 3; a++)
+        uc[a] /= mass;
+    for (int i = 0; i < o->n; i++) {
+        double *ui = u + 3 * (size_t)i;
+        const double q[3] = {ui[0] - uc[0], ui[1] - uc[1], ui[2] - uc[2]};
+        for (int a = 0; a < 3; a++)
+            ui[a] = uc[a] + R[3 * a] * q[0] + R[3 * a + 1] * q[1] + R[3 * a + 2] * q[2];
+    }
+}
+
 /* The end of a step that solved for the new velocities v1 (implicit Euler, Newmark, central
  * differences): positions (x += dt v1, or x_end when the step computed them: Newmark), ground
  * projection, finish_step, and the stage times t[0..4] (inputs, rotations, right-hand side,
@@ -2435,9 +2780,14 @@ static int step_implicit(cs_world_t *w, cs_object *o, cs_step_stats *st, bool tr
     int contacts = constrain_ground(w, o, dt);
     o->cg.stop_cap = contacts > 0 ? contact_cap(o, dt) : 0.0;
     active_hold(o);
+    /* a free body's turn: the centrifugal force its solve must feel (turn_centrifugal; out
+     * again if a node reaches the ground in the step, which then does not turn) */
+    bool centrifugal = !trap && turns_freely(o) && held_by_nothing(o) &&
+                       turn_centrifugal(w, o, 1.0);
     double t3 = now_ms(), t4 = t3, *av = NULL;
     int ground_rounds = 0;
     bool landed = false; /* Newmark: a node reached the ground in this step */
+    bool relinearized = false; /* relinearize_turn has run */
     cs_cg_result r = {0, 0, 1, 0};
     /* The tolerance is relative to ‖b − A v1‖ at the guess above (w->def.cg_relative_to):
      * the Δv form's right-hand side; a re-solve of this step keeps that reference. */
@@ -2527,6 +2877,8 @@ static int step_implicit(cs_world_t *w, cs_object *o, cs_step_stats *st, bool tr
                 break;
             }
             if (arrived > 0) {
+                if (centrifugal)
+                    centrifugal = !turn_centrifugal(w, o, -1.0);
                 if (contacts == 0)
                     o->cg.stop_cap = contact_cap(o, dt);
                 contacts += arrived;
@@ -2534,6 +2886,10 @@ static int step_implicit(cs_world_t *w, cs_object *o, cs_step_stats *st, bool tr
                 active_hold(o);
                 continue;
             }
+        }
+        if (!trap && !relinearized && relinearize_turn(w, o)) {
+            relinearized = true; /* once: not a round of the ground's */
+            continue;
         }
         if (!active_needs_av(w, o, contacts))
             break;
@@ -2587,8 +2943,15 @@ static int step_implicit(cs_world_t *w, cs_object *o, cs_step_stats *st, bool tr
             return step_implicit(w, o, st, false);
         }
     }
+    /* implicit Euler: a free body's rigid part along its rotation (o->cg.zo: scratch) */
+    double Rt[9];
+    const bool turned = !trap && free_body_rotation(w, o, o->cg.zo, Rt);
+    if (turned) {
+        turn_ctx tc = {o, Rt};
+        cs_cg_map_history(&o->cg, turn_velocities, &tc);
+    }
     if (end_solved_step(w, o, st, (const double[5]){t0, t1, t2, t3, t4}, r,
-                        trap ? o->cg.zo : NULL, el_end) != CS_OK)
+                        trap || turned ? o->cg.zo : NULL, el_end) != CS_OK)
         return CS_ERR_DIVERGED;
     if (!o->sleeping)
         cs_cg_record(&o->cg, o->v);
