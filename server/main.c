@@ -614,14 +614,19 @@ static void apply_inputs(cs_daemon *d, double now)
 /* ---------------------------------------------------------------- stepping */
 
 /* One physics step and what follows it. Returns false if the run must stop. */
-/* The current frame's deltas (and rigid poses) into the send queue; the clients are then
- * current (d->unpublished cleared) unless memory ran out (warned). */
+/* The current frame's deltas (and rigid poses) into the send queue. An exact one (every
+ * vertex whose float32 changed, every vertex of a rigid object) makes the clients current
+ * (d->unpublished cleared) unless memory ran out (warned); a regular one, within
+ * publish_epsilon and with rigid objects by their poses (whose float32 rebuild is a rounding
+ * off the daemon's vertices, even at publish_epsilon 0), does not: a pause at that frame still
+ * flushes (publish_paused; until session 32 a pause landing on a publish frame left the
+ * clients' rigid surfaces a rounding off the status' hashes). */
 static void queue_deltas(cs_daemon *d, bool exact)
 {
     sync_context(d);
     if (cs_bus_queue_deltas(d->bus, d->world, exact ? -1.0 : d->scene.publish_epsilon) < 0)
         cs_dlog_warn(&d->log, "deltas", "could not queue deltas (out of memory)");
-    else
+    else if (exact)
         d->unpublished = false;
 }
 

@@ -21,6 +21,9 @@
 #                              resend every vertex's rounding); main sent no delta while paused
 #   paused_bad_fracture        bad `fracture` arguments while paused: one error ack and one
 #                              stderr line each, nothing published, hashes and pieces kept
+#   paused_on_publish_frame    `step` to a publish frame: the pause's exact flush follows the
+#                              frame's regular deltas (rigid poses at publish_epsilon 0 send no
+#                              vertex), same hashes (session 32: it was skipped, one pause in 20)
 #   paused_pause_published     resume, then pause: the log ends at the paused frame, same
 #                              hashes (fails on main unless the pause lands on a publish frame)
 #   paused_replay_verify       the whole log passes cubesim-replay --verify, nothing lost
@@ -85,6 +88,7 @@ compare() {
 start_logger all; p_all=$!
 start_logger l1; p1=$!
 start_logger l2; p2=$!
+start_logger l3; p3=$!
 sleep 0.5
 if ! cs_start_daemon --scene scene.json --realtime; then
     cs_fail daemon_paused "daemon did not start: $(head -c 400 daemon.err | tr '\n' '|')"
@@ -150,6 +154,18 @@ nnew=$(tail -n +"$((e0 + 1))" daemon.err | wc -l)
 sent=$(( $(channel_count bad.txt CUBESIM_TOPOLOGY) + $(channel_count bad.txt CUBESIM_DELTA) + $(channel_count bad.txt CUBESIM_SNAPSHOT) ))
 [ "$sent" -eq 0 ] || why="$why $sent surface messages published;"
 [ -z "$why" ] && cs_pass "paused_bad_fracture (4 refusals)" || cs_fail paused_bad_fracture "$why"
+
+# Step on to the next publish frame and pause there (the spinning stone's pose was published at
+# that frame with publish_epsilon 0, which sends no vertex of a rigid object: the pause's exact
+# flush must follow all the same; it did not, so a pause landing on the grid, one in 20 above,
+# left the log's rigid surfaces a rounding off the daemon's).
+M=$((GRID - F1 % GRID))
+"$B/cubesim-push" --lcm "$U" --timeout 5 step $M >/dev/null || cs_fail paused_on_grid_ack "no ok ack"
+F5=$((F1 + M))
+st5=$(wait_paused $F5) || cs_fail paused_on_publish_frame "never paused at frame $F5: $(head -1 <<<"$st5")"
+sleep 0.3
+stop_logger $p3
+compare paused_on_publish_frame l3 "$st5" $F5
 
 # Resume, run on (the pieces fall), pause again: the pause itself publishes the paused frame.
 "$B/cubesim-push" --lcm "$U" --timeout 5 resume >/dev/null
