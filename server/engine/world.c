@@ -1953,26 +1953,14 @@ static void add_solve_stats(cs_step_stats *st, cs_cg_result r)
 #define CS_TURN_MAX 0.5
 #define CS_TURN_MAX_DEFORM 0.1
 
-/* R = exp(s [ω]×) (Rodrigues); the identity for s|ω| = 0. */
+/* R = exp(s [ω]×): the unit quaternion of that turn through cs_quat_to_mat (as rigid.c turns
+ * its bodies); the identity for s|ω| = 0. */
 static void rotation_exp(const double om[3], double s, double R[9])
 {
-    const double th = s * sqrt(om[0] * om[0] + om[1] * om[1] + om[2] * om[2]);
-    if (!(th > 0)) {
-        const double I3[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
-        memcpy(R, I3, sizeof I3);
-        return;
-    }
-    const double k[3] = {s * om[0] / th, s * om[1] / th, s * om[2] / th};
-    const double c = cos(th), sn = sin(th), cc = 1 - c;
-    R[0] = c + k[0] * k[0] * cc;
-    R[1] = k[0] * k[1] * cc - k[2] * sn;
-    R[2] = k[0] * k[2] * cc + k[1] * sn;
-    R[3] = k[1] * k[0] * cc + k[2] * sn;
-    R[4] = c + k[1] * k[1] * cc;
-    R[5] = k[1] * k[2] * cc - k[0] * sn;
-    R[6] = k[2] * k[0] * cc - k[1] * sn;
-    R[7] = k[2] * k[1] * cc + k[0] * sn;
-    R[8] = c + k[2] * k[2] * cc;
+    const double wn = sqrt(om[0] * om[0] + om[1] * om[1] + om[2] * om[2]), th = s * wn;
+    const double k = th > 0 ? sin(0.5 * th) / wn : 0.0;
+    const double q[4] = {th > 0 ? cos(0.5 * th) : 1.0, k * om[0], k * om[1], k * om[2]};
+    cs_quat_to_mat(q, R);
 }
 
 /* om = R I⁻¹ Rᵀ L, I⁻¹ = Ia / det: the angular velocity of momentum L once the body (inertia
@@ -1993,26 +1981,25 @@ static void rotated_inverse_inertia(const double R[9], const double Ia[9], doubl
  * vc, the angular momentum L about c, the inertia I about c (its adjugate Ia and determinant
  * det: I⁻¹ = Ia / det) and ω = I⁻¹ L. */
 typedef struct rigid_fit {
-    double c[3], vc[3], L[3], I[9], Ia[9], det, om[3];
+    double mass, c[3], vc[3], L[3], I[9], Ia[9], det, om[3];
 } rigid_fit;
 
 /* False if it cannot be had (no mass, a singular or non-finite inertia). */
 static bool fit_rigid(const cs_object *o, const double *v, rigid_fit *f)
 {
-    double mass = 0;
     memset(f, 0, sizeof *f);
     for (int i = 0; i < o->n; i++) {
-        mass += o->m[i];
+        f->mass += o->m[i];
         for (int a = 0; a < 3; a++) {
             f->c[a] += o->m[i] * o->x[3 * (size_t)i + a];
             f->vc[a] += o->m[i] * v[3 * (size_t)i + a];
         }
     }
-    if (!(mass > 0))
+    if (!(f->mass > 0))
         return false;
     for (int a = 0; a < 3; a++) {
-        f->c[a] /= mass;
-        f->vc[a] /= mass;
+        f->c[a] /= f->mass;
+        f->vc[a] /= f->mass;
     }
     for (int i = 0; i < o->n; i++) {
         const double *xi = o->x + 3 * (size_t)i, *vi = v + 3 * (size_t)i, m = o->m[i];
@@ -2052,6 +2039,18 @@ static bool turns_freely(const cs_object *o)
            o->model == CS_MODEL_MSS;
 }
 
+/* Whether the scene holds the object: a held dof (fixed nodes) or a penalty pin. */
+static bool held_by_scene(const cs_object *o)
+{
+    for (size_t d = 0; d < (size_t)o->n * 3; d++)
+        if (o->mask[d])
+            return true;
+    for (int i = 0; o->pin && i < o->n; i++)
+        if (o->pin[i])
+            return true;
+    return false;
+}
+
 /* Whether nothing holds the object in this step's solve: no held, ground-contact or frozen
  * dof (smask), no penalty pin and no drag or curve spring in its operator (a 400 N/m drag on
  * a one-cube piece of 1.6 g spun it tens of turns a second and the turn blew it up: the
@@ -2063,10 +2062,7 @@ static bool held_by_nothing(const cs_object *o)
     for (size_t d = 0; d < (size_t)o->n * 3; d++)
         if (o->smask[d])
             return false;
-    for (int i = 0; o->pin && i < o->n; i++)
-        if (o->pin[i])
-            return false;
-    return true;
+    return !held_by_scene(o);
 }
 
 /*
@@ -2136,15 +2132,9 @@ static bool turn_centrifugal(const cs_world_t *w, cs_object *o, double sign)
 #define CS_NEWTON_TURN 0.02 /* rad per step: a stretch of 2e-4 */
 static bool relinearize_turn(const cs_world_t *w, cs_object *o)
 {
-    if (!turns_freely(o) || held_by_nothing(o))
+    if (!turns_freely(o) || held_by_nothing(o) || held_by_scene(o))
         return false;
     const size_t n3 = (size_t)o->n * 3;
-    for (size_t d = 0; d < n3; d++)
-        if (o->mask[d])
-            return false;
-    for (int i = 0; o->pin && i < o->n; i++)
-        if (o->pin[i])
-            return false;
     const double dt = w->def.dt, th = rigid_turn(o, o->v1, dt);
     if (!(th >= CS_NEWTON_TURN) || th > CS_TURN_MAX)
         return false;
@@ -2191,14 +2181,16 @@ static bool relinearize_turn(const cs_world_t *w, cs_object *o)
  * without a force: the solve felt the centrifugal force instead (turn_centrifugal). A body
  * that turns by less than 1e-9 rad in the step is left to x + dt v1 (at rest, sliding), and
  * so is one a node of which would end below the ground. Writes x1 into x_out and v1 in place,
- * and the turn into R; false (v1 unchanged) if the step is not such a body's. Fixed order
- * (one thread): the result does not depend on the thread count.
+ * the turn into R and Σ m_i into mass; false (v1 unchanged) if the step is not such a
+ * body's. Fixed order (one thread): the result does not depend on the thread count.
  */
-static bool free_body_rotation(const cs_world_t *w, cs_object *o, double *x_out, double R[9])
+static bool free_body_rotation(const cs_world_t *w, cs_object *o, double *x_out, double R[9],
+                               double *mass)
 {
     rigid_fit f;
     if (!turns_freely(o) || !held_by_nothing(o) || !fit_rigid(o, o->v1, &f))
         return false;
+    *mass = f.mass;
     const double dt = w->def.dt, *x = o->x, *c = f.c, *vc = f.vc, *L = f.L, *Ia = f.Ia;
     const double det = f.det, *om = f.om;
     double *v = o->v1;
@@ -2225,10 +2217,7 @@ static bool free_body_rotation(const cs_world_t *w, cs_object *o, double *x_out,
         if (pass == 1) {
             /* Σ m r² = tr(I)/2; a deformation step past CS_TURN_MAX_DEFORM of the radius of
              * gyration: not turned (nothing written yet but scratch) */
-            double mass = 0;
-            for (int i = 0; i < o->n; i++)
-                mass += o->m[i];
-            const double rg2 = 0.5 * (f.I[0] + f.I[4] + f.I[8]) / mass;
+            const double rg2 = 0.5 * (f.I[0] + f.I[4] + f.I[8]) / f.mass;
             if (!(d2max <= CS_TURN_MAX_DEFORM * CS_TURN_MAX_DEFORM * rg2))
                 return false;
             double Ia1[9];
@@ -2286,6 +2275,7 @@ static bool free_body_rotation(const cs_world_t *w, cs_object *o, double *x_out,
 typedef struct turn_ctx {
     const cs_object *o;
     const double *R;
+    double mass; /* Σ m_i */
 } turn_ctx;
 
 static void turn_velocities(void *ctx, double *u)
@@ -2293,14 +2283,12 @@ static void turn_velocities(void *ctx, double *u)
     const turn_ctx *t = ctx;
     const cs_object *o = t->o;
     const double *R = t->R;
-    double mass = 0, uc[3] = {0, 0, 0};
-    for (int i = 0; i < o->n; i++) {
-        mass += o->m[i];
+    double uc[3] = {0, 0, 0};
+    for (int i = 0; i < o->n; i++)
         for (int a = 0; a < 3; a++)
             uc[a] += o->m[i] * u[3 * (size_t)i + a];
-    }
     for (int a = 0; a < 3; a++)
-        uc[a] /= mass;
+        uc[a] /= t->mass;
     for (int i = 0; i < o->n; i++) {
         double *ui = u + 3 * (size_t)i;
         const double q[3] = {ui[0] - uc[0], ui[1] - uc[1], ui[2] - uc[2]};
@@ -2966,10 +2954,10 @@ static int step_implicit(cs_world_t *w, cs_object *o, cs_step_stats *st, bool tr
         }
     }
     /* implicit Euler: a free body's rigid part along its rotation (o->cg.zo: scratch) */
-    double Rt[9];
-    const bool turned = !trap && free_body_rotation(w, o, o->cg.zo, Rt);
+    double Rt[9], mass = 0;
+    const bool turned = !trap && free_body_rotation(w, o, o->cg.zo, Rt, &mass);
     if (turned) {
-        turn_ctx tc = {o, Rt};
+        turn_ctx tc = {o, Rt, mass};
         cs_cg_map_history(&o->cg, turn_velocities, &tc);
     }
     if (end_solved_step(w, o, st, (const double[5]){t0, t1, t2, t3, t4}, r,
