@@ -222,6 +222,9 @@ int cs_soft_prepare(cs_soft_resp *r, cs_object *D, double dt, uint64_t step, boo
     r->coarse = false;
     r->two_level = iso;
     r->iso = iso;
+    r->kappa = 1;
+    r->pattern_open = false;
+    r->dt = dt;
     memset(r->V, 0, sizeof r->V);
     memset(r->W, 0, sizeof r->W);
     memset(r->U0, 0, sizeof r->U0);
@@ -237,6 +240,7 @@ int cs_soft_prepare(cs_soft_resp *r, cs_object *D, double dt, uint64_t step, boo
 
 void cs_soft_free(cs_soft_resp *r)
 {
+    free(r->pattern);
     free(r->u);
     free(r->ainv);
     free(r->scratch);
@@ -335,6 +339,25 @@ double cs_soft_compliance(const cs_soft_resp *r, const int32_t *nodes, const dou
     return s;
 }
 
+double cs_soft_unheld_compliance(const cs_soft_resp *r, const int32_t *nodes, const double *w,
+                                 int k, const double d[3])
+{
+    double s = 0;
+    for (int j = 0; j < k; j++) {
+        const size_t i = (size_t)nodes[j];
+        if (!(r->D->m[i] > 0))
+            continue;
+        if (r->stiff) { /* (ainv holds every node's block, held or not) */
+            double t[3];
+            mul3(r->ainv + 9 * i, d, t);
+            s += w[j] * w[j] * (d[0] * t[0] + d[1] * t[1] + d[2] * t[2]);
+        } else {
+            s += w[j] * w[j] * (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) / r->D->m[i];
+        }
+    }
+    return s;
+}
+
 void cs_soft_impulse(cs_soft_resp *r, const int32_t *nodes, const double *w, int k,
                      const double arm[3], const double J[3], double local)
 {
@@ -404,4 +427,120 @@ void cs_soft_coarse_velocity(const cs_soft_resp *r, const double arm[3], double 
     cross(W, arm, wa);
     for (int a = 0; a < 3; a++)
         v[a] = r->minv[a] * P[a] + r->U0[a] + wa[a];
+}
+
+/* ---------------------------------------------------------------- a held object's collective factor */
+
+/* y = A p, A the operator of D's next implicit step (prepare_stiff's), zero at held dofs;
+ * kd: 3n scratch for the damping fields' product (NULL without them). */
+static void apply_step_operator(const cs_soft_resp *r, const double *p, double *y, double *kd)
+{
+    cs_object *D = r->D;
+    const double dt = r->dt, al = D->mat.damping[0], be = D->mat.damping[1];
+    const bool fld = D->fld.has_damping;
+    const double mc = fld ? 1 : 1 + dt * al, kc = dt * dt + (fld ? 0 : dt * be);
+    cs_elastic_apply_K(D, p, y);
+    if (fld)
+        cs_elastic_apply_Kd(D, p, kd);
+    for (int i = 0; i < D->n; i++)
+        for (int a = 0; a < 3; a++) {
+            const size_t d = 3 * (size_t)i + a;
+            double v = kc * y[d] + mc * D->m[i] * p[d];
+            if (fld)
+                v += dt * be * kd[d] + dt * al * D->fld.md[i] * p[d];
+            if (D->pin[i])
+                v += dt * dt * D->penalty * p[d];
+            y[d] = D->mask[d] ? 0.0 : v;
+        }
+}
+
+bool cs_soft_is_held(const cs_soft_resp *r)
+{
+    return r->stiff && !r->coarse;
+}
+
+int cs_soft_collective_begin(cs_soft_resp *r)
+{
+    if (r->pattern_open)
+        return 1;
+    if (!cs_soft_is_held(r))
+        return 0;
+    const size_t n3 = 3 * (size_t)r->n;
+    if (grow_f64(&r->pattern, &r->cap_pattern, 2 * n3))
+        return -1;
+    memset(r->pattern + n3, 0, n3 * sizeof *r->pattern);
+    r->pattern_open = true;
+    return 1;
+}
+
+void cs_soft_collective_add(cs_soft_resp *r, const int32_t *nodes, const double *w, int k,
+                            const double d[3])
+{
+    double *g = r->pattern + 3 * (size_t)r->n;
+    for (int j = 0; j < k; j++) {
+        const size_t i = (size_t)nodes[j];
+        if (movable(r->D, i))
+            for (int a = 0; a < 3; a++)
+                g[3 * i + a] += w[j] * d[a];
+    }
+}
+
+#define COLLECTIVE_ITERATIONS 100 /* conjugate gradients on A φ = g: at most */
+#define COLLECTIVE_TOLERANCE 1e-2  /* relative residual (gᵀ φ converges as its square) */
+
+void cs_soft_collective_solve(cs_soft_resp *r)
+{
+    if (!r->pattern_open)
+        return;
+    r->pattern_open = false;
+    const size_t n3 = 3 * (size_t)r->n;
+    double *phi = r->pattern, *g = r->pattern + n3;
+    /* the scratch (9n, free after prepare_stiff): the residual, the search direction, A p */
+    double *res = r->scratch, *p = r->scratch + n3, *ap = r->scratch + 2 * n3, *kd = NULL;
+    if (r->D->fld.has_damping && !(kd = malloc(n3 * sizeof *kd)))
+        return; /* (kappa stays 1) */
+    double gg = 0, gbg = 0;
+    memset(phi, 0, n3 * sizeof *phi);
+    memcpy(res, g, n3 * sizeof *res);
+    for (int i = 0; i < r->n; i++) {
+        mul3(r->ainv + 9 * (size_t)i, res + 3 * (size_t)i, p + 3 * (size_t)i);
+        for (int a = 0; a < 3; a++) {
+            gg += g[3 * (size_t)i + a] * g[3 * (size_t)i + a];
+            gbg += res[3 * (size_t)i + a] * p[3 * (size_t)i + a];
+        }
+    }
+    double rz = gbg;
+    for (int it = 0; it < COLLECTIVE_ITERATIONS && rz > 0; it++) {
+        apply_step_operator(r, p, ap, kd);
+        double pap = 0;
+        for (size_t d = 0; d < n3; d++)
+            pap += p[d] * ap[d];
+        if (!(pap > 0))
+            break;
+        const double alpha = rz / pap;
+        double rr = 0;
+        for (size_t d = 0; d < n3; d++) {
+            phi[d] += alpha * p[d];
+            res[d] -= alpha * ap[d];
+            rr += res[d] * res[d];
+        }
+        if (rr <= COLLECTIVE_TOLERANCE * COLLECTIVE_TOLERANCE * gg)
+            break;
+        double rz1 = 0; /* z = B res, into ap (free now); then p = z + β p */
+        for (int i = 0; i < r->n; i++) {
+            mul3(r->ainv + 9 * (size_t)i, res + 3 * (size_t)i, ap + 3 * (size_t)i);
+            for (int a = 0; a < 3; a++)
+                rz1 += res[3 * (size_t)i + a] * ap[3 * (size_t)i + a];
+        }
+        const double beta = rz1 / rz;
+        rz = rz1;
+        for (size_t d = 0; d < n3; d++)
+            p[d] = ap[d] + beta * p[d];
+    }
+    free(kd);
+    double gphi = 0;
+    for (size_t d = 0; d < n3; d++)
+        gphi += g[d] * phi[d];
+    if (gbg > 0 && isfinite(gphi) && gphi > gbg)
+        r->kappa = gphi / gbg;
 }

@@ -65,6 +65,12 @@ typedef struct cs_soft_resp {
     /* the local part isotropic, (3 / tr A_ii) I instead of A_ii⁻¹, in u0 and the responses
      * alike (cs_soft_prepare's iso) */
     bool iso;
+    /* a held object's collective factor (cs_soft_collective_*): kappa ≥ 1 (1 until solved);
+     * pattern: 6n, φ then the pattern g of its contacts' normals */
+    double kappa, dt;
+    double *pattern;
+    size_t cap_pattern;
+    bool pattern_open;
 } cs_soft_resp;
 
 /* Make r (whose arrays may be from an earlier use) D's response for step `step` of world
@@ -85,9 +91,38 @@ void cs_soft_velocity(const cs_soft_resp *r, const int32_t *nodes, const double 
 /* dᵀ W d: the velocity change along d of an impulse d on that point (W its compliance). */
 double cs_soft_compliance(const cs_soft_resp *r, const int32_t *nodes, const double *w, int k,
                           const double arm[3], const double d[3], double local);
+/* The local part of that compliance as if none of the point's nodes were held (every node
+ * with mass counted): the scale a held point is judged against (rigid.c's soft_eff_mass). */
+double cs_soft_unheld_compliance(const cs_soft_resp *r, const int32_t *nodes, const double *w,
+                                 int k, const double d[3]);
 /* An impulse J on D at that point: D->v and the solve's view of it change. */
 void cs_soft_impulse(cs_soft_resp *r, const int32_t *nodes, const double *w, int k,
                      const double arm[3], const double J[3], double local);
+
+/*
+ * A held object's collective factor. An object held in place (fixed nodes or pins: no rigid
+ * modes) answers its contacts by its local part alone, A_ii⁻¹ at each node, and that is far
+ * stiffer than the object when many of its nodes are pushed together: the two halves of a
+ * held 4×2×2 beam cut lengthwise (E 2 MPa, dt 1/60 s) answer a push on their crack ~100×
+ * more than their blocks say. Between two such objects nothing else answers, so the
+ * sequential impulses pushed each node ~100× too hard, the step parted the pieces, they sprang
+ * back faster, and so on: every exchange gained energy, and the fracture demo's beam, broken
+ * at its clamp, was torn apart. kappa = gᵀ A⁻¹ g / gᵀ B g, g the pattern of the object's
+ * contact normals, A its step's operator (A⁻¹ g by conjugate gradients preconditioned by the
+ * blocks B = A_ii⁻¹, to 1e-2), is how much more the whole object yields along that pattern
+ * than its blocks say (at least 1); the contacts between two held objects scale their local
+ * parts by it (rigid.c), so a push along the pattern is answered as the object answers it, and
+ * a push on a few nodes is seen softer than it is: it falls short, and the next pass finishes
+ * it, where the stiff model threw. Objects with rigid modes keep their coarse response.
+ * is_held: r has no rigid modes and answers by its blocks (stiff). begin: the pattern zeroed
+ * (1), 0 if r is not held, -1 out of memory; add: the pattern gets d at that point (its free
+ * nodes); solve: kappa (left at 1 if the solve fails).
+ */
+bool cs_soft_is_held(const cs_soft_resp *r);
+int cs_soft_collective_begin(cs_soft_resp *r);
+void cs_soft_collective_add(cs_soft_resp *r, const int32_t *nodes, const double *w, int k,
+                            const double d[3]);
+void cs_soft_collective_solve(cs_soft_resp *r);
 
 /* The rigid modes alone (zero without them): the compliance dᵀ (minv d + iinv (arm × d) × arm)
  * along d at arm, and the velocity they will have at arm in D's next step, that of D's

@@ -2004,6 +2004,8 @@ typedef struct soft_contact {
     double ra[3], rb[3];
     double t1[3], t2[3];
     double kn, kt1, kt2, target, jn, jt1, jt2, mu;
+    double la, lb;      /* the scale of each side's local part: a held object's collective
+                         * factor against another held object, else 1 (contact_soft.h) */
     double e;           /* restitution: the larger of the two materials' */
     double vimp;        /* < 0: the node's approach now, at an impact (pair_restitution) */
     double vapp;        /* in a pair's first contact: the pair's approach on their rigid
@@ -2021,18 +2023,38 @@ static void soft_rel_velocity(const soft_contact *c, double v[3])
         v[a] = va[a] - vb[a];
 }
 
+/*
+ * The effective mass of contact c along d: 1 / (the two points' compliances), or 0 (the
+ * contact takes no impulse) where both points are held: each point's compliance under
+ * SOFT_HELD_FRACTION of what it would be with none of its nodes held, i.e. the point lies
+ * within about 1 % of held nodes (its free nodes' weights under ~1e-2). Pieces of an object
+ * held across their crack have such contacts from birth: a held node on the other piece's held
+ * corner, the face point's weights on its free corners round-off (1e-15 … 1e-47). Their
+ * compliance was the round-off's square, the effective mass 1e28–1e64 kg, and the impulse
+ * the round-off asked for, given to the free corners by their round-off weights, threw them
+ * at hundreds of m/s (in the fracture demo, the beam's pieces at its clamp and the star's at
+ * its held top). Nothing is lost by dropping them: what moves such a point is its free
+ * nodes, through a lever of their weights, and a push there would have to move them 1/w as
+ * far; the held nodes hold it.
+ */
+#define SOFT_HELD_FRACTION 1e-4
+
 static double soft_eff_mass(const soft_contact *c, const double d[3])
 {
-    const double k = cs_soft_compliance(c->SA, &c->node, ONE, 1, c->ra, d, 1.0) +
-                     cs_soft_compliance(c->SB, c->bn, c->bw, 4, c->rb, d, 1.0);
+    const double ka = cs_soft_compliance(c->SA, &c->node, ONE, 1, c->ra, d, c->la),
+                 kb = cs_soft_compliance(c->SB, c->bn, c->bw, 4, c->rb, d, c->lb);
+    if (ka < SOFT_HELD_FRACTION * c->la * cs_soft_unheld_compliance(c->SA, &c->node, ONE, 1, d) &&
+        kb < SOFT_HELD_FRACTION * c->lb * cs_soft_unheld_compliance(c->SB, c->bn, c->bw, 4, d))
+        return 0.0;
+    const double k = ka + kb;
     return k > 0 ? 1.0 / k : 0.0;
 }
 
 static void soft_impulse(soft_contact *c, const double J[3])
 {
     const double mJ[3] = {-J[0], -J[1], -J[2]};
-    cs_soft_impulse(c->SA, &c->node, ONE, 1, c->ra, J, 1.0);
-    cs_soft_impulse(c->SB, c->bn, c->bw, 4, c->rb, mJ, 1.0);
+    cs_soft_impulse(c->SA, &c->node, ONE, 1, c->ra, J, c->la);
+    cs_soft_impulse(c->SB, c->bn, c->bw, 4, c->rb, mJ, c->lb);
 }
 
 /* The normal relative velocity the two sides have now (D->v: after their steps). */
@@ -2741,6 +2763,29 @@ static int soft_contacts(cs_world_t *w, cs_rigid_world *rw, cs_step_stats *st)
     }
     if (rw->nsc == 0)
         return CS_OK;
+    /* held objects against held objects: their collective factors (contact_soft.h) */
+    bool held_pairs = false;
+    for (int k = 0; k < rw->nsc; k++) {
+        soft_contact *c = &rw->sc[k];
+        c->la = c->lb = 1;
+        if (!cs_soft_is_held(c->SA) || !cs_soft_is_held(c->SB))
+            continue;
+        const double mn[3] = {-c->n[0], -c->n[1], -c->n[2]};
+        if (cs_soft_collective_begin(c->SA) < 0 || cs_soft_collective_begin(c->SB) < 0)
+            return CS_ERR_NOMEM;
+        cs_soft_collective_add(c->SA, &c->node, ONE, 1, c->n);
+        cs_soft_collective_add(c->SB, c->bn, c->bw, 4, mn);
+        held_pairs = true;
+    }
+    for (int k = 0; held_pairs && k < rw->nsc; k++) {
+        soft_contact *c = &rw->sc[k];
+        if (!cs_soft_is_held(c->SA) || !cs_soft_is_held(c->SB))
+            continue;
+        cs_soft_collective_solve(c->SA);
+        cs_soft_collective_solve(c->SB);
+        c->la = c->SA->kappa;
+        c->lb = c->SB->kappa;
+    }
     /* prepare: arms, tangents, effective masses, target normal velocities */
     const double v_bounce = v_rest;
     for (int k = 0; k < rw->nsc; k++) {
