@@ -158,18 +158,28 @@ static void prepare_stiff(cs_soft_resp *r, cs_object *D, double dt, double groun
     for (size_t i = 0; i < 3 * n; i++)
         P[i % 3] += f[i];
     const bool held = coarse_modes(r, D, mass, P, ground_mu);
-    /* U = (Φᵀ A Φ)⁻¹ Φᵀ res. The torque leaves out res's stiffness term dt² (K v)ᵢ: for a
-     * rigid rotation of an unstrained body K Φ = 0, but after contact impulses on a few nodes
-     * of a stiff, strained, turning body v has spikes there whose dt² K v has a torque the
-     * exact step does not see (its v1 is smooth: Φᵀ A v1 = Φᵀ b takes dt² (KΦ)ᵀ v1, not v).
-     * Three steel blocks (E 2e11 Pa) dropped on each other were predicted to turn at tens of
-     * rad/s, and the solve's impulses threw them kilometres. (Its linear part sums to zero.) */
+    /* U = (Φᵀ A Φ)⁻¹ Φᵀ res. The torque is that of the loads and the mass damping alone,
+     * dt f_const − (mass − m) v: the elastic forces are internal and leave it out.
+     * - Their stiffness term dt² (K v)ᵢ: for a rigid rotation of an unstrained body K Φ = 0,
+     *   but after contact impulses on a few nodes of a stiff, strained, turning body v has
+     *   spikes there whose dt² K v has a torque the exact step does not see (its v1 is smooth:
+     *   Φᵀ A v1 = Φᵀ b takes dt² (KΦ)ᵀ v1, not v). Three steel blocks (E 2e11 Pa) dropped on
+     *   each other were predicted to turn at tens of rad/s, and the solve's impulses threw
+     *   them kilometres.
+     * - The elastic force at x, dt f_el (session 33): a corotated cell's force has a net torque
+     *   of second order in its non-affine strain (its rotation is the polar one at its centre),
+     *   which the step does not turn the body by (a free body's step keeps its angular
+     *   momentum, world.c "turning bodies"). A cube broken off the fracture demo's beam with
+     *   14 % of such strain has 0.03 N·m: predicted to spin at 900 rad/s, its nodes heading
+     *   apart at 20 m/s, against which its contacts pushed, and the cube was thrown apart
+     *   (230× its volume in one step).
+     * (The linear part of both sums to zero.) */
     for (size_t i = 0; i < n; i++) {
         double d[3], t[3], q[3];
         for (int a = 0; a < 3; a++) {
             const size_t k = 3 * i + a;
             d[a] = D->x[k] - r->c[a];
-            q[a] = D->mask[k] ? 0.0 : f[k] + kc * av[k] + (fld ? dt * be * kd[k] : 0.0);
+            q[a] = D->mask[k] ? 0.0 : dt * D->f_const[k] - (mass[i] - D->m[i]) * v[k];
         }
         cross(d, q, t);
         for (int a = 0; a < 3; a++)
