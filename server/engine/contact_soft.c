@@ -158,6 +158,11 @@ static void prepare_stiff(cs_soft_resp *r, cs_object *D, double dt, double groun
     for (size_t i = 0; i < 3 * n; i++)
         P[i % 3] += f[i];
     const bool held = coarse_modes(r, D, mass, P, ground_mu);
+    r->has_res0 = false;
+    if (!r->coarse && !grow_f64(&r->res0, &r->cap_res0, 3 * n)) {
+        memcpy(r->res0, f, 3 * n * sizeof *f);
+        r->has_res0 = true;
+    }
     /* U = (Φᵀ A Φ)⁻¹ Φᵀ res. The torque is that of the loads and the mass damping alone,
      * dt f_const − (mass − m) v: the elastic forces are internal and leave it out.
      * - Their stiffness term dt² (K v)ᵢ: for a rigid rotation of an unstrained body K Φ = 0,
@@ -232,8 +237,8 @@ int cs_soft_prepare(cs_soft_resp *r, cs_object *D, double dt, uint64_t step, boo
     r->coarse = false;
     r->two_level = iso;
     r->iso = iso;
-    r->kappa = 1;
-    r->pattern_open = false;
+    r->nm = 0;
+    r->modes_open = false;
     r->dt = dt;
     memset(r->V, 0, sizeof r->V);
     memset(r->W, 0, sizeof r->W);
@@ -250,7 +255,8 @@ int cs_soft_prepare(cs_soft_resp *r, cs_object *D, double dt, uint64_t step, boo
 
 void cs_soft_free(cs_soft_resp *r)
 {
-    free(r->pattern);
+    free(r->res0);
+    free(r->modes);
     free(r->u);
     free(r->ainv);
     free(r->scratch);
@@ -292,6 +298,40 @@ static void coarse_at(const cs_soft_resp *r, size_t i, const double V[3], const 
         out[a] -= r->mass[i] * t[a];
 }
 
+/* e_m at the point, along d: Σ_j w_j e_m,j · d (a held object's mode m). */
+static double mode_at(const cs_soft_resp *r, int m, const int32_t *nodes, const double *w, int k,
+                      const double d[3])
+{
+    const double *e = r->modes + (size_t)m * 3 * (size_t)r->n;
+    double s = 0;
+    for (int j = 0; j < k; j++) {
+        const double *x = e + 3 * (size_t)nodes[j];
+        s += w[j] * (x[0] * d[0] + x[1] * d[1] + x[2] * d[2]);
+    }
+    return s;
+}
+
+/* The velocity along d at the point of a unit coordinate of mode m: e_m there, less what the
+ * block-Jacobi pass after the coarse one takes back, A_jj⁻¹ (A e_m)_j (the two-level response,
+ * as u0 = v + ψ is: ψ = A⁻¹ res is a mode, so the pass after it has nothing left to do). */
+static double mode_velocity(const cs_soft_resp *r, int m, const int32_t *nodes, const double *w,
+                            int k, const double d[3])
+{
+    const size_t n3 = 3 * (size_t)r->n;
+    const double *e = r->modes + (size_t)m * n3, *ae = r->modes + (size_t)(2 + m) * n3;
+    double s = 0;
+    for (int j = 0; j < k; j++) {
+        const size_t i = (size_t)nodes[j];
+        if (!movable(r->D, i))
+            continue;
+        double t[3];
+        mul3(r->ainv + 9 * i, ae + 3 * i, t);
+        for (int a = 0; a < 3; a++)
+            s += w[j] * d[a] * (e[3 * i + a] - t[a]);
+    }
+    return s;
+}
+
 void cs_soft_arm(const cs_soft_resp *r, const int32_t *nodes, const double *w, int k,
                  double arm[3])
 {
@@ -315,6 +355,12 @@ void cs_soft_velocity(const cs_soft_resp *r, const int32_t *nodes, const double 
         for (int a = 0; a < 3; a++)
             v[a] += w[j] * (r->u[3 * i + a] + c[a]);
     }
+    for (int m = 0; m < r->nm; m++) {
+        for (int a = 0; a < 3; a++) {
+            const double e[3] = {a == 0, a == 1, a == 2};
+            v[a] += r->cm[m] * mode_velocity(r, m, nodes, w, k, e);
+        }
+    }
 }
 
 double cs_soft_compliance(const cs_soft_resp *r, const int32_t *nodes, const double *w, int k,
@@ -333,6 +379,11 @@ double cs_soft_compliance(const cs_soft_resp *r, const int32_t *nodes, const dou
             s += local * w[j] * w[j] * (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) / r->D->m[i];
         }
     }
+    if (r->nm > 0) /* a held object's modes: Δc_m = e_m,pᵀ d, seen along d at the point */
+        for (int m = 0; m < r->nm; m++) {
+            const double dc = mode_at(r, m, nodes, w, k, d);
+            s += dc * mode_velocity(r, m, nodes, w, k, d);
+        }
     if (r->coarse) {
         /* the coarse velocity the impulse d gives, seen at the point's nodes */
         double rd[3], dV[3], dW[3];
@@ -389,6 +440,8 @@ void cs_soft_impulse(cs_soft_resp *r, const int32_t *nodes, const double *w, int
             r->u[3 * i + a] += local * w[j] * du[a];  /* the solve's view of the response */
         }
     }
+    for (int m = 0; any && m < r->nm; m++)
+        r->cm[m] += mode_at(r, m, nodes, w, k, J);
     if (!any || !r->coarse)
         return;
     double rj[3], dw[3];
@@ -439,7 +492,7 @@ void cs_soft_coarse_velocity(const cs_soft_resp *r, const double arm[3], double 
         v[a] = r->minv[a] * P[a] + r->U0[a] + wa[a];
 }
 
-/* ---------------------------------------------------------------- a held object's collective factor */
+/* ---------------------------------------------------------------- a held object's modes */
 
 /* y = A p, A the operator of D's next implicit step (prepare_stiff's), zero at held dofs;
  * kd: 3n scratch for the damping fields' product (NULL without them). */
@@ -469,24 +522,24 @@ bool cs_soft_is_held(const cs_soft_resp *r)
     return r->stiff && !r->coarse;
 }
 
-int cs_soft_collective_begin(cs_soft_resp *r)
+int cs_soft_modes_begin(cs_soft_resp *r)
 {
-    if (r->pattern_open)
+    if (r->modes_open || r->nm > 0)
         return 1;
-    if (!cs_soft_is_held(r))
+    if (!cs_soft_is_held(r) || !r->has_res0)
         return 0;
     const size_t n3 = 3 * (size_t)r->n;
-    if (grow_f64(&r->pattern, &r->cap_pattern, 2 * n3))
+    if (grow_f64(&r->modes, &r->cap_modes, 5 * n3))
         return -1;
-    memset(r->pattern + n3, 0, n3 * sizeof *r->pattern);
-    r->pattern_open = true;
+    memset(r->modes + 4 * n3, 0, n3 * sizeof *r->modes);
+    r->modes_open = true;
     return 1;
 }
 
-void cs_soft_collective_add(cs_soft_resp *r, const int32_t *nodes, const double *w, int k,
-                            const double d[3])
+void cs_soft_modes_add(cs_soft_resp *r, const int32_t *nodes, const double *w, int k,
+                       const double d[3])
 {
-    double *g = r->pattern + 3 * (size_t)r->n;
+    double *g = r->modes + 4 * 3 * (size_t)r->n;
     for (int j = 0; j < k; j++) {
         const size_t i = (size_t)nodes[j];
         if (movable(r->D, i))
@@ -495,46 +548,45 @@ void cs_soft_collective_add(cs_soft_resp *r, const int32_t *nodes, const double 
     }
 }
 
-#define COLLECTIVE_ITERATIONS 100 /* conjugate gradients on A φ = g: at most */
-#define COLLECTIVE_TOLERANCE 1e-2  /* relative residual (gᵀ φ converges as its square) */
-
-void cs_soft_collective_solve(cs_soft_resp *r)
+/*
+ * x = A⁻¹ b by conjugate gradients on A (apply_step_operator) preconditioned by the blocks
+ * (ainv), from x = 0, to ‖res‖ ≤ tol ‖b‖ or `max_it` iterations. Uses the scratch (9n, free
+ * after prepare_stiff). Returns false if it could not run (out of memory, b = 0, breakdown
+ * before a step).
+ */
+static bool step_solve(cs_soft_resp *r, const double *b, double *x, double tol, int max_it)
 {
-    if (!r->pattern_open)
-        return;
-    r->pattern_open = false;
     const size_t n3 = 3 * (size_t)r->n;
-    double *phi = r->pattern, *g = r->pattern + n3;
-    /* the scratch (9n, free after prepare_stiff): the residual, the search direction, A p */
     double *res = r->scratch, *p = r->scratch + n3, *ap = r->scratch + 2 * n3, *kd = NULL;
     if (r->D->fld.has_damping && !(kd = malloc(n3 * sizeof *kd)))
-        return; /* (kappa stays 1) */
-    double gg = 0, gbg = 0;
-    memset(phi, 0, n3 * sizeof *phi);
-    memcpy(res, g, n3 * sizeof *res);
+        return false;
+    double bb = 0, rz = 0;
+    memset(x, 0, n3 * sizeof *x);
+    memcpy(res, b, n3 * sizeof *res);
     for (int i = 0; i < r->n; i++) {
         mul3(r->ainv + 9 * (size_t)i, res + 3 * (size_t)i, p + 3 * (size_t)i);
         for (int a = 0; a < 3; a++) {
-            gg += g[3 * (size_t)i + a] * g[3 * (size_t)i + a];
-            gbg += res[3 * (size_t)i + a] * p[3 * (size_t)i + a];
+            bb += b[3 * (size_t)i + a] * b[3 * (size_t)i + a];
+            rz += res[3 * (size_t)i + a] * p[3 * (size_t)i + a];
         }
     }
-    double rz = gbg;
-    for (int it = 0; it < COLLECTIVE_ITERATIONS && rz > 0; it++) {
+    bool ran = false;
+    for (int it = 0; it < max_it && rz > 0; it++) {
         apply_step_operator(r, p, ap, kd);
         double pap = 0;
         for (size_t d = 0; d < n3; d++)
             pap += p[d] * ap[d];
         if (!(pap > 0))
             break;
+        ran = true;
         const double alpha = rz / pap;
         double rr = 0;
         for (size_t d = 0; d < n3; d++) {
-            phi[d] += alpha * p[d];
+            x[d] += alpha * p[d];
             res[d] -= alpha * ap[d];
             rr += res[d] * res[d];
         }
-        if (rr <= COLLECTIVE_TOLERANCE * COLLECTIVE_TOLERANCE * gg)
+        if (rr <= tol * tol * bb)
             break;
         double rz1 = 0; /* z = B res, into ap (free now); then p = z + β p */
         for (int i = 0; i < r->n; i++) {
@@ -548,9 +600,83 @@ void cs_soft_collective_solve(cs_soft_resp *r)
             p[d] = ap[d] + beta * p[d];
     }
     free(kd);
-    double gphi = 0;
+    for (size_t d = 0; d < n3 && ran; d++)
+        ran = isfinite(x[d]);
+    return ran;
+}
+
+#define MODE_ITERATIONS 1000 /* conjugate gradients on A x = b: at most */
+#define MODE_TOLERANCE 1e-6   /* relative residual */
+
+/* Append x (3n, in the modes' room at slot r->nm) to the A-orthonormal modes: made
+ * A-orthogonal to those before it (twice: Gram–Schmidt loses it otherwise), normalized, A x
+ * stored beside it; dropped if little is left of it. ax: 3n scratch. */
+static void add_mode(cs_soft_resp *r, double *ax, double *kd)
+{
+    const size_t n3 = 3 * (size_t)r->n;
+    double *x = r->modes + (size_t)r->nm * n3;
+    apply_step_operator(r, x, ax, kd);
+    double xax0 = 0;
     for (size_t d = 0; d < n3; d++)
-        gphi += g[d] * phi[d];
-    if (gbg > 0 && isfinite(gphi) && gphi > gbg)
-        r->kappa = gphi / gbg;
+        xax0 += x[d] * ax[d];
+    if (!(xax0 > 0) || !isfinite(xax0))
+        return;
+    for (int pass = 0; pass < 2; pass++)
+        for (int m = 0; m < r->nm; m++) {
+            const double *e = r->modes + (size_t)m * n3;
+            double c = 0;
+            for (size_t d = 0; d < n3; d++)
+                c += e[d] * ax[d];
+            for (size_t d = 0; d < n3; d++)
+                x[d] -= c * e[d];
+            apply_step_operator(r, x, ax, kd);
+        }
+    double xax = 0;
+    for (size_t d = 0; d < n3; d++)
+        xax += x[d] * ax[d];
+    if (!(xax > 1e-12 * xax0))
+        return;
+    const double s = 1 / sqrt(xax);
+    double *ae = r->modes + (size_t)(2 + r->nm) * n3;
+    for (size_t d = 0; d < n3; d++) {
+        x[d] *= s;
+        ae[d] = ax[d] * s;
+    }
+    r->cm[r->nm++] = 0;
+}
+
+int cs_soft_modes_solve(cs_soft_resp *r)
+{
+    if (!r->modes_open)
+        return 0;
+    r->modes_open = false;
+    const size_t n3 = 3 * (size_t)r->n;
+    double *g = r->modes + 4 * n3, *kd = NULL, *ax = malloc(n3 * sizeof *ax);
+    if (!ax || (r->D->fld.has_damping && !(kd = malloc(n3 * sizeof *kd)))) {
+        free(ax);
+        return -1;
+    }
+    /* mode 0: ψ = A⁻¹ res, the step from v without contacts; u0 = v + ψ */
+    double *psi = r->modes;
+    if (step_solve(r, r->res0, psi, MODE_TOLERANCE, MODE_ITERATIONS)) {
+        const cs_object *D = r->D;
+        for (int i = 0; i < r->n; i++) {
+            double jac[3];
+            mul3(r->ainv + 9 * (size_t)i, r->res0 + 3 * (size_t)i, jac);
+            for (int a = 0; a < 3; a++) {
+                const size_t d = 3 * (size_t)i + a;
+                if (!D->mask[d])
+                    r->u[d] += psi[d] - jac[a]; /* (responses u holds already stay) */
+            }
+            if (D->contact && cs_ground_contact(D->contact[i]) && r->u[3 * (size_t)i + 2] < 0)
+                r->u[3 * (size_t)i + 2] = 0;
+        }
+        add_mode(r, ax, kd);
+    }
+    /* the next: φ = A⁻¹ g, the object's answer to its contacts pushing together */
+    if (step_solve(r, g, r->modes + (size_t)r->nm * n3, MODE_TOLERANCE, MODE_ITERATIONS))
+        add_mode(r, ax, kd);
+    free(ax);
+    free(kd);
+    return 0;
 }

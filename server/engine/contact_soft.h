@@ -65,12 +65,17 @@ typedef struct cs_soft_resp {
     /* the local part isotropic, (3 / tr A_ii) I instead of A_ii⁻¹, in u0 and the responses
      * alike (cs_soft_prepare's iso) */
     bool iso;
-    /* a held object's collective factor (cs_soft_collective_*): kappa ≥ 1 (1 until solved);
-     * pattern: 6n, φ then the pattern g of its contacts' normals */
-    double kappa, dt;
-    double *pattern;
-    size_t cap_pattern;
-    bool pattern_open;
+    /* a held object's residual of its next step at v (res, prepare_stiff's) */
+    double *res0;
+    size_t cap_res0;
+    bool has_res0;
+    /* a held object's modes (cs_soft_modes_*): nm ≤ 2 A-orthonormal e_m (3n each, from
+     * modes), A e_m (from modes + 6n), the contacts' pattern g (at modes + 12n), and the
+     * coordinates cm the impulses gave them so far */
+    double *modes, cm[2], dt;
+    size_t cap_modes;
+    int nm;
+    bool modes_open;
 } cs_soft_resp;
 
 /* Make r (whose arrays may be from an earlier use) D's response for step `step` of world
@@ -99,30 +104,33 @@ double cs_soft_unheld_compliance(const cs_soft_resp *r, const int32_t *nodes, co
 void cs_soft_impulse(cs_soft_resp *r, const int32_t *nodes, const double *w, int k,
                      const double arm[3], const double J[3], double local);
 
-/*
- * A held object's collective factor. An object held in place (fixed nodes or pins: no rigid
- * modes) answers its contacts by its local part alone, A_ii⁻¹ at each node, and that is far
- * stiffer than the object when many of its nodes are pushed together: the two halves of a
- * held 4×2×2 beam cut lengthwise (E 2 MPa, dt 1/60 s) answer a push on their crack ~100×
- * more than their blocks say. Between two such objects nothing else answers, so the
- * sequential impulses pushed each node ~100× too hard, the step parted the pieces, they sprang
- * back faster, and so on: every exchange gained energy, and the fracture demo's beam, broken
- * at its clamp, was torn apart. kappa = gᵀ A⁻¹ g / gᵀ B g, g the pattern of the object's
- * contact normals, A its step's operator (A⁻¹ g by conjugate gradients preconditioned by the
- * blocks B = A_ii⁻¹, to 1e-2), is how much more the whole object yields along that pattern
- * than its blocks say (at least 1); the contacts between two held objects scale their local
- * parts by it (rigid.c), so a push along the pattern is answered as the object answers it, and
- * a push on a few nodes is seen softer than it is: it falls short, and the next pass finishes
- * it, where the stiff model threw. Objects with rigid modes keep their coarse response.
- * is_held: r has no rigid modes and answers by its blocks (stiff). begin: the pattern zeroed
- * (1), 0 if r is not held, -1 out of memory; add: the pattern gets d at that point (its free
- * nodes); solve: kappa (left at 1 if the solve fails).
- */
+/* r has no rigid modes (fixed nodes or pins) and answers by its blocks (stiff): held. */
 bool cs_soft_is_held(const cs_soft_resp *r);
-int cs_soft_collective_begin(cs_soft_resp *r);
-void cs_soft_collective_add(cs_soft_resp *r, const int32_t *nodes, const double *w, int k,
-                            const double d[3]);
-void cs_soft_collective_solve(cs_soft_resp *r);
+
+/*
+ * A held object's modes: what carries its motion in place of the rigid modes it has not.
+ * Its blocks alone are a poor model of its next step: far stiffer than it is when many of its
+ * nodes are pushed together, and its u0 (one block-Jacobi iteration from v) far from the
+ * step. Between two held pieces those errors gave energy at every exchange: two halves of a
+ * held 4×2×2 beam (E 2 MPa, dt 1/60 s) cut lengthwise flew apart (0.28 m in 120 steps at
+ * rest) and, pushed sideways for 0.5 s, rattled on at 0.2 m/s for as long as they were
+ * watched; the fracture demo's beam, broken at its clamp into held cubes, was torn apart.
+ * Making u0 exact alone was worse (a free piece resting on a held base fell through it):
+ * u0 and the response are one model, and mixed, the contacts balance the wrong residual.
+ * So both get the same coarse space, as a free object's rigid modes: ψ = A⁻¹ res (u0 = v + ψ,
+ * the object's step without contacts, exactly) and φ = A⁻¹ g, g the pattern of its contact
+ * normals (its answer to its contacts pushing together), each by conjugate gradients on A
+ * preconditioned by its blocks to 1e-6, made A-orthonormal. An impulse J moves the modes'
+ * coordinates by e_mᵀ J, and every node sees them less what the block pass takes back (the
+ * two-level response: rigid.c sets two_level in the deformable pass). Cost: two solves of
+ * the object's step per step it has a deformable contact. begin: the pattern zeroed (1), 0
+ * if r is not held, -1 out of memory; add: the pattern gets d at that point (its free nodes);
+ * solve: the modes and u0 (0, or -1 out of memory; a solve that fails leaves its mode out).
+ */
+int cs_soft_modes_begin(cs_soft_resp *r);
+void cs_soft_modes_add(cs_soft_resp *r, const int32_t *nodes, const double *w, int k,
+                       const double d[3]);
+int cs_soft_modes_solve(cs_soft_resp *r);
 
 /* The rigid modes alone (zero without them): the compliance dᵀ (minv d + iinv (arm × d) × arm)
  * along d at arm, and the velocity they will have at arm in D's next step, that of D's
