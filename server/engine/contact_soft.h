@@ -36,6 +36,7 @@
 
 #include <stdint.h>
 
+#include "solver.h"
 #include "world_internal.h"
 
 typedef struct cs_soft_resp {
@@ -74,6 +75,17 @@ typedef struct cs_soft_resp {
      * coordinates cm the impulses gave them so far */
     double *modes, cm[2], dt;
     size_t cap_modes;
+    cs_cg_work cg;      /* the modes' solves (no warm start) */
+    double *kd;         /* 3n: the damping fields' product in them */
+    size_t cap_kd;
+    /* their answers, ψ then φ before they became modes, kept across steps as the next
+     * solves' starting points while the object (raw_id) keeps its topology and nodes */
+    double *raw;
+    size_t cap_raw;
+    cs_object_id raw_id;
+    uint32_t raw_version;
+    int raw_n;
+    bool raw_valid[2];
     int nm;
     bool modes_open;
 } cs_soft_resp;
@@ -117,15 +129,19 @@ bool cs_soft_is_held(const cs_soft_resp *r);
  * watched; the fracture demo's beam, broken at its clamp into held cubes, was torn apart.
  * Making u0 exact alone was worse (a free piece resting on a held base fell through it):
  * u0 and the response are one model, and mixed, the contacts balance the wrong residual.
- * So both get the same coarse space, as a free object's rigid modes: ψ = A⁻¹ res (u0 = v + ψ,
- * the object's step without contacts, exactly) and φ = A⁻¹ g, g the pattern of its contact
- * normals (its answer to its contacts pushing together), each by conjugate gradients on A
- * preconditioned by its blocks to 1e-6, made A-orthonormal. An impulse J moves the modes'
- * coordinates by e_mᵀ J, and every node sees them less what the block pass takes back (the
- * two-level response: rigid.c sets two_level in the deformable pass). Cost: two solves of
- * the object's step per step it has a deformable contact. begin: the pattern zeroed (1), 0
- * if r is not held, -1 out of memory; add: the pattern gets d at that point (its free nodes);
- * solve: the modes and u0 (0, or -1 out of memory; a solve that fails leaves its mode out).
+ * So both get the same coarse space, as a free object's rigid modes: ψ ≈ A⁻¹ res (the
+ * object's step without contacts) and φ ≈ A⁻¹ g, g the pattern of its contact normals (its
+ * answer to its contacts pushing together), each by conjugate gradients on A (preconditioned
+ * by the step's multigrid hierarchy where it has one, else by the blocks) to 1e-2, made
+ * A-orthonormal. Any vectors make a consistent model (u0 = v + M res, the response M J, M =
+ * P + B (I − A P), P the Galerkin projection on the modes); the closer they are to A⁻¹ res
+ * and A⁻¹ g, the closer the model is to the step (with ψ exact, u0 = v + ψ). The modes'
+ * coordinates start at e_mᵀ res and move by e_mᵀ J with every impulse J; every node sees
+ * them less what the block pass takes back (the two-level response of rigid.c's deformable
+ * pass). Cost: two solves of the object's step per step it has a deformable contact with
+ * another held object. begin: the pattern zeroed (1), 0 if r is not held, -1 out of memory;
+ * add: the pattern gets d at that point (its free nodes); solve: the modes (0, or -1 out of
+ * memory; a solve that fails leaves its mode out).
  */
 int cs_soft_modes_begin(cs_soft_resp *r);
 void cs_soft_modes_add(cs_soft_resp *r, const int32_t *nodes, const double *w, int k,
