@@ -3797,8 +3797,10 @@ int cs_fracture_after_step(cs_world_t *w, cs_object *o)
             rc = fracture_event(w, o, label, true, best, best_dir, best_sig, &cut);
             free(label);
         }
-        if (rc != CS_OK || w->n_objects != n_objects)
-            break; /* pieces renumbered o's cells: the rest waits for the next step */
+        if (rc != CS_OK || w->n_objects != n_objects || o->cm.n_cells != nc)
+            break; /* pieces renumbered o's cells, or a grazing cube went (no piece is made
+                    * of it, session 33: the star's next stress pass read past its cells):
+                    * the rest waits for the next step */
     }
     free(done);
     return rc;

@@ -769,3 +769,59 @@ TEST(fracture_closing_ends_on_float32_mesh_vertices)
         cs_world_destroy(w);
     }
 }
+
+#ifndef CS_SOURCE_DIR
+#define CS_SOURCE_DIR "."
+#endif
+
+/*
+ * A fracture that drops a grazing cube (a piece of cubes holding no surface: no object is
+ * made of it) ends the step's fractures of that object, as a new piece does: o's cells are
+ * one fewer, and the next stress pass of the same step read one past them (session 33: the
+ * fracture demo's daemon crashed, reproduced here). The fracture demo's scene without the
+ * bus, the demo's push on the beam at step 20 (40 N for 1.8 s) and drag at step 50 (to
+ * 0.2 m above, 400 N/m for 3 s): 80 steps. The star drops a grazing cube at step 66 with
+ * more of its cubes over strength; the test asserts the steps complete, the drop happened,
+ * and no object took more than max_fractures fractures in a step.
+ */
+TEST(fracture_dropped_grazing_cube_ends_the_steps_fractures)
+{
+    const char *root = getenv("CS_SOURCE_DIR");
+    char path[1024], err[512];
+    snprintf(path, sizeof path, "%s/scenes/fracture.json", root && *root ? root : CS_SOURCE_DIR);
+    cs_scene s;
+    ENSURE_MSG(cs_scene_load(path, &s, err, sizeof err) == 0, "%s", err);
+    cs_world_t *w = NULL;
+    ENSURE_MSG(cs_scene_instantiate(&s, &w, err, sizeof err) == 0, "%s", err);
+    const cs_object_id beam = cs_world_find_object(w, "beam");
+    ENSURE(beam != CS_NULL_OBJECT);
+    const double dt = cs_world_get_def(w)->dt;
+    const int max_f = cs_world_get_def(w)->max_fractures;
+    int dropped = 0, most = 0;
+    for (int f = 0; f < 80; f++) {
+        if (f == 20)
+            ENSURE(cs_world_apply_force(w, beam, (double[3]){0.4, 0, 0.55}, (double[3]){0, 40, 0},
+                                        108 * dt, err, sizeof err) == CS_OK);
+        if (f == 50)
+            ENSURE(cs_world_drag(w, beam, (double[3]){0.4, 0, 0.6}, (double[3]){0.4, 0, 0.8}, 400,
+                                 180 * dt, err, sizeof err) == CS_OK);
+        ENSURE(cs_world_step(w) == CS_OK);
+        int ne = 0;
+        const cs_event *ev = cs_world_events(w, &ne);
+        for (int i = 0; i < ne; i++) {
+            if (ev[i].kind != CS_EVENT_FRACTURE)
+                continue;
+            dropped += ev[i].dropped_pieces;
+            int same = 0;
+            for (int j = 0; j < ne; j++)
+                same += ev[j].kind == CS_EVENT_FRACTURE && ev[j].object == ev[i].object;
+            most = same > most ? same : most;
+        }
+    }
+    printf("    fracture scene, 80 steps: %d grazing cube%s dropped, at most %d fractures of an "
+           "object in a step (max_fractures %d)\n", dropped, dropped == 1 ? "" : "s", most, max_f);
+    ENSURE_MSG(dropped >= 1, "no grazing cube was dropped: the case is not exercised");
+    ENSURE(most <= max_f);
+    cs_world_destroy(w);
+    cs_scene_free(&s);
+}
