@@ -239,7 +239,7 @@ int cs_soft_prepare(cs_soft_resp *r, cs_object *D, double dt, uint64_t step, boo
     r->two_level = iso;
     r->iso = iso;
     r->nm = 0;
-    r->modes_open = false;
+    r->modes_open = r->exact = r->exact_open = false;
     r->dt = dt;
     memset(r->V, 0, sizeof r->V);
     memset(r->W, 0, sizeof r->W);
@@ -260,6 +260,10 @@ void cs_soft_free(cs_soft_resp *r)
     free(r->modes);
     free(r->kd);
     free(r->raw);
+    free(r->S);
+    free(r->cn);
+    free(r->slot);
+    free(r->dense);
     cs_cg_work_free(&r->cg);
     free(r->u);
     free(r->ainv);
@@ -371,6 +375,20 @@ double cs_soft_compliance(const cs_soft_resp *r, const int32_t *nodes, const dou
                           const double arm[3], const double d[3], double local)
 {
     double s = 0;
+    if (r->exact) { /* dᵀ (Σ_ij w_i w_j (A⁻¹)_ij) d over the point's free nodes */
+        for (int j = 0; j < k; j++) {
+            const int32_t sj = r->slot[nodes[j]];
+            for (int q = 0; q < k && sj >= 0; q++) {
+                const int32_t sq = r->slot[nodes[q]];
+                if (sq < 0)
+                    continue;
+                double t[3];
+                mul3(r->S + 9 * ((size_t)sq * r->n_cn + sj), d, t);
+                s += local * w[j] * w[q] * (d[0] * t[0] + d[1] * t[1] + d[2] * t[2]);
+            }
+        }
+        return s;
+    }
     for (int j = 0; j < k; j++) {
         const size_t i = (size_t)nodes[j];
         if (!movable(r->D, i))
@@ -428,6 +446,23 @@ void cs_soft_impulse(cs_soft_resp *r, const int32_t *nodes, const double *w, int
 {
     cs_object *D = r->D;
     bool any = false;
+    if (r->exact) { /* every contact node answers: u_q += Σ_j w_j (A⁻¹)_qj J */
+        for (int j = 0; j < k; j++) {
+            const size_t i = (size_t)nodes[j];
+            const int32_t sj = r->slot[i];
+            if (!movable(D, i) || sj < 0)
+                continue;
+            for (int a = 0; a < 3; a++)
+                D->v[3 * i + a] += w[j] * J[a] / D->m[i]; /* the momentum, now */
+            for (int q = 0; q < r->n_cn; q++) {
+                double du[3];
+                mul3(r->S + 9 * ((size_t)q * r->n_cn + sj), J, du);
+                for (int a = 0; a < 3; a++)
+                    r->u[3 * (size_t)r->cn[q] + a] += local * w[j] * du[a];
+            }
+        }
+        return; /* (a held object: no coarse part) */
+    }
     for (int j = 0; j < k; j++) {
         const size_t i = (size_t)nodes[j];
         if (!movable(D, i))
@@ -660,4 +695,173 @@ int cs_soft_modes_solve(cs_soft_resp *r)
         add_mode(r, ax);
     free(ax);
     return 0;
+}
+
+/* ---------------------------------------------------------------- a small held object's exact response */
+
+#define EXACT_DOFS 240 /* free dofs up to which a held object's A is factored (dense) */
+
+int cs_soft_exact_begin(cs_soft_resp *r)
+{
+    if (r->exact_open || r->exact)
+        return 1;
+    if (!cs_soft_is_held(r) || !r->has_res0)
+        return 0;
+    int nf = 0;
+    for (size_t d = 0; d < 3 * (size_t)r->n; d++)
+        nf += !r->D->mask[d] && r->D->m[d / 3] > 0;
+    if (nf == 0 || nf > EXACT_DOFS)
+        return 0;
+    int32_t *g = realloc(r->slot, (size_t)r->n * sizeof *g);
+    if (!g)
+        return -1;
+    r->slot = g;
+    for (int i = 0; i < r->n; i++)
+        r->slot[i] = -1;
+    r->n_cn = 0;
+    r->exact_open = true;
+    return 1;
+}
+
+int cs_soft_exact_add(cs_soft_resp *r, const int32_t *nodes, const double *w, int k)
+{
+    for (int j = 0; j < k; j++) {
+        const int32_t i = nodes[j];
+        if (w[j] == 0 || !movable(r->D, (size_t)i) || r->slot[i] >= 0)
+            continue;
+        if (r->n_cn == r->cap_cn) {
+            const int c = r->cap_cn ? 2 * r->cap_cn : 16;
+            int32_t *g = realloc(r->cn, (size_t)c * sizeof *g);
+            if (!g)
+                return -1;
+            r->cn = g;
+            r->cap_cn = c;
+        }
+        r->slot[i] = r->n_cn;
+        r->cn[r->n_cn++] = i;
+    }
+    return 0;
+}
+
+/* In place: the lower Cholesky factor of the SPD n×n matrix a (row-major); false if it is
+ * not positive definite. */
+static bool cholesky(double *a, int n)
+{
+    for (int j = 0; j < n; j++) {
+        double s = a[(size_t)j * n + j];
+        for (int k = 0; k < j; k++)
+            s -= a[(size_t)j * n + k] * a[(size_t)j * n + k];
+        if (!(s > 0))
+            return false;
+        const double l = sqrt(s);
+        a[(size_t)j * n + j] = l;
+        for (int i = j + 1; i < n; i++) {
+            double t = a[(size_t)i * n + j];
+            for (int k = 0; k < j; k++)
+                t -= a[(size_t)i * n + k] * a[(size_t)j * n + k];
+            a[(size_t)i * n + j] = t / l;
+        }
+    }
+    return true;
+}
+
+/* x = (L Lᵀ)⁻¹ x in place. */
+static void cholesky_solve(const double *l, int n, double *x)
+{
+    for (int i = 0; i < n; i++) {
+        double t = x[i];
+        for (int k = 0; k < i; k++)
+            t -= l[(size_t)i * n + k] * x[k];
+        x[i] = t / l[(size_t)i * n + i];
+    }
+    for (int i = n - 1; i >= 0; i--) {
+        double t = x[i];
+        for (int k = i + 1; k < n; k++)
+            t -= l[(size_t)k * n + i] * x[k];
+        x[i] = t / l[(size_t)i * n + i];
+    }
+}
+
+int cs_soft_exact_solve(cs_soft_resp *r)
+{
+    if (!r->exact_open)
+        return 0;
+    r->exact_open = false;
+    const cs_object *D = r->D;
+    const size_t n3 = 3 * (size_t)r->n;
+    const int m = r->n_cn;
+    /* the free dofs, A on them column by column (its products with unit vectors) */
+    int nf = 0;
+    for (size_t d = 0; d < n3; d++)
+        nf += !D->mask[d] && D->m[d / 3] > 0;
+    int32_t *fd = malloc((size_t)nf * sizeof *fd);
+    double *e = calloc(n3, sizeof *e), *ae = malloc(n3 * sizeof *ae), *x = malloc((size_t)nf * sizeof *x);
+    int rc = -1;
+    if (!fd || !e || !ae || !x || grow_f64(&r->dense, &r->cap_dense, (size_t)nf * nf) ||
+        grow_f64(&r->S, &r->cap_S, 9 * (size_t)m * m) ||
+        (D->fld.has_damping && grow_f64(&r->kd, &r->cap_kd, n3)))
+        goto out;
+    rc = 0;
+    nf = 0;
+    for (size_t d = 0; d < n3; d++)
+        if (!D->mask[d] && D->m[d / 3] > 0)
+            fd[nf++] = (int32_t)d;
+    double *A = r->dense;
+    for (int j = 0; j < nf; j++) {
+        e[fd[j]] = 1;
+        apply_step_operator(r, e, ae);
+        e[fd[j]] = 0;
+        for (int i = 0; i < nf; i++)
+            A[(size_t)i * nf + j] = ae[fd[i]];
+    }
+    for (int i = 0; i < nf; i++) /* (symmetric to round-off) */
+        for (int j = i + 1; j < nf; j++)
+            A[(size_t)i * nf + j] = A[(size_t)j * nf + i] =
+                0.5 * (A[(size_t)i * nf + j] + A[(size_t)j * nf + i]);
+    if (!cholesky(A, nf))
+        goto out; /* (the block model answers) */
+    /* S: A⁻¹ on the contact nodes, one column per contact node and axis */
+    int32_t *dof_of = calloc(n3, sizeof *dof_of); /* free dof index + 1, or 0 */
+    if (!dof_of) {
+        rc = -1;
+        goto out;
+    }
+    for (int i = 0; i < nf; i++)
+        dof_of[fd[i]] = i + 1;
+    for (int j = 0; j < m; j++)
+        for (int a = 0; a < 3; a++) {
+            memset(x, 0, (size_t)nf * sizeof *x);
+            const int32_t q = dof_of[3 * (size_t)r->cn[j] + a];
+            if (q)
+                x[q - 1] = 1;
+            cholesky_solve(A, nf, x);
+            for (int k = 0; k < m; k++)
+                for (int row = 0; row < 3; row++) {
+                    const int32_t p = dof_of[3 * (size_t)r->cn[k] + row];
+                    r->S[9 * ((size_t)k * m + j) + 3 * row + a] = q && p ? x[p - 1] : 0.0;
+                }
+        }
+    /* u0 = v + A⁻¹ res in place of v + A_ii⁻¹ res (responses u holds already stay) */
+    for (int i = 0; i < nf; i++)
+        x[i] = r->res0[fd[i]];
+    cholesky_solve(A, nf, x);
+    for (int i = 0; i < r->n; i++) {
+        double jac[3];
+        mul3(r->ainv + 9 * (size_t)i, r->res0 + 3 * (size_t)i, jac);
+        for (int a = 0; a < 3; a++) {
+            const size_t d = 3 * (size_t)i + a;
+            if (dof_of[d])
+                r->u[d] += x[dof_of[d] - 1] - jac[a];
+        }
+        if (D->contact && cs_ground_contact(D->contact[i]) && r->u[3 * (size_t)i + 2] < 0)
+            r->u[3 * (size_t)i + 2] = 0;
+    }
+    free(dof_of);
+    r->exact = true;
+out:
+    free(fd);
+    free(e);
+    free(ae);
+    free(x);
+    return rc;
 }

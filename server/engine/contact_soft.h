@@ -86,6 +86,14 @@ typedef struct cs_soft_resp {
     uint32_t raw_version;
     int raw_n;
     bool raw_valid[2];
+    /* a small held object's exact response (cs_soft_exact_*): its contact nodes cn (n_cn),
+     * each node's index in cn or -1 (slot, n), S = A⁻¹ on them (3×3 blocks row-major at
+     * 9 (k n_cn + j): rows of node cn[k], columns of cn[j]), and A's factor (dense) */
+    int32_t *cn, *slot;
+    int n_cn, cap_cn;
+    double *S, *dense;
+    size_t cap_S, cap_dense;
+    bool exact, exact_open;
     int nm;
     bool modes_open;
 } cs_soft_resp;
@@ -143,6 +151,20 @@ bool cs_soft_is_held(const cs_soft_resp *r);
  * add: the pattern gets d at that point (its free nodes); solve: the modes (0, or -1 out of
  * memory; a solve that fails leaves its mode out).
  */
+/*
+ * A small held object's exact response, in place of its modes: an object of at most 240 free
+ * dofs has its step's operator A assembled (its products with unit vectors) and factored
+ * (dense Cholesky); S = A⁻¹ on its contact nodes answers every impulse at every contact node
+ * and u0 = v + A⁻¹ res. The pieces a clamp holds after a beam breaks at it are single cubes
+ * and short rows: two modes and the blocks were not enough between them (a cluster of such
+ * pieces in the fracture demo kept throwing each other), the exact answer is. begin: 1 if r
+ * is held and small (its node list emptied), 0 if not (its modes answer), -1 out of memory;
+ * add: the point's free nodes join the list; solve: S and u0 (0, or -1 out of memory; left
+ * on the blocks if A is not positive definite).
+ */
+int cs_soft_exact_begin(cs_soft_resp *r);
+int cs_soft_exact_add(cs_soft_resp *r, const int32_t *nodes, const double *w, int k);
+int cs_soft_exact_solve(cs_soft_resp *r);
 int cs_soft_modes_begin(cs_soft_resp *r);
 void cs_soft_modes_add(cs_soft_resp *r, const int32_t *nodes, const double *w, int k,
                        const double d[3]);

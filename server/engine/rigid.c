@@ -2769,8 +2769,11 @@ static int soft_contacts(cs_world_t *w, cs_rigid_world *rw, cs_step_stats *st)
         if (!cs_soft_is_held(c->SA) || !cs_soft_is_held(c->SB))
             continue;
         const double mn[3] = {-c->n[0], -c->n[1], -c->n[2]};
-        const int ra = cs_soft_modes_begin(c->SA), rb = cs_soft_modes_begin(c->SB);
-        if (ra < 0 || rb < 0)
+        const int xa = cs_soft_exact_begin(c->SA), xb = cs_soft_exact_begin(c->SB);
+        const int ra = xa ? 0 : cs_soft_modes_begin(c->SA), rb = xb ? 0 : cs_soft_modes_begin(c->SB);
+        if (xa < 0 || xb < 0 || ra < 0 || rb < 0 ||
+            (xa && cs_soft_exact_add(c->SA, &c->node, ONE, 1) != 0) ||
+            (xb && cs_soft_exact_add(c->SB, c->bn, c->bw, 4) != 0))
             return CS_ERR_NOMEM;
         if (ra)
             cs_soft_modes_add(c->SA, &c->node, ONE, 1, c->n);
@@ -2778,7 +2781,8 @@ static int soft_contacts(cs_world_t *w, cs_rigid_world *rw, cs_step_stats *st)
             cs_soft_modes_add(c->SB, c->bn, c->bw, 4, mn);
     }
     for (int k = 0; k < rw->nsc; k++)
-        if (cs_soft_modes_solve(rw->sc[k].SA) != 0 || cs_soft_modes_solve(rw->sc[k].SB) != 0)
+        if (cs_soft_exact_solve(rw->sc[k].SA) != 0 || cs_soft_exact_solve(rw->sc[k].SB) != 0 ||
+            cs_soft_modes_solve(rw->sc[k].SA) != 0 || cs_soft_modes_solve(rw->sc[k].SB) != 0)
             return CS_ERR_NOMEM;
     /* prepare: arms, tangents, effective masses, target normal velocities */
     const double v_bounce = v_rest;
