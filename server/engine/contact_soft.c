@@ -743,45 +743,6 @@ int cs_soft_exact_add(cs_soft_resp *r, const int32_t *nodes, const double *w, in
     return 0;
 }
 
-/* In place: the lower Cholesky factor of the SPD n×n matrix a (row-major); false if it is
- * not positive definite. */
-static bool cholesky(double *a, int n)
-{
-    for (int j = 0; j < n; j++) {
-        double s = a[(size_t)j * n + j];
-        for (int k = 0; k < j; k++)
-            s -= a[(size_t)j * n + k] * a[(size_t)j * n + k];
-        if (!(s > 0))
-            return false;
-        const double l = sqrt(s);
-        a[(size_t)j * n + j] = l;
-        for (int i = j + 1; i < n; i++) {
-            double t = a[(size_t)i * n + j];
-            for (int k = 0; k < j; k++)
-                t -= a[(size_t)i * n + k] * a[(size_t)j * n + k];
-            a[(size_t)i * n + j] = t / l;
-        }
-    }
-    return true;
-}
-
-/* x = (L Lᵀ)⁻¹ x in place. */
-static void cholesky_solve(const double *l, int n, double *x)
-{
-    for (int i = 0; i < n; i++) {
-        double t = x[i];
-        for (int k = 0; k < i; k++)
-            t -= l[(size_t)i * n + k] * x[k];
-        x[i] = t / l[(size_t)i * n + i];
-    }
-    for (int i = n - 1; i >= 0; i--) {
-        double t = x[i];
-        for (int k = i + 1; k < n; k++)
-            t -= l[(size_t)k * n + i] * x[k];
-        x[i] = t / l[(size_t)i * n + i];
-    }
-}
-
 int cs_soft_exact_solve(cs_soft_resp *r)
 {
     if (!r->exact_open)
@@ -818,7 +779,7 @@ int cs_soft_exact_solve(cs_soft_resp *r)
         for (int j = i + 1; j < nf; j++)
             A[(size_t)i * nf + j] = A[(size_t)j * nf + i] =
                 0.5 * (A[(size_t)i * nf + j] + A[(size_t)j * nf + i]);
-    if (!cholesky(A, nf))
+    if (cs_cholesky(A, nf) != 0)
         goto out; /* (the block model answers) */
     /* S: A⁻¹ on the contact nodes, one column per contact node and axis */
     int32_t *dof_of = calloc(n3, sizeof *dof_of); /* free dof index + 1, or 0 */
@@ -834,7 +795,7 @@ int cs_soft_exact_solve(cs_soft_resp *r)
             const int32_t q = dof_of[3 * (size_t)r->cn[j] + a];
             if (q)
                 x[q - 1] = 1;
-            cholesky_solve(A, nf, x);
+            cs_cholesky_solve(A, nf, x);
             for (int k = 0; k < m; k++)
                 for (int row = 0; row < 3; row++) {
                     const int32_t p = dof_of[3 * (size_t)r->cn[k] + row];
@@ -844,7 +805,7 @@ int cs_soft_exact_solve(cs_soft_resp *r)
     /* u0 = v + A⁻¹ res in place of v + A_ii⁻¹ res (responses u holds already stay) */
     for (int i = 0; i < nf; i++)
         x[i] = r->res0[fd[i]];
-    cholesky_solve(A, nf, x);
+    cs_cholesky_solve(A, nf, x);
     for (int i = 0; i < r->n; i++) {
         double jac[3];
         mul3(r->ainv + 9 * (size_t)i, r->res0 + 3 * (size_t)i, jac);

@@ -36,6 +36,7 @@
 #include <string.h>
 
 #include "fem.h"
+#include "solver.h"
 
 /* Gauss–Legendre, 4 points on [0,1]. */
 static void gauss4(double xg[4], double wg[4])
@@ -800,26 +801,6 @@ void cs_lf_apply_Mw(cs_lf *lf, const double *w, const double *p, double *y, doub
 
 /* ---------------------------------------------------------------- stability bound */
 
-/* In-place Cholesky M = L Lᵀ (lower triangle); returns -1 if M is not positive definite. */
-static int cholesky(double *M, int n)
-{
-    for (int j = 0; j < n; j++) {
-        double d = M[j * n + j];
-        for (int k = 0; k < j; k++)
-            d -= M[j * n + k] * M[j * n + k];
-        if (!(d > 0))
-            return -1;
-        M[j * n + j] = sqrt(d);
-        for (int i = j + 1; i < n; i++) {
-            double s = M[i * n + j];
-            for (int k = 0; k < j; k++)
-                s -= M[i * n + k] * M[j * n + k];
-            M[i * n + j] = s / M[j * n + j];
-        }
-    }
-    return 0;
-}
-
 /* λmax of L⁻¹ K L⁻ᵀ (L⊗I₃ the Cholesky factor of M⊗I₃) by power iteration. */
 static double generalized_max(const double *K, double *L, int n)
 {
@@ -970,7 +951,7 @@ int cs_lf_omega2_bound(cs_model model, double young, double poisson, double dens
         for (int k = 0; k < 8; k++)
             Ml[9 * k] = density * h * h * h / 8.0;
     }
-    if (cholesky(Ml, 8) != 0)
+    if (cs_cholesky(Ml, 8) != 0)
         return -1;
     /* Power iteration approaches λmax from below; the 0.1 % margin covers what it has not
      * reached (test_localframe.c checks it against a full eigen-decomposition). */

@@ -138,6 +138,41 @@ void cs_cg_forget(cs_cg_work *w)
     w->hist_valid = w->dir_ready = false;
 }
 
+int cs_cholesky(double *M, int n)
+{
+    for (int j = 0; j < n; j++) {
+        double d = M[(size_t)j * n + j];
+        for (int k = 0; k < j; k++)
+            d -= M[(size_t)j * n + k] * M[(size_t)j * n + k];
+        if (!(d > 0))
+            return -1;
+        M[(size_t)j * n + j] = sqrt(d);
+        for (int i = j + 1; i < n; i++) {
+            double s = M[(size_t)i * n + j];
+            for (int k = 0; k < j; k++)
+                s -= M[(size_t)i * n + k] * M[(size_t)j * n + k];
+            M[(size_t)i * n + j] = s / M[(size_t)j * n + j];
+        }
+    }
+    return 0;
+}
+
+void cs_cholesky_solve(const double *L, int n, double *x)
+{
+    for (int i = 0; i < n; i++) {
+        double t = x[i];
+        for (int k = 0; k < i; k++)
+            t -= L[(size_t)i * n + k] * x[k];
+        x[i] = t / L[(size_t)i * n + i];
+    }
+    for (int i = n - 1; i >= 0; i--) {
+        double t = x[i];
+        for (int k = i + 1; k < n; k++)
+            t -= L[(size_t)k * n + i] * x[k];
+        x[i] = t / L[(size_t)i * n + i];
+    }
+}
+
 void cs_invert_block(double m[9])
 {
     double c[9];

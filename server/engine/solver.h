@@ -95,6 +95,11 @@ void cs_invert_blocks(double *blocks, int n_nodes);
  * in one pass. */
 void cs_invert_block(double m[9]);
 
+/* In-place dense Cholesky M = L Lᵀ of the symmetric n×n row-major M (L in the lower
+ * triangle); returns -1 if M is not positive definite. cs_cholesky_solve: x = (L Lᵀ)⁻¹ x. */
+int cs_cholesky(double *M, int n);
+void cs_cholesky_solve(const double *L, int n, double *x);
+
 typedef struct cs_cg_result {
     int iterations;
     double relres;   /* ‖r‖/ref at exit: the relative residual the solve stopped on */
