@@ -100,6 +100,33 @@ static bool coarse_modes(cs_soft_resp *r, const cs_object *D, const double *mass
     return false;
 }
 
+/* y = A p, A = (1 + dt α) M + (dt² + dt β) K (the damping fields' terms, the pins' penalty)
+ * the operator of D's next implicit step, zero at held dofs (a cs_matvec_fn; ctx is the
+ * response). The damping fields' product goes to the scratch's last third (free after the
+ * blocks are set up). */
+static void apply_step_operator(void *ctx, const double *p, double *y)
+{
+    const cs_soft_resp *r = ctx;
+    cs_object *D = r->D;
+    const double dt = r->dt, al = D->mat.damping[0], be = D->mat.damping[1];
+    const bool fld = D->fld.has_damping;
+    const double mc = fld ? 1 : 1 + dt * al, kc = dt * dt + (fld ? 0 : dt * be);
+    double *kd = r->scratch + 6 * (size_t)D->n;
+    cs_elastic_apply_K(D, p, y);
+    if (fld)
+        cs_elastic_apply_Kd(D, p, kd);
+    for (int i = 0; i < D->n; i++)
+        for (int a = 0; a < 3; a++) {
+            const size_t d = 3 * (size_t)i + a;
+            double v = kc * y[d] + mc * D->m[i] * p[d];
+            if (fld)
+                v += dt * be * kd[d] + dt * al * D->fld.md[i] * p[d];
+            if (D->pin[i])
+                v += dt * dt * D->penalty * p[d];
+            y[d] = D->mask[d] ? 0.0 : v;
+        }
+}
+
 /*
  * The blocks A_ii⁻¹, the coarse modes, and u0 = v + Φ U + A_ii⁻¹ (res − A Φ U) with
  * res = M v + dt f − A v the residual of D's next step at v and U = (Φᵀ M Φ)⁻¹ Φᵀ res its
@@ -111,7 +138,7 @@ static void prepare_stiff(cs_soft_resp *r, cs_object *D, double dt, double groun
     const double al = D->mat.damping[0], be = D->mat.damping[1];
     const bool fld = D->fld.has_damping;
     const double mc = fld ? 1 : 1 + dt * al, kc = dt * dt + (fld ? 0 : dt * be);
-    double *f = r->scratch, *av = r->scratch + 3 * n, *kd = r->scratch + 6 * n;
+    double *f = r->scratch, *av = r->scratch + 3 * n;
     const double *v = D->v;
     cs_elastic_update(D, D->x);
     D->elastic_energy_valid = false;
@@ -135,21 +162,14 @@ static void prepare_stiff(cs_soft_resp *r, cs_object *D, double dt, double groun
     }
     /* the residual res (into f), then the mass A gives each node */
     cs_elastic_force(D, D->x, f, NULL);
-    cs_elastic_apply_K(D, v, av);
-    if (fld)
-        cs_elastic_apply_Kd(D, v, kd);
+    apply_step_operator(r, v, av);
     for (size_t i = 0; i < n; i++) {
         for (int a = 0; a < 3; a++) {
             const size_t d = 3 * i + a;
             double F = f[d] + D->f_const[d];
-            double Av = kc * av[d] + mc * D->m[i] * v[d];
-            if (fld)
-                Av += dt * be * kd[d] + dt * al * D->fld.md[i] * v[d];
-            if (D->pin[i]) {
+            if (D->pin[i])
                 F += D->penalty * (D->cm.node_rest[d] - D->x[d]);
-                Av += dt * dt * D->penalty * v[d];
-            }
-            f[d] = D->mask[d] ? 0.0 : D->m[i] * v[d] + dt * F - Av;
+            f[d] = D->mask[d] ? 0.0 : D->m[i] * v[d] + dt * F - av[d];
         }
     }
     double *mass = r->mass;
@@ -258,7 +278,6 @@ void cs_soft_free(cs_soft_resp *r)
 {
     free(r->res0);
     free(r->modes);
-    free(r->kd);
     free(r->raw);
     free(r->S);
     free(r->cn);
@@ -371,6 +390,28 @@ void cs_soft_velocity(const cs_soft_resp *r, const int32_t *nodes, const double 
     }
 }
 
+/* The local part of the point's compliance along d, scaled by `local`: Σ w_j² dᵀ A_jj⁻¹ d
+ * (free point masses 1/m_j when not stiff) over its movable nodes, or over every node with
+ * mass (all: as if none were held; ainv holds every node's block, held or not). */
+static double block_compliance(const cs_soft_resp *r, const int32_t *nodes, const double *w,
+                               int k, const double d[3], double local, bool all)
+{
+    double s = 0;
+    for (int j = 0; j < k; j++) {
+        const size_t i = (size_t)nodes[j];
+        if (all ? !(r->D->m[i] > 0) : !movable(r->D, i))
+            continue;
+        if (r->stiff) {
+            double t[3];
+            mul3(r->ainv + 9 * i, d, t);
+            s += local * w[j] * w[j] * (d[0] * t[0] + d[1] * t[1] + d[2] * t[2]);
+        } else {
+            s += local * w[j] * w[j] * (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) / r->D->m[i];
+        }
+    }
+    return s;
+}
+
 double cs_soft_compliance(const cs_soft_resp *r, const int32_t *nodes, const double *w, int k,
                           const double arm[3], const double d[3], double local)
 {
@@ -389,18 +430,7 @@ double cs_soft_compliance(const cs_soft_resp *r, const int32_t *nodes, const dou
         }
         return s;
     }
-    for (int j = 0; j < k; j++) {
-        const size_t i = (size_t)nodes[j];
-        if (!movable(r->D, i))
-            continue;
-        if (r->stiff) {
-            double t[3];
-            mul3(r->ainv + 9 * i, d, t);
-            s += local * w[j] * w[j] * (d[0] * t[0] + d[1] * t[1] + d[2] * t[2]);
-        } else {
-            s += local * w[j] * w[j] * (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) / r->D->m[i];
-        }
-    }
+    s += block_compliance(r, nodes, w, k, d, local, false);
     if (r->nm > 0) /* a held object's modes: Δc_m = e_m,pᵀ d, seen along d at the point */
         for (int m = 0; m < r->nm; m++) {
             const double dc = mode_at(r, m, nodes, w, k, d);
@@ -425,20 +455,7 @@ double cs_soft_compliance(const cs_soft_resp *r, const int32_t *nodes, const dou
 double cs_soft_unheld_compliance(const cs_soft_resp *r, const int32_t *nodes, const double *w,
                                  int k, const double d[3])
 {
-    double s = 0;
-    for (int j = 0; j < k; j++) {
-        const size_t i = (size_t)nodes[j];
-        if (!(r->D->m[i] > 0))
-            continue;
-        if (r->stiff) { /* (ainv holds every node's block, held or not) */
-            double t[3];
-            mul3(r->ainv + 9 * i, d, t);
-            s += w[j] * w[j] * (d[0] * t[0] + d[1] * t[1] + d[2] * t[2]);
-        } else {
-            s += w[j] * w[j] * (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) / r->D->m[i];
-        }
-    }
-    return s;
+    return block_compliance(r, nodes, w, k, d, 1.0, true);
 }
 
 void cs_soft_impulse(cs_soft_resp *r, const int32_t *nodes, const double *w, int k,
@@ -533,31 +550,6 @@ void cs_soft_coarse_velocity(const cs_soft_resp *r, const double arm[3], double 
 
 /* ---------------------------------------------------------------- a held object's modes */
 
-/* y = A p, A the operator of D's next implicit step (prepare_stiff's), zero at held dofs
- * (a cs_matvec_fn; ctx is the response). */
-static void apply_step_operator(void *ctx, const double *p, double *y)
-{
-    const cs_soft_resp *r = ctx;
-    cs_object *D = r->D;
-    const double dt = r->dt, al = D->mat.damping[0], be = D->mat.damping[1];
-    const bool fld = D->fld.has_damping;
-    const double mc = fld ? 1 : 1 + dt * al, kc = dt * dt + (fld ? 0 : dt * be);
-    double *kd = r->kd;
-    cs_elastic_apply_K(D, p, y);
-    if (fld)
-        cs_elastic_apply_Kd(D, p, kd);
-    for (int i = 0; i < D->n; i++)
-        for (int a = 0; a < 3; a++) {
-            const size_t d = 3 * (size_t)i + a;
-            double v = kc * y[d] + mc * D->m[i] * p[d];
-            if (fld)
-                v += dt * be * kd[d] + dt * al * D->fld.md[i] * p[d];
-            if (D->pin[i])
-                v += dt * dt * D->penalty * p[d];
-            y[d] = D->mask[d] ? 0.0 : v;
-        }
-}
-
 bool cs_soft_is_held(const cs_soft_resp *r)
 {
     return r->stiff && !r->coarse;
@@ -604,8 +596,7 @@ static bool step_solve(cs_soft_resp *r, const double *b, double *x, double tol, 
     /* the warm start: this solve's answer in D's last step with contacts, if D is the same */
     const bool warm = r->raw_id == D->id && r->raw_version == D->topology_version &&
                       r->raw_n == r->n && r->raw_valid[which];
-    if ((D->fld.has_damping && grow_f64(&r->kd, &r->cap_kd, n3)) ||
-        (r->cg.n != (int)n3 && (cs_cg_work_free(&r->cg), cs_cg_work_init(&r->cg, (int)n3))))
+    if (r->cg.n != (int)n3 && (cs_cg_work_free(&r->cg), cs_cg_work_init(&r->cg, (int)n3)))
         return false;
     if (warm)
         memcpy(x, r->raw + (size_t)which * n3, n3 * sizeof *x);
@@ -759,8 +750,7 @@ int cs_soft_exact_solve(cs_soft_resp *r)
     double *e = calloc(n3, sizeof *e), *ae = malloc(n3 * sizeof *ae), *x = malloc((size_t)nf * sizeof *x);
     int rc = -1;
     if (!fd || !e || !ae || !x || grow_f64(&r->dense, &r->cap_dense, (size_t)nf * nf) ||
-        grow_f64(&r->S, &r->cap_S, 9 * (size_t)m * m) ||
-        (D->fld.has_damping && grow_f64(&r->kd, &r->cap_kd, n3)))
+        grow_f64(&r->S, &r->cap_S, 9 * (size_t)m * m))
         goto out;
     rc = 0;
     nf = 0;

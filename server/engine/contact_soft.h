@@ -76,8 +76,6 @@ typedef struct cs_soft_resp {
     double *modes, cm[2], dt;
     size_t cap_modes;
     cs_cg_work cg;      /* the modes' solves (no warm start) */
-    double *kd;         /* 3n: the damping fields' product in them */
-    size_t cap_kd;
     /* their answers, ψ then φ before they became modes, kept across steps as the next
      * solves' starting points while the object (raw_id) keeps its topology and nodes */
     double *raw;
