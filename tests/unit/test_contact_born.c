@@ -403,6 +403,22 @@ static cs_world_t *held_beam(int nx, bool cut, cs_object_id *id)
     return w;
 }
 
+/* The fastest a coordinate of P's nodes moved since the last call with *prev (per second at
+ * dt 1/60 s; 0 on the first, which allocates *prev), or NAN when out of memory. */
+static double node_speed(const cs_object *P, double **prev)
+{
+    double sp = 0;
+    if (!*prev) {
+        if (!(*prev = malloc(3 * (size_t)P->n * sizeof(double))))
+            return NAN;
+    } else {
+        for (int k = 0; k < 3 * P->n; k++)
+            sp = fmax(sp, fabs(P->x[k] - (*prev)[k]) / (1.0 / 60));
+    }
+    memcpy(*prev, P->x, 3 * (size_t)P->n * sizeof(double));
+    return sp;
+}
+
 TEST(contact_born_pieces_held_at_their_crack_stay_still)
 {
     cs_object_id whole, half;
@@ -418,14 +434,9 @@ TEST(contact_born_pieces_held_at_their_crack_stay_still)
         ENSURE(cs_world_step(u) == CS_OK && cs_world_step(w) == CS_OK);
         for (int p = 0; p < 2; p++) {
             const cs_object *P = cs_world_find_internal(w, ids[p]);
-            if (!prev[p]) {
-                prev[p] = malloc(3 * (size_t)P->n * sizeof(double));
-                ENSURE(prev[p]);
-            } else {
-                for (int k = 0; k < 3 * P->n; k++)
-                    step_speed = fmax(step_speed, fabs(P->x[k] - prev[p][k]) / (1.0 / 60));
-            }
-            memcpy(prev[p], P->x, 3 * (size_t)P->n * sizeof(double));
+            const double sp = node_speed(P, &prev[p]);
+            ENSURE(isfinite(sp));
+            step_speed = fmax(step_speed, sp);
             for (int i = 0; i < P->n; i++) {
                 vmax = fmax(vmax, sqrt(P->v[3 * i] * P->v[3 * i] + P->v[3 * i + 1] *
                                        P->v[3 * i + 1] + P->v[3 * i + 2] * P->v[3 * i + 2]));
@@ -481,19 +492,12 @@ TEST(contact_born_held_halves_pushed_come_to_rest)
             ENSURE(cs_world_step(w) == CS_OK);
             for (int p = 0; p < 2; p++) {
                 const cs_object *P = cs_world_find_internal(w, ids[p]);
-                if (!prev[p]) {
-                    prev[p] = malloc(3 * (size_t)P->n * sizeof(double));
-                    ENSURE(prev[p]);
-                } else {
-                    for (int k = 0; k < 3 * P->n; k++) {
-                        const double sp = fabs(P->x[k] - prev[p][k]) * 60;
-                        if (s >= steps - 60)
-                            late = fmax(late, sp);
-                        else if (s >= 30 && s < 90)
-                            early = fmax(early, sp);
-                    }
-                }
-                memcpy(prev[p], P->x, 3 * (size_t)P->n * sizeof(double));
+                const double sp = node_speed(P, &prev[p]);
+                ENSURE(isfinite(sp));
+                if (s >= steps - 60)
+                    late = fmax(late, sp);
+                else if (s >= 30 && s < 90)
+                    early = fmax(early, sp);
             }
         }
         printf("    held halves %d cubes long pushed for 0.5 s: fastest node %.3g m/s in the "
