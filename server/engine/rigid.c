@@ -2041,7 +2041,8 @@ static double soft_eff_mass(const soft_contact *c, const double d[3])
 {
     const double ka = cs_soft_compliance(c->SA, &c->node, ONE, 1, c->ra, d, 1.0),
                  kb = cs_soft_compliance(c->SB, c->bn, c->bw, 4, c->rb, d, 1.0);
-    if (ka < SOFT_HELD_FRACTION * cs_soft_unheld_compliance(c->SA, &c->node, ONE, 1, d) &&
+    if (c->SA->D->n_fixed_nodes > 0 && c->SB->D->n_fixed_nodes > 0 && /* (else none is held) */
+        ka < SOFT_HELD_FRACTION * cs_soft_unheld_compliance(c->SA, &c->node, ONE, 1, d) &&
         kb < SOFT_HELD_FRACTION * cs_soft_unheld_compliance(c->SB, c->bn, c->bw, 4, d))
         return 0.0;
     const double k = ka + kb;
