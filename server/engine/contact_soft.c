@@ -779,19 +779,39 @@ int cs_soft_exact_solve(cs_soft_resp *r)
     }
     for (int i = 0; i < nf; i++)
         dof_of[fd[i]] = i + 1;
-    for (int j = 0; j < m; j++)
-        for (int a = 0; a < 3; a++) {
-            memset(x, 0, (size_t)nf * sizeof *x);
-            const int32_t q = dof_of[3 * (size_t)r->cn[j] + a];
-            if (q)
-                x[q - 1] = 1;
-            cs_cholesky_solve(A, nf, x);
-            for (int k = 0; k < m; k++)
-                for (int row = 0; row < 3; row++) {
-                    const int32_t p = dof_of[3 * (size_t)r->cn[k] + row];
-                    r->S[9 * ((size_t)k * m + j) + 3 * row + a] = q && p ? x[p - 1] : 0.0;
-                }
+    /* (A⁻¹)_pq = y_p·y_q with y_q = L⁻¹ e_q, zero before row q: forward solves only, one
+     * per contact dof, and dot products from the later of the two rows on */
+    double *Y = malloc((size_t)3 * m * nf * sizeof *Y);
+    int32_t *qs = malloc((size_t)3 * m * sizeof *qs);
+    if (!Y || !qs) {
+        free(Y);
+        free(qs);
+        free(dof_of);
+        rc = -1;
+        goto out;
+    }
+    for (int c = 0; c < 3 * m; c++) {
+        double *y = Y + (size_t)c * nf;
+        qs[c] = dof_of[3 * (size_t)r->cn[c / 3] + c % 3] - 1; /* -1: not free */
+        memset(y, 0, (size_t)nf * sizeof *y);
+        if (qs[c] >= 0) {
+            y[qs[c]] = 1;
+            cs_cholesky_forward(A, nf, qs[c], y);
         }
+    }
+    for (int c1 = 0; c1 < 3 * m; c1++)
+        for (int c2 = c1; c2 < 3 * m; c2++) {
+            const double s = qs[c1] >= 0 && qs[c2] >= 0
+                                 ? cs_dot_short(Y + (size_t)c1 * nf, Y + (size_t)c2 * nf,
+                                                qs[c1] > qs[c2] ? qs[c1] : qs[c2], nf)
+                                 : 0.0;
+            /* S's block (k, j) holds row = the axis of k's dof, a = the axis of j's */
+            const int k1 = c1 / 3, a1 = c1 % 3, k2 = c2 / 3, a2 = c2 % 3;
+            r->S[9 * ((size_t)k1 * m + k2) + 3 * a1 + a2] = s;
+            r->S[9 * ((size_t)k2 * m + k1) + 3 * a2 + a1] = s;
+        }
+    free(Y);
+    free(qs);
     /* u0 = v + A⁻¹ res in place of v + A_ii⁻¹ res (responses u holds already stay) */
     for (int i = 0; i < nf; i++)
         x[i] = r->res0[fd[i]];

@@ -138,38 +138,56 @@ void cs_cg_forget(cs_cg_work *w)
     w->hist_valid = w->dir_ready = false;
 }
 
+double cs_dot_short(const double *a, const double *b, int lo, int hi)
+{
+    double s0 = 0, s1 = 0, s2 = 0, s3 = 0; /* four chains, as in cs_dot */
+    int i = lo;
+    for (; i + 4 <= hi; i += 4) {
+        s0 += a[i] * b[i];
+        s1 += a[i + 1] * b[i + 1];
+        s2 += a[i + 2] * b[i + 2];
+        s3 += a[i + 3] * b[i + 3];
+    }
+    for (; i < hi; i++)
+        s0 += a[i] * b[i];
+    return (s0 + s1) + (s2 + s3);
+}
+
 int cs_cholesky(double *M, int n)
 {
     for (int j = 0; j < n; j++) {
-        double d = M[(size_t)j * n + j];
-        for (int k = 0; k < j; k++)
-            d -= M[(size_t)j * n + k] * M[(size_t)j * n + k];
+        const double *Mj = M + (size_t)j * n;
+        const double d = Mj[j] - cs_dot_short(Mj, Mj, 0, j);
         if (!(d > 0))
             return -1;
         M[(size_t)j * n + j] = sqrt(d);
         for (int i = j + 1; i < n; i++) {
-            double s = M[(size_t)i * n + j];
-            for (int k = 0; k < j; k++)
-                s -= M[(size_t)i * n + k] * M[(size_t)j * n + k];
-            M[(size_t)i * n + j] = s / M[(size_t)j * n + j];
+            double *Mi = M + (size_t)i * n;
+            Mi[j] = (Mi[j] - cs_dot_short(Mi, Mj, 0, j)) / Mj[j];
         }
     }
     return 0;
 }
 
+void cs_cholesky_forward(const double *L, int n, int from, double *x)
+{
+    for (int i = from; i < n; i++) {
+        const double *Li = L + (size_t)i * n;
+        x[i] = (x[i] - cs_dot_short(Li, x, from, i)) / Li[i];
+    }
+}
+
 void cs_cholesky_solve(const double *L, int n, double *x)
 {
-    for (int i = 0; i < n; i++) {
-        double t = x[i];
-        for (int k = 0; k < i; k++)
-            t -= L[(size_t)i * n + k] * x[k];
-        x[i] = t / L[(size_t)i * n + i];
-    }
+    cs_cholesky_forward(L, n, 0, x);
+    /* Lᵀ x = y by rows of L: x_i once its row's later terms are out, then row i's part
+     * taken from every earlier entry (reading L along its rows, not down its columns) */
     for (int i = n - 1; i >= 0; i--) {
-        double t = x[i];
-        for (int k = i + 1; k < n; k++)
-            t -= L[(size_t)k * n + i] * x[k];
-        x[i] = t / L[(size_t)i * n + i];
+        const double *Li = L + (size_t)i * n;
+        const double xi = x[i] / Li[i];
+        x[i] = xi;
+        for (int k = 0; k < i; k++)
+            x[k] -= Li[k] * xi;
     }
 }
 

@@ -96,9 +96,16 @@ void cs_invert_blocks(double *blocks, int n_nodes);
 void cs_invert_block(double m[9]);
 
 /* In-place dense Cholesky M = L Lᵀ of the symmetric n×n row-major M (L in the lower
- * triangle); returns -1 if M is not positive definite. cs_cholesky_solve: x = (L Lᵀ)⁻¹ x. */
+ * triangle); returns -1 if M is not positive definite. cs_cholesky_solve: x = (L Lᵀ)⁻¹ x.
+ * cs_cholesky_forward: x = L⁻¹ x for an x that is 0 before row `from` (so is L⁻¹ x):
+ * (A⁻¹)_pq = (L⁻¹e_p)·(L⁻¹e_q) takes forward solves only. */
 int cs_cholesky(double *M, int n);
 void cs_cholesky_solve(const double *L, int n, double *x);
+void cs_cholesky_forward(const double *L, int n, int from, double *x);
+
+/* Σ a_i b_i over lo ≤ i < hi, in four interleaved sums (a fixed order: the same bits on
+ * every call), for the dense kernels' short dot products. */
+double cs_dot_short(const double *a, const double *b, int lo, int hi);
 
 typedef struct cs_cg_result {
     int iterations;

@@ -1,7 +1,8 @@
 /*
  * test_dense.c — the small dense kernels against known answers: the closed-form largest
  * eigenvalue of a symmetric 3×3 (the fracture pass ranks cubes by it) on matrices of known
- * spectrum.
+ * spectrum, and the dense Cholesky's solves, its forward solve from a row on, and the
+ * interleaved short dot product (a held object's exact contact response).
  */
 #include <math.h>
 #include <stdint.h>
@@ -11,6 +12,7 @@
 
 #include "check.h"
 #include "mat3.h"
+#include "solver.h"
 
 /* A fixed-seed generator: the same matrices on every run. */
 static double unit_rand(uint64_t *s)
@@ -82,4 +84,78 @@ TEST(dense_sym_max_eigen_matches_known_spectra)
     ENSURE(isnan(cs_mat3_sym_max_eigen(bad))); /* "> strength" is then false: no fracture */
     const double inf[9] = {INFINITY, 0, 0, 0, 1, 0, 0, 0, 1};
     ENSURE(!(cs_mat3_sym_max_eigen(inf) < 1e300));
+}
+
+TEST(dense_cholesky_solves_and_inverse_entries_by_forward_solves)
+{
+    enum { N = 41 };
+    uint64_t seed = 11;
+    static double B[N * N], A[N * N], L[N * N];
+    for (int i = 0; i < N * N; i++)
+        B[i] = unit_rand(&seed) - 0.5;
+    for (int i = 0; i < N; i++) /* A = B Bᵀ + I: SPD, condition about 10² */
+        for (int j = 0; j < N; j++) {
+            double t = i == j ? 1.0 : 0.0;
+            for (int k = 0; k < N; k++)
+                t += B[i * N + k] * B[j * N + k];
+            A[i * N + j] = t;
+        }
+    memcpy(L, A, sizeof L);
+    ENSURE(cs_cholesky(L, N) == 0);
+    /* L Lᵀ = A */
+    for (int i = 0; i < N; i++)
+        for (int j = 0; j <= i; j++) {
+            double t = 0;
+            for (int k = 0; k <= j; k++)
+                t += L[i * N + k] * L[j * N + k];
+            ENSURE_NEAR(t, A[i * N + j], 1e-12 * A[i * N + i]);
+        }
+    /* A x = b for a known x */
+    double x[N], b[N];
+    for (int i = 0; i < N; i++)
+        x[i] = sin(1.0 + i);
+    for (int i = 0; i < N; i++)
+        b[i] = cs_dot_short(A + i * N, x, 0, N);
+    cs_cholesky_solve(L, N, b);
+    for (int i = 0; i < N; i++)
+        ENSURE_NEAR(b[i], x[i], 1e-11);
+    /* (A⁻¹)_pq = (L⁻¹e_p)·(L⁻¹e_q), the forward solves started at p and q */
+    static double Y[N * N];
+    for (int p = 0; p < N; p++) {
+        double *y = Y + p * N;
+        memset(y, 0, N * sizeof *y);
+        y[p] = 1;
+        cs_cholesky_forward(L, N, p, y);
+        for (int i = 0; i < p; i++)
+            ENSURE(y[i] == 0.0);
+    }
+    for (int q = 0; q < N; q += 5) {
+        double col[N];
+        memset(col, 0, sizeof col);
+        col[q] = 1;
+        cs_cholesky_solve(L, N, col); /* column q of A⁻¹ */
+        for (int p = 0; p < N; p++) {
+            const double s = cs_dot_short(Y + p * N, Y + q * N, p > q ? p : q, N);
+            ENSURE_NEAR(s, col[p], 1e-12 * fabs(col[q]));
+        }
+    }
+    /* not positive definite: refused */
+    double M[4] = {1, 2, 2, 1};
+    ENSURE(cs_cholesky(M, 2) == -1);
+}
+
+TEST(dense_short_dot_every_tail_length)
+{
+    double a[13], b[13];
+    for (int i = 0; i < 13; i++) {
+        a[i] = i + 1;
+        b[i] = 2 * i - 5;
+    }
+    for (int lo = 0; lo < 5; lo++)
+        for (int hi = lo; hi <= 13; hi++) {
+            double ref = 0; /* integers: every order gives the same sum */
+            for (int i = lo; i < hi; i++)
+                ref += a[i] * b[i];
+            ENSURE_MSG(cs_dot_short(a, b, lo, hi) == ref, "lo %d hi %d", lo, hi);
+        }
 }
