@@ -38,7 +38,7 @@
 #include "cubemesh.h"
 
 /* Objects with fewer cells than this are stepped on one thread (see cs_fem_init). */
-#define CS_FEM_PARALLEL_CELLS 1024
+#define CS_FEM_PARALLEL_CELLS 2048
 
 typedef struct cs_fem {
     int n_cells, n_nodes;
