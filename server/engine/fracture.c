@@ -3776,6 +3776,8 @@ int cs_fracture_after_step(cs_world_t *w, cs_object *o)
                 continue;
             double S[9];
             cell_stress(o, c, S);
+            if (!(cs_mat3_sym_max_eigen_bound(S) > o->mat.strength))
+                continue; /* most cubes, most steps: no acos, no cos */
             const double sig = cs_mat3_sym_max_eigen(S);
             if (sig > o->mat.strength && (best < 0 || sig > best_sig)) {
                 best = c;

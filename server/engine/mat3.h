@@ -27,6 +27,19 @@ static inline double cs_mat3_adjugate(const double m[9], double c[9])
  * pass ranks every cube with it. Accurate to round-off of the largest |eigenvalue| where the
  * two largest eigenvalues are apart, to about 1e-8 of it where they meet (the cubic's double
  * root; test_dense.c). NaN if s is not finite. */
+/* An upper bound of the largest eigenvalue of the symmetric s without a transcendental:
+ * Samuelson's inequality on the eigenvalues, λmax ≤ m + √(2/3 ‖s − m I‖²_F) (m = tr/3), exact
+ * when the other two are equal (uniaxial, hydrostatic), at most twice λmax − m (when the top
+ * two are equal); plus 1e-9 of the scale so that it also bounds cs_mat3_sym_max_eigen's. */
+static inline double cs_mat3_sym_max_eigen_bound(const double s[9])
+{
+    const double m = (s[0] + s[4] + s[8]) / 3.0;
+    const double d0 = s[0] - m, d1 = s[4] - m, d2 = s[8] - m;
+    const double r = sqrt((d0 * d0 + d1 * d1 + d2 * d2 +
+                           2.0 * (s[1] * s[1] + s[2] * s[2] + s[5] * s[5])) * (2.0 / 3.0));
+    return m + r + 1e-9 * (fabs(m) + r);
+}
+
 static inline double cs_mat3_sym_max_eigen(const double s[9])
 {
     const double m = (s[0] + s[4] + s[8]) / 3.0;

@@ -45,11 +45,13 @@ TEST(dense_sym_max_eigen_matches_known_spectra)
 {
     uint64_t seed = 7;
     double worst = 0;
+    int exact_cases = 0;
     /* spectra: distinct, two equal (either pair), three equal, a zero matrix, signs mixed,
      * one eigenvalue far below the others, and scales from 1e-12 to 1e12 */
     const double fixed[][3] = {{3, 2, 1},      {5, 5, -1},   {-1, 4, 4},     {2, 2, 2},
                                {0, 0, 0},      {-3, -7, -5}, {1, 1e-9, -1},  {1e6, 1, 0},
-                               {-2, -2, -2.5}, {0, 0, 1e-3}, {7, 7, 7 + 1e-7}};
+                               {-2, -2, -2.5}, {0, 0, 1e-3}, {7, 7, 7 + 1e-7}, {3, 0, 0},
+                               {-2, -5, -5}};
     for (int t = 0; t < 2000; t++) {
         double l[3];
         if (t < (int)(sizeof fixed / sizeof fixed[0]))
@@ -75,8 +77,20 @@ TEST(dense_sym_max_eigen_matches_known_spectra)
         worst = fmax(worst, lmax - lmid < 1e-6 * big ? 0 : err / big);
         ENSURE_MSG(err <= tol, "spectrum %g %g %g: got %.17g", l[0], l[1], l[2],
                    cs_mat3_sym_max_eigen(s));
+        /* the bound that spares the closed form: above it, at most twice as far from the
+         * mean (the top two equal) */
+        const double bnd = cs_mat3_sym_max_eigen_bound(s), mean = (l[0] + l[1] + l[2]) / 3;
+        ENSURE_MSG(bnd >= cs_mat3_sym_max_eigen(s) && bnd >= lmax &&
+                       bnd - mean <= 2.0 * (lmax - mean) + 1e-8 * big + 1e-300,
+                   "spectrum %g %g %g: bound %.17g", l[0], l[1], l[2], bnd);
+        if (fabs(l[1] - l[2]) <= 1e-15 * big && l[0] >= l[1]) /* the other two equal */
+        {
+            ENSURE_NEAR(bnd, lmax, 3e-9 * big + 1e-300); /* (its 1e-9 margin) */
+            exact_cases++;
+        }
     }
     printf("    distinct top eigenvalues: largest error %.2g of the largest |eigenvalue|\n", worst);
+    ENSURE(exact_cases >= 3); /* uniaxial (two shapes) and hydrostatic were checked */
     /* a diagonal matrix as it is (no rotation's rounding) and one in a non-finite state */
     const double d[9] = {-4, 0, 0, 0, 9, 0, 0, 0, 1};
     ENSURE(cs_mat3_sym_max_eigen(d) == 9.0 || fabs(cs_mat3_sym_max_eigen(d) - 9.0) < 1e-14);
