@@ -1537,3 +1537,76 @@ TEST(fracture_meshes_harness_mirror)
         mirror_free(&mb);
     }
 }
+
+/*
+ * Stress-driven fractures that drop a grazing cube (session 33's crash). split_pieces drops a
+ * piece made only of cubes outside the surface that hold none of it (voxels the surface only
+ * grazed) without making an object of it; the object is then a cell short, and the after-step
+ * pass went on to its next overstressed cube with the old cell count and read past its cells
+ * (SIGSEGV in the fracture demo's daemon; a heap-buffer-overflow under the sanitizers, which
+ * `make test` runs this in). The icosphere at h = 0.017 m, held at its bottom, with a strength
+ * of 1 Pa and 64 fractures a step, drops such a cube in its fifth step while other cubes of
+ * the same object are still overstressed. Asserted: the case is reached, and every step ends
+ * with every piece closed, consistently oriented and of positive volume.
+ */
+TEST(fracture_meshes_dropped_grazing_cube_ends_the_objects_step)
+{
+    char path[600], err[600];
+    snprintf(path, sizeof path, "%s/scenes/meshes/icosphere.obj", source_dir());
+    cs_mesh m;
+    ENSURE_MSG(cs_mesh_load(path, &m, err, sizeof err) == 0, "%s", err);
+    cs_world_def wd = cs_world_def_default();
+    wd.max_fractures = 64;
+    cs_world_t *w = NULL;
+    ENSURE(cs_world_create(&wd, &w, err, sizeof err) == CS_OK);
+    cs_object_def d = cs_object_def_default();
+    d.name = "ball";
+    d.model = CS_MODEL_COROTATIONAL;
+    d.material.young = 1e5;
+    d.material.density = 1000;
+    d.material.strength = 1;
+    d.fracture = true;
+    d.cube_size = 0.017;
+    d.geometry = CS_GEOMETRY_MESH;
+    d.mesh_vertices = m.v;
+    d.n_mesh_vertices = m.nv;
+    d.mesh_triangles = m.t;
+    d.n_mesh_triangles = m.nt;
+    cs_aabb fix = {{-1, -1, -1}, {1, 1, -0.05}};
+    d.fixed = &fix;
+    d.n_fixed = 1;
+    cs_object_id id;
+    const int rc = cs_world_add_object(w, &d, &id, err, sizeof err);
+    cs_mesh_free(&m);
+    if (rc != CS_OK)
+        cs_world_destroy(w);
+    ENSURE_MSG(rc == CS_OK, "%s", err);
+    int dropped = 0, fractures = 0;
+    for (int s = 0; s < 6; s++) {
+        const int src = cs_world_step(w);
+        int ne;
+        const cs_event *ev = cs_world_events(w, &ne);
+        for (int i = 0; i < ne; i++)
+            if (ev[i].kind == CS_EVENT_FRACTURE) {
+                fractures++;
+                dropped += ev[i].dropped_pieces;
+            }
+        cs_object_id ids[512];
+        cs_piece_view pv[512];
+        const int n = cs_world_object_ids(w, ids, 512);
+        for (int i = 0; i < n && i < 512; i++) {
+            cs_object_surface(w, ids[i], &pv[i].v, &pv[i].nv, &pv[i].t, &pv[i].nt);
+            pv[i].name = NULL;
+        }
+        const int ok = cs_check_pieces(pv, n < 512 ? n : 512, NAN, 0, NULL, err, sizeof err);
+        if (src != CS_OK || !ok || n > 512)
+            cs_world_destroy(w);
+        ENSURE_MSG(src == CS_OK, "step %d: %d", s, src);
+        ENSURE_MSG(ok, "step %d: %s", s, err);
+        ENSURE(n <= 512);
+    }
+    printf("    %d stress-driven fractures in 6 steps, %d grazing pieces dropped\n", fractures,
+           dropped);
+    cs_world_destroy(w);
+    ENSURE(dropped >= 1);
+}
