@@ -78,6 +78,8 @@ typedef struct cs_input {
     int steps_left;
     int steps_total;      /* CURVE: steps of the segment */
     int delay;            /* steps before the input starts acting */
+    bool centred;         /* DRAG, CURVE: moved to its body's centre of mass (world.c,
+                             centre_fast_springs) */
 } cs_input;
 
 /* Springs (DRAG, CURVE) enter the implicit operator; FORCE and PRESSURE are loads. */
