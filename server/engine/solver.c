@@ -140,7 +140,12 @@ void cs_cg_forget(cs_cg_work *w)
 
 double cs_dot_short(const double *a, const double *b, int lo, int hi)
 {
-    double s0 = 0, s1 = 0, s2 = 0, s3 = 0; /* four chains, as in cs_dot */
+    /* four sums side by side: one chain of dependent additions waits for the adder at every
+     * element. (CG's own reductions keep their single chains: in four, the fracture scene's
+     * cs_dot went from 10 to 2.8 % of its time, but the changed round-off tipped a soft tower
+     * dropped 2 cm onto itself, contact_soft_tower_of_three_stands, from standing to falling
+     * in the sanitizer build: session 34, README Known limitations.) */
+    double s0 = 0, s1 = 0, s2 = 0, s3 = 0;
     int i = lo;
     for (; i + 4 <= hi; i += 4) {
         s0 += a[i] * b[i];
@@ -220,20 +225,10 @@ double cs_dot(cs_cg_work *w, const double *a, const double *b, int n, int thread
 #pragma omp parallel for num_threads(threads) schedule(static) if (nb > 1)
     for (int k = 0; k < nb; k++) {
         int lo = k * CS_DOT_BLOCK, hi = lo + CS_DOT_BLOCK < n ? lo + CS_DOT_BLOCK : n;
-        /* four sums side by side: one chain of dependent additions waits 4 cycles an
-         * element (the fracture scene's Jacobi-preconditioned pieces spent 10 % of their
-         * time here); the order is fixed, so results stay the same on any thread count */
-        double s0 = 0, s1 = 0, s2 = 0, s3 = 0;
-        int i = lo;
-        for (; i + 4 <= hi; i += 4) {
-            s0 += a[i] * b[i];
-            s1 += a[i + 1] * b[i + 1];
-            s2 += a[i + 2] * b[i + 2];
-            s3 += a[i + 3] * b[i + 3];
-        }
-        for (; i < hi; i++)
-            s0 += a[i] * b[i];
-        w->partial[k] = (s0 + s1) + (s2 + s3);
+        double s = 0;
+        for (int i = lo; i < hi; i++)
+            s += a[i] * b[i];
+        w->partial[k] = s;
     }
     double s = 0;
     for (int k = 0; k < nb; k++)
@@ -287,17 +282,10 @@ static double update_xr(cs_cg_work *w, const uint8_t *mask, double alpha, const 
 #pragma omp parallel for num_threads(threads) schedule(static) if (nb > 1)
     for (int k = 0; k < nb; k++) {
         const int lo = k * CS_DOT_BLOCK, hi = lo + CS_DOT_BLOCK < n ? lo + CS_DOT_BLOCK : n;
-        double s0 = 0, s1 = 0, s2 = 0, s3 = 0; /* four chains, as in cs_dot */
-        int i = lo;
-        for (; i + 4 <= hi; i += 4) {
-            s0 += update_xr_at(mask, i, alpha, p[i], q[i], x, r);
-            s1 += update_xr_at(mask, i + 1, alpha, p[i + 1], q[i + 1], x, r);
-            s2 += update_xr_at(mask, i + 2, alpha, p[i + 2], q[i + 2], x, r);
-            s3 += update_xr_at(mask, i + 3, alpha, p[i + 3], q[i + 3], x, r);
-        }
-        for (; i < hi; i++)
-            s0 += update_xr_at(mask, i, alpha, p[i], q[i], x, r);
-        w->partial[k] = (s0 + s1) + (s2 + s3);
+        double s = 0;
+        for (int i = lo; i < hi; i++)
+            s += update_xr_at(mask, i, alpha, p[i], q[i], x, r);
+        w->partial[k] = s;
     }
     double s = 0;
     for (int k = 0; k < nb; k++)
@@ -349,19 +337,12 @@ static double copy_dot(cs_cg_work *w, const double *r, const double *z, double *
 #pragma omp parallel for num_threads(threads) schedule(static) if (nb > 1)
     for (int k = 0; k < nb; k++) {
         const int lo = k * CS_DOT_BLOCK, hi = lo + CS_DOT_BLOCK < n ? lo + CS_DOT_BLOCK : n;
-        double s0 = 0, s1 = 0; /* two chains, as in cs_dot */
-        int i = lo;
-        for (; i + 2 <= hi; i += 2) {
+        double s = 0;
+        for (int i = lo; i < hi; i++) {
             p[i] = z[i];
-            p[i + 1] = z[i + 1];
-            s0 += r[i] * z[i];
-            s1 += r[i + 1] * z[i + 1];
+            s += r[i] * z[i];
         }
-        for (; i < hi; i++) {
-            p[i] = z[i];
-            s0 += r[i] * z[i];
-        }
-        w->partial[k] = s0 + s1;
+        w->partial[k] = s;
     }
     double s = 0;
     for (int k = 0; k < nb; k++)
@@ -378,20 +359,13 @@ static void dot2(cs_cg_work *w, const double *r, const double *z, const double *
 #pragma omp parallel for num_threads(threads) schedule(static) if (nb > 1)
     for (int k = 0; k < nb; k++) {
         const int lo = k * CS_DOT_BLOCK, hi = lo + CS_DOT_BLOCK < n ? lo + CS_DOT_BLOCK : n;
-        double a0 = 0, a1 = 0, b0 = 0, b1 = 0; /* two chains each, as in cs_dot */
-        int i = lo;
-        for (; i + 2 <= hi; i += 2) {
-            a0 += r[i] * z[i];
-            b0 += r[i] * zo[i];
-            a1 += r[i + 1] * z[i + 1];
-            b1 += r[i + 1] * zo[i + 1];
+        double a = 0, b = 0;
+        for (int i = lo; i < hi; i++) {
+            a += r[i] * z[i];
+            b += r[i] * zo[i];
         }
-        for (; i < hi; i++) {
-            a0 += r[i] * z[i];
-            b0 += r[i] * zo[i];
-        }
-        pa[k] = a0 + a1;
-        pb[k] = b0 + b1;
+        pa[k] = a;
+        pb[k] = b;
     }
     double a = 0, b = 0;
     for (int k = 0; k < nb; k++) {

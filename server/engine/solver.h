@@ -104,7 +104,7 @@ void cs_cholesky_solve(const double *L, int n, double *x);
 void cs_cholesky_forward(const double *L, int n, int from, double *x);
 
 /* Σ a_i b_i over lo ≤ i < hi, in four interleaved sums (a fixed order: the same bits on
- * every call), for the dense kernels' short dot products. */
+ * every call), for the dense kernels' dot products. */
 double cs_dot_short(const double *a, const double *b, int lo, int hi);
 
 typedef struct cs_cg_result {
