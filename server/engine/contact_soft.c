@@ -781,8 +781,8 @@ int cs_soft_exact_solve(cs_soft_resp *r)
         dof_of[fd[i]] = i + 1;
     /* (A⁻¹)_pq = y_p·y_q with y_q = L⁻¹ e_q, zero before row q: forward solves only, one
      * per contact dof, and dot products from the later of the two rows on */
-    double *Y = malloc((size_t)3 * m * nf * sizeof *Y);
-    int32_t *qs = malloc((size_t)3 * m * sizeof *qs);
+    double *Y = malloc(((size_t)3 * m * nf + 1) * sizeof *Y); /* (+1: m may be 0) */
+    int32_t *qs = malloc(((size_t)3 * m + 1) * sizeof *qs);
     if (!Y || !qs) {
         free(Y);
         free(qs);
