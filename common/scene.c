@@ -1343,3 +1343,33 @@ int cs_scene_coarse_object(const cs_scene *s, const cs_world_t *w, int i, char *
              hi[1] - lo[1], hi[2] - lo[2]);
     return 1;
 }
+
+int cs_scene_below_ground_object(const cs_scene *s, const cs_world_t *w, int i, char *msg,
+                                 size_t n)
+{
+    if (!s || !w || i < 0 || i >= s->n_objects || !s->world.has_ground)
+        return 0;
+    const cs_object_def *o = &s->objects[i];
+    const cs_object_id id = cs_world_find_object(w, o->name);
+    cs_object_info info;
+    const double *rest, *x, *v;
+    int nn;
+    if (id == CS_NULL_OBJECT || cs_object_get_info(w, id, &info) != CS_OK ||
+        cs_object_nodes(w, id, &rest, &x, &v, &nn) != CS_OK || nn <= 0)
+        return 0;
+    double zmin = INFINITY;
+    for (int k = 0; k < nn; k++)
+        zmin = fmin(zmin, x[3 * k + 2]);
+    const double depth = s->world.ground_height - zmin;
+    if (!(depth > 1e-3 * info.cube_size))
+        return 0;
+    char b[SC_SHOW_NAME + 1];
+    snprintf(msg, n,
+             "objects[%d] '%s': starts %.3g m below the ground (z = %g): it is pushed up onto "
+             "the plane (%s), place it on or above the ground",
+             i, show(o->name, b), depth, s->world.ground_height,
+             info.model == CS_MODEL_RIGID ? "by its contacts, a little each step"
+                                          : "in its first step, compressed and thrown up by "
+                                            "the depth");
+    return 1;
+}

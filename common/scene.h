@@ -49,4 +49,15 @@ int cs_scene_instantiate(const cs_scene *s, cs_world_t **out, char *err, size_t 
 #define CS_SCENE_COARSE_RATIO 2.0
 int cs_scene_coarse_object(const cs_scene *s, const cs_world_t *w, int i, char *msg, size_t n);
 
+/*
+ * Whether scene object i (instantiated in w under its name) starts with part of it below the
+ * ground plane (the scene has a ground, and the lowest of its cube mesh's nodes is more than a
+ * thousandth of its cube size below `ground.height`). Such an object is pushed up onto the
+ * plane: a deformable one in its first step, compressed by the depth at once and thrown up by
+ * it; a rigid one by its contacts, a little each step. Returns 1 with one line in msg naming
+ * the object, the depth and the plane; 0 if not (or no ground, or not in w).
+ */
+int cs_scene_below_ground_object(const cs_scene *s, const cs_world_t *w, int i, char *msg,
+                                 size_t n);
+
 #endif

@@ -320,13 +320,17 @@ static int load_scene(const char *path, cs_scene *scene, cs_world_t **world, cha
     return 0;
 }
 
-/* One warning per object of the scene voxelized coarsely (cs_scene_coarse_object). */
-static void warn_coarse(cs_dlog *log, const cs_scene *scene, const cs_world_t *world)
+/* One warning per object of the scene voxelized coarsely (cs_scene_coarse_object) and per
+ * object that starts below the ground (cs_scene_below_ground_object). */
+static void warn_scene(cs_dlog *log, const cs_scene *scene, const cs_world_t *world)
 {
     char msg[512];
-    for (int i = 0; i < scene->n_objects; i++)
+    for (int i = 0; i < scene->n_objects; i++) {
         if (cs_scene_coarse_object(scene, world, i, msg, sizeof msg))
             cs_dlog_warn(log, NULL, "%s", msg);
+        if (cs_scene_below_ground_object(scene, world, i, msg, sizeof msg))
+            cs_dlog_warn(log, NULL, "%s", msg);
+    }
 }
 
 static double publish_period(const cs_daemon *d)
@@ -542,7 +546,7 @@ static void apply_command(cs_daemon *d, const cs_input *in, double now, char *ms
         new_epoch(d, now);
         cs_dlog_info(&d->log, "loaded scene %s: epoch %d, %d objects", in->argument,
                      (int)d->epoch, d->scene.n_objects);
-        warn_coarse(&d->log, &d->scene, d->world);
+        warn_scene(&d->log, &d->scene, d->world);
         break;
     }
     case CS_CMD_FRACTURE: {
@@ -906,7 +910,7 @@ int main(int argc, char **argv)
         d.steps_limit = 1;
     cs_dlog_info(&d.log, "scene %s: %d objects, dt = %g s", d.opt.scene, d.scene.n_objects,
                  wd->dt);
-    warn_coarse(&d.log, &d.scene, d.world);
+    warn_scene(&d.log, &d.scene, d.world);
 
     int rc = 0;
     if (d.opt.static_solve) {

@@ -220,4 +220,34 @@ for sc in "$CS_TMP/fine.json" "$CS_ROOT"/scenes/*.json; do
     grep -q "is coarse" <<<"$err" && quiet_scenes+=" $(basename "$sc")"
 done
 [ -z "$quiet_scenes" ] && cs_pass scene-fitting-meshes-not-warned || cs_fail scene-fitting-meshes-not-warned "warned:$quiet_scenes"
+# an object that starts below the ground runs, and says so in one line (a deformable one is
+# pushed up in its first step, a rigid one by its contacts); one resting on the plane, and the
+# shipped scenes, say nothing (session 34)
+below_scene() { # below_scene MODEL ZMIN
+    cat <<JSON
+{ "ground": { "height": 0.0 },
+  "materials": { "m": { "young": 1e5, "poisson": 0.3, "density": 1000.0 } },
+  "objects": [ { "name": "sunk", "material": "m", "model": "$1", "cube_size": 0.05,
+                 "box": { "min": [0, 0, $2], "size": [0.2, 0.2, 0.2] } } ] }
+JSON
+}
+below_scene corotational -0.03 >"$CS_TMP/below.json"
+below_scene rigid -0.03 >"$CS_TMP/below_rigid.json"
+below_scene corotational 0.0 >"$CS_TMP/onground.json"
+err=$(timeout 30 "$D" --quiet --scene "$CS_TMP/below.json" --steps 2 2>&1 >/dev/null); rc=$?
+err_r=$(timeout 30 "$D" --quiet --scene "$CS_TMP/below_rigid.json" --steps 2 2>&1 >/dev/null); rc_r=$?
+if [ $rc -eq 0 ] && [ "$(grep -c . <<<"$err")" -eq 1 ] &&
+   grep -q "^cubesimd: objects\[0\] 'sunk': starts 0.03 m below the ground (z = 0): it is pushed up onto the plane (in its first step, compressed and thrown up by the depth), place it on or above the ground$" <<<"$err" &&
+   [ $rc_r -eq 0 ] && [ "$(grep -c . <<<"$err_r")" -eq 1 ] &&
+   grep -q "'sunk': starts 0.03 m below the ground (z = 0): it is pushed up onto the plane (by its contacts, a little each step)" <<<"$err_r"; then
+    cs_pass scene-below-ground-warned
+else
+    cs_fail scene-below-ground-warned "exit $rc/$rc_r, stderr: ${err//$'\n'/ | } / ${err_r//$'\n'/ | }"
+fi
+quiet_scenes=""
+for sc in "$CS_TMP/onground.json" "$CS_ROOT"/scenes/*.json; do
+    err=$(timeout 60 "$D" --quiet --scene "$sc" --steps 1 2>&1 >/dev/null)
+    grep -q "below the ground" <<<"$err" && quiet_scenes+=" $(basename "$sc")"
+done
+[ -z "$quiet_scenes" ] && cs_pass scene-on-ground-not-warned || cs_fail scene-on-ground-not-warned "warned:$quiet_scenes"
 cs_finish
