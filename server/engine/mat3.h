@@ -21,36 +21,41 @@ static inline double cs_mat3_adjugate(const double m[9], double c[9])
     return m[0] * c[0] + m[1] * c[3] + m[2] * c[6];
 }
 
+/* The mean m = tr(s)/3 of the symmetric s's eigenvalues and their spread
+ * p = √(‖s − m I‖²_F / 6) (returned): s = m I + p B with B's eigenvalues in [−2, 2]. */
+static inline double cs_mat3_sym_spread(const double s[9], double *m)
+{
+    *m = (s[0] + s[4] + s[8]) / 3.0;
+    const double d0 = s[0] - *m, d1 = s[4] - *m, d2 = s[8] - *m;
+    return sqrt((d0 * d0 + d1 * d1 + d2 * d2 + 2.0 * (s[1] * s[1] + s[2] * s[2] + s[5] * s[5])) /
+                6.0);
+}
+
+/* An upper bound of the largest eigenvalue of the symmetric s without a transcendental:
+ * m + 2p (cs_mat3_sym_spread), Samuelson's inequality on the eigenvalues, exact when the
+ * other two are equal (uniaxial, hydrostatic), at most twice λmax − m (when the top two are
+ * equal); plus 1e-9 of the scale so that it also bounds cs_mat3_sym_max_eigen's. */
+static inline double cs_mat3_sym_max_eigen_bound(const double s[9])
+{
+    double m;
+    const double p = cs_mat3_sym_spread(s, &m);
+    return m + 2.0 * p + 1e-9 * (fabs(m) + 2.0 * p);
+}
+
 /* The largest eigenvalue of the symmetric s in closed form: the trigonometric solution of its
- * characteristic cubic (s = m I + p B, m = tr/3, λmax = m + 2p cos(acos(det B / 2) / 3)).
+ * characteristic cubic (s = m I + p B, λmax = m + 2p cos(acos(det B / 2) / 3)).
  * A few flops, one acos and one cos, against a Jacobi eigensolver's sweeps: the fracture
  * pass ranks every cube with it. Accurate to round-off of the largest |eigenvalue| where the
  * two largest eigenvalues are apart, to about 1e-8 of it where they meet (the cubic's double
  * root; test_dense.c). NaN if s is not finite. */
-/* An upper bound of the largest eigenvalue of the symmetric s without a transcendental:
- * Samuelson's inequality on the eigenvalues, λmax ≤ m + √(2/3 ‖s − m I‖²_F) (m = tr/3), exact
- * when the other two are equal (uniaxial, hydrostatic), at most twice λmax − m (when the top
- * two are equal); plus 1e-9 of the scale so that it also bounds cs_mat3_sym_max_eigen's. */
-static inline double cs_mat3_sym_max_eigen_bound(const double s[9])
-{
-    const double m = (s[0] + s[4] + s[8]) / 3.0;
-    const double d0 = s[0] - m, d1 = s[4] - m, d2 = s[8] - m;
-    const double r = sqrt((d0 * d0 + d1 * d1 + d2 * d2 +
-                           2.0 * (s[1] * s[1] + s[2] * s[2] + s[5] * s[5])) * (2.0 / 3.0));
-    return m + r + 1e-9 * (fabs(m) + r);
-}
-
 static inline double cs_mat3_sym_max_eigen(const double s[9])
 {
-    const double m = (s[0] + s[4] + s[8]) / 3.0;
-    const double d0 = s[0] - m, d1 = s[4] - m, d2 = s[8] - m;
-    const double p2 =
-        (d0 * d0 + d1 * d1 + d2 * d2 + 2.0 * (s[1] * s[1] + s[2] * s[2] + s[5] * s[5])) / 6.0;
-    const double p = sqrt(p2);
+    double m;
+    const double p = cs_mat3_sym_spread(s, &m);
     if (!(p > 0))
         return p == 0 ? m : NAN; /* hydrostatic, or not finite */
-    const double b0 = d0 / p, b1 = s[1] / p, b2 = s[2] / p, b4 = d1 / p, b5 = s[5] / p,
-                 b8 = d2 / p;
+    const double b0 = (s[0] - m) / p, b1 = s[1] / p, b2 = s[2] / p, b4 = (s[4] - m) / p,
+                 b5 = s[5] / p, b8 = (s[8] - m) / p;
     double r = 0.5 * (b0 * (b4 * b8 - b5 * b5) - b1 * (b1 * b8 - b5 * b2) +
                       b2 * (b1 * b5 - b4 * b2));
     r = r < -1.0 ? -1.0 : r > 1.0 ? 1.0 : r;

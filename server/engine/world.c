@@ -3282,27 +3282,10 @@ static void centre_fast_springs(const cs_world_t *w, cs_object *o)
     for (int i = 0; i < o->n_inputs && !any; i++)
         any = cs_input_is_spring(&o->inputs[i]) && o->inputs[i].delay <= 0 &&
               !o->inputs[i].centred;
-    if (!any || o->model == CS_MODEL_RIGID || held_by_scene(o))
+    rigid_fit f; /* the centre of mass and the inertia about it */
+    if (!any || o->model == CS_MODEL_RIGID || held_by_scene(o) || !fit_rigid(o, o->v, &f))
         return;
-    double mass = 0, c[3] = {0, 0, 0}, I[9] = {0};
-    for (int i = 0; i < o->n; i++) {
-        mass += o->m[i];
-        for (int a = 0; a < 3; a++)
-            c[a] += o->m[i] * o->x[3 * (size_t)i + a];
-    }
-    if (!(mass > 0))
-        return;
-    for (int a = 0; a < 3; a++)
-        c[a] /= mass;
-    for (int i = 0; i < o->n; i++) {
-        const double *xi = o->x + 3 * (size_t)i;
-        const double r[3] = {xi[0] - c[0], xi[1] - c[1], xi[2] - c[2]};
-        const double r2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
-        for (int a = 0; a < 3; a++)
-            for (int b = 0; b < 3; b++)
-                I[3 * a + b] += o->m[i] * ((a == b ? r2 : 0.0) - r[a] * r[b]);
-    }
-    const double dt = w->def.dt;
+    const double *c = f.c, *I = f.I, dt = w->def.dt;
     for (int i = 0; i < o->n_inputs; i++) {
         cs_input *in = &o->inputs[i];
         if (!cs_input_is_spring(in) || in->delay > 0 || in->centred)
