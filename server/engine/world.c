@@ -1944,12 +1944,19 @@ static void add_solve_stats(cs_step_stats *st, cs_cg_result r)
 }
 
 #define FREE_ROTATION_ITERS 4 /* fixed-point iterations of the midpoint rotation */
-/* The turning bodies' steps apply while a step turns the body by at most CS_TURN_MAX rad and
- * (the free body's turn) its deformation moves no node by more than CS_TURN_MAX_DEFORM of
- * its radius of gyration: a one-cube piece born of a violent fracture in the fracture demo
- * turned by 10.9 rad in its first step while its nodes moved 1.4 cubes apart, and turning it
- * blew it up (the inertia of where the nodes went was 6600 times the start's). Such a step
- * resolves neither the turn nor the deformation; it is left to x + dt v1 as before. */
+/* A step resolves a turn of at most CS_TURN_MAX rad. A free body spinning faster (a one-cube
+ * piece born of a violent fracture in the fracture demo turned by 10.9 rad in its first step)
+ * has the rigid part of its spin slowed to that rate, the rest of its velocity kept: what
+ * rigid-body engines do with an angular velocity past their limit. Left to x + dt v1, as until
+ * session 35, such a body stretched along every circle: a one-cube piece at 300 rad/s (5 rad a
+ * step at 60 Hz) swelled to 33 times its volume in its first steps, and a block spinning at
+ * 25 rad/s whose nodes also shook stayed 2.8 times its volume (it never passed the deformation
+ * test below again). The relinearized step of a body the ground holds (relinearize_turn)
+ * keeps the bound as it was: past it, nothing.
+ * Where a free body's deformation moves a node by more than CS_TURN_MAX_DEFORM of its radius
+ * of gyration in the step, the turned nodes' inertia is no guide to its new spin (turning
+ * that piece with ω' = I'⁻¹ L blew it up: where its nodes went had 6600 times the start's
+ * inertia); its velocities turn with it instead (each node's relative speed kept). */
 #define CS_TURN_MAX 0.5
 #define CS_TURN_MAX_DEFORM 0.1
 
@@ -2083,10 +2090,14 @@ static bool turn_centrifugal(const cs_world_t *w, cs_object *o, double sign)
     rigid_fit f;
     if (!fit_rigid(o, o->v, &f))
         return false;
-    const double *om = f.om, w2 = om[0] * om[0] + om[1] * om[1] + om[2] * om[2];
     const double dt = w->def.dt, s = sign * dt;
-    if (!(dt * sqrt(w2) >= 1e-9) || dt * sqrt(w2) > CS_TURN_MAX)
+    const double th = dt * sqrt(f.om[0] * f.om[0] + f.om[1] * f.om[1] + f.om[2] * f.om[2]);
+    if (!(th >= 1e-9))
         return false;
+    /* a spin past CS_TURN_MAX rad a step turns at that rate (free_body_rotation) */
+    const double k = th > CS_TURN_MAX ? CS_TURN_MAX / th : 1.0;
+    const double om[3] = {k * f.om[0], k * f.om[1], k * f.om[2]};
+    const double w2 = om[0] * om[0] + om[1] * om[1] + om[2] * om[2];
     /* the torque of −m ω × (ω × r) = m (ω² r − (ω·r) ω) about c, then α = I⁻¹ τ */
     double tau[3] = {0, 0, 0}, al[3] = {0, 0, 0};
     for (int pass = 0; pass < 2; pass++) {
@@ -2178,11 +2189,14 @@ static bool relinearize_turn(const cs_world_t *w, cs_object *o)
  * body leaves with is v1 = vc + ω' × r1 + R d, its deformation turned with it and
  * ω' = I₁⁻¹ (L − Σ m r1 × R d) (I₁ the inertia of the r1), so that momentum and angular
  * momentum are kept to round-off. The turn gives each node its centripetal acceleration
- * without a force: the solve felt the centrifugal force instead (turn_centrifugal). A body
- * that turns by less than 1e-9 rad in the step is left to x + dt v1 (at rest, sliding), and
- * so is one a node of which would end below the ground. Writes x1 into x_out and v1 in place,
- * the turn into R and Σ m_i into mass; false (v1 unchanged) if the step is not such a
- * body's. Fixed order (one thread): the result does not depend on the thread count.
+ * without a force: the solve felt the centrifugal force instead (turn_centrifugal). A spin
+ * past CS_TURN_MAX rad a step is first slowed to it (ω → ω CS_TURN_MAX / (|ω| dt), in v1); a
+ * deformation step past CS_TURN_MAX_DEFORM turns the velocities with the body, v1 = vc +
+ * R (v1 − vc), instead of spinning at ω'. A body that turns by less than 1e-9 rad in the step
+ * is left to x + dt v1 (at rest, sliding), and so is one a node of which would end below the
+ * ground (with its spin slowed, if it was). Writes x1 into x_out and v1 in place, the turn into
+ * R and Σ m_i into mass; false if the step is not such a body's (v1 unchanged but for that
+ * slowing). Fixed order (one thread): the result does not depend on the thread count.
  */
 static bool free_body_rotation(const cs_world_t *w, cs_object *o, double *x_out, double R[9],
                                double *mass)
@@ -2195,8 +2209,21 @@ static bool free_body_rotation(const cs_world_t *w, cs_object *o, double *x_out,
     const double det = f.det, *om = f.om;
     double *v = o->v1;
     const double th = dt * sqrt(om[0] * om[0] + om[1] * om[1] + om[2] * om[2]);
-    if (!(th >= 1e-9) || th > CS_TURN_MAX)
+    if (!(th >= 1e-9))
         return false;
+    if (th > CS_TURN_MAX) {
+        /* a spin the step cannot resolve: its rigid part slowed to CS_TURN_MAX rad a step */
+        const double k = 1 - CS_TURN_MAX / th;
+        for (int i = 0; i < o->n; i++) {
+            const double *xi = x + 3 * (size_t)i;
+            const double r[3] = {xi[0] - c[0], xi[1] - c[1], xi[2] - c[2]};
+            v[3 * (size_t)i] -= k * (om[1] * r[2] - om[2] * r[1]);
+            v[3 * (size_t)i + 1] -= k * (om[2] * r[0] - om[0] * r[2]);
+            v[3 * (size_t)i + 2] -= k * (om[0] * r[1] - om[1] * r[0]);
+        }
+        if (!fit_rigid(o, v, &f))
+            return false;
+    }
     /* R = exp(dt [ωm]×), ωm the rotation at the step's midpoint orientation Rh = exp(dt/2
      * [ωm]×): ωm = Rh I⁻¹ Rhᵀ L, by fixed-point iteration from ω (time-reversible: a tumbling
      * body's energy stays bounded; turning by ω itself pumped the intermediate-axis tumble of
@@ -2213,21 +2240,23 @@ static bool free_body_rotation(const cs_world_t *w, cs_object *o, double *x_out,
      * turned deformation velocities; then the velocities, ω' = I'⁻¹ (L − Ld), which keeps the
      * momentum and the angular momentum exactly (what the nodes carry is what the solve left) */
     double I1[9] = {0}, Ld[3] = {0, 0, 0}, d2max = 0;
+    bool rotate_field = false;
     for (int pass = 0; pass < 2; pass++) {
         if (pass == 1) {
             /* Σ m r² = tr(I)/2; a deformation step past CS_TURN_MAX_DEFORM of the radius of
-             * gyration: not turned (nothing written yet but scratch) */
+             * gyration, or a degenerate I': the velocities turned with the body */
             const double rg2 = 0.5 * (f.I[0] + f.I[4] + f.I[8]) / f.mass;
-            if (!(d2max <= CS_TURN_MAX_DEFORM * CS_TURN_MAX_DEFORM * rg2))
-                return false;
             double Ia1[9];
             const double det1 = cs_mat3_adjugate(I1, Ia1);
-            if (!(det1 > 0) || !isfinite(det1))
-                return false;
-            const double Lr[3] = {L[0] - Ld[0], L[1] - Ld[1], L[2] - Ld[2]};
-            for (int a = 0; a < 3; a++)
-                om1[a] = (Ia1[3 * a] * Lr[0] + Ia1[3 * a + 1] * Lr[1] + Ia1[3 * a + 2] * Lr[2]) /
-                         det1;
+            if (!(d2max <= CS_TURN_MAX_DEFORM * CS_TURN_MAX_DEFORM * rg2) || !(det1 > 0) ||
+                !isfinite(det1)) {
+                rotate_field = true;
+            } else {
+                const double Lr[3] = {L[0] - Ld[0], L[1] - Ld[1], L[2] - Ld[2]};
+                for (int a = 0; a < 3; a++)
+                    om1[a] = (Ia1[3 * a] * Lr[0] + Ia1[3 * a + 1] * Lr[1] +
+                              Ia1[3 * a + 2] * Lr[2]) / det1;
+            }
         }
         for (int i = 0; i < o->n; i++) {
             const double *xi = x + 3 * (size_t)i;
@@ -2257,6 +2286,12 @@ static bool free_body_rotation(const cs_world_t *w, cs_object *o, double *x_out,
                 Ld[0] += m * (r1[1] * Rd[2] - r1[2] * Rd[1]);
                 Ld[1] += m * (r1[2] * Rd[0] - r1[0] * Rd[2]);
                 Ld[2] += m * (r1[0] * Rd[1] - r1[1] * Rd[0]);
+                continue;
+            }
+            if (rotate_field) {
+                const double u[3] = {vi[0] - vc[0], vi[1] - vc[1], vi[2] - vc[2]};
+                for (int a = 0; a < 3; a++)
+                    vi[a] = vc[a] + R[3 * a] * u[0] + R[3 * a + 1] * u[1] + R[3 * a + 2] * u[2];
                 continue;
             }
             const double wr[3] = {om1[1] * r1[2] - om1[2] * r1[1],
