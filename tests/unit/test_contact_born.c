@@ -17,6 +17,7 @@
 #include <string.h>
 
 #include "check.h"
+#include "demo_beam.h"
 #include "contact_probe.h"
 #include "cubesim.h"
 #include "lattice.h"
@@ -379,11 +380,7 @@ static cs_world_t *held_beam(int nx, bool cut, cs_object_id *id)
     int32_t *ijk = cs_box_cells(nx, 2, 2);
     cs_object_def d = cs_object_def_default();
     d.name = "beam";
-    d.material.young = 2e6;
-    d.material.density = 100;
-    d.material.damping[0] = 0.5;
-    d.material.damping[1] = 0.002;
-    d.cube_size = 0.025;
+    demo_beam_material(&d);
     d.geometry = CS_GEOMETRY_CELLS;
     d.cells_ijk = ijk;
     d.n_cells = 4 * nx;

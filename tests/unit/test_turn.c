@@ -10,6 +10,7 @@
 #include <stdlib.h>
 
 #include "check.h"
+#include "demo_beam.h"
 #include "cubesim.h"
 #include "lattice.h"
 #include "mat3.h"
@@ -294,11 +295,7 @@ static bool shaken_spin(int n_cells, double spin, double shake, unsigned seed, d
     int32_t *ijk = cs_box_cells(2, 2, 2);
     cs_object_def d = cs_object_def_default();
     d.name = "piece";
-    d.material.young = 2e6;
-    d.material.density = 100;
-    d.material.damping[0] = 0.5;
-    d.material.damping[1] = 0.002;
-    d.cube_size = 0.025;
+    demo_beam_material(&d);
     d.geometry = CS_GEOMETRY_CELLS;
     d.cells_origin[2] = 1;
     d.cells_ijk = ijk;
