@@ -1949,14 +1949,16 @@ static void add_solve_stats(cs_step_stats *st, cs_cg_result r)
  * has the rigid part of its spin slowed to that rate, the rest of its velocity kept: what
  * rigid-body engines do with an angular velocity past their limit. Left to x + dt v1, as until
  * session 35, such a body stretched along every circle: a one-cube piece at 300 rad/s (5 rad a
- * step at 60 Hz) swelled to 33 times its volume in its first steps, and a block spinning at
- * 25 rad/s whose nodes also shook stayed 2.8 times its volume (it never passed the deformation
- * test below again). The relinearized step of a body the ground holds (relinearize_turn)
+ * step at 60 Hz) swelled to 33 times its volume in its first steps, and a block spun at
+ * 25 rad/s whose nodes also shook (a tumble of 0.53–0.9 rad a step in all) flew at up to 2.8
+ * times its volume. The relinearized step of a body the ground holds (relinearize_turn)
  * keeps the bound as it was: past it, nothing.
  * Where a free body's deformation moves a node by more than CS_TURN_MAX_DEFORM of its radius
  * of gyration in the step, the turned nodes' inertia is no guide to its new spin (turning
  * that piece with ω' = I'⁻¹ L blew it up: where its nodes went had 6600 times the start's
- * inertia); its velocities turn with it instead (each node's relative speed kept). */
+ * inertia); its velocities turn with it instead (each node's relative speed kept: momentum
+ * and kinetic energy exact, angular momentum turned with the body). The bound is on |I⁻¹L| dt;
+ * the step turns by the midpoint spin, which for a body unlike on its axes can differ a little. */
 #define CS_TURN_MAX 0.5
 #define CS_TURN_MAX_DEFORM 0.1
 
@@ -2238,7 +2240,9 @@ static bool free_body_rotation(const cs_world_t *w, cs_object *o, double *x_out,
      * did not: ground_arrivals held every node that did, and a held node ends this function
      * above), with their inertia I' about the new centre and the angular momentum Ld of the
      * turned deformation velocities; then the velocities, ω' = I'⁻¹ (L − Ld), which keeps the
-     * momentum and the angular momentum exactly (what the nodes carry is what the solve left) */
+     * momentum and the angular momentum exactly (what the nodes carry is what the solve left);
+     * or, past the deformation bound, turned with the body, which keeps the momentum and the
+     * kinetic energy exactly but turns L with R (not kept for a tumbling body) */
     double I1[9] = {0}, Ld[3] = {0, 0, 0}, d2max = 0;
     bool rotate_field = false;
     for (int pass = 0; pass < 2; pass++) {

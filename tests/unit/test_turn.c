@@ -217,15 +217,19 @@ TEST(turn_block_rolling_on_its_edge_keeps_its_shape)
     cs_world_destroy(w);
 }
 
-/* The rigid part's turn rate |ω| dt (ω = I⁻¹ L about the centre of mass) of velocities v. */
-static double turn_rate(const cs_object *o, double dt)
+/* The rigid part of velocities v on o's nodes: the centre of mass c, the mean velocity vc and
+ * the spin ω = I⁻¹ L about c. */
+static void rigid_part(const cs_object *o, const double *v, double c[3], double vc[3],
+                       double om[3])
 {
-    double M = 0, c[3] = {0, 0, 0}, vc[3] = {0, 0, 0}, L[3] = {0, 0, 0}, I[9] = {0};
+    double M = 0, L[3] = {0, 0, 0}, I[9] = {0};
+    for (int a = 0; a < 3; a++)
+        c[a] = vc[a] = 0;
     for (int i = 0; i < o->n; i++) {
         M += o->m[i];
         for (int a = 0; a < 3; a++) {
             c[a] += o->m[i] * o->x[3 * i + a];
-            vc[a] += o->m[i] * o->v[3 * i + a];
+            vc[a] += o->m[i] * v[3 * i + a];
         }
     }
     for (int a = 0; a < 3; a++) {
@@ -234,7 +238,7 @@ static double turn_rate(const cs_object *o, double dt)
     }
     for (int i = 0; i < o->n; i++) {
         const double r[3] = {o->x[3 * i] - c[0], o->x[3 * i + 1] - c[1], o->x[3 * i + 2] - c[2]};
-        const double u[3] = {o->v[3 * i] - vc[0], o->v[3 * i + 1] - vc[1], o->v[3 * i + 2] - vc[2]};
+        const double u[3] = {v[3 * i] - vc[0], v[3 * i + 1] - vc[1], v[3 * i + 2] - vc[2]};
         const double m = o->m[i], r2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
         L[0] += m * (r[1] * u[2] - r[2] * u[1]);
         L[1] += m * (r[2] * u[0] - r[0] * u[2]);
@@ -245,12 +249,16 @@ static double turn_rate(const cs_object *o, double dt)
     }
     double Ia[9];
     const double det = cs_mat3_adjugate(I, Ia);
-    double om2 = 0;
-    for (int a = 0; a < 3; a++) {
-        const double w = (Ia[3 * a] * L[0] + Ia[3 * a + 1] * L[1] + Ia[3 * a + 2] * L[2]) / det;
-        om2 += w * w;
-    }
-    return dt * sqrt(om2);
+    for (int a = 0; a < 3; a++)
+        om[a] = (Ia[3 * a] * L[0] + Ia[3 * a + 1] * L[1] + Ia[3 * a + 2] * L[2]) / det;
+}
+
+/* The rigid part's turn rate |ω| dt of o's velocities. */
+static double turn_rate(const cs_object *o, double dt)
+{
+    double c[3], vc[3], om[3];
+    rigid_part(o, o->v, c, vc, om);
+    return dt * sqrt(om[0] * om[0] + om[1] * om[1] + om[2] * om[2]);
 }
 
 /* The smallest and largest corner Jacobian det(∂x/∂X) of o's cubes (1 at rest). */
@@ -281,11 +289,12 @@ static void corner_jacobians(const cs_object *o, double *jmin, double *jmax)
 
 /* A free piece of the fracture demo's beam material (E 2 MPa, ρ 100, damping 0.5 / 0.002,
  * 2.5 cm cubes), n_cells of the 2×2×2 block, spinning at `spin` rad/s about z through its
- * centre with every node's velocity shaken by up to `shake` m/s (seed); 120 steps at 60 Hz.
- * Reports the corner Jacobians' range over the run, the largest turn rate after the first
- * step, and the energies at the end. False if it cannot be made or a step fails. */
+ * centre, every node's velocity shaken by up to `shake` m/s (seed: the shake has a mean and a
+ * spin of its own); 120 steps at 60 Hz. Reports the
+ * corner Jacobians' range over the run, the turn rate after the first step and the largest
+ * after any, and the energies at the end. False if it cannot be made or a step fails. */
 static bool shaken_spin(int n_cells, double spin, double shake, unsigned seed, double *jmin,
-                        double *jmax, double *turn_after, cs_energy *e)
+                        double *jmax, double *turn_first, double *turn_after, cs_energy *e)
 {
     cs_world_def wd = cs_world_def_default();
     wd.threads = 1;
@@ -329,7 +338,10 @@ static bool shaken_spin(int n_cells, double spin, double shake, unsigned seed, d
     for (int s = 0; s < 120 && ok; s++) {
         ok = cs_world_step(w) == CS_OK;
         corner_jacobians(o, jmin, jmax);
-        *turn_after = fmax(*turn_after, turn_rate(o, w->def.dt));
+        const double t = turn_rate(o, w->def.dt);
+        if (s == 0)
+            *turn_first = t;
+        *turn_after = fmax(*turn_after, t);
     }
     ok = ok && cs_object_energy(w, id, e) == CS_OK;
     cs_world_destroy(w);
@@ -342,42 +354,43 @@ TEST(turn_violent_piece_spins_no_faster_than_a_step_resolves)
      * nodes flying apart at metres a second (10.9 rad in one step in the demo). Left to its
      * tangent steps x + dt v1 (until session 35) it swelled to 33 times its volume at 300
      * rad/s and 131 times at 650 in its first steps, then the damping took the energy out.
-     * Now the rigid part of a spin past CS_TURN_MAX (0.5 rad) a step is slowed to it, and the
-     * piece turns at that rate in its shape: corner Jacobians 1 ± 0.01, the turn rate after
-     * each step 0.5 rad (to 1 %: the turned inertia), at rest in its shape at the end (free fall adds the rest). */
+     * Now the rigid part of a spin past CS_TURN_MAX (0.5 rad) a step is slowed to that rate,
+     * not stopped, and the piece turns in its shape: corner Jacobians 1 ± 0.01, a turn rate of
+     * 0.45–0.505 rad a step after the first step (the turned inertia moves it by under 1 %),
+     * never more after, and no strain left at the end (2 s of free fall, no ground). */
     const double spins[2] = {300, 650};
     for (int k = 0; k < 2; k++)
         for (unsigned seed = 1; seed <= 2; seed++) {
-            double jmin, jmax, turn;
+            double jmin, jmax, first, turn;
             cs_energy e;
-            ENSURE(shaken_spin(1, spins[k], 3.0, seed, &jmin, &jmax, &turn, &e));
-            printf("    %.0f rad/s, seed %u: Jacobians %.4f..%.4f, turn at most %.3f rad a step; "
-                   "after 2 s elastic %.2e J, kinetic %.3g J\n", spins[k], seed, jmin, jmax, turn,
-                   e.elastic, e.kinetic);
+            ENSURE(shaken_spin(1, spins[k], 3.0, seed, &jmin, &jmax, &first, &turn, &e));
+            printf("    %.0f rad/s, seed %u: Jacobians %.4f..%.4f, turn %.3f rad after the first "
+                   "step, at most %.3f; after 2 s elastic %.2e J\n", spins[k], seed, jmin, jmax,
+                   first, turn, e.elastic);
             ENSURE_MSG(jmin > 0.99 && jmax < 1.01, "%.0f rad/s seed %u: Jacobians %g..%g",
                        spins[k], seed, jmin, jmax);
-            ENSURE_MSG(turn <= 0.505, "%.0f rad/s seed %u: turned %g rad in a step",
-                       spins[k], seed, turn);
-            ENSURE_MSG(isfinite(e.kinetic) && e.elastic < 1e-6 && e.kinetic < 1,
-                       "%.0f rad/s seed %u: elastic %g J, kinetic %g J", spins[k], seed,
-                       e.elastic, e.kinetic);
+            ENSURE_MSG(first >= 0.45 && turn <= 0.505,
+                       "%.0f rad/s seed %u: turned %g rad in the first step, at most %g", spins[k],
+                       seed, first, turn);
+            ENSURE_MSG(isfinite(e.kinetic) && e.elastic < 1e-6, "%.0f rad/s seed %u: elastic %g J",
+                       spins[k], seed, e.elastic);
         }
 }
 
 TEST(turn_shaken_spinning_block_keeps_its_shape)
 {
-    /* A 2×2×2 block of the same material at 25 rad/s (0.42 rad a step, within the bound) with
-     * its nodes shaken by up to 3 m/s: the first steps' deformation moves nodes by more than
-     * a tenth of the radius of gyration, where the turned inertia is no guide to the new spin.
-     * Such steps were left to the tangents, which stretched the block, whose recoil then
-     * failed that test again: it flew at up to 2.8 times its volume. Its velocities now turn
-     * with it: Jacobians 1 ± 0.05 throughout. */
+    /* A 2×2×2 block of the same material spun at 25 rad/s about z with its nodes shaken by up
+     * to 3 m/s: the shake adds a spin of its own about other axes, 0.53–0.90 rad a step in all
+     * (seeds 1–4), past the bound. Left to its tangent steps (until session 35) the tumbling
+     * block flew at 1.35–2.83 times its volume; slowed to the bound and turned, its corner
+     * Jacobians stay within 1 ± 0.05 (5e-4 measured), the turn at most 0.505 rad a step. */
     for (unsigned seed = 1; seed <= 4; seed++) {
-        double jmin, jmax, turn;
+        double jmin, jmax, first, turn;
         cs_energy e;
-        ENSURE(shaken_spin(8, 25, 3.0, seed, &jmin, &jmax, &turn, &e));
-        printf("    seed %u: Jacobians %.4f..%.4f, turn at most %.3f rad a step\n", seed, jmin,
-               jmax, turn);
+        ENSURE(shaken_spin(8, 25, 3.0, seed, &jmin, &jmax, &first, &turn, &e));
+        printf("    seed %u: Jacobians %.4f..%.4f, turn %.3f rad after the first step, at most "
+               "%.3f\n", seed, jmin, jmax, first, turn);
         ENSURE_MSG(jmin > 0.95 && jmax < 1.05, "seed %u: Jacobians %g..%g", seed, jmin, jmax);
+        ENSURE_MSG(turn <= 0.505, "seed %u: turned %g rad in a step", seed, turn);
     }
 }
