@@ -2174,6 +2174,34 @@ static bool relinearize_turn(const cs_world_t *w, cs_object *o)
     return true;
 }
 
+/* A velocity field u turned with a free body (free_body_rotation's R): u = ū + R (u − ū), ū
+ * its mass-weighted mean. What the warm start's history gets (cs_cg_map_history), so that the
+ * changes the next guess searches are the solves' own, not the turn's. */
+typedef struct turn_ctx {
+    const cs_object *o;
+    const double *R;
+    double mass; /* Σ m_i */
+} turn_ctx;
+
+static void turn_velocities(void *ctx, double *u)
+{
+    const turn_ctx *t = ctx;
+    const cs_object *o = t->o;
+    const double *R = t->R;
+    double uc[3] = {0, 0, 0};
+    for (int i = 0; i < o->n; i++)
+        for (int a = 0; a < 3; a++)
+            uc[a] += o->m[i] * u[3 * (size_t)i + a];
+    for (int a = 0; a < 3; a++)
+        uc[a] /= t->mass;
+    for (int i = 0; i < o->n; i++) {
+        double *ui = u + 3 * (size_t)i;
+        const double q[3] = {ui[0] - uc[0], ui[1] - uc[1], ui[2] - uc[2]};
+        for (int a = 0; a < 3; a++)
+            ui[a] = uc[a] + R[3 * a] * q[0] + R[3 * a + 1] * q[1] + R[3 * a + 2] * q[2];
+    }
+}
+
 /*
  * The rigid part of a free body's implicit Euler step, moved along its rotation instead of
  * its tangents. x1 = x + dt v1 moves every node along the tangent of its circle, which
@@ -2244,23 +2272,23 @@ static bool free_body_rotation(const cs_world_t *w, cs_object *o, double *x_out,
      * or, past the deformation bound, turned with the body, which keeps the momentum and the
      * kinetic energy exactly but turns L with R (not kept for a tumbling body) */
     double I1[9] = {0}, Ld[3] = {0, 0, 0}, d2max = 0;
-    bool rotate_field = false;
     for (int pass = 0; pass < 2; pass++) {
         if (pass == 1) {
             /* Σ m r² = tr(I)/2; a deformation step past CS_TURN_MAX_DEFORM of the radius of
-             * gyration, or a degenerate I': the velocities turned with the body */
+             * gyration, or a degenerate I': the velocities turned with the body, as the warm
+             * start's history is (turn_velocities) */
             const double rg2 = 0.5 * (f.I[0] + f.I[4] + f.I[8]) / f.mass;
             double Ia1[9];
             const double det1 = cs_mat3_adjugate(I1, Ia1);
             if (!(d2max <= CS_TURN_MAX_DEFORM * CS_TURN_MAX_DEFORM * rg2) || !(det1 > 0) ||
                 !isfinite(det1)) {
-                rotate_field = true;
-            } else {
-                const double Lr[3] = {L[0] - Ld[0], L[1] - Ld[1], L[2] - Ld[2]};
-                for (int a = 0; a < 3; a++)
-                    om1[a] = (Ia1[3 * a] * Lr[0] + Ia1[3 * a + 1] * Lr[1] +
-                              Ia1[3 * a + 2] * Lr[2]) / det1;
+                turn_velocities(&(turn_ctx){o, R, f.mass}, v);
+                return true;
             }
+            const double Lr[3] = {L[0] - Ld[0], L[1] - Ld[1], L[2] - Ld[2]};
+            for (int a = 0; a < 3; a++)
+                om1[a] = (Ia1[3 * a] * Lr[0] + Ia1[3 * a + 1] * Lr[1] + Ia1[3 * a + 2] * Lr[2]) /
+                         det1;
         }
         for (int i = 0; i < o->n; i++) {
             const double *xi = x + 3 * (size_t)i;
@@ -2292,12 +2320,6 @@ static bool free_body_rotation(const cs_world_t *w, cs_object *o, double *x_out,
                 Ld[2] += m * (r1[0] * Rd[1] - r1[1] * Rd[0]);
                 continue;
             }
-            if (rotate_field) {
-                const double u[3] = {vi[0] - vc[0], vi[1] - vc[1], vi[2] - vc[2]};
-                for (int a = 0; a < 3; a++)
-                    vi[a] = vc[a] + R[3 * a] * u[0] + R[3 * a + 1] * u[1] + R[3 * a + 2] * u[2];
-                continue;
-            }
             const double wr[3] = {om1[1] * r1[2] - om1[2] * r1[1],
                                   om1[2] * r1[0] - om1[0] * r1[2],
                                   om1[0] * r1[1] - om1[1] * r1[0]};
@@ -2306,34 +2328,6 @@ static bool free_body_rotation(const cs_world_t *w, cs_object *o, double *x_out,
         }
     }
     return true;
-}
-
-/* A velocity field u turned with a free body (free_body_rotation's R): u = ū + R (u − ū), ū
- * its mass-weighted mean. What the warm start's history gets (cs_cg_map_history), so that the
- * changes the next guess searches are the solves' own, not the turn's. */
-typedef struct turn_ctx {
-    const cs_object *o;
-    const double *R;
-    double mass; /* Σ m_i */
-} turn_ctx;
-
-static void turn_velocities(void *ctx, double *u)
-{
-    const turn_ctx *t = ctx;
-    const cs_object *o = t->o;
-    const double *R = t->R;
-    double uc[3] = {0, 0, 0};
-    for (int i = 0; i < o->n; i++)
-        for (int a = 0; a < 3; a++)
-            uc[a] += o->m[i] * u[3 * (size_t)i + a];
-    for (int a = 0; a < 3; a++)
-        uc[a] /= t->mass;
-    for (int i = 0; i < o->n; i++) {
-        double *ui = u + 3 * (size_t)i;
-        const double q[3] = {ui[0] - uc[0], ui[1] - uc[1], ui[2] - uc[2]};
-        for (int a = 0; a < 3; a++)
-            ui[a] = uc[a] + R[3 * a] * q[0] + R[3 * a + 1] * q[1] + R[3 * a + 2] * q[2];
-    }
 }
 
 /* The end of a step that solved for the new velocities v1 (implicit Euler, Newmark, central
