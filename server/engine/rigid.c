@@ -2762,19 +2762,32 @@ static int soft_contacts(cs_world_t *w, cs_rigid_world *rw, cs_step_stats *st)
     }
     if (rw->nsc == 0)
         return CS_OK;
-    /* held objects against held objects: their modes (contact_soft.h). (A held object under
-     * a free one keeps its blocks: the free one's rigid modes carry the exchange, and the
-     * modes' two solves a step made a soft block resting on a held slab 1.7-3.3x dearer.) */
+    /* held objects against held objects: their modes or, when small, their exact response
+     * (contact_soft.h). (A held object under a free one keeps its blocks: the free one's
+     * rigid modes carry the exchange, and the modes' two solves a step made a soft block
+     * resting on a held slab 1.7-3.3x dearer.) An object answering exactly answers every
+     * contact it has by S, so every contact's nodes join its list, its contacts with free
+     * objects too: the exact response ignores an impulse on a node not in the list, and until
+     * session 36 a small held piece touching a held sibling and a free block dropped the
+     * block's impulses on its side (no momentum, no compliance: the block rested on a rigid
+     * piece, which never felt its weight; test contact_born_exact_piece_feels_a_block_on_it). */
     for (int k = 0; k < rw->nsc; k++) {
         soft_contact *c = &rw->sc[k];
+        if (cs_soft_is_held(c->SA) && cs_soft_is_held(c->SB) &&
+            (cs_soft_exact_begin(c->SA) < 0 || cs_soft_exact_begin(c->SB) < 0))
+            return CS_ERR_NOMEM;
+    }
+    for (int k = 0; k < rw->nsc; k++) {
+        soft_contact *c = &rw->sc[k];
+        if ((c->SA->exact_open && cs_soft_exact_add(c->SA, &c->node, ONE, 1) != 0) ||
+            (c->SB->exact_open && cs_soft_exact_add(c->SB, c->bn, c->bw, 4) != 0))
+            return CS_ERR_NOMEM;
+        const bool xa = c->SA->exact_open || c->SA->exact, xb = c->SB->exact_open || c->SB->exact;
         if (!cs_soft_is_held(c->SA) || !cs_soft_is_held(c->SB))
             continue;
         const double mn[3] = {-c->n[0], -c->n[1], -c->n[2]};
-        const int xa = cs_soft_exact_begin(c->SA), xb = cs_soft_exact_begin(c->SB);
         const int ra = xa ? 0 : cs_soft_modes_begin(c->SA), rb = xb ? 0 : cs_soft_modes_begin(c->SB);
-        if (xa < 0 || xb < 0 || ra < 0 || rb < 0 ||
-            (xa && cs_soft_exact_add(c->SA, &c->node, ONE, 1) != 0) ||
-            (xb && cs_soft_exact_add(c->SB, c->bn, c->bw, 4) != 0))
+        if (ra < 0 || rb < 0)
             return CS_ERR_NOMEM;
         if (ra)
             cs_soft_modes_add(c->SA, &c->node, ONE, 1, c->n);
