@@ -1962,6 +1962,12 @@ static void add_solve_stats(cs_step_stats *st, cs_cg_result r)
 #define CS_TURN_MAX 0.5
 #define CS_TURN_MAX_DEFORM 0.1
 
+/* The factor that slows a spin of th rad a step to CS_TURN_MAX (1 within it). */
+static double turn_scale(double th)
+{
+    return th > CS_TURN_MAX ? CS_TURN_MAX / th : 1.0;
+}
+
 /* R = exp(s [ω]×): the unit quaternion of that turn through cs_quat_to_mat (as rigid.c turns
  * its bodies); the identity for s|ω| = 0. */
 static void rotation_exp(const double om[3], double s, double R[9])
@@ -2097,7 +2103,7 @@ static bool turn_centrifugal(const cs_world_t *w, cs_object *o, double sign)
     if (!(th >= 1e-9))
         return false;
     /* a spin past CS_TURN_MAX rad a step turns at that rate (free_body_rotation) */
-    const double k = th > CS_TURN_MAX ? CS_TURN_MAX / th : 1.0;
+    const double k = turn_scale(th);
     const double om[3] = {k * f.om[0], k * f.om[1], k * f.om[2]};
     const double w2 = om[0] * om[0] + om[1] * om[1] + om[2] * om[2];
     /* the torque of −m ω × (ω × r) = m (ω² r − (ω·r) ω) about c, then α = I⁻¹ τ */
@@ -2243,7 +2249,7 @@ static bool free_body_rotation(const cs_world_t *w, cs_object *o, double *x_out,
         return false;
     if (th > CS_TURN_MAX) {
         /* a spin the step cannot resolve: its rigid part slowed to CS_TURN_MAX rad a step */
-        const double k = 1 - CS_TURN_MAX / th;
+        const double k = 1 - turn_scale(th);
         for (int i = 0; i < o->n; i++) {
             const double *xi = x + 3 * (size_t)i;
             const double r[3] = {xi[0] - c[0], xi[1] - c[1], xi[2] - c[2]};
