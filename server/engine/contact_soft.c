@@ -100,7 +100,8 @@ static bool coarse_modes(cs_soft_resp *r, const cs_object *D, const double *mass
     return false;
 }
 
-/* y = A p, A = (1 + dt α) M + (dt² + dt β) K (the damping fields' terms, the pins' penalty)
+/* y = A p, A = (1 + dt α) M + (dt² + dt β) K (the damping fields' terms, the pins' penalty, the
+ * drags' springs)
  * the operator of D's next implicit step, zero at held dofs (a cs_matvec_fn; ctx is the
  * response). The damping fields' product goes to the scratch's last third (free after the
  * blocks are set up). */
@@ -123,14 +124,19 @@ static void apply_step_operator(void *ctx, const double *p, double *y)
                 v += dt * be * kd[d] + dt * al * D->fld.md[i] * p[d];
             if (D->pin[i])
                 v += dt * dt * D->penalty * p[d];
-            y[d] = D->mask[d] ? 0.0 : v;
+            y[d] = v;
         }
+    cs_object_add_spring_operator(D, dt * dt, p, y);
+    for (size_t d = 0; d < 3 * (size_t)D->n; d++)
+        if (D->mask[d])
+            y[d] = 0.0;
 }
 
 /*
  * The blocks A_ii⁻¹, the coarse modes, and u0 = v + Φ U + A_ii⁻¹ (res − A Φ U) with
  * res = M v + dt f − A v the residual of D's next step at v and U = (Φᵀ M Φ)⁻¹ Φᵀ res its
- * coarse correction (K Φ = 0 for rigid modes). Client forces and drags are not in f.
+ * coarse correction (K Φ = 0 for rigid modes). f holds the clients' inputs the step will apply
+ * (point forces, drags, pressure; a drag's spring is in A too).
  */
 static void prepare_stiff(cs_soft_resp *r, cs_object *D, double dt, double ground_mu)
 {
@@ -145,10 +151,13 @@ static void prepare_stiff(cs_soft_resp *r, cs_object *D, double dt, double groun
     if (fld) /* the damping field's blocks, in the scratch until folded in */
         cs_elastic_diag_blocks_d(D, r->scratch);
     cs_elastic_diag_blocks(D, r->ainv);
+    for (size_t i = 0; i < 9 * n; i++)
+        r->ainv[i] *= kc;
+    cs_object_add_spring_blocks(D, dt * dt, r->ainv);
     for (size_t i = 0; i < n; i++) {
         double *B = r->ainv + 9 * i;
-        for (int k = 0; k < 9; k++)
-            B[k] = kc * B[k] + (fld ? dt * be * r->scratch[9 * i + k] : 0.0);
+        for (int k = 0; k < 9 && fld; k++)
+            B[k] += dt * be * r->scratch[9 * i + k];
         for (int a = 0; a < 3; a++)
             B[4 * a] += mc * D->m[i] + (fld ? dt * al * D->fld.md[i] : 0.0) +
                         (D->pin[i] ? dt * dt * D->penalty : 0.0);
@@ -162,6 +171,7 @@ static void prepare_stiff(cs_soft_resp *r, cs_object *D, double dt, double groun
     }
     /* the residual res (into f), then the mass A gives each node */
     cs_elastic_force(D, D->x, f, NULL);
+    cs_object_add_input_forces(D, f);
     apply_step_operator(r, v, av);
     for (size_t i = 0; i < n; i++) {
         for (int a = 0; a < 3; a++) {

@@ -1201,19 +1201,14 @@ static void add_penalty_operator(const cs_object *o, double coef, const double *
                 y[3 * i + a] += coef * o->penalty * p[3 * i + a];
 }
 
-/* f = f_const + point forces + drag and curve springs + pressure at the current positions
- * (+ the penalty springs of held nodes if `penalty`). */
-static void gather_forces_ex(cs_object *o, bool penalty)
+void cs_object_add_input_forces(cs_object *o, double *f)
 {
-    memcpy(o->f, o->f_const, (size_t)o->n * 3 * sizeof(double));
-    if (penalty)
-        add_penalty_force(o, o->x, o->f);
     for (int i = 0; i < o->n_inputs; i++) {
         const cs_input *in = &o->inputs[i];
         if (in->delay > 0)
             continue;
         if (in->kind == CS_INPUT_PRESSURE) {
-            add_pressure(o, in->pressure, o->f);
+            add_pressure(o, in->pressure, f);
             continue;
         }
         const int32_t *nd = o->cm.cell_nodes + 8 * in->cell;
@@ -1229,8 +1224,18 @@ static void gather_forces_ex(cs_object *o, bool penalty)
         }
         for (int k = 0; k < 8; k++)
             for (int a = 0; a < 3; a++)
-                o->f[3 * nd[k] + a] += in->w[k] * F[a];
+                f[3 * nd[k] + a] += in->w[k] * F[a];
     }
+}
+
+/* f = f_const + point forces + drag and curve springs + pressure at the current positions
+ * (+ the penalty springs of held nodes if `penalty`). */
+static void gather_forces_ex(cs_object *o, bool penalty)
+{
+    memcpy(o->f, o->f_const, (size_t)o->n * 3 * sizeof(double));
+    if (penalty)
+        add_penalty_force(o, o->x, o->f);
+    cs_object_add_input_forces(o, o->f);
 }
 
 static void gather_forces(cs_object *o)
@@ -1253,7 +1258,7 @@ static void expire_inputs(cs_object *o)
 
 /* The drag springs (drags and curve drags not waiting for their start) of the implicit
  * operators: y += coef·Σ k w (w·p) over each spring's cube corners. */
-static void add_spring_operator(const cs_object *o, double coef, const double *p, double *y)
+void cs_object_add_spring_operator(const cs_object *o, double coef, const double *p, double *y)
 {
     if (coef == 0)
         return;
@@ -1273,7 +1278,7 @@ static void add_spring_operator(const cs_object *o, double coef, const double *p
 }
 
 /* Their diagonal, added to the preconditioner's blocks: coef·k w_k² per corner. */
-static void add_spring_blocks(cs_object *o, double coef)
+void cs_object_add_spring_blocks(const cs_object *o, double coef, double *blocks)
 {
     for (int i = 0; coef != 0 && i < o->n_inputs; i++) {
         const cs_input *in = &o->inputs[i];
@@ -1281,7 +1286,7 @@ static void add_spring_blocks(cs_object *o, double coef)
             continue;
         for (int k = 0; k < 8; k++)
             for (int a = 0; a < 3; a++)
-                o->blocks[9 * o->cm.cell_nodes[8 * in->cell + k] + 4 * a] +=
+                blocks[9 * o->cm.cell_nodes[8 * in->cell + k] + 4 * a] +=
                     coef * in->stiffness * in->w[k] * in->w[k];
     }
 }
@@ -1307,7 +1312,7 @@ static void step_operator_kp(cs_object *o, const double *p, const double *kp, do
                 y[3 * i + a] += o->cmcoef * o->fld.md[i] * p[3 * i + a];
     }
     add_penalty_operator(o, o->pcoef, p, y);
-    add_spring_operator(o, o->dcoef, p, y);
+    cs_object_add_spring_operator(o, o->dcoef, p, y);
 }
 
 /* y = mcoef·M p + kcoef·K_R p + dcoef·Σ drags k w (w·p): the implicit Euler operator. With
@@ -1322,7 +1327,7 @@ static void step_operator(void *ctx, const double *p, double *y)
         !(o->fld.has_damping && (o->cmcoef != 0 || o->ckcoef != 0))) {
         cs_fem_apply_K_mass(&o->fem, o->kcoef, o->mcoef, o->m, p, y);
         add_penalty_operator(o, o->pcoef, p, y);
-        add_spring_operator(o, o->dcoef, p, y);
+        cs_object_add_spring_operator(o, o->dcoef, p, y);
         return;
     }
     cs_elastic_apply_K(o, p, y);
@@ -1380,7 +1385,7 @@ static void build_preconditioner(cs_object *o)
             cs_invert_block(B);
     }
     if (springs) {
-        add_spring_blocks(o, o->dcoef);
+        cs_object_add_spring_blocks(o, o->dcoef, o->blocks);
 #pragma omp parallel for num_threads(cs_elastic_threads(o)) schedule(static)
         for (int i = 0; i < o->n; i++)
             cs_invert_block(o->blocks + 9 * (size_t)i);
@@ -3037,7 +3042,7 @@ static void cd_operator(void *ctx, const double *p, double *y)
             cs_elastic_apply_Md(o, p, y, o->cmcoef);
     }
     add_penalty_operator(o, o->pcoef, p, y);
-    add_spring_operator(o, o->dcoef, p, y);
+    cs_object_add_spring_operator(o, o->dcoef, p, y);
 }
 
 static void cd_preconditioner(cs_object *o)
@@ -3061,7 +3066,7 @@ static void cd_preconditioner(cs_object *o)
         for (size_t d = 0; d < 9 * (size_t)o->n; d++)
             o->blocks[d] += o->ckcoef * o->fld.tmp[d];
     }
-    add_spring_blocks(o, o->dcoef);
+    cs_object_add_spring_blocks(o, o->dcoef, o->blocks);
     cs_invert_blocks(o->blocks, o->n);
 }
 

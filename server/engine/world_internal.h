@@ -325,6 +325,13 @@ struct cs_world {
 int cs_engine_fail(char *err, size_t errlen, int code, const char *fmt, ...)
     __attribute__((format(printf, 4, 5)));
 cs_object *cs_world_find_internal(const cs_world_t *w, cs_object_id id);
+/* The clients' inputs that o's next step applies (those not waiting for their start): f +=
+ * their forces at o->x (point forces, drag and curve springs, pressure); y += coef · the drag
+ * and curve springs' stiffness times p (the implicit operators' term); blocks (9 per node)
+ * += its diagonal, coef · k w_k² per corner. */
+void cs_object_add_input_forces(cs_object *o, double *f);
+void cs_object_add_spring_operator(const cs_object *o, double coef, const double *p, double *y);
+void cs_object_add_spring_blocks(const cs_object *o, double coef, double *blocks);
 int cs_world_append_object(cs_world_t *w, cs_object *o);
 /* An implicit object's nodes on or below the ground plane that no step has constrained yet (it
  * was just added or reset): marked sticking or sliding as the next step's ground constraint
