@@ -124,8 +124,11 @@ static void apply_step_operator(void *ctx, const double *p, double *y)
                 v += dt * be * kd[d] + dt * al * D->fld.md[i] * p[d];
             if (D->pin[i])
                 v += dt * dt * D->penalty * p[d];
-            y[d] = v;
+            y[d] = D->mask[d] ? 0.0 : v;
         }
+    if (D->n_inputs == 0)
+        return;
+    /* (the springs' corners may be held: zero them again) */
     cs_object_add_spring_operator(D, dt * dt, p, y);
     for (size_t d = 0; d < 3 * (size_t)D->n; d++)
         if (D->mask[d])

@@ -12,6 +12,7 @@
 #include "contact_probe.h"
 #include "contact_soft.h"
 #include "cubesim.h"
+#include "demo_beam.h"
 #include "lattice.h"
 #include "world_internal.h"
 
@@ -1361,11 +1362,7 @@ static double held_prediction_error(int input)
     int32_t *ijk = cs_box_cells(4, 2, 2);
     cs_object_def d = cs_object_def_default();
     d.name = "beam";
-    d.material.young = 2e6;
-    d.material.density = 100;
-    d.material.damping[0] = 0.5;
-    d.material.damping[1] = 0.002;
-    d.cube_size = 0.025;
+    demo_beam_material(&d);
     d.geometry = CS_GEOMETRY_CELLS;
     d.cells_origin[2] = 0.5;
     d.cells_ijk = ijk;
