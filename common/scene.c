@@ -982,6 +982,21 @@ static int parse_constraints(sc_ctx *c, const cJSON *o, const char *path, cs_obj
 
 /* ---------------------------------------------------------------- objects */
 
+/* "strain_limit": 0 (none) or in [CS_STRAIN_LIMIT_MIN, CS_STRAIN_LIMIT_MAX]. */
+static int parse_strain_limit(sc_ctx *c, const cJSON *o, const char *path, cs_object_def *d)
+{
+    static const sc_range R = {LO_GE, 0, HI_LE, CS_STRAIN_LIMIT_MAX};
+    char p[SC_PATH];
+    if (get_number(c, o, path, "strain_limit", &d->strain_limit, R, 0))
+        return -1;
+    if (d->strain_limit != 0 && d->strain_limit < CS_STRAIN_LIMIT_MIN) {
+        join_key(p, path, "strain_limit");
+        return fail(c, p, "must be 0 (none) or in [%g, %g], got %g", CS_STRAIN_LIMIT_MIN,
+                    CS_STRAIN_LIMIT_MAX, d->strain_limit);
+    }
+    return 0;
+}
+
 static int parse_object(sc_ctx *c, const cJSON *o, int index, const char *base_dir,
                         const sc_named_material *mats, const sc_names *mat_index,
                         sc_names *obj_index, cs_object_def *d, cs_scene_object_store *st)
@@ -989,7 +1004,7 @@ static int parse_object(sc_ctx *c, const cJSON *o, int index, const char *base_d
     static const char *const keys[] = {"name",  "model", "integrator", "material", "cube_size",
                                        "fracture", "fracture_radius", "box", "mesh", "cells",
                                        "fixed", "loads", "fields", "constraints",
-                                       "penalty_stiffness", NULL};
+                                       "penalty_stiffness", "strain_limit", NULL};
     char path[SC_PATH], p[SC_PATH], b[SC_SHOW_NAME + 1];
     join_index(path, "objects", index);
     if (!cJSON_IsObject(o))
@@ -1060,6 +1075,7 @@ static int parse_object(sc_ctx *c, const cJSON *o, int index, const char *base_d
     if (get_number(c, o, path, "cube_size", &d->cube_size, POSITIVE, 0) ||
         get_bool(c, o, path, "fracture", &d->fracture) ||
         get_number(c, o, path, "fracture_radius", &d->fracture_radius, NONNEG, 0) ||
+        parse_strain_limit(c, o, path, d) ||
         parse_fixed(c, o, path, d, st) ||
         parse_loads(c, o, path, d, st) ||
         parse_fields(c, o, path, d, st) ||

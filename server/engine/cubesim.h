@@ -176,7 +176,13 @@ typedef struct cs_object_def {
     cs_constraint_mode constraints;/* default CS_CONSTRAINT_REMOVE */
     double penalty_stiffness; /* [N/m] per held node, >= 0 (PENALTY only); 0: automatic,
                                  1e4·E·h (a held node then yields |reaction|/(1e4·E·h)) */
+    double strain_limit;      /* corotational and mss: after each step no cube is stretched
+                                 past this factor of its edge, or compressed below its inverse,
+                                 along any direction, nor inverted (strain_limit.h); 0 = none
+                                 (default), else in [CS_STRAIN_LIMIT_MIN, CS_STRAIN_LIMIT_MAX] */
 } cs_object_def;
+#define CS_STRAIN_LIMIT_MIN 1.1
+#define CS_STRAIN_LIMIT_MAX 1000.0
 
 cs_object_def cs_object_def_default(void);
 

@@ -2779,6 +2779,7 @@ static cs_object *make_piece(cs_world_t *w, const cs_object *o, const int32_t *c
     p->omega2_plain = o->omega2_plain;
     p->fracture = o->fracture;
     p->fracture_radius = o->fracture_radius;
+    p->strain_limit = o->strain_limit;
     if (o->rb && !(p->rb = cs_rigid_clone(o->rb))) /* rigid: continues o's motion */
         goto fail;
     /* cube mesh */

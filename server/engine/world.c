@@ -28,6 +28,7 @@
 #include "mat3.h"
 #include "mg.h"
 #include "rigid.h"
+#include "strain_limit.h"
 #include "voxelize.h"
 #include "world_internal.h"
 
@@ -261,6 +262,8 @@ void cs_object_free_internal(cs_object *o)
     free(o->ground);
     free(o->v_wake);
     free(o->pin);
+    free(o->sl_flag);
+    free(o->sl_list);
     free(o->frozen);
     free(o->cell_active);
     free(o->cell_flip);
@@ -721,6 +724,11 @@ int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *i
         return cs_engine_fail(err, errlen, CS_ERR_INVALID,
                               "penalty_stiffness must be in [0, 1e15] N/m, got %g",
                               def->penalty_stiffness);
+    if (!(def->strain_limit == 0 || (def->strain_limit >= CS_STRAIN_LIMIT_MIN &&
+                                     def->strain_limit <= CS_STRAIN_LIMIT_MAX)))
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID,
+                              "strain_limit must be 0 (none) or in [%g, %g], got %g",
+                              CS_STRAIN_LIMIT_MIN, CS_STRAIN_LIMIT_MAX, def->strain_limit);
 
     cs_object *o = calloc(1, sizeof *o);
     if (!o)
@@ -730,6 +738,7 @@ int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *i
     o->integrator = integ;
     o->mat = def->material;
     o->fracture = def->fracture;
+    o->strain_limit = def->strain_limit;
     o->penalty = def->constraints != CS_CONSTRAINT_PENALTY ? 0.0
                  : def->penalty_stiffness > 0 ? def->penalty_stiffness
                  : 1e4 * def->material.young * def->cube_size;
@@ -2374,7 +2383,12 @@ static int end_solved_step(const cs_world_t *w, cs_object *o, cs_step_stats *st,
         }
         ke += o->m[i] * v2;
     }
-    const int moved = ground_project(w, o);
+    const int limited = isfinite(ke) && isfinite(sx) ? cs_strain_limit(o, dt) : 0;
+    if (limited < 0) {
+        memcpy(o->x, o->b, n3 * sizeof(double));
+        return CS_ERR_NOMEM;
+    }
+    const int moved = ground_project(w, o) + limited;
     if (!(isfinite(ke) && isfinite(sx)) || (moved > 0 && !state_finite(o))) {
         memcpy(o->x, o->b, n3 * sizeof(double));
         o->elastic_energy_valid = false;

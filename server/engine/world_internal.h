@@ -207,6 +207,10 @@ typedef struct cs_object {
      * each towards its rest position (pin[node] = 1, mask 0). */
     double penalty;
     uint8_t *pin;          /* per node: held by a penalty spring */
+    double strain_limit;   /* strain_limit.h; 0 = none */
+    uint8_t *sl_flag;      /* strain_limit.c scratch: per cell, 2 per cell; cells they hold */
+    int32_t *sl_list;
+    size_t sl_cap_cells;
     /* An integrator honours them through world.c: gather_forces adds k_p (X − x) at pinned
      * nodes, and an implicit operator adds pcoef·k_p on their diagonal (step_operator and
      * build_preconditioner do; central differences' cd_operator too, with 2dt²). An explicit
