@@ -186,8 +186,11 @@ static bool cell_out(const double *x, const int32_t *nd, double h, double smin, 
     for (int r = 0; r < 3; r++)
         for (int j = 0; j < 3; j++)
             F[3 * r + j] = g * a[j][r];
-    const double nb0 = sqrt(dot3(b[0], b[0])), nb1 = sqrt(dot3(b[1], b[1])),
-                 nb2 = sqrt(dot3(b[2], b[2])), nc = sqrt(dot3(c, c));
+    /* L1 norms: each bounds the Euclidean one, without a square root */
+    const double nb0 = fabs(b[0][0]) + fabs(b[0][1]) + fabs(b[0][2]),
+                 nb1 = fabs(b[1][0]) + fabs(b[1][1]) + fabs(b[1][2]),
+                 nb2 = fabs(b[2][0]) + fabs(b[2][1]) + fabs(b[2][2]),
+                 nc = fabs(c[0]) + fabs(c[1]) + fabs(c[2]);
     const double p0 = nb0 + nb2 + nc, p1 = nb1 + nb0 + nc, p2 = nb2 + nb1 + nc;
     const double eta = g * sqrt(p0 * p0 + p1 * p1 + p2 * p2);
     const double n2 = dot3(F, F) + dot3(F + 3, F + 3) + dot3(F + 6, F + 6);
