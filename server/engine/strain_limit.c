@@ -129,14 +129,22 @@ static double left_vectors(const double A[9], double v[3][3], double u[3][3], do
     return dot3(u[2], av[2]);
 }
 
-void cs_strain_singular_values(const double F[9], double s[3])
+/* F = Σ_k s_k u_k v_kᵀ: the singular values descending (s₂ with the sign of det F) and the
+ * proper orthonormal u_k, v_k, from the eigenvectors of FᵀF (left_vectors). */
+static void svd3(const double F[9], double s[3], double u[3][3], double v[3][3])
 {
-    double C[9], l[3], v[3][3], u[3][3];
+    double C[9], l[3];
     for (int i = 0; i < 3; i++)
         for (int j = 0; j < 3; j++)
             C[3 * i + j] = F[i] * F[j] + F[3 + i] * F[3 + j] + F[6 + i] * F[6 + j];
     sym_eigen3(C, l, v);
     s[2] = left_vectors(F, v, u, s);
+}
+
+void cs_strain_singular_values(const double F[9], double s[3])
+{
+    double u[3][3], v[3][3];
+    svd3(F, s, u, v);
 }
 
 /* Whether some singular value of E lies outside [smin, smax] (a negative one does). */
@@ -229,15 +237,11 @@ static void project_cell(cs_object *o, int c, double smin, double smax, double d
     double a[3][3], b[3][3], cc[3];
     cell_modes(o->x, nd, a, b, cc);
     /* the centre's stretch, clamped, in the material frame: S = Σ_k s_k v_k v_kᵀ */
-    double F[9], C[9], l[3], v[3][3], u[3][3], s[3];
+    double F[9], v[3][3], u[3][3], s[3];
     for (int r = 0; r < 3; r++)
         for (int j = 0; j < 3; j++)
             F[3 * r + j] = (2 / h) * a[j][r];
-    for (int i = 0; i < 3; i++)
-        for (int j = 0; j < 3; j++)
-            C[3 * i + j] = F[i] * F[j] + F[3 + i] * F[3 + j] + F[6 + i] * F[6 + j];
-    sym_eigen3(C, l, v);
-    s[2] = left_vectors(F, v, u, s);
+    svd3(F, s, u, v);
     for (int k = 0; k < 3; k++)
         s[k] = fmin(fmax(s[k], smin), smax);
     double S[9];
@@ -275,12 +279,8 @@ static void project_cell(cs_object *o, int c, double smin, double smax, double d
                 A[3 * r + q] += w[k] * (o->x[3 * i + r] - xw[r]) * (P[k][q] - pw[q]);
     }
     /* R = polar(A) = Σ u_k v_kᵀ, proper */
-    for (int i = 0; i < 3; i++)
-        for (int j = 0; j < 3; j++)
-            C[3 * i + j] = A[i] * A[j] + A[3 + i] * A[3 + j] + A[6 + i] * A[6 + j];
-    sym_eigen3(C, l, v);
-    double sa[2];
-    left_vectors(A, v, u, sa);
+    double sa[3];
+    svd3(A, sa, u, v);
     double R[9];
     for (int i = 0; i < 3; i++)
         for (int j = 0; j < 3; j++)
