@@ -376,6 +376,78 @@ static void dot2(cs_cg_work *w, const double *r, const double *z, const double *
     *rzo = b;
 }
 
+/* Block [lo, hi) of the warm start's sums: out[a nv + c] = Σ_i D_a[i] Q_c[i] and
+ * out[nv nv + a] = Σ_i D_a[i] r[i], each summed in i order from 0. */
+static void gram_block_any(const double *const *D, const double *const *Q, const double *r,
+                           int nv, int lo, int hi, double *out)
+{
+    double acc[(CS_CG_DIRS + 1) * (CS_CG_DIRS + 2)] = {0};
+    for (int i = lo; i < hi; i++)
+        for (int a = 0; a < nv; a++) {
+            const double da = D[a][i];
+            acc[nv * nv + a] += da * r[i];
+            for (int c = 0; c < nv; c++)
+                acc[a * nv + c] += da * Q[c][i];
+        }
+    memcpy(out, acc, (size_t)(nv * (nv + 1)) * sizeof(double));
+}
+
+/* The same for the usual count, the guess and four directions (nv = 5), its 30 sums held in
+ * vectors across the sums (row a: Q_0..Q_3 in one 4-double vector, Q_4 and r in a 2-double
+ * one): per i, each row adds D_a[i] times (Q_0[i], .., Q_4[i], r[i]). Each sum gets the same
+ * terms in the same order as gram_block_any's (a product, then an addition: no contraction in
+ * ISO C), so the same bits; GCC vectorized the scalar loop across i instead, with in-order
+ * reductions by shuffles that cost twice as much. */
+#if CS_CG_DIRS == 4
+typedef double gv4 __attribute__((vector_size(32)));
+typedef double gv2 __attribute__((vector_size(16)));
+__attribute__((target_clones("arch=x86-64-v3", "default"))) static void
+gram_block(const double *const *D, const double *const *Q, const double *r, int lo, int hi,
+           double *out)
+{
+    const double *restrict d0 = D[0], *restrict d1 = D[1], *restrict d2 = D[2],
+                           *restrict d3 = D[3], *restrict d4 = D[4];
+    const double *restrict q0 = Q[0], *restrict q1 = Q[1], *restrict q2 = Q[2],
+                           *restrict q3 = Q[3], *restrict q4 = Q[4];
+    gv4 A0 = {0}, A1 = {0}, A2 = {0}, A3 = {0}, A4 = {0};
+    gv2 B0 = {0}, B1 = {0}, B2 = {0}, B3 = {0}, B4 = {0};
+    for (int i = lo; i < hi; i++) {
+        const gv4 qa = {q0[i], q1[i], q2[i], q3[i]};
+        const gv2 qb = {q4[i], r[i]};
+        A0 += d0[i] * qa;
+        B0 += d0[i] * qb;
+        A1 += d1[i] * qa;
+        B1 += d1[i] * qb;
+        A2 += d2[i] * qa;
+        B2 += d2[i] * qb;
+        A3 += d3[i] * qa;
+        B3 += d3[i] * qb;
+        A4 += d4[i] * qa;
+        B4 += d4[i] * qb;
+    }
+    const gv4 A[5] = {A0, A1, A2, A3, A4};
+    const gv2 B[5] = {B0, B1, B2, B3, B4};
+    for (int a = 0; a < 5; a++) {
+        for (int c = 0; c < 4; c++)
+            out[5 * a + c] = A[a][c];
+        out[5 * a + 4] = B[a][0];
+        out[25 + a] = B[a][1];
+    }
+}
+#endif
+
+void cs_cg_gram_block(const double *const *D, const double *const *Q, const double *r, int nv,
+                      int lo, int hi, double *out)
+{
+#if CS_CG_DIRS == 4
+    if (nv == 5) {
+        gram_block(D, Q, r, lo, hi, out);
+        return;
+    }
+#endif
+    gram_block_any(D, Q, r, nv, lo, hi, out);
+}
+
 /*
  * The warm start's Galerkin step: x += D α with D the nd directions of the last steps
  * (cs_cg_guess; masked here), preceded by x0 when given (the guess itself, 0 at the held
@@ -412,19 +484,12 @@ static double warm_subspace(cs_cg_work *w, cs_matvec_fn A, void *ctx, const uint
         Q[nv++] = w->adirs[k];
     }
     const int ne = nv * (nv + 1);
-    /* G = Dᵀ Q (nv × nv) and g = Dᵀ r, one pass */
+    /* G = Dᵀ Q (nv × nv) and g = Dᵀ r, one pass (the usual nv = 5 by gram_block: the same
+     * sums in the same order) */
 #pragma omp parallel for num_threads(threads) schedule(static) if (nb > 1)
     for (int k = 0; k < nb; k++) {
         const int lo = k * CS_DOT_BLOCK, hi = lo + CS_DOT_BLOCK < n ? lo + CS_DOT_BLOCK : n;
-        double acc[(CS_CG_DIRS + 1) * (CS_CG_DIRS + 2)] = {0};
-        for (int i = lo; i < hi; i++)
-            for (int a = 0; a < nv; a++) {
-                const double da = D[a][i];
-                acc[nv * nv + a] += da * r[i];
-                for (int c = 0; c < nv; c++)
-                    acc[a * nv + c] += da * Q[c][i];
-            }
-        memcpy(w->gpartial + (size_t)k * ne, acc, (size_t)ne * sizeof(double));
+        cs_cg_gram_block(D, Q, r, nv, lo, hi, w->gpartial + (size_t)k * ne);
     }
     double G[(CS_CG_DIRS + 1) * (CS_CG_DIRS + 2)] = {0};
     double L[(CS_CG_DIRS + 1) * (CS_CG_DIRS + 1)] = {0};

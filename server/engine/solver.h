@@ -88,6 +88,11 @@ void cs_cg_forget(cs_cg_work *w);
  * the changes it holds): for a state that was transformed between steps by the same linear
  * map (a free body's turn, world.c), so that the next guess's changes are the solves' own. */
 void cs_cg_map_history(cs_cg_work *w, void (*map)(void *ctx, double *u), void *ctx);
+/* The warm start's sums over dofs [lo, hi) (one of its fixed blocks) for nv ≤ CS_CG_DIRS + 1
+ * directions D and products Q: out[a·nv + c] = Σ_i D_a[i] Q_c[i], out[nv·nv + a] = Σ_i D_a[i]
+ * r[i], each summed in i order from 0 (nv = 5 by vectors across the sums, the same bits). */
+void cs_cg_gram_block(const double *const *D, const double *const *Q, const double *r, int nv,
+                      int lo, int hi, double *out);
 
 /* Invert each 3×3 block in place (9 per node); a singular block becomes its diagonal inverse. */
 void cs_invert_blocks(double *blocks, int n_nodes);
