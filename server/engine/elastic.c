@@ -11,6 +11,7 @@
 #include <string.h>
 
 #include "localframe.h"
+#include "mat3.h"
 #include "rigid.h"
 
 int cs_elastic_init(cs_object *o, int threads)
@@ -268,21 +269,8 @@ static double sym_max_eigen(const double *K)
         for (int p = 0; p < 24; p++)
             for (int q = p + 1; q < 24; q++) {
                 const double apq = A[24 * p + q];
-                if (fabs(apq) < 1e-300)
-                    continue;
-                const double theta = (A[24 * q + q] - A[24 * p + p]) / (2 * apq);
-                const double t = (theta >= 0 ? 1.0 : -1.0) / (fabs(theta) + sqrt(theta * theta + 1));
-                const double c = 1 / sqrt(t * t + 1), s = t * c;
-                for (int k = 0; k < 24; k++) {
-                    const double akp = A[24 * k + p], akq = A[24 * k + q];
-                    A[24 * k + p] = c * akp - s * akq;
-                    A[24 * k + q] = s * akp + c * akq;
-                }
-                for (int k = 0; k < 24; k++) {
-                    const double apk = A[24 * p + k], aqk = A[24 * q + k];
-                    A[24 * p + k] = c * apk - s * aqk;
-                    A[24 * q + k] = s * apk + c * aqk;
-                }
+                if (!(fabs(apq) < 1e-300))
+                    cs_jacobi_rotate(A, NULL, 24, p, q, apq);
             }
     }
     double mx = 0;

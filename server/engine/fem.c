@@ -74,15 +74,7 @@ void cs_cube_stiffness_gauss(double young, double poisson, double h, int g, doub
 void cs_quat_to_mat(const double q[4], double R[9])
 {
     const double w = q[0], x = q[1], y = q[2], z = q[3];
-    R[0] = 1 - 2 * (y * y + z * z);
-    R[1] = 2 * (x * y - w * z);
-    R[2] = 2 * (x * z + w * y);
-    R[3] = 2 * (x * y + w * z);
-    R[4] = 1 - 2 * (x * x + z * z);
-    R[5] = 2 * (y * z - w * x);
-    R[6] = 2 * (x * z - w * y);
-    R[7] = 2 * (y * z + w * x);
-    R[8] = 1 - 2 * (x * x + y * y);
+    CS_QUAT_TO_MAT(w, x, y, z, R);
 }
 
 /* ------------------------------------------------------------------ rotation extraction
@@ -134,15 +126,7 @@ static inline bool rany(rm m)
 static inline __attribute__((always_inline)) void rot_quat_mat(const rv q[4], rv R[9])
 {
     const rv w = q[0], x = q[1], y = q[2], z = q[3];
-    R[0] = 1 - 2 * (y * y + z * z);
-    R[1] = 2 * (x * y - w * z);
-    R[2] = 2 * (x * z + w * y);
-    R[3] = 2 * (x * y + w * z);
-    R[4] = 1 - 2 * (x * x + z * z);
-    R[5] = 2 * (y * z - w * x);
-    R[6] = 2 * (x * z - w * y);
-    R[7] = 2 * (y * z + w * x);
-    R[8] = 1 - 2 * (x * x + y * y);
+    CS_QUAT_TO_MAT(w, x, y, z, R);
 }
 
 /*
@@ -569,15 +553,7 @@ modal_avx512_body(mlanes *restrict b, int rot, double rest, int energy, const in
                     qy = _mm256_loadu_pd(Qp + 8), qz = _mm256_loadu_pd(Qp + 12);
             TRANSPOSE4(qw, qx, qy, qz);
             const vd4 w = (vd4)qw, x1 = (vd4)qx, y1 = (vd4)qy, z1 = (vd4)qz;
-            R[0] = 1 - 2 * (y1 * y1 + z1 * z1);
-            R[1] = 2 * (x1 * y1 - w * z1);
-            R[2] = 2 * (x1 * z1 + w * y1);
-            R[3] = 2 * (x1 * y1 + w * z1);
-            R[4] = 1 - 2 * (x1 * x1 + z1 * z1);
-            R[5] = 2 * (y1 * z1 - w * x1);
-            R[6] = 2 * (x1 * z1 - w * y1);
-            R[7] = 2 * (y1 * z1 + w * x1);
-            R[8] = 1 - 2 * (x1 * x1 + y1 * y1);
+            CS_QUAT_TO_MAT(w, x1, y1, z1, R);
         } else if (rot && plain) {
             /* 4 cells' 9 entries: entries 0–3 and 4–7 by two 4 × 4 transposes */
             const double *Rp = b->R + 9 * h;

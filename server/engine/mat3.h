@@ -62,4 +62,47 @@ static inline double cs_mat3_sym_max_eigen(const double s[9])
     return m + 2.0 * p * cos(acos(r) / 3.0);
 }
 
+/* R(q) for a unit quaternion q = (w, x, y, z), row-major, for any arithmetic type (double,
+ * or a vector of them: one lane per quaternion). The one spelling of the map that
+ * cs_quat_to_mat, the rotation extraction's lanes, the double product's kernel and the
+ * V-cycle's float element pass all use, so they agree in every bit their types allow. */
+#define CS_QUAT_TO_MAT(w, x, y, z, R)                                                          \
+    do {                                                                                       \
+        (R)[0] = 1 - 2 * ((y) * (y) + (z) * (z));                                              \
+        (R)[1] = 2 * ((x) * (y) - (w) * (z));                                                  \
+        (R)[2] = 2 * ((x) * (z) + (w) * (y));                                                  \
+        (R)[3] = 2 * ((x) * (y) + (w) * (z));                                                  \
+        (R)[4] = 1 - 2 * ((x) * (x) + (z) * (z));                                              \
+        (R)[5] = 2 * ((y) * (z) - (w) * (x));                                                  \
+        (R)[6] = 2 * ((x) * (z) - (w) * (y));                                                  \
+        (R)[7] = 2 * ((y) * (z) + (w) * (x));                                                  \
+        (R)[8] = 1 - 2 * ((x) * (x) + (y) * (y));                                              \
+    } while (0)
+
+/* One cyclic Jacobi rotation of the symmetric n×n row-major a (and of the eigenvector
+ * columns v, if not NULL) that zeroes a[p][q], given apq = a[p][q] ≠ 0: a ← Jᵀ a J, v ← v J.
+ * What the engine's Jacobi eigensolvers (strain_limit.c's 3×3, elastic.c's 24×24 stability
+ * bound) do per pair. */
+static inline void cs_jacobi_rotate(double *a, double *v, int n, int p, int q, double apq)
+{
+    const double th = (a[n * q + q] - a[n * p + p]) / (2 * apq);
+    const double t = (th >= 0 ? 1.0 : -1.0) / (fabs(th) + sqrt(th * th + 1));
+    const double c = 1 / sqrt(t * t + 1), s = t * c;
+    for (int k = 0; k < n; k++) { /* a J */
+        const double akp = a[n * k + p], akq = a[n * k + q];
+        a[n * k + p] = c * akp - s * akq;
+        a[n * k + q] = s * akp + c * akq;
+    }
+    for (int k = 0; k < n; k++) { /* Jᵀ (a J) */
+        const double apk = a[n * p + k], aqk = a[n * q + k];
+        a[n * p + k] = c * apk - s * aqk;
+        a[n * q + k] = s * apk + c * aqk;
+    }
+    for (int k = 0; v && k < n; k++) {
+        const double vkp = v[n * k + p], vkq = v[n * k + q];
+        v[n * k + p] = c * vkp - s * vkq;
+        v[n * k + q] = s * vkp + c * vkq;
+    }
+}
+
 #endif

@@ -1078,21 +1078,13 @@ static inline __attribute__((always_inline)) void half_rest(const mg_level *l, i
     vf R[9], y[24], L, M;
     const size_t o = (size_t)b * MG_LANES + VF_LANES * h;
     if (l->bQ_ok) {
-        /* R(q), as fem.c's rot_quat_mat, in float */
+        /* R(q) (mat3.h), in float */
         vf q[4];
         for (int j = 0; j < 4; j++)
             memcpy(&q[j], l->bQ + 4 * MG_LANES * (size_t)b + MG_LANES * j + VF_LANES * h,
                    sizeof(vf));
         const vf w = q[0], qx = q[1], qy = q[2], qz = q[3];
-        R[0] = 1 - 2 * (qy * qy + qz * qz);
-        R[1] = 2 * (qx * qy - w * qz);
-        R[2] = 2 * (qx * qz + w * qy);
-        R[3] = 2 * (qx * qy + w * qz);
-        R[4] = 1 - 2 * (qx * qx + qz * qz);
-        R[5] = 2 * (qy * qz - w * qx);
-        R[6] = 2 * (qx * qz - w * qy);
-        R[7] = 2 * (qy * qz + w * qx);
-        R[8] = 1 - 2 * (qx * qx + qy * qy);
+        CS_QUAT_TO_MAT(w, qx, qy, qz, R);
     } else {
         for (int j = 0; j < 9; j++)
             memcpy(&R[j], l->bR + 9 * MG_LANES * (size_t)b + MG_LANES * j + VF_LANES * h,

@@ -18,6 +18,7 @@
 #include <string.h>
 
 #include "elastic.h"
+#include "mat3.h"
 
 #define HELD_WEIGHT 1000.0 /* a held corner's weight in the fit, against its mass */
 #define SLACK 1e-9         /* relative: a cell just projected onto a bound is in bounds */
@@ -49,26 +50,8 @@ static void sym_eigen3(const double a_in[9], double l[3], double v[3][3])
         for (int p = 0; p < 2; p++)
             for (int q = p + 1; q < 3; q++) {
                 const double apq = a[3 * p + q];
-                if (apq == 0)
-                    continue;
-                const double th = (a[3 * q + q] - a[3 * p + p]) / (2 * apq);
-                const double t = (th >= 0 ? 1.0 : -1.0) / (fabs(th) + sqrt(th * th + 1));
-                const double c = 1 / sqrt(t * t + 1), s = t * c;
-                for (int k = 0; k < 3; k++) { /* a J */
-                    const double akp = a[3 * k + p], akq = a[3 * k + q];
-                    a[3 * k + p] = c * akp - s * akq;
-                    a[3 * k + q] = s * akp + c * akq;
-                }
-                for (int k = 0; k < 3; k++) { /* Jᵀ (a J) */
-                    const double apk = a[3 * p + k], aqk = a[3 * q + k];
-                    a[3 * p + k] = c * apk - s * aqk;
-                    a[3 * q + k] = s * apk + c * aqk;
-                }
-                for (int k = 0; k < 3; k++) {
-                    const double vkp = V[3 * k + p], vkq = V[3 * k + q];
-                    V[3 * k + p] = c * vkp - s * vkq;
-                    V[3 * k + q] = s * vkp + c * vkq;
-                }
+                if (apq != 0)
+                    cs_jacobi_rotate(a, V, 3, p, q, apq);
             }
     }
     int o[3] = {0, 1, 2};

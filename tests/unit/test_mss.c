@@ -19,6 +19,7 @@
 #include "scene.h"
 #include "world_internal.h"
 #include "lattice.h"
+#include "mat3.h"
 
 #ifndef CS_SOURCE_DIR
 #define CS_SOURCE_DIR "."
@@ -165,21 +166,8 @@ static void eigenvalues24(const double *K, double w[24])
         for (int p = 0; p < 24; p++)
             for (int q = p + 1; q < 24; q++) {
                 const double apq = 0.5 * (A[24 * p + q] + A[24 * q + p]);
-                if (fabs(apq) < 1e-300)
-                    continue;
-                const double th = (A[24 * q + q] - A[24 * p + p]) / (2 * apq);
-                const double t = (th >= 0 ? 1.0 : -1.0) / (fabs(th) + sqrt(th * th + 1));
-                const double c = 1 / sqrt(t * t + 1), s = t * c;
-                for (int k = 0; k < 24; k++) {
-                    const double akp = A[24 * k + p], akq = A[24 * k + q];
-                    A[24 * k + p] = c * akp - s * akq;
-                    A[24 * k + q] = s * akp + c * akq;
-                }
-                for (int k = 0; k < 24; k++) {
-                    const double apk = A[24 * p + k], aqk = A[24 * q + k];
-                    A[24 * p + k] = c * apk - s * aqk;
-                    A[24 * q + k] = s * apk + c * aqk;
-                }
+                if (!(fabs(apq) < 1e-300))
+                    cs_jacobi_rotate(A, NULL, 24, p, q, apq);
             }
     for (int i = 0; i < 24; i++)
         w[i] = A[25 * i];
