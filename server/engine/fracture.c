@@ -3151,7 +3151,7 @@ static int ensure_positive_volume(cs_world_t *w, cs_object *o, bool record)
     }
     free(v);
     free(t);
-    cs_surface_skin(&ns, &o->cm, o->x);
+    cs_surface_skin(&ns, &o->cm, o->x, 1);
     uint8_t *kind = malloc((size_t)(nt ? nt : 1));
     int32_t *vrem = malloc((size_t)(o->surf.n_vertices + 1) * sizeof *vrem);
     int32_t *trem = malloc((size_t)(o->surf.n_triangles + 1) * sizeof *trem);

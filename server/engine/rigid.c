@@ -354,7 +354,7 @@ static void place_nodes(cs_object *o)
             o->v[3 * (size_t)i + a] = rb->v[a] + wr[a];
         }
     }
-    cs_surface_skin(&o->surf, &o->cm, o->x);
+    cs_surface_skin(&o->surf, &o->cm, o->x, 1);
     o->elastic_energy_valid = false;
 }
 
@@ -1979,7 +1979,7 @@ static void cell_contacts_done(cs_rigid_world *rw)
             D->sleeping = false;
             D->contact_pushed = true;
             if (D != last)
-                cs_surface_skin(&D->surf, &D->cm, D->x);
+                cs_surface_skin(&D->surf, &D->cm, D->x, 1);
             last = D;
         }
     }

@@ -283,9 +283,11 @@ static inline void skin_one(const cs_cubemesh *cm, const double *node_pos, int32
     out[2] = z;
 }
 
-void cs_surface_skin(cs_surface *s, const cs_cubemesh *cm, const double *node_pos)
+void cs_surface_skin(cs_surface *s, const cs_cubemesh *cm, const double *node_pos, int threads)
 {
     const int nv = s->n_vertices;
+    /* (below a few thousand vertices a second thread costs more than it takes) */
+#pragma omp parallel for num_threads(threads > 1 ? threads : 1) schedule(static) if (nv >= 4096)
     for (int i = 0; i < nv; i++)
         skin_one(cm, node_pos, s->vert_cell[i], s->vert_uvw + 3 * (size_t)i,
                  s->rest + 3 * (size_t)i, s->pos + 3 * (size_t)i);

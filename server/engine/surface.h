@@ -52,8 +52,9 @@ int cs_surface_build_cell_lists(cs_surface *s, const cs_cubemesh *cm, double tol
 int cs_surface_extend_cell_lists(cs_surface *s, const cs_cubemesh *cm, double tol, int first);
 
 /* Recompute s->pos from node positions (3 per node) by trilinear interpolation, or by the
- * tricubic B-spline map in cells that have one (cm->spline_nodes, localframe objects). */
-void cs_surface_skin(cs_surface *s, const cs_cubemesh *cm, const double *node_pos);
+ * tricubic B-spline map in cells that have one (cm->spline_nodes, localframe objects), on up
+ * to `threads` threads (each vertex on its own: the same bits on any count). */
+void cs_surface_skin(cs_surface *s, const cs_cubemesh *cm, const double *node_pos, int threads);
 /* The position cs_surface_skin gives a vertex at rest point `rest` with local coordinates
  * `uvw` in `cell` (bit for bit the same arithmetic): for vertices made between skins (fracture). */
 void cs_surface_skin_point(const cs_cubemesh *cm, const double *node_pos, int32_t cell,

@@ -820,7 +820,7 @@ int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *i
     rc = cs_object_check_stability(o, w->def.dt, "", err, errlen);
     if (rc)
         goto fail;
-    cs_surface_skin(&o->surf, &o->cm, o->x);
+    cs_surface_skin(&o->surf, &o->cm, o->x, 1);
     if (o->model == CS_MODEL_RIGID) {
         if (cs_rigid_init(o) != 0) {
             rc = cs_engine_fail(err, errlen, CS_ERR_NOMEM, "out of memory");
@@ -1815,6 +1815,7 @@ static int ground_project(const cs_world_t *w, cs_object *o)
         return 0;
     const double g = w->def.ground_height;
     int moved = 0;
+#pragma omp parallel for num_threads(cs_elastic_threads(o)) schedule(static) reduction(+ : moved)
     for (int i = 0; i < o->n; i++) {
         double *x = o->x + 3 * i, *v = o->v + 3 * i;
         if (x[2] >= g || o->mask[3 * i + 2])
@@ -1826,6 +1827,21 @@ static int ground_project(const cs_world_t *w, cs_object *o)
         moved++;
     }
     return moved;
+}
+
+/* Whether node i, free of the ground, ends the step below the plane (by more than eps); *z:
+ * its height at the step's start. (A node released on the plane last step is free, may
+ * return.) */
+static inline bool ground_arriving(const cs_world_t *w, const cs_object *o, int i, bool trap,
+                                   double eps, double *z)
+{
+    const size_t d = 3 * (size_t)i + 2;
+    if (o->smask[d] || o->contact[i] != CS_GROUND_FREE)
+        return false;
+    const double dt = w->def.dt;
+    *z = o->x[d];
+    const double z1 = trap ? *z + 0.5 * dt * (o->v[d] + o->v1[d]) : *z + dt * o->v1[d];
+    return z1 < w->def.ground_height - eps;
 }
 
 /*
@@ -1847,55 +1863,72 @@ static int ground_arrivals(const cs_world_t *w, cs_object *o, bool trap)
      * height in a step has every node's free flight end below the plane, and holding them
      * all there flattened it (a 2 mm steel block dropped 1 mm took 1e3 J); with the lowest
      * held the solve stops the others, and those still arriving are held in the next round.
-     * (The second pass runs only when the first found one.) */
+     * (The second pass runs only when the first found one.) The lowest is a minimum, the
+     * same on any thread count. */
+    const int nt = cs_elastic_threads(o);
     double zlow = INFINITY;
-    int count = 0;
-    for (int pass = 0; pass < 2 && (pass == 0 || zlow < INFINITY); pass++)
-        for (int i = 0; i < o->n; i++) {
-            const size_t d = 3 * (size_t)i + 2;
-            if (o->smask[d] || o->contact[i] != CS_GROUND_FREE)
-                continue;
-            const double z = o->x[d];
-            const double z1 = trap ? z + 0.5 * dt * (o->v[d] + o->v1[d]) : z + dt * o->v1[d];
-            if (!(z1 < g - eps))
-                continue; /* (a node released on the plane last step is free, may return) */
-            if (pass == 0) {
-                zlow = fmin(zlow, z);
-                continue;
-            }
-            if (!(z < zlow + 0.5 * o->cm.h))
-                continue;
-            o->smask[d] = 1;
-            o->v1[d] = (g - z) / dt;
-            o->contact[i] = CS_GROUND_SLIDE;
-            o->ground[3 * (size_t)i] = o->ground[3 * (size_t)i + 1] = o->ground[d] = 0;
-            count++;
+    int found = 0;
+#pragma omp parallel for num_threads(nt) schedule(static) reduction(min : zlow) reduction(+ : found)
+    for (int i = 0; i < o->n; i++) {
+        double z;
+        if (ground_arriving(w, o, i, trap, eps, &z)) {
+            zlow = z < zlow ? z : zlow;
+            found++;
         }
+    }
+    if (found == 0)
+        return 0;
+    const double zcut = zlow + 0.5 * o->cm.h;
+    int count = 0;
+#pragma omp parallel for num_threads(nt) schedule(static) reduction(+ : count)
+    for (int i = 0; i < o->n; i++) {
+        double z;
+        if (!ground_arriving(w, o, i, trap, eps, &z) || !(z < zcut))
+            continue;
+        const size_t d = 3 * (size_t)i + 2;
+        o->smask[d] = 1;
+        o->v1[d] = (g - z) / dt;
+        o->contact[i] = CS_GROUND_SLIDE;
+        o->ground[3 * (size_t)i] = o->ground[3 * (size_t)i + 1] = o->ground[d] = 0;
+        count++;
+    }
     return count;
 }
 
-static bool all_finite(const double *a, size_t n)
+/* The O(n) passes of a step around its solves (the checks, the ground's, the positions' and
+ * the skin) on the object's threads (cs_elastic_threads: 1 below CS_FEM_PARALLEL_CELLS).
+ * Each node's values are computed on their own, so the same bits on any thread count; the
+ * reductions are a count, a minimum, a maximum or an or. */
+static bool all_finite(const double *a, size_t n, int threads)
 {
+    int bad = 0;
+#pragma omp parallel for num_threads(threads) schedule(static) reduction(| : bad)
     for (size_t i = 0; i < n; i++)
-        if (!isfinite(a[i]))
-            return false;
-    return true;
+        bad |= !isfinite(a[i]);
+    return !bad;
 }
 
-/* Positions and velocities finite, and the kinetic energy too: a finite speed above
+/* Node i's position and velocity finite, and its kinetic energy too: a finite speed above
  * 1e154 m/s squares to infinity (7e155 N on a 2-cube block, its ground contacts held inside
- * the step: no NaN, but no energy, momentum or next step either). */
+ * the step: no NaN, but no energy, momentum or next step either). A NaN or infinite velocity
+ * makes m v² so (masses are positive), a NaN or infinite position the sum of its coordinates
+ * (as does a sum past 1e308: absurd anyway). Until session 40 the sums ran over the whole
+ * object; node by node the test needs no order of summation, so it runs on any thread count
+ * with the same answer (it differs only where a sum of finite terms passed 1e308). */
+static inline bool node_finite(const cs_object *o, int i)
+{
+    const double *v = o->v + 3 * (size_t)i, *x = o->x + 3 * (size_t)i;
+    return isfinite(o->m[i] * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2])) &&
+           isfinite(x[0] + x[1] + x[2]);
+}
+
 static bool state_finite(const cs_object *o)
 {
-    /* one pass: a NaN or infinite velocity makes m v² so (masses are positive), a NaN or
-     * infinite position the sum of the positions (as does a sum past 1e308: absurd anyway) */
-    double ke = 0, sx = 0;
-    for (int i = 0; i < o->n; i++) {
-        const double *v = o->v + 3 * (size_t)i, *x = o->x + 3 * (size_t)i;
-        ke += o->m[i] * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
-        sx += x[0] + x[1] + x[2];
-    }
-    return isfinite(ke) && isfinite(sx);
+    int bad = 0;
+#pragma omp parallel for num_threads(cs_elastic_threads(o)) schedule(static) reduction(| : bad)
+    for (int i = 0; i < o->n; i++)
+        bad |= !node_finite(o, i);
+    return !bad;
 }
 
 /* The implicit Euler operator (M + dt C + dt² K [+ dt² springs]) with Rayleigh damping
@@ -1927,6 +1960,7 @@ static double finish_step(const cs_world_t *w, cs_object *o)
 {
     const size_t n3 = (size_t)o->n * 3;
     double vmax2 = 0;
+#pragma omp parallel for num_threads(cs_elastic_threads(o)) schedule(static) reduction(max : vmax2)
     for (size_t d = 0; d < n3; d += 3) {
         double s = o->v[d] * o->v[d] + o->v[d + 1] * o->v[d + 1] + o->v[d + 2] * o->v[d + 2];
         if (s > vmax2)
@@ -1934,7 +1968,7 @@ static double finish_step(const cs_world_t *w, cs_object *o)
     }
     expire_inputs(o);
     const double t0 = now_ms();
-    cs_surface_skin(&o->surf, &o->cm, o->x);
+    cs_surface_skin(&o->surf, &o->cm, o->x, cs_elastic_threads(o));
     const double ms = now_ms() - t0;
     if (w->def.sleep_steps > 0 && o->n_inputs == 0 && sqrt(vmax2) < w->def.sleep_speed) {
         if (++o->still_steps >= w->def.sleep_steps) {
@@ -2367,29 +2401,27 @@ static int end_solved_step(const cs_world_t *w, cs_object *o, cs_step_stats *st,
 {
     const size_t n3 = (size_t)o->n * 3;
     const double dt = w->def.dt;
-    /* one pass: the old positions kept, the new state written and checked (state_finite's
-     * sums); the ground's projection may change it again, and then it is checked again */
-    double ke = 0, sx = 0;
+    /* one pass: the old positions kept, the new state written and checked (node_finite); the
+     * ground's projection may change it again, and then it is checked again */
+    int bad = 0;
+#pragma omp parallel for num_threads(cs_elastic_threads(o)) schedule(static) reduction(| : bad)
     for (int i = 0; i < o->n; i++) {
-        double v2 = 0;
         for (int a = 0; a < 3; a++) {
             const size_t d = 3 * (size_t)i + a;
             const double v1 = o->v1[d];
             o->b[d] = o->x[d];
             o->x[d] = x_end ? x_end[d] : o->x[d] + dt * v1;
             o->v[d] = v1;
-            sx += o->x[d];
-            v2 += v1 * v1;
         }
-        ke += o->m[i] * v2;
+        bad |= !node_finite(o, i);
     }
-    const int limited = isfinite(ke) && isfinite(sx) ? cs_strain_limit(o, dt) : 0;
+    const int limited = !bad ? cs_strain_limit(o, dt) : 0;
     if (limited < 0) {
         memcpy(o->x, o->b, n3 * sizeof(double));
         return CS_ERR_NOMEM;
     }
     const int moved = ground_project(w, o) + limited;
-    if (!(isfinite(ke) && isfinite(sx)) || (moved > 0 && !state_finite(o))) {
+    if (bad || (moved > 0 && !state_finite(o))) {
         memcpy(o->x, o->b, n3 * sizeof(double));
         o->elastic_energy_valid = false;
         return CS_ERR_DIVERGED;
@@ -2842,6 +2874,7 @@ static int step_implicit(cs_world_t *w, cs_object *o, cs_step_stats *st, bool tr
      * held dofs 0, ground contacts their lift (constrain_ground). */
     o->cg.threads = cs_elastic_threads(o); /* cs_cg_guess's and cs_cg_record's passes */
     cs_cg_guess(&o->cg, o->v, o->v1);
+#pragma omp parallel for num_threads(cs_elastic_threads(o)) schedule(static)
     for (size_t d = 0; d < n3; d++)
         if (o->mask[d])
             o->v1[d] = 0.0;
@@ -2892,7 +2925,7 @@ static int step_implicit(cs_world_t *w, cs_object *o, cs_step_stats *st, bool tr
         } else if (use_mg && round == 0) {
             o->lag.fresh_it = rr.iterations;
         }
-        if (lagged && (!rr.converged || !all_finite(o->v1, n3))) {
+        if (lagged && (!rr.converged || !all_finite(o->v1, n3, cs_elastic_threads(o)))) {
             /* The lagged hierarchy did not get there: build a fresh one and go on from where
              * the solve stopped (from v at the free dofs if it blew up; the held ones keep
              * their values, which CG does not change), with the same stopping reference. */
@@ -2902,7 +2935,7 @@ static int step_implicit(cs_world_t *w, cs_object *o, cs_step_stats *st, bool tr
                 o->cg.stop = CS_CG_STOP_GIVEN;
                 o->cg.stop_ref = rr.ref;
             }
-            if (!all_finite(o->v1, n3))
+            if (!all_finite(o->v1, n3, cs_elastic_threads(o)))
                 for (size_t d = 0; d < n3; d++)
                     if (!o->smask[d])
                         o->v1[d] = o->v[d];
@@ -2923,7 +2956,7 @@ static int step_implicit(cs_world_t *w, cs_object *o, cs_step_stats *st, bool tr
         t4 = now_ms();
         /* A right-hand side whose norm overflows stops CG before its first iteration with the
          * guess and "converged" (inf <= inf): relres is then NaN, and the step diverged. */
-        if (!all_finite(o->v1, n3) || !isfinite(rr.relres)) {
+        if (!all_finite(o->v1, n3, cs_elastic_threads(o)) || !isfinite(rr.relres)) {
             o->fem.cell_active = NULL;
             o->cg.stop = CS_CG_STOP_RHS;
             o->cg.stop_cap = 0;
@@ -3149,7 +3182,8 @@ static int step_central_difference(cs_world_t *w, cs_object *o, cs_step_stats *s
         r.iterations += rr.iterations;
         r.relres = rr.relres;
         r.converged = rr.converged;
-        if (!all_finite(o->v1, n3) || !isfinite(rr.relres)) /* see step_implicit */
+        /* see step_implicit */
+        if (!all_finite(o->v1, n3, cs_elastic_threads(o)) || !isfinite(rr.relres))
             return CS_ERR_DIVERGED;
         if (ground_reactions(w, o, contacts, cd_operator, 2.0 * dt,
                              round < CS_GROUND_RESOLVES) == 0)
@@ -3551,7 +3585,7 @@ static cs_cg_result static_solve(cs_world_t *w, cs_object *o, cs_matvec_fn A, do
     const bool use_mg = setup_multigrid(w, o, A, o->mask);
     cs_cg_result r = solve(w, o, use_mg, A, o->mask, res, dx, ctol, max_it);
     st->cg_iterations += r.iterations;
-    if (!r.converged && !use_mg && all_finite(dx, 3 * (size_t)o->n) &&
+    if (!r.converged && !use_mg && all_finite(dx, 3 * (size_t)o->n, cs_elastic_threads(o)) &&
         setup_multigrid_ex(w, o, A, o->mask, true)) {
         const int done = r.iterations;
         r = solve(w, o, true, A, o->mask, res, dx, ctol, max_it);
@@ -3593,7 +3627,7 @@ static int solve_static_object(cs_world_t *w, cs_object *o, cs_step_stats *st)
     shift_frame(o, c, 1.0, rest_save);
     free(rest_save);
     cs_elastic_update(o, o->x);
-    cs_surface_skin(&o->surf, &o->cm, o->x);
+    cs_surface_skin(&o->surf, &o->cm, o->x, cs_elastic_threads(o));
     return rc;
 }
 
@@ -3646,7 +3680,7 @@ static int solve_static_in_frame(cs_world_t *w, cs_object *o, cs_step_stats *st,
                 r = static_solve(w, o, step_operator, res, dx, ctol, st);
             }
             solved = r.converged;
-            if (!all_finite(dx, (size_t)n3))
+            if (!all_finite(dx, (size_t)n3, cs_elastic_threads(o)))
                 break;
             /* Backtracking (Armijo) on the total potential energy, the natural merit function
              * of this conservative problem: the residual norm alone rejects good steps, as
@@ -3761,7 +3795,7 @@ void cs_world_reset(cs_world_t *w)
         o->contact_seen = false;
         cs_cg_forget(&o->cg);
         cs_elastic_reset(o);
-        cs_surface_skin(&o->surf, &o->cm, o->x);
+        cs_surface_skin(&o->surf, &o->cm, o->x, 1);
         if (o->rb)
             cs_rigid_reset(o);
     }

@@ -140,7 +140,7 @@ TEST(fracture_open_crack_copies_start_on_their_side)
             x[2] = 2 * H + sphi * rx + cphi * rz;
         }
     free(moved);
-    cs_surface_skin(&o->surf, &o->cm, o->x);
+    cs_surface_skin(&o->surf, &o->cm, o->x, 1);
     for (int c = 0; c < 8; c++)
         ENSURE_NEAR(cell_det(o, c), H * H * H, 1e-15);
     int rim = 0; /* surface vertices at the rim (2h, y, h), bound to the flap */

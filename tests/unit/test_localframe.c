@@ -802,7 +802,7 @@ TEST(lf_skin_tricubic_exact_at_rest_and_affine)
     const int n = cm.n_nodes;
     double *x = malloc(sizeof(double) * 3 * n);
     memcpy(x, cm.node_rest, sizeof(double) * 3 * n);
-    cs_surface_skin(&s, &cm, x);
+    cs_surface_skin(&s, &cm, x, 1);
     for (int i = 0; i < 3 * 4; i++) /* the tetrahedron, in a B-spline cell: bit-exact */
         ENSURE(s.pos[i] == s.rest[i]);
     for (int i = 3 * 4; i < 3 * 7; i++) /* the trilinear cell: up to rounding */
@@ -814,7 +814,7 @@ TEST(lf_skin_tricubic_exact_at_rest_and_affine)
         for (int r = 0; r < 3; r++)
             x[3 * i + r] = A[3 * r] * X[0] + A[3 * r + 1] * X[1] + A[3 * r + 2] * X[2] + bb[r];
     }
-    cs_surface_skin(&s, &cm, x);
+    cs_surface_skin(&s, &cm, x, 1);
     for (int i = 0; i < 7; i++)
         for (int r = 0; r < 3; r++)
             ENSURE_NEAR(s.pos[3 * i + r],
@@ -827,7 +827,7 @@ TEST(lf_skin_tricubic_exact_at_rest_and_affine)
         x[3 * i + 1] = X[1] + 0.2 * X[0] * X[0];
         x[3 * i + 2] = X[2] + 0.1 * cos(5 * X[0] + 3 * X[1]);
     }
-    cs_surface_skin(&s, &cm, x);
+    cs_surface_skin(&s, &cm, x, 1);
     const int32_t cell = s.vert_cell[0];
     ENSURE(cm.spline_nodes[64 * cell] >= 0);
     double bx[4], by[4], bz[4], p[3] = {0, 0, 0}, ptri[3] = {0, 0, 0};

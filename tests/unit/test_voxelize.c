@@ -581,7 +581,7 @@ TEST(surface_bind_and_skin)
             bad += s.cell_tri_list[q] <= s.cell_tri_list[q - 1];
     /* at rest: skinning gives back the rest positions */
     memset(s.pos, 0, (size_t)s.n_vertices * 3 * sizeof *s.pos);
-    cs_surface_skin(&s, &cm, cm.node_rest);
+    cs_surface_skin(&s, &cm, cm.node_rest, 1);
     double err_rest = 0;
     for (int i = 0; i < 3 * s.n_vertices; i++)
         err_rest = fmax(err_rest, fabs(s.pos[i] - m.v[i]));
@@ -593,7 +593,7 @@ TEST(surface_bind_and_skin)
         for (int r = 0; r < 3; r++)
             np[3 * i + r] = A[r][0] * cm.node_rest[3 * i] + A[r][1] * cm.node_rest[3 * i + 1] +
                             A[r][2] * cm.node_rest[3 * i + 2] + b[r];
-    cs_surface_skin(&s, &cm, np);
+    cs_surface_skin(&s, &cm, np, 1);
     double err_aff = 0;
     for (int i = 0; i < s.n_vertices; i++)
         for (int r = 0; r < 3; r++) {
@@ -638,7 +638,7 @@ TEST(surface_bind_on_cell_boundaries)
     cs_surface s;
     rc = cs_surface_bind(&s, &cm, m.v, m.nv, m.t, m.nt, err, sizeof err);
     if (rc == 0) {
-        cs_surface_skin(&s, &cm, cm.node_rest);
+        cs_surface_skin(&s, &cm, cm.node_rest, 1);
         double e = 0;
         for (int i = 0; i < 3 * m.nv; i++)
             e = fmax(e, fabs(s.pos[i] - m.v[i]));

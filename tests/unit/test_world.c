@@ -318,6 +318,48 @@ TEST(world_results_independent_of_thread_count)
     ENSURE(hashes[0] == hashes[1]);
 }
 
+/* Session 40: the passes around a step's solve (the finiteness checks, the ground's arrivals
+ * and projection, the new positions, the fastest node, the skin) run on the object's threads.
+ * A free 48×48×4 plate (9216 cells, over 4096 surface vertices: the skin's threshold) dropped
+ * 1 cm onto the ground and pushed sideways ends with the same surface, bit for bit, on one
+ * and two threads; and it did land (its lowest vertex on the plane). */
+TEST(world_landing_and_skin_independent_of_thread_count)
+{
+    double *pos[2] = {NULL, NULL};
+    int nv[2] = {0, 0};
+    double zmin = INFINITY;
+    for (int t = 0; t < 2; t++) {
+        cs_world_def wd = cs_world_def_default();
+        wd.threads = t + 1;
+        wd.has_ground = true;
+        wd.ground_height = -0.01;
+        beam b;
+        ENSURE(make_beam(&b, wd, CS_MODEL_COROTATIONAL, cs_material_default(), 48, 48, 4, 0.02,
+                         false, NULL) == 0);
+        char err[256];
+        ENSURE(cs_world_apply_force(b.w, b.id, (double[3]){0.9, 0.5, 0.08},
+                                    (double[3]){40, 10, -20}, 0.2, err, sizeof err) == CS_OK);
+        for (int s = 0; s < 20; s++)
+            ENSURE(cs_world_step(b.w) == CS_OK);
+        const double *v;
+        const int32_t *tri;
+        int nt;
+        ENSURE(cs_object_surface(b.w, b.id, &v, &nv[t], &tri, &nt) == CS_OK);
+        pos[t] = malloc(3 * (size_t)nv[t] * sizeof(double));
+        ENSURE(pos[t]);
+        memcpy(pos[t], v, 3 * (size_t)nv[t] * sizeof(double));
+        for (int i = 0; t == 0 && i < nv[t]; i++)
+            zmin = fmin(zmin, v[3 * i + 2]);
+        free_beam(&b);
+    }
+    printf("    %d surface vertices, lowest z %.6f m (ground -0.01 m)\n", nv[0], zmin);
+    ENSURE(nv[0] >= 4096 && nv[0] == nv[1]);
+    ENSURE(fabs(zmin + 0.01) < 1e-6);
+    ENSURE(memcmp(pos[0], pos[1], 3 * (size_t)nv[0] * sizeof(double)) == 0);
+    free(pos[0]);
+    free(pos[1]);
+}
+
 TEST(world_reset_restores_rest_state)
 {
     cs_material mat = cs_material_default();
