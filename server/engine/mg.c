@@ -1026,14 +1026,16 @@ double cs_mg_rotation_drift(const cs_mg *mg, const double *R)
 
 bool cs_mg_held_matches(const cs_mg *mg, const uint8_t *mask)
 {
+    /* every step of a lagged hierarchy: on the level's threads (the answer an or) */
     const mg_level *l = &mg->lv[0];
+    int differ = 0;
+#pragma omp parallel for num_threads(l->threads) schedule(static) reduction(| : differ)
     for (int n = 0; n < l->n_nodes; n++) {
         const uint8_t h = (uint8_t)((mask[3 * n] ? 1 : 0) | (mask[3 * n + 1] ? 2 : 0) |
                                     (mask[3 * n + 2] ? 4 : 0));
-        if (h != l->held[n])
-            return false;
+        differ |= h != l->held[n];
     }
-    return true;
+    return !differ;
 }
 
 int cs_mg_levels(const cs_mg *mg)

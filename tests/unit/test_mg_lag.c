@@ -26,13 +26,13 @@ typedef struct scene {
 
 /* An nx×ny×nz corotational box of cubes of edge h (fixed at x = 0 if fix), multigrid
  * preconditioner, one thread, tolerance 1e-6 of ‖b‖. */
-static int make(scene *s, int nx, int ny, int nz, double h, double young, bool fix,
-                cs_integrator integ, bool gravity)
+static int make_threads(scene *s, int nx, int ny, int nz, double h, double young, bool fix,
+                        cs_integrator integ, bool gravity, int threads)
 {
     char err[256];
     memset(s, 0, sizeof *s);
     cs_world_def wd = cs_world_def_default();
-    wd.threads = 1;
+    wd.threads = threads;
     wd.preconditioner = CS_PRECOND_MULTIGRID;
     wd.sleep_steps = 0;
     wd.cg_tolerance = 1e-6;
@@ -64,6 +64,12 @@ static int make(scene *s, int nx, int ny, int nz, double h, double young, bool f
     }
     s->o = cs_world_find_internal(s->w, s->id);
     return 0;
+}
+
+static int make(scene *s, int nx, int ny, int nz, double h, double young, bool fix,
+                cs_integrator integ, bool gravity)
+{
+    return make_threads(s, nx, ny, nz, h, young, fix, integ, gravity, 1);
 }
 
 /* Every node moving as a rigid rotation at omega (rad/s) about the centroid. */
@@ -182,6 +188,31 @@ TEST(mg_lag_rebuilt_on_each_trigger)
     ENSURE_MSG(step_builds(&s, &rc) == 1, "rotation");
     ENSURE(step_builds(&s, &rc) == 0);
     ENSURE(s.o->lag.retries == 0);
+    cs_world_destroy(s.w);
+}
+
+/* The held dofs' check runs on the object's threads (session 40): on a 2048-cell box on two
+ * threads a newly held dof in either thread's half of the nodes is seen, and the hierarchy
+ * rebuilt before the solve (a check that missed it would leave the lagged V-cycle moving the
+ * held dof; its solve then fails and is retried with a fresh build: lag.retries). */
+TEST(mg_lag_held_dofs_checked_on_two_threads)
+{
+    scene s;
+    ENSURE(make_threads(&s, 32, 8, 8, 0.05, 1e8, true, CS_INTEGRATOR_IMPLICIT_EULER, true, 2) ==
+           0);
+    ENSURE(s.o->fem.threads == 2);
+    int rc;
+    ENSURE(step_builds(&s, &rc) == 1);
+    ENSURE(step_builds(&s, &rc) == 0);
+    const int nodes[2] = {s.o->n / 4, s.o->n - 1};
+    for (int k = 0; k < 2; k++) {
+        ENSURE(!s.o->mask[3 * nodes[k] + 2]);
+        s.o->mask[3 * nodes[k] + 2] = 1;
+        ENSURE_MSG(step_builds(&s, &rc) == 1 && rc == CS_OK, "node %d held", nodes[k]);
+        /* built before the solve, not after a lagged solve that failed */
+        ENSURE(s.o->lag.retries == 0);
+        ENSURE(step_builds(&s, &rc) == 0);
+    }
     cs_world_destroy(s.w);
 }
 
