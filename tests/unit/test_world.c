@@ -322,8 +322,9 @@ TEST(world_results_independent_of_thread_count)
  * and projection, the new positions, the fastest node, the skin) run on the object's threads.
  * A free 48×48×4 plate (9216 cells, over 4096 surface vertices: the skin's threshold) dropped
  * 1 cm onto the ground and pushed sideways ends with the same surface, bit for bit, on one
- * and two threads; and it did land (its lowest vertex on the plane). */
-TEST(world_landing_and_skin_independent_of_thread_count)
+ * and two threads; and it did land (its lowest vertex on the plane). (Slow: 6 minutes under
+ * valgrind, so `make valgrind`'s --quick leaves it out; it was run there once, clean.) */
+SLOW_TEST(world_landing_and_skin_independent_of_thread_count)
 {
     double *pos[2] = {NULL, NULL};
     int nv[2] = {0, 0};
@@ -339,7 +340,7 @@ TEST(world_landing_and_skin_independent_of_thread_count)
         char err[256];
         ENSURE(cs_world_apply_force(b.w, b.id, (double[3]){0.9, 0.5, 0.08},
                                     (double[3]){40, 10, -20}, 0.2, err, sizeof err) == CS_OK);
-        for (int s = 0; s < 20; s++)
+        for (int s = 0; s < 8; s++) /* it lands in the third */
             ENSURE(cs_world_step(b.w) == CS_OK);
         const double *v;
         const int32_t *tri;
