@@ -2925,7 +2925,10 @@ static int step_implicit(cs_world_t *w, cs_object *o, cs_step_stats *st, bool tr
         } else if (use_mg && round == 0) {
             o->lag.fresh_it = rr.iterations;
         }
-        if (lagged && (!rr.converged || !all_finite(o->v1, n3, cs_elastic_threads(o)))) {
+        /* whether v1 is finite, tested once per solve: a lagged solve's test (which decides
+         * the retry) serves the check after it unless the retry solves again */
+        bool tested = lagged, finite = !lagged || all_finite(o->v1, n3, cs_elastic_threads(o));
+        if (lagged && (!rr.converged || !finite)) {
             /* The lagged hierarchy did not get there: build a fresh one and go on from where
              * the solve stopped (from v at the free dofs if it blew up; the held ones keep
              * their values, which CG does not change), with the same stopping reference. */
@@ -2935,7 +2938,7 @@ static int step_implicit(cs_world_t *w, cs_object *o, cs_step_stats *st, bool tr
                 o->cg.stop = CS_CG_STOP_GIVEN;
                 o->cg.stop_ref = rr.ref;
             }
-            if (!all_finite(o->v1, n3, cs_elastic_threads(o)))
+            if (!finite)
                 for (size_t d = 0; d < n3; d++)
                     if (!o->smask[d])
                         o->v1[d] = o->v[d];
@@ -2945,7 +2948,10 @@ static int step_implicit(cs_world_t *w, cs_object *o, cs_step_stats *st, bool tr
                 pc_lag_record(w, o);
             rr = solve(w, o, use_mg, step_operator, o->smask, o->b, o->v1, w->def.cg_tolerance,
                        w->def.cg_max_iterations);
+            tested = false;
         }
+        if (!tested)
+            finite = all_finite(o->v1, n3, cs_elastic_threads(o));
         r.iterations += rr.iterations;
         r.relres = rr.relres;
         r.converged = rr.converged;
@@ -2956,7 +2962,7 @@ static int step_implicit(cs_world_t *w, cs_object *o, cs_step_stats *st, bool tr
         t4 = now_ms();
         /* A right-hand side whose norm overflows stops CG before its first iteration with the
          * guess and "converged" (inf <= inf): relres is then NaN, and the step diverged. */
-        if (!all_finite(o->v1, n3, cs_elastic_threads(o)) || !isfinite(rr.relres)) {
+        if (!finite || !isfinite(rr.relres)) {
             o->fem.cell_active = NULL;
             o->cg.stop = CS_CG_STOP_RHS;
             o->cg.stop_cap = 0;
