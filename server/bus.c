@@ -167,8 +167,8 @@ static void validate_force(cs_bus_t *b, cs_input *x)
         if (!finite3(x->force)) {
             refuse(b, x, "force: force vector is not finite%s", "");
         } else {
-            double m = sqrt(x->force[0] * x->force[0] + x->force[1] * x->force[1] +
-                            x->force[2] * x->force[2]);
+            /* hypot: the squares of a finite 1e300 N force overflow (the refusal quoted inf) */
+            double m = hypot(hypot(x->force[0], x->force[1]), x->force[2]);
             if (m > b->max_force) {
                 snprintf(num, sizeof num, "%g N exceeds max_force %g N", m, b->max_force);
                 refuse(b, x, "force: |force| = %s", num);

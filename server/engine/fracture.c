@@ -3824,6 +3824,27 @@ int cs_fracture_after_step(cs_world_t *w, cs_object *o)
     return rc;
 }
 
+/* The cell whose centre is nearest p, or -1. Past about 1.3e154 m the squared distances
+ * overflow for every cell (a client's fracture at x = 1e200 left none and crashed the daemon),
+ * and then the distances themselves are compared; -1 only where even those overflow. */
+static int nearest_cell(const cs_object *o, const double p[3])
+{
+    int best = -1;
+    double bd = INFINITY;
+    for (int pass = 0; pass < 2 && best < 0; pass++)
+        for (int c = 0; c < o->cm.n_cells; c++) {
+            double q[3];
+            cell_centre(o, c, q);
+            const double dx = q[0] - p[0], dy = q[1] - p[1], dz = q[2] - p[2];
+            const double d = pass == 0 ? dx * dx + dy * dy + dz * dz : hypot(hypot(dx, dy), dz);
+            if (d < bd) {
+                bd = d;
+                best = c;
+            }
+        }
+    return best;
+}
+
 int cs_world_fracture(cs_world_t *w, cs_object_id id, const double point[3],
                       const double normal[3], double radius, char *err, size_t errlen)
 {
@@ -3832,32 +3853,29 @@ int cs_world_fracture(cs_world_t *w, cs_object_id id, const double point[3],
     cs_object *o = cs_world_find_internal(w, id);
     if (!o)
         return cs_engine_fail(err, errlen, CS_ERR_UNKNOWN_OBJECT, "no object with id %u", (unsigned)id);
-    double nn = 0;
+    double m = 0;
     for (int a = 0; a < 3; a++) {
         if (!isfinite(point[a]) || !isfinite(normal[a]))
             return cs_engine_fail(err, errlen, CS_ERR_INVALID, "fracture point and normal must be finite");
-        nn += normal[a] * normal[a];
+        m = fmax(m, fabs(normal[a]));
     }
-    if (!(nn > 1e-24))
+    if (!(m > 0))
         return cs_engine_fail(err, errlen, CS_ERR_INVALID, "fracture normal must not be zero");
     if (!(radius >= 0 && isfinite(radius)))
         return cs_engine_fail(err, errlen, CS_ERR_INVALID, "fracture radius must be >= 0 m, got %g",
                     radius);
+    /* The normal scaled by its largest component first: the squares of (1e300, 0, 0) overflow
+     * and of (1e-200, 0, 0) underflow, and either left a zero or NaN normal. */
+    const double u[3] = {normal[0] / m, normal[1] / m, normal[2] / m};
+    const double un = sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]);
+    const double n[3] = {u[0] / un, u[1] / un, u[2] / un};
+    const int best = nearest_cell(o, point);
+    if (best < 0)
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID,
+                              "fracture point (%g, %g, %g) is too far from '%s' to find its "
+                              "nearest cube", point[0], point[1], point[2], o->name);
     cs_fracture_clear_step(w);
     cs_rigid_drop_pending(w);
-    const double n[3] = {normal[0] / sqrt(nn), normal[1] / sqrt(nn), normal[2] / sqrt(nn)};
-    int best = -1;
-    double bd = INFINITY;
-    for (int c = 0; c < o->cm.n_cells; c++) {
-        double p[3];
-        cell_centre(o, c, p);
-        double d = (p[0] - point[0]) * (p[0] - point[0]) + (p[1] - point[1]) * (p[1] - point[1]) +
-                   (p[2] - point[2]) * (p[2] - point[2]);
-        if (d < bd) {
-            bd = d;
-            best = c;
-        }
-    }
     int8_t *label = plane_labels(o, best, n, effective_radius(o, radius), false);
     if (!label)
         return cs_engine_fail(err, errlen, CS_ERR_NOMEM, "out of memory");

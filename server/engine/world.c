@@ -68,6 +68,13 @@ static double norm3(const double v[3])
     return sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
 }
 
+/* |v| without overflow for any finite v (norm3's squares overflow past 1.3e154): what the
+ * refusals of inputs check and quote, so that a 1e300 N force reads "1e+300 N", not "inf N". */
+static double length3(const double v[3])
+{
+    return hypot(hypot(v[0], v[1]), v[2]);
+}
+
 const char *cs_status_str(int status)
 {
     switch (status) {
@@ -893,17 +900,21 @@ cs_object_id cs_world_find_object(const cs_world_t *w, const char *name)
 static void nearest_material_point(const cs_object *o, const double p[3], int32_t *cell,
                                    double wts[8])
 {
-    int best = 0;
+    /* squared distances; past about 1.3e154 m they overflow for every vertex, and then the
+     * distances themselves are compared (a point that far off still finds its nearest) */
+    int best = -1;
     double bd = INFINITY;
-    for (int i = 0; i < o->surf.n_vertices; i++) {
-        const double *q = o->surf.pos + 3 * i;
-        double d = (q[0] - p[0]) * (q[0] - p[0]) + (q[1] - p[1]) * (q[1] - p[1]) +
-                   (q[2] - p[2]) * (q[2] - p[2]);
-        if (d < bd) {
-            bd = d;
-            best = i;
+    for (int pass = 0; pass < 2 && best < 0; pass++)
+        for (int i = 0; i < o->surf.n_vertices; i++) {
+            const double *q = o->surf.pos + 3 * i;
+            const double dx = q[0] - p[0], dy = q[1] - p[1], dz = q[2] - p[2];
+            const double d = pass == 0 ? dx * dx + dy * dy + dz * dz : hypot(hypot(dx, dy), dz);
+            if (d < bd) {
+                bd = d;
+                best = i;
+            }
         }
-    }
+    best = best < 0 ? 0 : best;
     *cell = o->surf.vert_cell[best];
     const double *u = o->surf.vert_uvw + 3 * best;
     for (int k = 0; k < 8; k++)
@@ -985,9 +996,9 @@ int cs_world_apply_force(cs_world_t *w, cs_object_id id, const double point[3],
         return cs_engine_fail(err, errlen, CS_ERR_INVALID, "NULL argument");
     if (!finite3(force))
         return cs_engine_fail(err, errlen, CS_ERR_INVALID, "force is not finite");
-    if (norm3(force) > w->def.max_force)
+    if (length3(force) > w->def.max_force)
         return cs_engine_fail(err, errlen, CS_ERR_INVALID, "force of %g N exceeds max_force %g N",
-                    norm3(force), w->def.max_force);
+                    length3(force), w->def.max_force);
     cs_input in = {.kind = CS_INPUT_FORCE, .force = {force[0], force[1], force[2]}};
     return add_input(w, id, &in, point, seconds, err, errlen);
 }
@@ -1005,8 +1016,8 @@ int cs_world_drag(cs_world_t *w, cs_object_id id, const double grab[3], const do
     /* The largest force the spring could exert over the object's extent must stay sane. */
     cs_object *o = cs_world_find_internal(w, id);
     if (o) {
-        double d = norm3((double[3]){target[0] - grab[0], target[1] - grab[1],
-                                     target[2] - grab[2]});
+        double d = length3((double[3]){target[0] - grab[0], target[1] - grab[1],
+                                       target[2] - grab[2]});
         if (stiffness * d > w->def.max_force)
             return cs_engine_fail(err, errlen, CS_ERR_INVALID,
                         "drag force of %g N (stiffness x distance) exceeds max_force %g N",
@@ -1042,7 +1053,7 @@ int cs_world_drag_curve(cs_world_t *w, cs_object_id id, const double *points, in
     len[0] = 0;
     for (int i = 1; i < n; i++) {
         const double *a = points + 3 * (i - 1), *b = points + 3 * i;
-        total += norm3((double[3]){b[0] - a[0], b[1] - a[1], b[2] - a[2]});
+        total += length3((double[3]){b[0] - a[0], b[1] - a[1], b[2] - a[2]});
         len[i] = total;
     }
     if (!(total > 0))
@@ -1059,7 +1070,7 @@ int cs_world_drag_curve(cs_world_t *w, cs_object_id id, const double *points, in
             grab[a] += in.w[k] * o->x[3 * nd[k] + a];
     for (int i = 0; i < n; i++) {
         const double *q = points + 3 * i;
-        dmax = fmax(dmax, norm3((double[3]){q[0] - grab[0], q[1] - grab[1], q[2] - grab[2]}));
+        dmax = fmax(dmax, length3((double[3]){q[0] - grab[0], q[1] - grab[1], q[2] - grab[2]}));
     }
     if (stiffness * dmax > w->def.max_force)
         return cs_engine_fail(err, errlen, CS_ERR_INVALID,

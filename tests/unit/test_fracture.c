@@ -620,6 +620,71 @@ TEST(fracture_refuses_bad_arguments)
 }
 
 
+/* Points and normals far outside double's squares (an outside client's `fracture beam --at
+ * 1e200 0 0.5` crashed the daemon: every squared distance overflowed, no cell was nearest, and
+ * cell -1 was read; a normal (1e300, 0, 0) squared to inf and was accepted as zero, cutting
+ * nothing). A huge or tiny normal now acts as its direction; a point that far off is accepted
+ * (at 1e200 m every cube is equally near in double: the first is taken, as ties always were),
+ * and so is a force there; a 1e300 N force is refused quoting 1e+300, not inf. */
+static int pieces_after(const double p[3], const double n[3])
+{
+    cs_object_id id;
+    cs_world_t *w = box_world(4, 1, 1, 0.1, &id, NULL);
+    if (!w)
+        return -1;
+    char err[256];
+    int r = cs_world_fracture(w, id, p, n, 0, err, sizeof err);
+    cs_object_id ids[8];
+    r = r == CS_OK ? cs_world_object_ids(w, ids, 8) : -1 - r;
+    cs_world_destroy(w);
+    return r;
+}
+
+TEST(fracture_far_point_and_extreme_normals_act_as_ordinary_ones)
+{
+    const double near_hi[3] = {0.35, 0.05, 0.05}, near_lo[3] = {0.05, 0.05, 0.05};
+    const double far_hi[3] = {1e200, 0.05, 0.05}, far_lo[3] = {-1e300, 0.05, 0.05};
+    const double x[3] = {1, 0, 0}, mx[3] = {-1, 0, 0}, big[3] = {1e300, 0, 0};
+    const double tiny[3] = {1e-200, 0, 0};
+    const int ref_hi = pieces_after(near_hi, x), ref_lo = pieces_after(near_lo, mx);
+    ENSURE_MSG(ref_hi == 2 && ref_lo == 2, "%d, %d pieces", ref_hi, ref_lo);
+    const struct {
+        const double *p, *n;
+        int want;
+    } cases[] = {{near_hi, big, 2}, {near_hi, tiny, 2}, {near_lo, big, 1}};
+    for (size_t k = 0; k < sizeof cases / sizeof cases[0]; k++) {
+        const int got = pieces_after(cases[k].p, cases[k].n);
+        ENSURE_MSG(got == cases[k].want, "case %zu: %d pieces, want %d", k, got, cases[k].want);
+    }
+    const double *far[] = {far_hi, far_lo};
+    for (int k = 0; k < 2; k++) {
+        const int got = pieces_after(far[k], big);
+        ENSURE_MSG(got == 1 || got == 2, "far point %d: %d", k, got);
+    }
+    cs_object_id id;
+    cs_world_t *w = box_world(4, 1, 1, 0.1, &id, NULL);
+    ENSURE(w);
+    char err[256];
+    ENSURE(cs_world_apply_force(w, id, far_hi, x, 0.1, err, sizeof err) == CS_OK);
+    const double f[3] = {1e300, 0, 0};
+    ENSURE(cs_world_apply_force(w, id, near_hi, f, 0.1, err, sizeof err) == CS_ERR_INVALID);
+    ENSURE_MSG(strstr(err, "1e+300 N") && !strstr(err, "inf"), "%s", err);
+    ENSURE(cs_world_fracture(w, id, near_hi, big, 0, err, sizeof err) == CS_OK);
+    cs_object_id ids[8];
+    const int n = cs_world_object_ids(w, ids, 8);
+    ENSURE_MSG(n == 2, "%d objects", n);
+    int cells[2];
+    for (int i = 0; i < 2; i++) {
+        cs_object_info info;
+        ENSURE(cs_object_get_info(w, ids[i], &info) == CS_OK);
+        cells[i] = info.n_cells;
+    }
+    ENSURE_MSG((cells[0] == 3 && cells[1] == 1) || (cells[0] == 1 && cells[1] == 3),
+               "pieces of %d and %d cubes", cells[0], cells[1]);
+    ENSURE(cs_world_step(w) == CS_OK);
+    cs_world_destroy(w);
+}
+
 /* A cantilever under gravity is most stressed in its root layer, whose cubes have no joined
  * neighbour on the fixed side: the plane through such a cube's centre, with the cube on its +
  * side, separates nothing. With max_fractures 1 that empty event used up the budget, the same
