@@ -3648,6 +3648,27 @@ static int solve_static_object(cs_world_t *w, cs_object *o, cs_step_stats *st)
     return rc;
 }
 
+/*
+ * The round-off floor of static_residual at the current positions: x is stored to half an
+ * ulp(|x|), and the internal forces computed from it carry the stiffness (and the supports'
+ * springs) times that error, which for a stiff object under a light load lies above the loads'
+ * 1e-8 (an outside check: a 10 cm steel bar under gravity stalls at 1.4e-6 of its loads, a
+ * 1 m bar of 1 GPa under 1e-3 g at about 1e-4), whatever the displacements' own accuracy.
+ * Estimated as ‖(K + P) δ‖ over the free dofs with δ = ±ulp(x)/2, signs from a hash of the
+ * dof (deterministic); delta and out are scratch vectors of 3n. The operator's coefficients
+ * must be statics' (kcoef 1, pcoef 1, no mass, no drags).
+ */
+static double static_floor(cs_object *o, double *delta, double *out)
+{
+    for (int d = 0; d < 3 * o->n; d++) {
+        const double a = fabs(o->x[d]), ulp = nextafter(a, INFINITY) - a;
+        const uint32_t hsh = (uint32_t)d * 2654435761u;
+        delta[d] = (hsh >> 31) ? 0.5 * ulp : -0.5 * ulp;
+    }
+    step_operator(o, delta, out);
+    return masked_norm(o, out);
+}
+
 static int solve_static_in_frame(cs_world_t *w, cs_object *o, cs_step_stats *st, double fnorm)
 {
     const int n3 = 3 * o->n;
@@ -3671,10 +3692,14 @@ static int solve_static_in_frame(cs_world_t *w, cs_object *o, cs_step_stats *st,
         double target = load + dl > 1 ? 1 : load + dl;
         memcpy(x_save, o->x, (size_t)n3 * sizeof(double));
         double pot, rn = static_residual(o, target, res, &pot), rn_prev = INFINITY;
+        /* no tighter than the residual's round-off floor (static_floor, 4× for its spread):
+         * below it Newton only stirs the last bits and then stalls, and the load search that
+         * followed gave back a smaller load's state, or the rest state (exit 1) */
+        const double floor4 = 4.0 * static_floor(o, dx, o->cg.q);
         bool ok = false, solved = true;
         for (int it = 0; it < 60 && isfinite(rn); it++) {
-            double ltol = (target < 1 ? 1e3 : 1.0) * tol;
-            if (rn <= ltol) {
+            const double ltol = (target < 1 ? 1e3 : 1.0) * tol;
+            if (rn <= fmax(ltol, floor4)) {
                 ok = true;
                 break;
             }
@@ -3682,7 +3707,9 @@ static int solve_static_in_frame(cs_world_t *w, cs_object *o, cs_step_stats *st,
             memset(dx, 0, (size_t)n3 * sizeof(double));
             /* Inexact Newton: the tangent itself is approximate (its geometric part is
              * symmetrized), so solving it beyond 1e-3 is wasted; near the target a looser
-             * solve suffices. A linear object's tangent is exact: one solve to the target. */
+             * solve suffices. A linear object's tangent is exact: one solve to the target
+             * (the tolerance asked for, even below the floor: the displacements the solve
+             * adds are exact to its tolerance where the residual of their sum cannot show it). */
             double ctol = linear ? fmin(0.1, 0.5 * ltol / rn)
                                  : fmin(0.1, fmax(1e-3, 0.5 * ltol / rn));
             /* Newton with the geometric stiffness where it is positive definite; where CG
