@@ -54,7 +54,9 @@
 #define CS_BUS_BURST (128.0 * 1024.0)  /* bytes the outbox may send back to back */
 #define CS_BUS_OUTBOX_MAX (64 << 20)   /* beyond this the outbox is dropped, a snapshot queued */
 #define CS_BUS_INPUT_MAX 4096          /* queued inputs; more are refused with an error ack */
-#define CS_BUS_QUEUE_CAPACITY 1000     /* LCM subscription queue (LCM's default is 30) */
+#define CS_BUS_QUEUE_CAPACITY 8192     /* LCM subscription queue: twice CS_BUS_INPUT_MAX, so a burst
+                                        * the input queue refuses still gets its acks (LCM drops
+                                        * silently past it; LCM default 30) */
 
 typedef enum cs_input_kind {
     CS_INPUT_FORCE = 0,

@@ -7,6 +7,8 @@
  *             [--force x,y,z] [--target x,y,z] [--stiffness K] [--duration S] [--cid N]
  *   cs_it_bus ... command NAME [--count N] [--arg S] [--cid N]
  *       publish, wait for the matching ack, print "ack ok=0|1 request=R message=M"
+ *       (force --burst N: publish N forces back to back, command ids cid .. cid+N-1, wait for
+ *       their acks, print "burst sent=N acked=A ok=K": every one must get its ack)
  *   cs_it_bus ... foreign CHANNEL            publish a cubesim.ack_t (a foreign type) there
  *   cs_it_bus ... truncated CHANNEL          publish half of an encoded force_t/command_t raw
  *   cs_it_bus ... badlength CHANNEL          ... whole, with its first string's length = -16
@@ -43,6 +45,8 @@
 typedef struct state {
     int64_t client_id, command_id;
     int got_ack;
+    int burst, burst_acked, burst_ok; /* force --burst: acks of command ids id .. id+burst-1 */
+    unsigned char *burst_seen;
     int status_left;
     int snap_id, snap_chunks, snap_seen, snap_objects, snap_v, snap_t, snap_done;
     unsigned char seen[4096];
@@ -56,6 +60,15 @@ typedef struct state {
 static void on_ack(const lcm_recv_buf_t *rb, const char *ch, const cubesim_ack_t *a, void *u)
 {
     state *st = u;
+    if (st->burst > 0) {
+        const int64_t k = a->command_id - st->command_id;
+        if (a->client_id == st->client_id && k >= 0 && k < st->burst && !st->burst_seen[k]) {
+            st->burst_seen[k] = 1;
+            st->burst_acked++;
+            st->burst_ok += a->ok != 0;
+        }
+        return;
+    }
     if (a->client_id != st->client_id || a->command_id != st->command_id)
         return;
     printf("ack ok=%d request=%s message=%s\n", a->ok, a->request, a->message);
@@ -204,6 +217,7 @@ static int wait_for(lcm_t *lcm, double timeout, int (*done)(const state *), cons
 }
 
 static int ack_done(const state *st) { return st->got_ack; }
+static int burst_done(const state *st) { return st->burst_acked >= st->burst; }
 static int status_done(const state *st) { return st->status_left <= 0; }
 static int snap_done(const state *st) { return st->snap_done; }
 
@@ -259,6 +273,7 @@ int main(int argc, char **argv)
             else if (strcmp(k, "--cid") == 0) st.command_id = atoll(v);
             else if (strcmp(k, "--count") == 0) c.count = atoi(v);
             else if (strcmp(k, "--arg") == 0) c.argument = (char *)v;
+            else if (strcmp(k, "--burst") == 0) bad = (st.burst = atoi(v)) <= 0;
             else bad = 1;
             if (bad) {
                 fprintf(stderr, "cs_it_bus: bad option %s %s\n", k, v);
@@ -274,6 +289,23 @@ int main(int argc, char **argv)
                                                                     &st);
         f.client_id = c.client_id = st.client_id;
         f.command_id = c.command_id = st.command_id;
+        if (st.burst > 0 && verb[0] == 'f') {
+            /* the acks of a burst come back as one: room for all of them in our queue */
+            cubesim_ack_t_subscription_set_queue_capacity(sub, st.burst + 64);
+            st.burst_seen = calloc((size_t)st.burst, 1);
+            for (int k = 0; k < st.burst && !rc && st.burst_seen; k++) {
+                f.command_id = st.command_id + k;
+                rc = cubesim_force_t_publish(lcm, "CUBESIM_FORCE", &f) < 0;
+            }
+            if (!rc)
+                rc = st.burst_seen ? wait_for(lcm, timeout, burst_done, &st) : 1;
+            printf("burst sent=%d acked=%d ok=%d\n", st.burst, st.burst_acked, st.burst_ok);
+            free(st.burst_seen);
+            rc = rc == 3 ? 0 : rc; /* the count says what came back */
+            cubesim_ack_t_unsubscribe(lcm, sub);
+            lcm_destroy(lcm);
+            return rc;
+        }
         if (verb[0] == 'f')
             rc = cubesim_force_t_publish(lcm, "CUBESIM_FORCE", &f) < 0;
         else
