@@ -209,7 +209,7 @@ static int load_direct(const char *path, cs_mesh *out, char *err, size_t errlen)
         return -1;
     }
     const struct aiScene *sc =
-        aiImportFile(path, aiProcess_Triangulate | aiProcess_JoinIdenticalVertices |
+        aiImportFile(path, aiProcess_Triangulate |
                                aiProcess_PreTransformVertices | aiProcess_SortByPType |
                                aiProcess_ValidateDataStructure);
     if (!sc) {

@@ -129,6 +129,40 @@ TEST(mesh_welds_stl_and_drops_degenerates)
     ENSURE_NEAR(vol, 1.0 / 6.0, 1e-12);
 }
 
+/* A closed mesh whose vertices lie closer together than assimp's vertex joining tolerance
+ * (an outside check: a sphere of radius 5e-6 units was refused as not manifold, one of 5e-5
+ * lost its pole by 1 %): the loader welds exactly equal positions only, so the icosphere
+ * scaled to a radius of 5e-6 keeps every vertex, triangle and its volume (× 5e-5³). */
+TEST(mesh_keeps_vertices_closer_than_a_micrometre)
+{
+    char p[512], err[256];
+    cs_mesh ref, m;
+    ENSURE(cs_mesh_load(mesh_path(p, sizeof p, "icosphere.obj"), &ref, err, sizeof err) == 0);
+    const double s = 5e-5; /* the icosphere's radius is 0.1 */
+    char path[] = "/tmp/cs_test_tiny_XXXXXX.obj";
+    int fd = mkstemps(path, 4);
+    ENSURE(fd >= 0);
+    FILE *f = fdopen(fd, "w");
+    for (int i = 0; i < ref.nv; i++)
+        fprintf(f, "v %.17g %.17g %.17g\n", s * ref.v[3 * i], s * ref.v[3 * i + 1],
+                s * ref.v[3 * i + 2]);
+    for (int t = 0; t < ref.nt; t++)
+        fprintf(f, "f %d %d %d\n", ref.t[3 * t] + 1, ref.t[3 * t + 1] + 1, ref.t[3 * t + 2] + 1);
+    fclose(f);
+    int rc = cs_mesh_load(path, &m, err, sizeof err);
+    unlink(path);
+    const double vref = cs_mesh_volume(ref.v, ref.t, ref.nt) * s * s * s;
+    const int nvr = ref.nv, ntr = ref.nt;
+    cs_mesh_free(&ref);
+    ENSURE_MSG(rc == 0, "%s", err);
+    const int nv = m.nv, nt = m.nt;
+    const double vol = cs_mesh_volume(m.v, m.t, m.nt);
+    cs_mesh_free(&m);
+    ENSURE_MSG(nv == nvr && nt == ntr, "%d vertices, %d triangles against %d, %d", nv, nt, nvr,
+               ntr);
+    ENSURE_NEAR(vol / vref, 1.0, 1e-6);
+}
+
 TEST(mesh_load_errors_name_the_problem)
 {
     char p[512], err[256];
