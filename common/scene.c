@@ -51,6 +51,7 @@ struct cs_scene_object_store {
     cs_aabb *fixed;
     cs_load *loads;
     cs_field_region *fields;
+    int shells, shells_turned; /* a mesh's shells and those wound inside out, turned */
 };
 
 typedef struct {
@@ -742,14 +743,24 @@ static int parse_mesh(sc_ctx *c, const cJSON *mesh, const char *path, const char
 
     cs_watertight_report rep;
     int closed = cs_watertight_check(m.v, m.nv, m.t, m.nt, &rep, msg, sizeof msg);
-    if (closed != 1 && !rep.boundary_edges && !rep.nonmanifold_edges && !rep.misoriented_edges &&
-        !rep.degenerate_triangles && rep.volume < 0) {
-        /* closed and consistently oriented, but wound clockwise seen from outside (as some
-         * formats import, e.g. DirectX .x): the orientation is unambiguous, so turn it out */
-        for (int i = 0; i < m.nt; i++) {
-            int32_t tmp = m.t[3 * i + 1];
-            m.t[3 * i + 1] = m.t[3 * i + 2];
-            m.t[3 * i + 2] = tmp;
+    if (!rep.boundary_edges && !rep.nonmanifold_edges && !rep.misoriented_edges &&
+        !rep.degenerate_triangles) {
+        /* closed and consistently oriented. Wound clockwise seen from outside as a whole (as
+         * some formats import, e.g. DirectX .x): the orientation is unambiguous, so turn it
+         * out. Then a shell wound inside out where no other encloses it (a part written with
+         * the other winding, a mirrored glTF node, which assimp does not turn) is turned out
+         * too; a cavity's wall, inward inside another shell, is kept. */
+        if (rep.volume < 0)
+            for (int i = 0; i < m.nt; i++) {
+                int32_t tmp = m.t[3 * i + 1];
+                m.t[3 * i + 1] = m.t[3 * i + 2];
+                m.t[3 * i + 2] = tmp;
+            }
+        st->shells_turned = cs_mesh_orient_shells(m.v, m.nv, m.t, m.nt, &st->shells);
+        if (st->shells_turned < 0) {
+            cs_mesh_free(&m);
+            return fail(c, "", "objects[%d] '%s': mesh '%s': out of memory", index,
+                        show(name, b1), cs_msg_path(fname, b2, sizeof b2));
         }
         closed = cs_watertight_check(m.v, m.nv, m.t, m.nt, &rep, msg, sizeof msg);
     }
@@ -1357,6 +1368,20 @@ int cs_scene_coarse_object(const cs_scene *s, const cs_world_t *w, int i, char *
              i, show(o->name, b), info.n_cells, info.n_cells == 1 ? "" : "s", info.cube_size,
              info.n_cells == 1 ? "s" : "", info.volume, info.volume / mv, mv, hi[0] - lo[0],
              hi[1] - lo[1], hi[2] - lo[2]);
+    return 1;
+}
+
+int cs_scene_turned_shells(const cs_scene *s, int i, char *msg, size_t n)
+{
+    if (!s || i < 0 || i >= s->n_objects || !s->store || s->store[i].shells_turned <= 0)
+        return 0;
+    const cs_scene_object_store *st = &s->store[i];
+    char b[SC_SHOW_NAME + 1];
+    snprintf(msg, n,
+             "objects[%d] '%s': %d of its mesh's %d shells %s wound inside out with nothing "
+             "around %s: turned outward (a cavity's wall would lie inside another shell)",
+             i, show(s->objects[i].name, b), st->shells_turned, st->shells,
+             st->shells_turned == 1 ? "was" : "were", st->shells_turned == 1 ? "it" : "them");
     return 1;
 }
 

@@ -50,6 +50,13 @@ int cs_scene_instantiate(const cs_scene *s, cs_world_t **out, char *err, size_t 
 int cs_scene_coarse_object(const cs_scene *s, const cs_world_t *w, int i, char *msg, size_t n);
 
 /*
+ * Whether scene object i's mesh had shells wound inside out with no other shell around them,
+ * which loading turned outward (cs_mesh_orient_shells). Returns 1 with one line in msg naming
+ * the object and the count; 0 if none (or not a mesh).
+ */
+int cs_scene_turned_shells(const cs_scene *s, int i, char *msg, size_t n);
+
+/*
  * Whether scene object i (instantiated in w under its name) starts with part of it below the
  * ground plane (the scene has a ground, and the lowest of its cube mesh's nodes is more than a
  * thousandth of its cube size below `ground.height`). Such an object is pushed up onto the

@@ -48,6 +48,142 @@ double cs_mesh_volume(const double *v, const int32_t *t, int nt)
     return vol / 6.0;
 }
 
+/* edge key with the triangle that uses it (cs_mesh_orient_shells) */
+typedef struct {
+    int32_t lo, hi, tri;
+} edge_tri;
+
+static int cmp_edge_tri(const void *pa, const void *pb)
+{
+    const edge_tri *a = pa, *b = pb;
+    if (a->lo != b->lo)
+        return a->lo < b->lo ? -1 : 1;
+    if (a->hi != b->hi)
+        return a->hi < b->hi ? -1 : 1;
+    return (a->tri > b->tri) - (a->tri < b->tri);
+}
+
+static int32_t root_of(int32_t *up, int32_t i)
+{
+    while (up[i] != i) {
+        up[i] = up[up[i]];
+        i = up[i];
+    }
+    return i;
+}
+
+/* The solid angle of triangle (a, b, c) seen from p, over 4π (Van Oosterom and Strackee). */
+static double winding_of_triangle(const double *p, const double *pa, const double *pb,
+                                  const double *pc)
+{
+    const double a[3] = {pa[0] - p[0], pa[1] - p[1], pa[2] - p[2]};
+    const double b[3] = {pb[0] - p[0], pb[1] - p[1], pb[2] - p[2]};
+    const double c[3] = {pc[0] - p[0], pc[1] - p[1], pc[2] - p[2]};
+    const double la = sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
+    const double lb = sqrt(b[0] * b[0] + b[1] * b[1] + b[2] * b[2]);
+    const double lc = sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]);
+    const double det = a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) +
+                       a[2] * (b[0] * c[1] - b[1] * c[0]);
+    const double den = la * lb * lc + (a[0] * b[0] + a[1] * b[1] + a[2] * b[2]) * lc +
+                       (a[0] * c[0] + a[1] * c[1] + a[2] * c[2]) * lb +
+                       (b[0] * c[0] + b[1] * c[1] + b[2] * c[2]) * la;
+    return 2.0 * atan2(det, den) / (4.0 * M_PI);
+}
+
+int cs_mesh_orient_shells(const double *v, int nv, int32_t *t, int nt, int *n_shells)
+{
+    if (n_shells)
+        *n_shells = nt > 0;
+    if (nt <= 1 || nv <= 0)
+        return 0;
+    int32_t *up = malloc((size_t)nt * sizeof *up);
+    edge_tri *e = malloc((size_t)nt * 3 * sizeof *e);
+    if (!up || !e) {
+        free(up);
+        free(e);
+        return -1;
+    }
+    for (int32_t i = 0; i < nt; i++)
+        up[i] = i;
+    for (int32_t i = 0; i < nt; i++)
+        for (int k = 0; k < 3; k++) {
+            const int32_t a = t[3 * i + k], b = t[3 * i + (k + 1) % 3];
+            e[3 * i + k] = (edge_tri){a < b ? a : b, a < b ? b : a, i};
+        }
+    qsort(e, (size_t)nt * 3, sizeof *e, cmp_edge_tri);
+    for (int i = 0; i + 1 < 3 * nt; i++)
+        if (e[i].lo == e[i + 1].lo && e[i].hi == e[i + 1].hi) {
+            const int32_t ra = root_of(up, e[i].tri), rb = root_of(up, e[i + 1].tri);
+            if (ra != rb)
+                up[ra < rb ? rb : ra] = ra < rb ? ra : rb;
+        }
+    free(e);
+    /* shells numbered by their first triangle; their signed volumes from one common point */
+    int32_t *shell = malloc((size_t)nt * sizeof *shell), ns = 0;
+    int32_t *first = malloc((size_t)nt * sizeof *first);
+    double *vol = calloc((size_t)nt, sizeof *vol);
+    if (!shell || !first || !vol) {
+        free(up);
+        free(shell);
+        free(first);
+        free(vol);
+        return -1;
+    }
+    for (int32_t i = 0; i < nt; i++) {
+        const int32_t r = root_of(up, i);
+        if (r == i) {
+            first[ns] = i;
+            shell[i] = ns++;
+        } else {
+            shell[i] = shell[r]; /* r < i: numbered already */
+        }
+    }
+    free(up);
+    if (n_shells)
+        *n_shells = ns;
+    const double *o = v + 3 * t[0];
+    for (int32_t i = 0; i < nt; i++) {
+        const double *pa = v + 3 * t[3 * i], *pb = v + 3 * t[3 * i + 1], *pc = v + 3 * t[3 * i + 2];
+        const double a[3] = {pa[0] - o[0], pa[1] - o[1], pa[2] - o[2]};
+        const double b[3] = {pb[0] - o[0], pb[1] - o[1], pb[2] - o[2]};
+        const double c[3] = {pc[0] - o[0], pc[1] - o[1], pc[2] - o[2]};
+        vol[shell[i]] += a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) +
+                         a[2] * (b[0] * c[1] - b[1] * c[0]);
+    }
+    /* each inward shell: the winding number of the other shells at its first triangle's
+     * centroid (they do not pass through it: the surface is manifold) */
+    unsigned char *turn = calloc((size_t)ns, 1);
+    int turned = 0;
+    for (int32_t s = 0; turn && ns > 1 && s < ns; s++) {
+        if (!(vol[s] < 0))
+            continue;
+        const int32_t *f = t + 3 * first[s];
+        double p[3], w = 0;
+        for (int a = 0; a < 3; a++)
+            p[a] = (v[3 * f[0] + a] + v[3 * f[1] + a] + v[3 * f[2] + a]) / 3.0;
+        for (int32_t i = 0; i < nt; i++)
+            if (shell[i] != s)
+                w += winding_of_triangle(p, v + 3 * t[3 * i], v + 3 * t[3 * i + 1],
+                                         v + 3 * t[3 * i + 2]);
+        if (w < 0.5) {
+            turn[s] = 1;
+            turned++;
+        }
+    }
+    for (int32_t i = 0; turned > 0 && i < nt; i++)
+        if (turn[shell[i]]) {
+            const int32_t tmp = t[3 * i + 1];
+            t[3 * i + 1] = t[3 * i + 2];
+            t[3 * i + 2] = tmp;
+        }
+    const int rc = turn ? turned : -1;
+    free(turn);
+    free(shell);
+    free(first);
+    free(vol);
+    return rc;
+}
+
 static int fail(char *err, size_t errlen, const char *msg)
 {
     if (err && errlen)

@@ -320,8 +320,9 @@ static int load_scene(const char *path, cs_scene *scene, cs_world_t **world, cha
     return 0;
 }
 
-/* One warning per object of the scene voxelized coarsely (cs_scene_coarse_object) and per
- * object that starts below the ground (cs_scene_below_ground_object). */
+/* One warning per object of the scene voxelized coarsely (cs_scene_coarse_object), per
+ * object that starts below the ground (cs_scene_below_ground_object) and per mesh whose
+ * inside-out shells were turned outward (cs_scene_turned_shells). */
 static void warn_scene(cs_dlog *log, const cs_scene *scene, const cs_world_t *world)
 {
     char msg[512];
@@ -329,6 +330,8 @@ static void warn_scene(cs_dlog *log, const cs_scene *scene, const cs_world_t *wo
         if (cs_scene_coarse_object(scene, world, i, msg, sizeof msg))
             cs_dlog_warn(log, NULL, "%s", msg);
         if (cs_scene_below_ground_object(scene, world, i, msg, sizeof msg))
+            cs_dlog_warn(log, NULL, "%s", msg);
+        if (cs_scene_turned_shells(scene, i, msg, sizeof msg))
             cs_dlog_warn(log, NULL, "%s", msg);
     }
 }
