@@ -186,6 +186,81 @@ static int weld_and_clean(cs_mesh *m)
     return 0;
 }
 
+/*
+ * The triangles of polygon face idx[0..k) (k >= 4) over positions v, appended to t (3 per
+ * triangle, the face's winding kept); returns their count (k − 2). Ear clipping in the plane
+ * that drops the largest component of the face's Newell normal: a concave face (an L- or
+ * T-shaped cap) comes out as its own area, where assimp's triangulation overlapped triangles
+ * and the surface was then refused with a wrong reason (an outside check: "vertex … lies in no
+ * cube", "6 boundary edges"). A vertex is an ear when it turns with the face and no other
+ * vertex of what is left lies in or on its triangle; where no ear is left (a self-intersecting
+ * or degenerate face) the rest is a fan. rest: scratch of k ints.
+ */
+static int triangulate_face(const double *v, const int32_t *idx, int k, int32_t *t, int *rest)
+{
+    double nrm[3] = {0, 0, 0};
+    for (int i = 0; i < k; i++) {
+        const double *p = v + 3 * idx[i], *q = v + 3 * idx[(i + 1) % k];
+        nrm[0] += (p[1] - q[1]) * (p[2] + q[2]);
+        nrm[1] += (p[2] - q[2]) * (p[0] + q[0]);
+        nrm[2] += (p[0] - q[0]) * (p[1] + q[1]);
+    }
+    const int ax = fabs(nrm[0]) > fabs(nrm[1]) ? (fabs(nrm[0]) > fabs(nrm[2]) ? 0 : 2)
+                                               : (fabs(nrm[1]) > fabs(nrm[2]) ? 1 : 2);
+    const int u = (ax + 1) % 3, w = (ax + 2) % 3; /* (u, w, ax) right-handed */
+    const double sg = nrm[ax] < 0 ? -1.0 : 1.0;
+    int n = k, nt = 0;
+    for (int i = 0; i < k; i++)
+        rest[i] = idx[i];
+#define FX(i) (v[3 * rest[i] + u])
+#define FY(i) (v[3 * rest[i] + w])
+    while (n > 3) {
+        int ear = -1;
+        /* from the second vertex on: a convex face becomes the fan from its first vertex, as
+         * assimp cut it (a quad along its diagonal 0–2 unless that is outside it; the other
+         * diagonal of the duck's non-planar quads is an edge of its neighbours) */
+        for (int q = 1; q <= n && ear < 0; q++) {
+            const int i = q % n, a = (i + n - 1) % n, c = (i + 1) % n;
+            const double ax2 = FX(a), ay = FY(a), bx = FX(i), by = FY(i), cx = FX(c), cy = FY(c);
+            const double turn = sg * ((bx - ax2) * (cy - by) - (by - ay) * (cx - bx));
+            if (!(turn > 0))
+                continue;
+            int inside = 0;
+            for (int j = 0; j < n && !inside; j++) {
+                if (j == a || j == i || j == c)
+                    continue;
+                const double px = FX(j), py = FY(j);
+                if ((px == ax2 && py == ay) || (px == bx && py == by) || (px == cx && py == cy))
+                    continue; /* a repeated position of a corner */
+                const double d1 = sg * ((bx - ax2) * (py - ay) - (by - ay) * (px - ax2));
+                const double d2 = sg * ((cx - bx) * (py - by) - (cy - by) * (px - bx));
+                const double d3 = sg * ((ax2 - cx) * (py - cy) - (ay - cy) * (px - cx));
+                inside = d1 >= 0 && d2 >= 0 && d3 >= 0;
+            }
+            if (!inside)
+                ear = i;
+        }
+        if (ear < 0)
+            break;
+        const int a = (ear + n - 1) % n, c = (ear + 1) % n;
+        t[3 * nt] = rest[a];
+        t[3 * nt + 1] = rest[ear];
+        t[3 * nt + 2] = rest[c];
+        nt++;
+        memmove(rest + ear, rest + ear + 1, (size_t)(n - ear - 1) * sizeof *rest);
+        n--;
+    }
+#undef FX
+#undef FY
+    for (int i = 1; i + 1 < n; i++) { /* the last triangle, or the fan of what is left */
+        t[3 * nt] = rest[0];
+        t[3 * nt + 1] = rest[i];
+        t[3 * nt + 2] = rest[i + 1];
+        nt++;
+    }
+    return nt;
+}
+
 /* The import itself (in the child process of cs_mesh_load). */
 static int load_direct(const char *path, cs_mesh *out, char *err, size_t errlen)
 {
@@ -209,8 +284,7 @@ static int load_direct(const char *path, cs_mesh *out, char *err, size_t errlen)
         return -1;
     }
     const struct aiScene *sc =
-        aiImportFile(path, aiProcess_Triangulate |
-                               aiProcess_PreTransformVertices | aiProcess_SortByPType |
+        aiImportFile(path, aiProcess_PreTransformVertices | aiProcess_SortByPType |
                                aiProcess_ValidateDataStructure);
     if (!sc) {
         const char *why = aiGetErrorString();
@@ -221,14 +295,19 @@ static int load_direct(const char *path, cs_mesh *out, char *err, size_t errlen)
                 *p = ' ';
         return -1;
     }
-    size_t nv = 0, nt = 0;
+    /* faces of 3 or more corners (polygons triangulated here: triangulate_face) */
+    const unsigned faces = aiPrimitiveType_TRIANGLE | aiPrimitiveType_POLYGON;
+    size_t nv = 0, nt = 0, kmax = 0;
     for (unsigned i = 0; i < sc->mNumMeshes; i++) {
         const struct aiMesh *am = sc->mMeshes[i];
-        if (!(am->mPrimitiveTypes & aiPrimitiveType_TRIANGLE))
+        if (!(am->mPrimitiveTypes & faces))
             continue;
         nv += am->mNumVertices;
-        for (unsigned f = 0; f < am->mNumFaces; f++)
-            nt += am->mFaces[f].mNumIndices == 3;
+        for (unsigned f = 0; f < am->mNumFaces; f++) {
+            const size_t k = am->mFaces[f].mNumIndices;
+            nt += k >= 3 ? k - 2 : 0;
+            kmax = k > kmax ? k : kmax;
+        }
     }
     if (nt == 0) {
         aiReleaseImport(sc);
@@ -242,8 +321,12 @@ static int load_direct(const char *path, cs_mesh *out, char *err, size_t errlen)
     }
     out->v = malloc(nv * 3 * sizeof(double));
     out->t = malloc(nt * 3 * sizeof(int32_t));
-    if (!out->v || !out->t) {
+    int *rest = malloc((kmax + 1) * sizeof *rest);
+    int32_t *poly = malloc((kmax + 1) * sizeof *poly);
+    if (!out->v || !out->t || !rest || !poly) {
         aiReleaseImport(sc);
+        free(rest);
+        free(poly);
         cs_mesh_free(out);
         snprintf(err, errlen, "mesh '%s': out of memory", shown);
         return -1;
@@ -251,16 +334,14 @@ static int load_direct(const char *path, cs_mesh *out, char *err, size_t errlen)
     int vbase = 0, tcount = 0;
     for (unsigned i = 0; i < sc->mNumMeshes; i++) {
         const struct aiMesh *am = sc->mMeshes[i];
-        if (!(am->mPrimitiveTypes & aiPrimitiveType_TRIANGLE))
+        if (!(am->mPrimitiveTypes & faces))
             continue;
         for (unsigned k = 0; k < am->mNumVertices; k++) {
             double x = am->mVertices[k].x, y = am->mVertices[k].y, z = am->mVertices[k].z;
             if (!isfinite(x) || !isfinite(y) || !isfinite(z)) {
-                aiReleaseImport(sc);
-                cs_mesh_free(out);
                 snprintf(err, errlen, "mesh '%s': vertex %u of mesh %u is not finite", shown, k,
                          i);
-                return -1;
+                goto fail;
             }
             out->v[3 * (vbase + (int)k)] = x;
             out->v[3 * (vbase + (int)k) + 1] = y;
@@ -268,22 +349,28 @@ static int load_direct(const char *path, cs_mesh *out, char *err, size_t errlen)
         }
         for (unsigned f = 0; f < am->mNumFaces; f++) {
             const struct aiFace *fc = &am->mFaces[f];
-            if (fc->mNumIndices != 3)
+            const int k = (int)fc->mNumIndices;
+            if (k < 3)
                 continue;
-            for (int c = 0; c < 3; c++) {
+            for (int c = 0; c < k; c++) {
                 if (fc->mIndices[c] >= am->mNumVertices) {
-                    aiReleaseImport(sc);
-                    cs_mesh_free(out);
                     snprintf(err, errlen, "mesh '%s': face %u of mesh %u has a bad index", shown,
                              f, i);
-                    return -1;
+                    goto fail;
                 }
-                out->t[3 * tcount + c] = vbase + (int32_t)fc->mIndices[c];
+                poly[c] = vbase + (int32_t)fc->mIndices[c];
             }
-            tcount++;
+            if (k == 3) {
+                memcpy(out->t + 3 * (size_t)tcount, poly, 3 * sizeof *poly);
+                tcount++;
+            } else {
+                tcount += triangulate_face(out->v, poly, k, out->t + 3 * (size_t)tcount, rest);
+            }
         }
         vbase += (int)am->mNumVertices;
     }
+    free(rest);
+    free(poly);
     aiReleaseImport(sc);
     out->nv = vbase;
     out->nt = tcount;
@@ -298,6 +385,12 @@ static int load_direct(const char *path, cs_mesh *out, char *err, size_t errlen)
         return -1;
     }
     return 0;
+fail:
+    aiReleaseImport(sc);
+    free(rest);
+    free(poly);
+    cs_mesh_free(out);
+    return -1;
 }
 
 /* ---------------------------------------------------------------- the guarded import */

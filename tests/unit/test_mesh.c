@@ -163,6 +163,71 @@ TEST(mesh_keeps_vertices_closer_than_a_micrometre)
     ENSURE_NEAR(vol / vref, 1.0, 1e-6);
 }
 
+/* Prisms whose caps are single concave polygons, an L (6 corners) and a T (8), and a star (10
+ * corners, 5 of them reflex), as CAD programs write them (an outside check: assimp's
+ * triangulation overlapped the L's and T's cap triangles, and the surfaces were refused as
+ * "vertex … lies in no cube" and "6 boundary edges"). The loader cuts polygons itself: closed,
+ * oriented, the volume to float rounding (assimp keeps float positions). */
+static int prism_obj(const char *path, const double (*xy)[2], int k, double *area)
+{
+    FILE *f = fopen(path, "w");
+    if (!f)
+        return -1;
+    *area = 0;
+    for (int z = 0; z < 2; z++)
+        for (int i = 0; i < k; i++)
+            fprintf(f, "v %.17g %.17g %d\n", xy[i][0], xy[i][1], z);
+    for (int i = 0; i < k; i++)
+        *area += 0.5 * (xy[i][0] * xy[(i + 1) % k][1] - xy[(i + 1) % k][0] * xy[i][1]);
+    fprintf(f, "f");
+    for (int i = k; i >= 1; i--) /* bottom, seen from below: clockwise from above */
+        fprintf(f, " %d", i);
+    fprintf(f, "\nf");
+    for (int i = 1; i <= k; i++)
+        fprintf(f, " %d", k + i);
+    fprintf(f, "\n");
+    for (int i = 1; i <= k; i++)
+        fprintf(f, "f %d %d %d %d\n", i, i % k + 1, k + i % k + 1, k + i);
+    return fclose(f);
+}
+
+TEST(mesh_concave_polygon_faces_are_cut_inside_them)
+{
+    static const double L[6][2] = {{0, 0}, {2, 0}, {2, 1}, {1, 1}, {1, 2}, {0, 2}};
+    static const double T[8][2] = {{0, 1}, {1, 1}, {1, 0}, {2, 0}, {2, 1}, {3, 1}, {3, 2}, {0, 2}};
+    double star[10][2];
+    for (int i = 0; i < 10; i++) {
+        const double r = i % 2 ? 0.4 : 1.0, a = 2 * M_PI * i / 10;
+        star[i][0] = r * cos(a);
+        star[i][1] = r * sin(a);
+    }
+    const struct {
+        const double (*xy)[2];
+        int k;
+    } shapes[] = {{L, 6}, {T, 8}, {(const double (*)[2])star, 10}};
+    for (int s = 0; s < 3; s++) {
+        char path[] = "/tmp/cs_test_prism_XXXXXX.obj";
+        int fd = mkstemps(path, 4);
+        ENSURE(fd >= 0);
+        close(fd);
+        double area;
+        ENSURE(prism_obj(path, shapes[s].xy, shapes[s].k, &area) == 0);
+        cs_mesh m;
+        char err[256];
+        int rc = cs_mesh_load(path, &m, err, sizeof err);
+        unlink(path);
+        ENSURE_MSG(rc == 0, "shape %d: %s", s, err);
+        cs_watertight_report rep;
+        const int closed = cs_watertight_check(m.v, m.nv, m.t, m.nt, &rep, err, sizeof err);
+        const int nt = m.nt;
+        cs_mesh_free(&m);
+        ENSURE_MSG(closed == 1, "shape %d: %s", s, err);
+        ENSURE_MSG(nt == 2 * (shapes[s].k - 2) + 2 * shapes[s].k, "shape %d: %d triangles", s, nt);
+        ENSURE_MSG(fabs(rep.volume - area) < 1e-6 * area, "shape %d: volume %.17g, area %.17g", s,
+                   rep.volume, area);
+    }
+}
+
 TEST(mesh_load_errors_name_the_problem)
 {
     char p[512], err[256];
