@@ -769,6 +769,19 @@ static int parse_mesh(sc_ctx *c, const cJSON *mesh, const char *path, const char
         return fail(c, "", "objects[%d] '%s': mesh '%s' is refused: %s", index, show(name, b1),
                     cs_msg_path(fname, b2, sizeof b2), msg);
     }
+    /* Far from the origin double precision spaces positions too coarsely for the cubes: at
+     * 6e14 m they are 0.125 m apart, no edge there can be halved, and the subdivision ran
+     * 15 s and took 3.5 GB before it gave up on its triangle bound (an outside check). */
+    double far = 0;
+    for (int i = 0; i < 3 * m.nv; i++)
+        far = fmax(far, fabs(m.v[i]));
+    if (nextafter(far, INFINITY) - far > h / 1024) {
+        cs_mesh_free(&m);
+        return fail(c, "", "objects[%d] '%s': mesh '%s' lies %.3g m from the origin, where "
+                    "positions are %.3g m apart, more than cube_size/1024 (%g m): place it "
+                    "nearer the origin", index, show(name, b1), cs_msg_path(fname, b2, sizeof b2),
+                    far, nextafter(far, INFINITY) - far, h / 1024);
+    }
     if (cs_subdivide_edges(&m.v, &m.nv, &m.t, &m.nt, h, msg, sizeof msg) != 0) {
         cs_mesh_free(&m);
         return fail(c, "", "objects[%d] '%s': mesh '%s': %s", index, show(name, b1),

@@ -568,6 +568,39 @@ static int write_boxes_obj(const char *path, int n, const double (*b)[6], const 
     return fclose(f);
 }
 
+/* A mesh placed where double precision spaces positions more coarsely than cube_size/1024 is
+ * refused at once, naming the distance and the spacing (an outside check: at 6e14 m the
+ * subdivision ran 15 s and took 3.5 GB before its triangle bound refused it, misnamed); at
+ * 1e8 m it loads. */
+TEST(scene_mesh_too_far_for_its_cubes_refused_at_once)
+{
+    char dir[] = "/tmp/cs_scene_XXXXXX";
+    ENSURE(mkdtemp(dir) != NULL);
+    char obj[256], err[512], text[512];
+    snprintf(obj, sizeof obj, "%s/cube.obj", dir);
+    const double b[1][6] = {{0, 0, 0, 1, 1, 1}};
+    const int out[1] = {0};
+    ENSURE(write_boxes_obj(obj, 1, b, out) == 0);
+    const double where[2] = {6e14, 1e8};
+    int rc[2];
+    for (int k = 0; k < 2; k++) {
+        snprintf(text, sizeof text,
+                 "{\"objects\": [{\"name\": \"far\", \"cube_size\": 0.25, \"mesh\": "
+                 "{\"file\": \"cube.obj\", \"position\": [%g, 0, 0]}}]}", where[k]);
+        cs_scene s;
+        rc[k] = cs_scene_parse(text, dir, &s, err, sizeof err);
+        if (rc[k] == 0)
+            cs_scene_free(&s);
+        else if (k == 0)
+            ENSURE_MSG(contains(err, "lies 6e+14 m from the origin, where positions are 0.125 m "
+                                     "apart") && !strchr(err, '\n'), "%s", err);
+    }
+    unlink(obj);
+    rmdir(dir);
+    ENSURE(rc[0] == -1);
+    ENSURE_MSG(rc[1] == 0, "%s", err);
+}
+
 /* A shell wound inside out with no other shell around it (an outside check: a second part
  * written with the other winding, or a glTF node mirrored by a negative scale, which assimp
  * does not turn, loaded without a word, solid, and published inside out; two equal boxes one
