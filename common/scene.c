@@ -569,15 +569,15 @@ static int parse_box(sc_ctx *c, const cJSON *box, const char *path, double h,
             return fail(c, p, "%g m is not a whole number of cubes of %g m (%.9g cubes)", size[a],
                         h, cubes);
         if (r > SC_MAX_PER_AXIS)
-            return fail(c, p, "%.0f cubes along this side; at most %d", r, SC_MAX_PER_AXIS);
+            return fail(c, p, "%.16g cubes along this side; at most %d", r, SC_MAX_PER_AXIS);
         n[a] = (long)r;
         total *= r;
     }
     if (total > SC_MAX_CELLS)
-        return fail(c, path, "%.0f cubes; at most %d", total, SC_MAX_CELLS);
+        return fail(c, path, "%.16g cubes; at most %d", total, SC_MAX_CELLS);
     st->ijk = malloc((size_t)total * 3 * sizeof *st->ijk);
     if (!st->ijk)
-        return fail(c, path, "out of memory for %.0f cubes", total);
+        return fail(c, path, "out of memory for %.16g cubes", total);
     size_t q = 0;
     for (long k = 0; k < n[2]; k++)
         for (long j = 0; j < n[1]; j++)
@@ -737,7 +737,7 @@ static int parse_mesh(sc_ctx *c, const cJSON *mesh, const char *path, const char
             double span = (hi[a] - lo[a]) / h;
             cs_mesh_free(&m);
             pathf(p, "objects[%d].cube_size", index);
-            return fail(c, p, "the mesh spans %.0f cubes of %g m along %c; at most %d", span, h,
+            return fail(c, p, "the mesh spans %.16g cubes of %g m along %c; at most %d", span, h,
                         'x' + a, SC_MAX_PER_AXIS);
         }
 
@@ -1244,7 +1244,7 @@ int cs_scene_parse(const char *json, const char *base_dir, cs_scene *out, char *
         if (cubes > SC_MAX_CELLS) {
             char p[SC_PATH];
             pathf(p, "objects[%d]", i);
-            fail(c, p, "the scene's boxes and cell sets hold %.0f cubes with this one; at most "
+            fail(c, p, "the scene's boxes and cell sets hold %.16g cubes with this one; at most "
                        "%d in all (about 7 GB)", cubes, SC_MAX_CELLS);
             goto done;
         }
