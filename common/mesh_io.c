@@ -339,8 +339,10 @@ static int load_direct(const char *path, cs_mesh *out, char *err, size_t errlen)
         for (unsigned k = 0; k < am->mNumVertices; k++) {
             double x = am->mVertices[k].x, y = am->mVertices[k].y, z = am->mVertices[k].z;
             if (!isfinite(x) || !isfinite(y) || !isfinite(z)) {
-                snprintf(err, errlen, "mesh '%s': vertex %u of mesh %u is not finite", shown, k,
-                         i);
+                /* assimp's numbering (after its own processing), not the file's lines; it
+                 * reads floats, so a coordinate past 3.4e38 arrives as inf */
+                snprintf(err, errlen, "mesh '%s': a vertex is not finite (NaN, inf, or beyond "
+                         "float's 3.4e38; assimp's vertex %u of its mesh %u)", shown, k, i);
                 goto fail;
             }
             out->v[3 * (vbase + (int)k)] = x;

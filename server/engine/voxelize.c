@@ -742,7 +742,17 @@ int cs_voxelize(const double *verts, int nv, const int32_t *tris, int nt, double
     free(g);
     if (count == 0) {
         free(out);
-        snprintf(err, errlen, "voxelize: no cell kept at h = %g", h);
+        double vlo[3] = {INFINITY, INFINITY, INFINITY}, vhi[3] = {-INFINITY, -INFINITY, -INFINITY};
+        for (int i = 0; i < nv; i++)
+            for (int a = 0; a < 3; a++) {
+                vlo[a] = fmin(vlo[a], verts[3 * i + a]);
+                vhi[a] = fmax(vhi[a], verts[3 * i + a]);
+            }
+        /* (a mesh far smaller than a cube: its triangles are below the exact test's
+         * resolution there) */
+        snprintf(err, errlen, "voxelize: no cube of %g m kept for a mesh of %.3g x %.3g x %.3g m: "
+                 "choose a cube_size nearer its size (or scale it)", h, vhi[0] - vlo[0],
+                 vhi[1] - vlo[1], vhi[2] - vlo[2]);
         return -1;
     }
     *ijk = out;

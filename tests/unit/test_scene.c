@@ -601,6 +601,26 @@ TEST(scene_mesh_too_far_for_its_cubes_refused_at_once)
     ENSURE_MSG(rc[1] == 0, "%s", err);
 }
 
+/* A mesh far smaller than its cubes keeps none: the refusal says how small the mesh is (an
+ * outside check: "voxelize: no cell kept at h = 0.1" said nothing of a mesh scaled 1e-12). */
+TEST(scene_mesh_far_smaller_than_a_cube_named)
+{
+    char err[512];
+    cs_scene s;
+    cs_world_t *w = NULL;
+    const char *text = "{\"objects\": [{\"name\": \"speck\", \"cube_size\": 0.1, \"mesh\": "
+                       "{\"file\": \"scenes/meshes/icosphere.obj\", \"scale\": 1e-12}}]}";
+    int rc = cs_scene_parse(text, ".", &s, err, sizeof err);
+    if (rc == 0) {
+        rc = cs_scene_instantiate(&s, &w, err, sizeof err);
+        cs_world_destroy(w);
+        cs_scene_free(&s);
+    }
+    ENSURE(rc != 0);
+    ENSURE_MSG(contains(err, "'speck'") && contains(err, "for a mesh of 2e-13 x") &&
+                   !strchr(err, '\n'), "%s", err);
+}
+
 /* A shell wound inside out with no other shell around it (an outside check: a second part
  * written with the other winding, or a glTF node mirrored by a negative scale, which assimp
  * does not turn, loaded without a word, solid, and published inside out; two equal boxes one
