@@ -3663,7 +3663,7 @@ static double static_floor(cs_object *o, double *delta, double *out)
     for (int d = 0; d < 3 * o->n; d++) {
         const double a = fabs(o->x[d]), ulp = nextafter(a, INFINITY) - a;
         const uint32_t hsh = (uint32_t)d * 2654435761u;
-        delta[d] = (hsh >> 31) ? 0.5 * ulp : -0.5 * ulp;
+        delta[d] = o->mask[d] ? 0.0 : (hsh >> 31) ? 0.5 * ulp : -0.5 * ulp; /* held: exact */
     }
     step_operator(o, delta, out);
     return masked_norm(o, out);
@@ -3692,14 +3692,21 @@ static int solve_static_in_frame(cs_world_t *w, cs_object *o, cs_step_stats *st,
         double target = load + dl > 1 ? 1 : load + dl;
         memcpy(x_save, o->x, (size_t)n3 * sizeof(double));
         double pot, rn = static_residual(o, target, res, &pot), rn_prev = INFINITY;
-        /* no tighter than the residual's round-off floor (static_floor, 4× for its spread):
+        /* No tighter than the residual's round-off floor (static_floor, 4× for its spread):
          * below it Newton only stirs the last bits and then stalls, and the load search that
-         * followed gave back a smaller load's state, or the rest state (exit 1) */
+         * followed gave back a smaller load's state, or the rest state (exit 1). Only after a
+         * step: a load below the floor still moves the object (the floor is the stiffest
+         * modes', the load the softest's: a steel cantilever under 1e-5 g was "converged" at
+         * rest), and a nonlinear one only once Newton has stopped halving its residual (its
+         * inexact steps would pass the floor long before they converge, where penalty
+         * supports raise it). */
         const double floor4 = 4.0 * static_floor(o, dx, o->cg.q);
+        double rn_last = INFINITY; /* the residual before the last step */
         bool ok = false, solved = true;
         for (int it = 0; it < 60 && isfinite(rn); it++) {
             const double ltol = (target < 1 ? 1e3 : 1.0) * tol;
-            if (rn <= fmax(ltol, floor4)) {
+            const bool at_floor = it > 0 && rn <= floor4 && (linear || rn > 0.5 * rn_last);
+            if (rn <= ltol || at_floor) {
                 ok = true;
                 break;
             }
@@ -3750,6 +3757,7 @@ static int solve_static_in_frame(cs_world_t *w, cs_object *o, cs_step_stats *st,
                 break; /* no acceptable step: give up at this load level */
             /* The accepted trial point's residual (and rotations) are already computed. */
             memcpy(res, o->cg.q, (size_t)n3 * sizeof(double));
+            rn_last = rn;
             rn = rn_new;
             pot = pot1;
             if (it > 8 && rn > 0.999 * rn_prev)

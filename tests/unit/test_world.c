@@ -660,7 +660,8 @@ static int bar_static_tip(cs_model model, double E, double nu, double rho, doubl
  * 1 − 2⁻¹³ of the load (exit 1); a 1 m bar of 1 GPa at ν 0.45 under 1e-3 g (floor ~1e-4)
  * returned the rest state. Now the residual's estimated floor bounds what is asked: both
  * converge at 1e-8 and 1e-10, a linear bar's tip is proportional to its load (g against
- * 1e-3 g, to 1e-7) and equal to the default tolerance's, and the steel bar is within 5 % of
+ * 1e-3 g, to 1e-7; the steel bar's, linear and corotational, at 1e-6 g, a load below the
+ * floor, to 1e-3) and equal to the default tolerance's, and the steel bar is within 5 % of
  * Timoshenko's tip (trilinear cubes are a little stiff: 2.5–3.5 % at four through the depth). */
 TEST(world_static_below_the_position_round_off_floor_converges)
 {
@@ -678,6 +679,16 @@ TEST(world_static_below_the_position_round_off_floor_converges)
     ENSURE(bar_static_tip(CS_MODEL_LINEAR, 1e9, 0.45, 1000, 0.025, 9.81e-3, 1e-8, &tg3) == CS_OK);
     ENSURE_MSG(tg3 < 0 && fabs(1000 * tg3 / tg - 1) < 1e-7, "tips %.12g at g, %.12g at 1e-3 g", tg,
                tg3);
+    /* a load far below the floor still moves the bar: its tip is proportional to the load
+     * (accepted before any step, the rest state passed as converged) */
+    double t5, c5;
+    ENSURE(bar_static_tip(CS_MODEL_LINEAR, 2e11, 0.3, 7850, 0.0025, 9.81e-6, 1e-8, &t5) == CS_OK);
+    ENSURE_MSG(fabs(t5 / (1e-6 * t8) - 1) < 1e-3, "steel tip %.12g at 1e-6 g against %.12g", t5,
+               1e-6 * t8);
+    ENSURE(bar_static_tip(CS_MODEL_COROTATIONAL, 2e11, 0.3, 7850, 0.0025, 9.81e-6, 1e-8, &c5) ==
+           CS_OK);
+    ENSURE_MSG(fabs(c5 / (1e-6 * t8) - 1) < 1e-3, "corotational tip %.12g at 1e-6 g against %.12g",
+               c5, 1e-6 * t8);
     double c8, c4;
     ENSURE(bar_static_tip(CS_MODEL_COROTATIONAL, 2e11, 0.3, 7850, 0.0025, 9.81, 1e-8, &c8) == CS_OK);
     ENSURE(bar_static_tip(CS_MODEL_COROTATIONAL, 2e11, 0.3, 7850, 0.0025, 9.81, 1e-4, &c4) == CS_OK);
