@@ -194,9 +194,12 @@ static int weld_and_clean(cs_mesh *m)
  * and the surface was then refused with a wrong reason (an outside check: "vertex … lies in no
  * cube", "6 boundary edges"). A vertex is an ear when it turns with the face and no other
  * vertex of what is left lies in or on its triangle; where no ear is left (a self-intersecting
- * or degenerate face) the rest is a fan. rest: scratch of k ints.
+ * or degenerate face) the rest is a fan. rest: scratch of k ints. budget: containment tests
+ * left for the file (each face's cost is up to corners² × reflex corners, and a crafted file
+ * must not keep the importer busy to its time limit); once spent, faces are fans.
  */
-static int triangulate_face(const double *v, const int32_t *idx, int k, int32_t *t, int *rest)
+static int triangulate_face(const double *v, const int32_t *idx, int k, int32_t *t, int *rest,
+                            long *budget)
 {
     double nrm[3] = {0, 0, 0};
     for (int i = 0; i < k; i++) {
@@ -214,20 +217,28 @@ static int triangulate_face(const double *v, const int32_t *idx, int k, int32_t 
         rest[i] = idx[i];
 #define FX(i) (v[3 * rest[i] + u])
 #define FY(i) (v[3 * rest[i] + w])
-    while (n > 3) {
+#define TURN(a, b, c) (sg * ((FX(b) - FX(a)) * (FY(c) - FY(b)) - (FY(b) - FY(a)) * (FX(c) - FX(b))))
+    /* From the second corner, and after each ear from the corner that followed it: a convex
+     * face becomes the fan from its first corner, as assimp cut it (a quad along its diagonal
+     * 0–2 unless that lies outside it; the other diagonal of the duck's non-planar quads is an
+     * edge of its neighbours), each ear found at once. */
+    int start = 1, reflex = 0; /* corners that turn against the face (or not at all) */
+    for (int i = 0; i < n; i++)
+        reflex += !(TURN((i + n - 1) % n, i, (i + 1) % n) > 0);
+    while (n > 3 && reflex > 0 && *budget > 0) { /* none left: the fan below is the rest */
         int ear = -1;
-        /* from the second vertex on: a convex face becomes the fan from its first vertex, as
-         * assimp cut it (a quad along its diagonal 0–2 unless that is outside it; the other
-         * diagonal of the duck's non-planar quads is an edge of its neighbours) */
-        for (int q = 1; q <= n && ear < 0; q++) {
-            const int i = q % n, a = (i + n - 1) % n, c = (i + 1) % n;
-            const double ax2 = FX(a), ay = FY(a), bx = FX(i), by = FY(i), cx = FX(c), cy = FY(c);
-            const double turn = sg * ((bx - ax2) * (cy - by) - (by - ay) * (cx - bx));
-            if (!(turn > 0))
+        for (int q = 0; q < n && ear < 0; q++) {
+            const int i = (start + q) % n, a = (i + n - 1) % n, c = (i + 1) % n;
+            if (!(TURN(a, i, c) > 0))
                 continue;
+            const double ax2 = FX(a), ay = FY(a), bx = FX(i), by = FY(i), cx = FX(c), cy = FY(c);
             int inside = 0;
             for (int j = 0; j < n && !inside; j++) {
                 if (j == a || j == i || j == c)
+                    continue;
+                --*budget;
+                /* in a simple polygon only a reflex (or straight) corner can lie in an ear */
+                if (TURN((j + n - 1) % n, j, (j + 1) % n) > 0)
                     continue;
                 const double px = FX(j), py = FY(j);
                 if ((px == ax2 && py == ay) || (px == bx && py == by) || (px == cx && py == cy))
@@ -247,9 +258,14 @@ static int triangulate_face(const double *v, const int32_t *idx, int k, int32_t 
         t[3 * nt + 1] = rest[ear];
         t[3 * nt + 2] = rest[c];
         nt++;
+        reflex -= !(TURN((a + n - 1) % n, a, ear) > 0) + !(TURN(ear, c, (c + 1) % n) > 0);
         memmove(rest + ear, rest + ear + 1, (size_t)(n - ear - 1) * sizeof *rest);
         n--;
+        start = ear % n;
+        const int a1 = ear > 0 ? ear - 1 : n - 1, c1 = ear % n; /* a and c, renumbered */
+        reflex += !(TURN((a1 + n - 1) % n, a1, c1) > 0) + !(TURN(a1, c1, (c1 + 1) % n) > 0);
     }
+#undef TURN
 #undef FX
 #undef FY
     for (int i = 1; i + 1 < n; i++) { /* the last triangle, or the fan of what is left */
@@ -332,6 +348,7 @@ static int load_direct(const char *path, cs_mesh *out, char *err, size_t errlen)
         return -1;
     }
     int vbase = 0, tcount = 0;
+    long budget = 100000000; /* triangulate_face's corner tests for the file: about 0.5 s */
     for (unsigned i = 0; i < sc->mNumMeshes; i++) {
         const struct aiMesh *am = sc->mMeshes[i];
         if (!(am->mPrimitiveTypes & faces))
@@ -366,7 +383,8 @@ static int load_direct(const char *path, cs_mesh *out, char *err, size_t errlen)
                 memcpy(out->t + 3 * (size_t)tcount, poly, 3 * sizeof *poly);
                 tcount++;
             } else {
-                tcount += triangulate_face(out->v, poly, k, out->t + 3 * (size_t)tcount, rest);
+                tcount += triangulate_face(out->v, poly, k, out->t + 3 * (size_t)tcount, rest,
+                                           &budget);
             }
         }
         vbase += (int)am->mNumVertices;
