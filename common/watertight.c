@@ -10,6 +10,7 @@
 #include "watertight.h"
 
 #include <math.h>
+#include <stdbool.h>
 #include <stdio.h>
 #include <stdlib.h>
 
@@ -90,6 +91,35 @@ static double winding_of_triangle(const double *p, const double *pa, const doubl
     return 2.0 * atan2(det, den) / (4.0 * M_PI);
 }
 
+/* What cs_mesh_orient_shells keeps per shell. */
+typedef struct shell_info {
+    double vol, lo[3], hi[3];
+    int32_t start, count; /* its triangles in the shell-sorted order */
+    double p[3];          /* a point of it off every other shell (shell_point) */
+} shell_info;
+
+static bool box_within(const shell_info *in, const shell_info *out)
+{
+    for (int a = 0; a < 3; a++)
+        if (in->lo[a] < out->lo[a] || in->hi[a] > out->hi[a])
+            return false;
+    return true;
+}
+
+/* The winding number of shell j about p (solid angles summed over its triangles); *budget
+ * counts the triangles. */
+static double shell_winding(const double *v, const int32_t *t, const int32_t *order,
+                            const shell_info *sj, const double *p, long *budget)
+{
+    double w = 0;
+    for (int32_t k = sj->start; k < sj->start + sj->count; k++) {
+        const int32_t *f = t + 3 * order[k];
+        w += winding_of_triangle(p, v + 3 * f[0], v + 3 * f[1], v + 3 * f[2]);
+    }
+    *budget -= sj->count;
+    return w;
+}
+
 int cs_mesh_orient_shells(const double *v, int nv, int32_t *t, int nt, int *n_shells)
 {
     if (n_shells)
@@ -118,69 +148,120 @@ int cs_mesh_orient_shells(const double *v, int nv, int32_t *t, int nt, int *n_sh
                 up[ra < rb ? rb : ra] = ra < rb ? ra : rb;
         }
     free(e);
-    /* shells numbered by their first triangle; their signed volumes from one common point */
-    int32_t *shell = malloc((size_t)nt * sizeof *shell), ns = 0;
-    int32_t *first = malloc((size_t)nt * sizeof *first);
-    double *vol = calloc((size_t)nt, sizeof *vol);
-    if (!shell || !first || !vol) {
+    /* shells numbered by their first triangle (a root is its set's lowest index) */
+    int32_t *shell = malloc((size_t)nt * sizeof *shell), *order = malloc((size_t)nt * sizeof *order);
+    shell_info *sh = calloc((size_t)nt, sizeof *sh);
+    if (!shell || !order || !sh) {
         free(up);
         free(shell);
-        free(first);
-        free(vol);
+        free(order);
+        free(sh);
         return -1;
     }
+    int32_t ns = 0;
     for (int32_t i = 0; i < nt; i++) {
         const int32_t r = root_of(up, i);
-        if (r == i) {
-            first[ns] = i;
-            shell[i] = ns++;
-        } else {
-            shell[i] = shell[r]; /* r < i: numbered already */
-        }
+        shell[i] = r == i ? ns++ : shell[r];
     }
     free(up);
     if (n_shells)
         *n_shells = ns;
+    for (int32_t s = 0; s < ns; s++)
+        for (int a = 0; a < 3; a++) {
+            sh[s].lo[a] = INFINITY;
+            sh[s].hi[a] = -INFINITY;
+        }
     const double *o = v + 3 * t[0];
     for (int32_t i = 0; i < nt; i++) {
+        shell_info *si = &sh[shell[i]];
+        si->count++;
         const double *pa = v + 3 * t[3 * i], *pb = v + 3 * t[3 * i + 1], *pc = v + 3 * t[3 * i + 2];
         const double a[3] = {pa[0] - o[0], pa[1] - o[1], pa[2] - o[2]};
         const double b[3] = {pb[0] - o[0], pb[1] - o[1], pb[2] - o[2]};
         const double c[3] = {pc[0] - o[0], pc[1] - o[1], pc[2] - o[2]};
-        vol[shell[i]] += a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) +
-                         a[2] * (b[0] * c[1] - b[1] * c[0]);
+        si->vol += a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) +
+                   a[2] * (b[0] * c[1] - b[1] * c[0]);
+        for (int k = 0; k < 3; k++)
+            for (int d = 0; d < 3; d++) {
+                sh[shell[i]].lo[d] = fmin(sh[shell[i]].lo[d], v[3 * t[3 * i + k] + d]);
+                sh[shell[i]].hi[d] = fmax(sh[shell[i]].hi[d], v[3 * t[3 * i + k] + d]);
+            }
     }
-    /* each inward shell: the winding number of the other shells at its first triangle's
-     * centroid (they do not pass through it: the surface is manifold) */
-    unsigned char *turn = calloc((size_t)ns, 1);
-    int turned = 0;
-    for (int32_t s = 0; turn && ns > 1 && s < ns; s++) {
-        if (!(vol[s] < 0))
-            continue;
-        const int32_t *f = t + 3 * first[s];
-        double p[3], w = 0;
-        for (int a = 0; a < 3; a++)
-            p[a] = (v[3 * f[0] + a] + v[3 * f[1] + a] + v[3 * f[2] + a]) / 3.0;
-        for (int32_t i = 0; i < nt; i++)
-            if (shell[i] != s)
-                w += winding_of_triangle(p, v + 3 * t[3 * i], v + 3 * t[3 * i + 1],
-                                         v + 3 * t[3 * i + 2]);
-        if (w < 0.5) {
-            turn[s] = 1;
-            turned++;
-        }
+    bool any_inward = false;
+    for (int32_t s = 0, at = 0; s < ns; s++) {
+        sh[s].start = at;
+        at += sh[s].count;
+        sh[s].count = 0;
+        any_inward |= sh[s].vol < 0;
     }
-    for (int32_t i = 0; turned > 0 && i < nt; i++)
-        if (turn[shell[i]]) {
-            const int32_t tmp = t[3 * i + 1];
-            t[3 * i + 1] = t[3 * i + 2];
-            t[3 * i + 2] = tmp;
-        }
-    const int rc = turn ? turned : -1;
-    free(turn);
+    for (int32_t i = 0; i < nt; i++)
+        order[sh[shell[i]].start + sh[shell[i]].count++] = i;
     free(shell);
-    free(first);
-    free(vol);
+    unsigned char *turn = any_inward && ns > 1 ? calloc((size_t)ns, 1) : NULL;
+    int turned = 0;
+    /* triangles summed over and box tests, each about half a second at most; past either, the
+     * shells not yet decided are left as they are */
+    long budget = 20000000, boxes = 400000000;
+    /* A shell of negative volume at even depth (inside no shell, or inside a cavity: 0 or 2
+     * shells around it) is the outer wall of a part wound inside out as a whole; the part is
+     * turned: that shell and every shell inside it (a cavity wall in it, wound outward, becomes
+     * one again). A negative shell at odd depth is a cavity's wall; positive shells are left as
+     * they are (an outward shell inside another is a second solid, winding number 2). "Inside":
+     * its bounding box within the other's, and the other's winding number about a point of it
+     * not 0 — a point tried at up to 8 of its triangles' centroids until every winding number
+     * about it is near a whole number (a centroid on another shell's face gives ½). */
+    for (int32_t s = 0; turn && s < ns && budget > 0 && boxes > 0; s++) {
+        if (!(sh[s].vol < 0) || turn[s])
+            continue;
+        int depth = 0;
+        for (int tries = 0; tries < 8 && budget > 0; tries++) {
+            const int32_t k = sh[s].start + (int32_t)((int64_t)sh[s].count * tries / 8);
+            const int32_t *f = t + 3 * order[k];
+            for (int a = 0; a < 3; a++)
+                sh[s].p[a] = (v[3 * f[0] + a] + v[3 * f[1] + a] + v[3 * f[2] + a]) / 3.0;
+            bool clean = true;
+            depth = 0;
+            for (int32_t j = 0; j < ns && budget > 0 && boxes > 0; j++) {
+                boxes--; /* shells × shells of box tests in a file of many shells */
+                if (j == s || !box_within(&sh[s], &sh[j]))
+                    continue;
+                const double w = shell_winding(v, t, order, &sh[j], sh[s].p, &budget);
+                clean &= fabs(w - round(w)) < 0.25;
+                depth += fabs(w) >= 0.5;
+            }
+            if (clean)
+                break;
+        }
+        if (budget <= 0 || boxes <= 0 || depth % 2)
+            continue;
+        turn[s] = 1;
+        for (int32_t j = 0; j < ns && budget > 0 && boxes > 0; j++) {
+            boxes--;
+            if (j == s || turn[j] || !box_within(&sh[j], &sh[s]))
+                continue;
+            const int32_t *f = t + 3 * order[sh[j].start];
+            double p[3];
+            for (int a = 0; a < 3; a++)
+                p[a] = (v[3 * f[0] + a] + v[3 * f[1] + a] + v[3 * f[2] + a]) / 3.0;
+            if (fabs(shell_winding(v, t, order, &sh[s], p, &budget)) >= 0.5)
+                turn[j] = 1;
+        }
+    }
+    for (int32_t s = 0; turn && s < ns; s++) {
+        if (!turn[s])
+            continue;
+        turned++;
+        for (int32_t k = sh[s].start; k < sh[s].start + sh[s].count; k++) {
+            int32_t *f = t + 3 * order[k];
+            const int32_t tmp = f[1];
+            f[1] = f[2];
+            f[2] = tmp;
+        }
+    }
+    const int rc = (any_inward && ns > 1 && !turn) ? -1 : turned;
+    free(turn);
+    free(order);
+    free(sh);
     return rc;
 }
 

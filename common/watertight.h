@@ -47,14 +47,17 @@ int cs_check_pieces(const cs_piece_view *pieces, int n, double expected_volume,
 double cs_mesh_volume(const double *v, const int32_t *t, int nt);
 
 /*
- * Turn outward every shell of a closed, consistently oriented surface (one that passes
- * cs_watertight_check) that is wound inside out where nothing encloses it: a shell (triangles
- * joined through shared edges) of negative volume is a cavity's wall when the other shells
- * wind around it (winding number ≥ 1 at a point of it), and is left so; otherwise it is inside
- * out (a second part of a file written with the opposite winding, a glTF node mirrored by a
- * negative scale, which assimp does not turn) and its triangles are reversed. Decided for all
- * shells at once, from the orientation as given. Returns the number of shells turned (0 if
- * none), -1 if out of memory; *n_shells (may be NULL) receives the number of shells.
+ * Turn outward every part of a closed, consistently oriented surface (one that passes
+ * cs_watertight_check) that is wound inside out as a whole: a shell (triangles joined through
+ * shared edges) of negative volume at even depth (inside no other shell, or inside a cavity)
+ * is such a part's outer wall, and it is turned with every shell inside it (its cavities'
+ * walls become inward again). A negative shell at odd depth is a cavity's wall and is kept;
+ * a positive shell is never turned on its own (an outward shell inside another is a second
+ * solid). Inside: bounding box within the other's and a winding number (by solid angles)
+ * about a point of it not 0, the point tried at several triangles until every winding number
+ * is near a whole one. Bounded work (a file of many shells: those not decided within about
+ * a second are left as given). Returns the number of shells turned, -1 if out of memory;
+ * *n_shells (may be NULL) receives the number of shells.
  */
 int cs_mesh_orient_shells(const double *v, int nv, int32_t *t, int nt, int *n_shells);
 

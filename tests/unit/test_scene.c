@@ -635,20 +635,27 @@ TEST(scene_mesh_inside_out_shells_turned_cavities_kept)
     snprintf(obj, sizeof obj, "%s/shells.obj", dir);
     const double two[2][6] = {{0, 0, 0, 1, 1, 1}, {2, 0, 0, 1, 1, 1}};
     const double big_small[2][6] = {{0, 0, 0, 2, 2, 2}, {3, 0, 0, 1, 1, 1}};
-    const double hollow[2][6] = {{0, 0, 0, 4, 4, 4}, {1, 1, 1, 2, 2, 2}};
+    const double hollow[3][6] = {{0, 0, 0, 4, 4, 4}, {1, 1, 1, 2, 2, 2}, {5, 0, 0, 5, 4, 4}};
+    const double stacked[2][6] = {{0, 0, 0, 2, 2, 1}, {0.5, 0.5, 1, 1, 1, 1}};
     const struct {
         const double (*b)[6];
-        int inward[2], turned, cells;
+        int n, inward[3], turned, cells;
         double volume;
     } cases[] = {
-        {two, {0, 1}, 1, 2 * 64, 2.0},           /* equal volumes: the total was 0 */
-        {big_small, {0, 1}, 1, 512 + 64, 9.0},   /* the small one inside out, beside */
-        {big_small, {1, 0}, 1, 512 + 64, 9.0},   /* the big one: turned whole, then the small */
-        {hollow, {0, 1}, 0, 64 * 64 - 8 * 64, 56.0}, /* a cavity */
-        {hollow, {1, 0}, 0, 64 * 64 - 8 * 64, 56.0}, /* a cavity, the whole inside out */
+        {two, 2, {0, 1}, 1, 2 * 64, 2.0},         /* equal volumes: the total was 0 */
+        {big_small, 2, {0, 1}, 1, 512 + 64, 9.0}, /* the small one inside out, beside */
+        {big_small, 2, {1, 0}, 1, 512 + 64, 9.0}, /* the big one: turned whole, then the small */
+        {hollow, 2, {0, 1}, 0, 64 * 64 - 8 * 64, 56.0}, /* a cavity */
+        {hollow, 2, {1, 0}, 0, 64 * 64 - 8 * 64, 56.0}, /* a cavity, the whole inside out */
+        /* a hollow part mirrored as a whole beside a larger box: its outer wall and its
+         * cavity's are turned together (the cavity was filled: 73 m³ for 71 in the review) */
+        {hollow, 3, {1, 0, 0}, 2, 64 * 64 - 8 * 64 + 80 * 64, 136.0},
+        /* an inward box standing on an outward one, its bottom in the other's top face (its
+         * first centroid lies on that face: winding ½) */
+        {stacked, 2, {0, 1}, 1, 4 * 64 + 64, 5.0},
     };
     for (size_t k = 0; k < sizeof cases / sizeof cases[0]; k++) {
-        ENSURE(write_boxes_obj(obj, 2, cases[k].b, cases[k].inward) == 0);
+        ENSURE(write_boxes_obj(obj, cases[k].n, cases[k].b, cases[k].inward) == 0);
         cs_scene s;
         const char *text = "{\"objects\": [{\"name\": \"parts\", \"cube_size\": 0.25,"
                            " \"mesh\": {\"file\": \"shells.obj\"}}]}";
@@ -667,9 +674,12 @@ TEST(scene_mesh_inside_out_shells_turned_cavities_kept)
         ENSURE_MSG(rc == 0, "case %zu: %s", k, err);
         ENSURE_MSG(fabs(vol - cases[k].volume) < 1e-9, "case %zu: volume %g", k, vol);
         ENSURE_MSG(turned == (cases[k].turned > 0), "case %zu: turned %d", k, turned);
-        if (turned)
-            ENSURE_MSG(contains(msg, "'parts': 1 of its mesh's 2 shells was wound inside out") &&
-                           !strchr(msg, '\n'), "%s", msg);
+        if (turned) {
+            char want[96];
+            snprintf(want, sizeof want, "'parts': %d of its mesh's %d shells w", cases[k].turned,
+                     cases[k].n);
+            ENSURE_MSG(contains(msg, want) && !strchr(msg, '\n'), "case %zu: %s", k, msg);
+        }
         ENSURE_MSG(info.n_cells == cases[k].cells, "case %zu: %d cells, want %d", k, info.n_cells,
                    cases[k].cells);
     }
