@@ -1391,10 +1391,11 @@ int cs_scene_turned_shells(const cs_scene *s, int i, char *msg, size_t n)
     const cs_scene_object_store *st = &s->store[i];
     char b[SC_SHOW_NAME + 1];
     snprintf(msg, n,
-             "objects[%d] '%s': %d of its mesh's %d shells %s wound inside out with nothing "
-             "around %s: turned outward (a cavity's wall would lie inside another shell)",
+             "objects[%d] '%s': %d of its mesh's %d shells %s wound inside out (a part's outer "
+             "wall and what lies in it): turned outward (a cavity's wall, inward inside another "
+             "shell, is kept)",
              i, show(s->objects[i].name, b), st->shells_turned, st->shells,
-             st->shells_turned == 1 ? "was" : "were", st->shells_turned == 1 ? "it" : "them");
+             st->shells_turned == 1 ? "was" : "were");
     return 1;
 }
 
