@@ -281,7 +281,7 @@ int main(int argc, char **argv)
                 return 2;
             }
         }
-        if (i < argc) {
+        if (i < argc || (st.burst > 0 && verb[0] != 'f')) { /* --burst: forces only */
             lcm_destroy(lcm);
             return usage();
         }
