@@ -176,6 +176,15 @@ else
     cs_fail daemon-load-scene "ack '$ack', status $(tr '\n' ' ' <<<"$st")"
 fi
 
+# A burst of 5000 forces on the (paused) object: every one acked, exactly 1024 taken (an
+# object's active inputs; the rest refused, by that limit or the full input queue).
+b=$("$CS_IT_BIN/cs_it_bus" --lcm "$CS_LCM_URL&recv_buf_size=4194304" --timeout 30 force \
+    --name block2 --point 0.1,0.1,0.1 --force 0,0,0 --duration 0 --cid 200000 --burst 5000)
+case "$b" in
+"burst sent=5000 acked=5000 ok=1024") cs_pass "daemon-burst-to-an-object ($b)" ;;
+*) cs_fail daemon-burst-to-an-object "'$b'" ;;
+esac
+
 if cs_stop_daemon TERM; then cs_pass daemon-sigterm-exit0; else cs_fail daemon-sigterm-exit0 "exit status $CS_DAEMON_RC"; fi
 if [ "$(head -1 "$CS_TMP/nodes.csv" 2>/dev/null)" = "x,y,z,ux,uy,uz" ] && [ "$(wc -l <"$CS_TMP/nodes.csv")" -eq 28 ]; then
     cs_pass daemon-sigterm-dump-nodes
