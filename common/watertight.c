@@ -17,6 +17,7 @@
 typedef struct {
     int32_t lo, hi;
     int32_t forward; /* 1 if the triangle runs lo -> hi */
+    int32_t tri;     /* the triangle (cs_mesh_orient_shells) */
 } edge_rec;
 
 static int cmp_edge(const void *pa, const void *pb)
@@ -29,6 +30,16 @@ static int cmp_edge(const void *pa, const void *pb)
     return (a->forward > b->forward) - (a->forward < b->forward);
 }
 
+/* 6 × the signed volume of the tetrahedron (o, pa, pb, pc). */
+static double tet6(const double *o, const double *pa, const double *pb, const double *pc)
+{
+    const double a[3] = {pa[0] - o[0], pa[1] - o[1], pa[2] - o[2]};
+    const double b[3] = {pb[0] - o[0], pb[1] - o[1], pb[2] - o[2]};
+    const double c[3] = {pc[0] - o[0], pc[1] - o[1], pc[2] - o[2]};
+    return a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) +
+           a[2] * (b[0] * c[1] - b[1] * c[0]);
+}
+
 double cs_mesh_volume(const double *v, const int32_t *t, int nt)
 {
     /* Tetrahedra from a point of the mesh, not from the origin: for a closed surface the sum is
@@ -38,30 +49,9 @@ double cs_mesh_volume(const double *v, const int32_t *t, int nt)
         return 0.0;
     const double *o = v + 3 * t[0];
     double vol = 0.0;
-    for (int i = 0; i < nt; i++) {
-        const double *pa = v + 3 * t[3 * i], *pb = v + 3 * t[3 * i + 1], *pc = v + 3 * t[3 * i + 2];
-        const double a[3] = {pa[0] - o[0], pa[1] - o[1], pa[2] - o[2]};
-        const double b[3] = {pb[0] - o[0], pb[1] - o[1], pb[2] - o[2]};
-        const double c[3] = {pc[0] - o[0], pc[1] - o[1], pc[2] - o[2]};
-        vol += a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) +
-               a[2] * (b[0] * c[1] - b[1] * c[0]);
-    }
+    for (int i = 0; i < nt; i++)
+        vol += tet6(o, v + 3 * t[3 * i], v + 3 * t[3 * i + 1], v + 3 * t[3 * i + 2]);
     return vol / 6.0;
-}
-
-/* edge key with the triangle that uses it (cs_mesh_orient_shells) */
-typedef struct {
-    int32_t lo, hi, tri;
-} edge_tri;
-
-static int cmp_edge_tri(const void *pa, const void *pb)
-{
-    const edge_tri *a = pa, *b = pb;
-    if (a->lo != b->lo)
-        return a->lo < b->lo ? -1 : 1;
-    if (a->hi != b->hi)
-        return a->hi < b->hi ? -1 : 1;
-    return (a->tri > b->tri) - (a->tri < b->tri);
 }
 
 static int32_t root_of(int32_t *up, int32_t i)
@@ -83,8 +73,7 @@ static double winding_of_triangle(const double *p, const double *pa, const doubl
     const double la = sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
     const double lb = sqrt(b[0] * b[0] + b[1] * b[1] + b[2] * b[2]);
     const double lc = sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]);
-    const double det = a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) +
-                       a[2] * (b[0] * c[1] - b[1] * c[0]);
+    const double det = tet6(p, pa, pb, pc);
     const double den = la * lb * lc + (a[0] * b[0] + a[1] * b[1] + a[2] * b[2]) * lc +
                        (a[0] * c[0] + a[1] * c[1] + a[2] * c[2]) * lb +
                        (b[0] * c[0] + b[1] * c[1] + b[2] * c[2]) * la;
@@ -95,8 +84,13 @@ static double winding_of_triangle(const double *p, const double *pa, const doubl
 typedef struct shell_info {
     double vol, lo[3], hi[3];
     int32_t start, count; /* its triangles in the shell-sorted order */
-    double p[3];          /* a point of it off every other shell (shell_point) */
 } shell_info;
+
+static void centroid(const double *v, const int32_t *f, double p[3])
+{
+    for (int a = 0; a < 3; a++)
+        p[a] = (v[3 * f[0] + a] + v[3 * f[1] + a] + v[3 * f[2] + a]) / 3.0;
+}
 
 static bool box_within(const shell_info *in, const shell_info *out)
 {
@@ -127,7 +121,7 @@ int cs_mesh_orient_shells(const double *v, int nv, int32_t *t, int nt, int *n_sh
     if (nt <= 1 || nv <= 0)
         return 0;
     int32_t *up = malloc((size_t)nt * sizeof *up);
-    edge_tri *e = malloc((size_t)nt * 3 * sizeof *e);
+    edge_rec *e = malloc((size_t)nt * 3 * sizeof *e);
     if (!up || !e) {
         free(up);
         free(e);
@@ -138,9 +132,9 @@ int cs_mesh_orient_shells(const double *v, int nv, int32_t *t, int nt, int *n_sh
     for (int32_t i = 0; i < nt; i++)
         for (int k = 0; k < 3; k++) {
             const int32_t a = t[3 * i + k], b = t[3 * i + (k + 1) % 3];
-            e[3 * i + k] = (edge_tri){a < b ? a : b, a < b ? b : a, i};
+            e[3 * i + k] = (edge_rec){a < b ? a : b, a < b ? b : a, a < b, i};
         }
-    qsort(e, (size_t)nt * 3, sizeof *e, cmp_edge_tri);
+    qsort(e, (size_t)nt * 3, sizeof *e, cmp_edge);
     for (int i = 0; i + 1 < 3 * nt; i++)
         if (e[i].lo == e[i + 1].lo && e[i].hi == e[i + 1].hi) {
             const int32_t ra = root_of(up, e[i].tri), rb = root_of(up, e[i + 1].tri);
@@ -175,16 +169,11 @@ int cs_mesh_orient_shells(const double *v, int nv, int32_t *t, int nt, int *n_sh
     for (int32_t i = 0; i < nt; i++) {
         shell_info *si = &sh[shell[i]];
         si->count++;
-        const double *pa = v + 3 * t[3 * i], *pb = v + 3 * t[3 * i + 1], *pc = v + 3 * t[3 * i + 2];
-        const double a[3] = {pa[0] - o[0], pa[1] - o[1], pa[2] - o[2]};
-        const double b[3] = {pb[0] - o[0], pb[1] - o[1], pb[2] - o[2]};
-        const double c[3] = {pc[0] - o[0], pc[1] - o[1], pc[2] - o[2]};
-        si->vol += a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) +
-                   a[2] * (b[0] * c[1] - b[1] * c[0]);
+        si->vol += tet6(o, v + 3 * t[3 * i], v + 3 * t[3 * i + 1], v + 3 * t[3 * i + 2]);
         for (int k = 0; k < 3; k++)
             for (int d = 0; d < 3; d++) {
-                sh[shell[i]].lo[d] = fmin(sh[shell[i]].lo[d], v[3 * t[3 * i + k] + d]);
-                sh[shell[i]].hi[d] = fmax(sh[shell[i]].hi[d], v[3 * t[3 * i + k] + d]);
+                si->lo[d] = fmin(si->lo[d], v[3 * t[3 * i + k] + d]);
+                si->hi[d] = fmax(si->hi[d], v[3 * t[3 * i + k] + d]);
             }
     }
     bool any_inward = false;
@@ -216,16 +205,15 @@ int cs_mesh_orient_shells(const double *v, int nv, int32_t *t, int nt, int *n_sh
         int depth = 0;
         for (int tries = 0; tries < 8 && budget > 0; tries++) {
             const int32_t k = sh[s].start + (int32_t)((int64_t)sh[s].count * tries / 8);
-            const int32_t *f = t + 3 * order[k];
-            for (int a = 0; a < 3; a++)
-                sh[s].p[a] = (v[3 * f[0] + a] + v[3 * f[1] + a] + v[3 * f[2] + a]) / 3.0;
+            double p[3];
+            centroid(v, t + 3 * order[k], p);
             bool clean = true;
             depth = 0;
             for (int32_t j = 0; j < ns && budget > 0 && boxes > 0; j++) {
                 boxes--; /* shells × shells of box tests in a file of many shells */
                 if (j == s || !box_within(&sh[s], &sh[j]))
                     continue;
-                const double w = shell_winding(v, t, order, &sh[j], sh[s].p, &budget);
+                const double w = shell_winding(v, t, order, &sh[j], p, &budget);
                 clean &= fabs(w - round(w)) < 0.25;
                 depth += fabs(w) >= 0.5;
             }
@@ -239,10 +227,8 @@ int cs_mesh_orient_shells(const double *v, int nv, int32_t *t, int nt, int *n_sh
             boxes--;
             if (j == s || turn[j] || !box_within(&sh[j], &sh[s]))
                 continue;
-            const int32_t *f = t + 3 * order[sh[j].start];
             double p[3];
-            for (int a = 0; a < 3; a++)
-                p[a] = (v[3 * f[0] + a] + v[3 * f[1] + a] + v[3 * f[2] + a]) / 3.0;
+            centroid(v, t + 3 * order[sh[j].start], p);
             if (fabs(shell_winding(v, t, order, &sh[s], p, &budget)) >= 0.5)
                 turn[j] = 1;
         }
@@ -312,7 +298,7 @@ int cs_watertight_check(const double *v, int nv, const int32_t *t, int nt,
             int32_t a = tri[k], b = tri[(k + 1) % 3];
             if (a == b)
                 continue;
-            e[ne++] = a < b ? (edge_rec){a, b, 1} : (edge_rec){b, a, 0};
+            e[ne++] = a < b ? (edge_rec){a, b, 1, i} : (edge_rec){b, a, 0, i};
         }
     }
     qsort(e, (size_t)ne, sizeof *e, cmp_edge);
