@@ -772,9 +772,9 @@ static int parse_mesh(sc_ctx *c, const cJSON *mesh, const char *path, const char
     /* Far from the origin double precision spaces positions too coarsely for the cubes: at
      * 6e14 m they are 0.125 m apart, no edge there can be halved, and the subdivision ran
      * 15 s and took 3.5 GB before it gave up on its triangle bound (an outside check). */
-    double far = 0;
-    for (int i = 0; i < 3 * m.nv; i++)
-        far = fmax(far, fabs(m.v[i]));
+    double far = 0; /* from the placed mesh's bounds above */
+    for (int a = 0; a < 3; a++)
+        far = fmax(far, fmax(fabs(lo[a]), fabs(hi[a])));
     if (nextafter(far, INFINITY) - far > h / 1024) {
         cs_mesh_free(&m);
         return fail(c, "", "objects[%d] '%s': mesh '%s' lies %.3g m from the origin, where "
