@@ -51,8 +51,8 @@ void cs_dlog_info(cs_dlog *l, const char *fmt, ...)
 static void summarise(cs_dlog_slot *s)
 {
     if (s->suppressed > 0)
-        fprintf(stderr, "cubesimd: (%lld more '%s' warnings suppressed)\n",
-                (long long)s->suppressed, s->key);
+        fprintf(stderr, "cubesimd: (%lld more '%s' %s suppressed)\n", (long long)s->suppressed,
+                s->key, s->info ? "lines" : "warnings");
     s->suppressed = 0;
     s->printed = 0;
 }
@@ -89,21 +89,38 @@ static cs_dlog_slot *find_slot(cs_dlog *l, const char *key, double now)
     return oldest;
 }
 
+/* Whether a line under key may be printed now (counted if not). */
+static bool admit(cs_dlog *l, const char *key, bool info)
+{
+    double now = cs_dlog_now();
+    cs_dlog_slot *s = find_slot(l, key, now);
+    if (now - s->window_start >= 1.0) {
+        summarise(s);
+        s->window_start = now;
+    }
+    s->info = info;
+    if (s->printed >= CS_DLOG_BURST) {
+        s->suppressed++;
+        return false;
+    }
+    s->printed++;
+    return true;
+}
+
+void cs_dlog_event(cs_dlog *l, const char *key, const char *fmt, ...)
+{
+    if (l && (l->quiet || (key && !admit(l, key, true))))
+        return;
+    va_list ap;
+    va_start(ap, fmt);
+    vline(fmt, ap);
+    va_end(ap);
+}
+
 void cs_dlog_warn(cs_dlog *l, const char *key, const char *fmt, ...)
 {
-    if (l && key) {
-        double now = cs_dlog_now();
-        cs_dlog_slot *s = find_slot(l, key, now);
-        if (now - s->window_start >= 1.0) {
-            summarise(s);
-            s->window_start = now;
-        }
-        if (s->printed >= CS_DLOG_BURST) {
-            s->suppressed++;
-            return;
-        }
-        s->printed++;
-    }
+    if (l && key && !admit(l, key, false))
+        return;
     va_list ap;
     va_start(ap, fmt);
     vline(fmt, ap);

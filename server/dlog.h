@@ -4,6 +4,7 @@
  * Owns: nothing but its own small rate-limit table. Info lines are silenced by `quiet`;
  * warnings and errors never are, but a warning repeated under the same key is printed at most
  * CS_DLOG_BURST times per second and the rest are counted and summarised once ("N more ...").
+ * Events that clients can repeat at will (an applied input) are info lines limited the same way.
  * Not library code: the daemon's adapters (main.c, bus.c) are the only users.
  */
 #ifndef CS_DLOG_H
@@ -20,6 +21,7 @@ typedef struct cs_dlog_slot {
     double window_start; /* monotonic seconds */
     int printed;         /* in this window */
     int64_t suppressed;  /* in this window */
+    bool info;           /* the key's lines are events (cs_dlog_event), not warnings */
 } cs_dlog_slot;
 
 typedef struct cs_dlog {
@@ -33,6 +35,10 @@ int64_t cs_dlog_utime(void);
 
 /* An event; silenced by quiet. */
 void cs_dlog_info(cs_dlog *l, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+/* An event a client can repeat at will (an input applied): an info line (silenced by quiet),
+ * rate-limited per key like a warning. */
+void cs_dlog_event(cs_dlog *l, const char *key, const char *fmt, ...)
+    __attribute__((format(printf, 3, 4)));
 /* A problem that does not stop the daemon, rate-limited per key (NULL key: never limited). */
 void cs_dlog_warn(cs_dlog *l, const char *key, const char *fmt, ...)
     __attribute__((format(printf, 3, 4)));

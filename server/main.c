@@ -608,9 +608,12 @@ static void apply_inputs(cs_daemon *d, double now)
                 cs_dlog_warn(&d->log, key,
                              "refused %s from client %lld (command %lld): %s", in.request,
                              (long long)in.client_id, (long long)in.command_id, msg);
-            else if (in.kind != CS_INPUT_COMMAND)
-                cs_dlog_info(&d->log, "%s from client %lld (command %lld) applied", in.request,
-                             (long long)in.client_id, (long long)in.command_id);
+            else if (in.kind != CS_INPUT_COMMAND) {
+                /* a client streaming drags at 60 Hz, or a burst, would flood the log */
+                snprintf(key, sizeof key, "applied input, client %lld", (long long)in.client_id);
+                cs_dlog_event(&d->log, key, "%s from client %lld (command %lld) applied",
+                              in.request, (long long)in.client_id, (long long)in.command_id);
+            }
         }
         sync_context(d);
         cs_bus_ack(d->bus, &in, msg[0] == 0, msg);

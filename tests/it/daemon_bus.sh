@@ -178,12 +178,27 @@ fi
 
 # A burst of 5000 forces on the (paused) object: every one acked, exactly 1024 taken (an
 # object's active inputs; the rest refused, by that limit or the full input queue).
+before=$(wc -l <"$CS_TMP/daemon.err")
 b=$("$CS_IT_BIN/cs_it_bus" --lcm "$CS_LCM_URL&recv_buf_size=4194304" --timeout 30 force \
     --name block2 --point 0.1,0.1,0.1 --force 0,0,0 --duration 0 --cid 200000 --burst 5000)
 case "$b" in
 "burst sent=5000 acked=5000 ok=1024") cs_pass "daemon-burst-to-an-object ($b)" ;;
 *) cs_fail daemon-burst-to-an-object "'$b'" ;;
 esac
+# ... and the log holds a few lines of each kind a second and a summary, not 5000 lines (the
+# 1024 applied forces were 1024 lines until session 42).
+sleep 1.3
+status_line 1 >/dev/null   # the summaries are printed on the daemon's next second
+burst_log=$(tail -n +"$((before + 1))" "$CS_TMP/daemon.err")
+applied=$(grep -c 'force from client [0-9]* (command [0-9]*) applied' <<<"$burst_log")
+refused=$(grep -c 'refused force from client' <<<"$burst_log")
+if [ "$applied" -ge 1 ] && [ "$applied" -le 15 ] && [ "$refused" -le 15 ] \
+    && grep -q "more 'applied input, client [0-9]*' lines suppressed" <<<"$burst_log" \
+    && grep -q "more 'refused input, client [0-9]*' warnings suppressed" <<<"$burst_log"; then
+    cs_pass "daemon-burst-log-rate-limited ($applied applied, $refused refused lines)"
+else
+    cs_fail daemon-burst-log-rate-limited "$applied applied and $refused refused lines, $(wc -l <<<"$burst_log") in all: $(tail -3 <<<"$burst_log" | tr '\n' '|')"
+fi
 
 if cs_stop_daemon TERM; then cs_pass daemon-sigterm-exit0; else cs_fail daemon-sigterm-exit0 "exit status $CS_DAEMON_RC"; fi
 if [ "$(head -1 "$CS_TMP/nodes.csv" 2>/dev/null)" = "x,y,z,ux,uy,uz" ] && [ "$(wc -l <"$CS_TMP/nodes.csv")" -eq 28 ]; then
