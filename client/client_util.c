@@ -18,6 +18,7 @@
 #include "cubesim_ack_t.h"
 #include "cubesim_delta_t.h"
 #include "cubesim_pose_t.h"
+#include "number.h"
 #include "cubesim_snapshot_t.h"
 #include "cubesim_status_t.h"
 #include "cubesim_topology_t.h"
@@ -102,13 +103,7 @@ int cs_msg_header(const void *data, int len, cubesim_header_t *h)
 
 int cs_parse_double(const char *s, double *out)
 {
-    char *end;
-    errno = 0;
-    double v = strtod(s, &end);
-    if (!*s || *end || errno || !isfinite(v))
-        return -1;
-    *out = v;
-    return 0;
+    return cs_parse_decimal(s, out) == 0 ? 0 : -1;
 }
 
 int cs_parse_int(const char *s, long lo, long hi, long *out)

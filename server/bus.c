@@ -6,6 +6,7 @@
  * own one-line warning naming the channel instead of LCM's anonymous "error -1 decoding".
  */
 #include "bus.h"
+#include "number.h"
 
 #include <errno.h>
 #include <fcntl.h>
@@ -500,11 +501,11 @@ static int parse_fracture(cs_input *x, char *why, size_t whylen)
         goto out;
     }
     for (int i = 1; i < n; i++) {
-        char *end = NULL;
-        errno = 0;
-        num[i - 1] = strtod(tok[i], &end);
-        if (!end || *end || errno || !isfinite(num[i - 1])) {
-            snprintf(why, whylen, "'%.40s' is not a finite number", tok[i]);
+        const int e = cs_parse_decimal(tok[i], &num[i - 1]);
+        if (e) {
+            snprintf(why, whylen, "'%.40s' is not a %s", tok[i],
+                     e == -2 ? "finite number (too large for a double)"
+                             : "finite number (a decimal such as -0.25 or 1e-3)");
             goto out;
         }
     }

@@ -30,6 +30,7 @@
 #include "cubesim.h"
 #include "dlog.h"
 #include "mesh.h"
+#include "number.h"
 #include "scene.h"
 
 typedef struct options {
@@ -141,9 +142,8 @@ static int parse_cli(int argc, char **argv, options *o)
                 return bad_cli("--steps '%s' is not a whole number >= 1%s", val, "");
             o->steps = n;
         } else if (strcmp(a, "--duration") == 0) {
-            char *end = NULL;
-            double d = strtod(val, &end);
-            if (!end || *end || !isfinite(d) || d <= 0)
+            double d = 0;
+            if (cs_parse_decimal(val, &d) || d <= 0)
                 return bad_cli("--duration '%s' is not a finite number of seconds > 0%s", val,
                                "");
             o->duration = d;

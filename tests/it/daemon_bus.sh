@@ -88,6 +88,7 @@ expect_refused daemon-load-broken-scene 'load: .*broken.json' command load --arg
 expect_refused daemon-load-missing-scene 'load: .*nothere.json' command load --arg "$CS_TMP/nothere.json"
 expect_refused daemon-fracture-arg-count 'fracture: argument must be .OBJECT X Y Z NX NY NZ' command fracture --arg "block 1 2"
 expect_refused daemon-fracture-nan "fracture: 'nan' is not a finite number" command fracture --arg "block nan 0 0 1 0 0"
+expect_refused daemon-fracture-hex "fracture: '0x10' is not a finite number .a decimal" command fracture --arg "block 0x10 0 0 1 0 0"
 expect_refused daemon-fracture-zero-normal 'fracture: the normal is zero' command fracture --arg "block 0 0 0 0 0 0"
 expect_refused daemon-fracture-negative-radius 'fracture: radius -1 m is negative' command fracture --arg "block 0 0 0 1 0 0 -1"
 expect_refused daemon-fracture-unknown-object "fracture: no object named 'nosuch'" command fracture --arg "nosuch 0 0 0 1 0 0"

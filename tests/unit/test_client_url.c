@@ -10,6 +10,7 @@
 #include <string.h>
 
 #include "client/client_util.h"
+#include "common/number.h"
 #include "cubesim_delta_t.h"
 #include "cubesim_pose_t.h"
 
@@ -99,4 +100,32 @@ TEST(client_seq_table_counts_a_restart_once)
     ENSURE(lost == 1);
     ENSURE(tab.n == 4);
     cs_seq_table_free(&tab);
+}
+
+/* The numbers people and clients type (flags, the fracture argument): decimal only. strtod
+ * alone read "0x10" as 16, "infinity" and " 1" as numbers, and refused 1e-400 (ERANGE). */
+TEST(parse_decimal_takes_decimal_numbers_only)
+{
+    const struct {
+        const char *s;
+        int rc;
+        double v;
+    } c[] = {
+        {"0", 0, 0},        {"-0.25", 0, -0.25},  {"+3", 0, 3},        {".5", 0, 0.5},
+        {"5.", 0, 5},       {"1e-3", 0, 1e-3},    {"2E+2", 0, 200},    {"1e-400", 0, 0},
+        {"1e400", -2, 0},   {"-1e309", -2, 0},    {"0x10", -1, 0},     {"inf", -1, 0},
+        {"nan", -1, 0},     {"infinity", -1, 0},  {" 1", -1, 0},       {"1 ", -1, 0},
+        {"", -1, 0},        {"-", -1, 0},         {".", -1, 0},        {"1e", -1, 0},
+        {"1e+", -1, 0},     {"e5", -1, 0},        {"1.2.3", -1, 0},    {"1,5", -1, 0},
+    };
+    for (size_t k = 0; k < sizeof c / sizeof c[0]; k++) {
+        double v = 42;
+        const int rc = cs_parse_decimal(c[k].s, &v);
+        if (rc != c[k].rc || (rc == 0 && v != c[k].v) || (rc != 0 && v != 42))
+            printf("    '%s': rc %d (want %d), value %g\n", c[k].s, rc, c[k].rc, v);
+        ENSURE(rc == c[k].rc);
+        ENSURE(rc == 0 ? v == c[k].v : v == 42);
+        double w = 42;
+        ENSURE((cs_parse_double(c[k].s, &w) == 0) == (c[k].rc == 0));
+    }
 }
