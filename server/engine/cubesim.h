@@ -189,12 +189,19 @@ cs_object_def cs_object_def_default(void);
 /* The CG preconditioner of the FEM solves (implicit Euler, statics). */
 typedef enum cs_preconditioner {
     CS_PRECOND_AUTO = 0,      /* multigrid for linear/corotational FEM objects of at least
-                                 CS_MG_AUTO_CELLS cells, block Jacobi otherwise */
+                                 CS_MG_AUTO_CELLS cells, in statics, and for smaller ones once
+                                 block Jacobi has taken more than CS_MG_AUTO_JACOBI_IT
+                                 iterations in CS_MG_AUTO_HARD_STEPS implicit steps in a row
+                                 where (ω_max dt)² ≤ CS_MG_AUTO_MAX_OMEGA_DT2; block Jacobi
+                                 otherwise */
     CS_PRECOND_JACOBI = 1,    /* 3×3 block Jacobi */
     CS_PRECOND_MULTIGRID = 2  /* a geometric multigrid V-cycle per iteration (FEM models; others
                                  keep block Jacobi) */
 } cs_preconditioner;
 #define CS_MG_AUTO_CELLS 2048
+#define CS_MG_AUTO_JACOBI_IT 25
+#define CS_MG_AUTO_HARD_STEPS 2
+#define CS_MG_AUTO_MAX_OMEGA_DT2 1e6
 
 /* Cubes a scene's boxes and cell sets may hold together, and a mesh may fill (the scene
  * parser and the voxelizer refuse more): a deformable cube costs the daemon about 1.7 kB, so

@@ -375,3 +375,104 @@ TEST(mg_lag_capped_by_fresh_iterations)
     ENSURE_MSG(it < it_lag, "%d iterations with the cap against %d without", it, it_lag);
     cs_world_destroy(s.w);
 }
+
+/* A box of nx×ny×nz cubes of edge h under "auto" at the default tolerance, one thread, held
+ * at x = 0 (fix) or resting above the ground (z0), with density rho; steps it `steps` times. */
+static int auto_box(scene *s, int nx, int ny, int nz, double h, double young, double rho,
+                    bool fix, cs_preconditioner pc, int steps, long *its_after)
+{
+    char err[256];
+    memset(s, 0, sizeof *s);
+    cs_world_def wd = cs_world_def_default();
+    wd.threads = 1;
+    wd.preconditioner = pc;
+    wd.sleep_steps = 0;
+    wd.has_ground = !fix;
+    if (cs_world_create(&wd, &s->w, err, sizeof err) != CS_OK)
+        return -1;
+    int32_t *ijk = cs_box_cells(nx, ny, nz);
+    cs_object_def d = cs_object_def_default();
+    d.name = "o";
+    d.model = CS_MODEL_COROTATIONAL;
+    d.material.young = young;
+    d.material.density = rho;
+    d.cube_size = h;
+    d.cells_ijk = ijk;
+    d.n_cells = nx * ny * nz;
+    d.cells_origin[2] = fix ? 1.0 : 0.05;
+    cs_aabb box = {{-1e-3 * h, -1, -1}, {1e-3 * h, 1e3, 1e3}};
+    if (fix) {
+        d.fixed = &box;
+        d.n_fixed = 1;
+    }
+    const int rc = cs_world_add_object(s->w, &d, &s->id, err, sizeof err);
+    free(ijk);
+    if (rc != CS_OK) {
+        printf("    add: %s\n", err);
+        return -1;
+    }
+    s->o = cs_world_find_internal(s->w, s->id);
+    *its_after = 0;
+    for (int k = 0; k < steps; k++) {
+        if (cs_world_step(s->w) != CS_OK)
+            return -1;
+        if (k >= steps / 2)
+            *its_after += cs_world_last_stats(s->w)->cg_iterations;
+    }
+    return 0;
+}
+
+/*
+ * "auto" below CS_MG_AUTO_CELLS (session 42): block Jacobi, until its solves take more than
+ * CS_MG_AUTO_JACOBI_IT iterations in CS_MG_AUTO_HARD_STEPS steps in a row; then multigrid
+ * for good, unless the body is free and so stiff for its mass ((ω dt)² past
+ * CS_MG_AUTO_MAX_OMEGA_DT2) that the float V-cycle cannot see what holds its rigid motions.
+ * A held 40×4×4 beam (E 1e7 and 1e13 Pa, 41–84 Jacobi iterations a step) takes multigrid and
+ * needs under a fifth of the iterations, to the same state as Jacobi's within the
+ * tolerance's reach; a soft 8³ block (6 a step) keeps Jacobi; a free 4³ block of (ω dt)² 3e7
+ * landing on the ground keeps Jacobi although its landing solves take hundreds.
+ */
+TEST(mg_auto_takes_multigrid_where_jacobi_works_hard)
+{
+    struct {
+        const char *what;
+        int nx, ny, nz;
+        double h, young, rho;
+        bool fix, want_mg;
+    } c[] = {
+        {"held beam 40x4x4, E 1e7", 40, 4, 4, 0.025, 1e7, 1000, true, true},
+        {"held beam 40x4x4, E 1e13", 40, 4, 4, 0.025, 1e13, 1000, true, true},
+        {"held soft block 8^3, E 1e5", 8, 8, 8, 0.1, 1e5, 1000, true, false},
+        {"free block 4^3 on the ground, (w dt)^2 3e7", 4, 4, 4, 0.1, 1000, 1e-5, false, false},
+    };
+    for (size_t k = 0; k < sizeof c / sizeof c[0]; k++) {
+        scene a, j;
+        long its_a, its_j;
+        ENSURE(auto_box(&a, c[k].nx, c[k].ny, c[k].nz, c[k].h, c[k].young, c[k].rho, c[k].fix,
+                        CS_PRECOND_AUTO, 40, &its_a) == 0);
+        ENSURE(auto_box(&j, c[k].nx, c[k].ny, c[k].nz, c[k].h, c[k].young, c[k].rho, c[k].fix,
+                        CS_PRECOND_JACOBI, 40, &its_j) == 0);
+        /* the same state to what the tolerance allows: largest node difference against the
+         * largest displacement */
+        double diff = 0, umax = 0;
+        for (int d = 0; d < 3 * a.o->n; d++) {
+            diff = fmax(diff, fabs(a.o->x[d] - j.o->x[d]));
+            umax = fmax(umax, fabs(j.o->x[d] - j.o->cm.node_rest[d]));
+        }
+        printf("    %s: %s, CG it/step %.1f (jacobi %.1f), state within %.2g of %.3g m\n",
+               c[k].what, a.o->lag.small_mg ? "multigrid" : "jacobi", its_a / 20.0,
+               its_j / 20.0, diff, umax);
+        ENSURE_MSG(a.o->lag.small_mg == c[k].want_mg, "%s", c[k].what);
+        ENSURE(!j.o->lag.small_mg);
+        if (c[k].want_mg) {
+            ENSURE(its_j > 20 * CS_MG_AUTO_JACOBI_IT && 5 * its_a < its_j);
+            ENSURE_MSG(diff <= 1e-3 * umax, "%s: %g of %g", c[k].what, diff, umax);
+        } else {
+            ENSURE(its_a == its_j && diff == 0); /* Jacobi all along: the same bits */
+            if (!c[k].fix) /* the bound, not the iterations, kept it on Jacobi */
+                ENSURE(its_j > 20 * CS_MG_AUTO_JACOBI_IT);
+        }
+        cs_world_destroy(a.w);
+        cs_world_destroy(j.w);
+    }
+}
