@@ -24,33 +24,23 @@ typedef struct scene {
     cs_object *o;
 } scene;
 
-/* An nx×ny×nz corotational box of cubes of edge h (fixed at x = 0 if fix), multigrid
- * preconditioner, one thread, tolerance 1e-6 of ‖b‖. */
-static int make_threads(scene *s, int nx, int ny, int nz, double h, double young, bool fix,
-                        cs_integrator integ, bool gravity, int threads)
+/* Adds an nx×ny×nz corotational box of cubes of edge h and density rho to s->w (fixed at
+ * x = 0 if fix; its lowest cells at z0) and finds its internal object. */
+static int add_box(scene *s, int nx, int ny, int nz, double h, double young, double rho,
+                   bool fix, cs_integrator integ, double z0)
 {
     char err[256];
-    memset(s, 0, sizeof *s);
-    cs_world_def wd = cs_world_def_default();
-    wd.threads = threads;
-    wd.preconditioner = CS_PRECOND_MULTIGRID;
-    wd.sleep_steps = 0;
-    wd.cg_tolerance = 1e-6;
-    wd.cg_relative_to = CS_CG_RELATIVE_RHS;
-    if (!gravity)
-        wd.gravity[0] = wd.gravity[1] = wd.gravity[2] = 0;
-    if (cs_world_create(&wd, &s->w, err, sizeof err) != CS_OK)
-        return -1;
     int32_t *ijk = cs_box_cells(nx, ny, nz);
     cs_object_def d = cs_object_def_default();
     d.name = "o";
     d.model = CS_MODEL_COROTATIONAL;
     d.integrator = integ;
     d.material.young = young;
-    d.material.density = 1000;
+    d.material.density = rho;
     d.cube_size = h;
     d.cells_ijk = ijk;
     d.n_cells = nx * ny * nz;
+    d.cells_origin[2] = z0;
     cs_aabb box = {{-1e-3 * h, -1, -1}, {1e-3 * h, 1e3, 1e3}};
     if (fix) {
         d.fixed = &box;
@@ -64,6 +54,25 @@ static int make_threads(scene *s, int nx, int ny, int nz, double h, double young
     }
     s->o = cs_world_find_internal(s->w, s->id);
     return 0;
+}
+
+/* An nx×ny×nz corotational box of cubes of edge h (fixed at x = 0 if fix), multigrid
+ * preconditioner, one thread, tolerance 1e-6 of ‖b‖. */
+static int make_threads(scene *s, int nx, int ny, int nz, double h, double young, bool fix,
+                        cs_integrator integ, bool gravity, int threads)
+{
+    memset(s, 0, sizeof *s);
+    cs_world_def wd = cs_world_def_default();
+    wd.threads = threads;
+    wd.preconditioner = CS_PRECOND_MULTIGRID;
+    wd.sleep_steps = 0;
+    wd.cg_tolerance = 1e-6;
+    wd.cg_relative_to = CS_CG_RELATIVE_RHS;
+    if (!gravity)
+        wd.gravity[0] = wd.gravity[1] = wd.gravity[2] = 0;
+    if (cs_world_create(&wd, &s->w, NULL, 0) != CS_OK)
+        return -1;
+    return add_box(s, nx, ny, nz, h, young, 1000, fix, integ, 0);
 }
 
 static int make(scene *s, int nx, int ny, int nz, double h, double young, bool fix,
@@ -376,42 +385,22 @@ TEST(mg_lag_capped_by_fresh_iterations)
     cs_world_destroy(s.w);
 }
 
-/* A box of nx×ny×nz cubes of edge h under "auto" at the default tolerance, one thread, held
- * at x = 0 (fix) or resting above the ground (z0), with density rho; steps it `steps` times. */
+/* A box of nx×ny×nz cubes of edge h under preconditioner pc at the default tolerance, one
+ * thread, held at x = 0 (fix) or resting above the ground, with density rho; steps it `steps`
+ * times and sums the CG iterations of the second half in *its_after. */
 static int auto_box(scene *s, int nx, int ny, int nz, double h, double young, double rho,
                     bool fix, cs_preconditioner pc, int steps, long *its_after)
 {
-    char err[256];
     memset(s, 0, sizeof *s);
     cs_world_def wd = cs_world_def_default();
     wd.threads = 1;
     wd.preconditioner = pc;
     wd.sleep_steps = 0;
     wd.has_ground = !fix;
-    if (cs_world_create(&wd, &s->w, err, sizeof err) != CS_OK)
+    if (cs_world_create(&wd, &s->w, NULL, 0) != CS_OK ||
+        add_box(s, nx, ny, nz, h, young, rho, fix, CS_INTEGRATOR_IMPLICIT_EULER,
+                fix ? 1.0 : 0.05) != 0)
         return -1;
-    int32_t *ijk = cs_box_cells(nx, ny, nz);
-    cs_object_def d = cs_object_def_default();
-    d.name = "o";
-    d.model = CS_MODEL_COROTATIONAL;
-    d.material.young = young;
-    d.material.density = rho;
-    d.cube_size = h;
-    d.cells_ijk = ijk;
-    d.n_cells = nx * ny * nz;
-    d.cells_origin[2] = fix ? 1.0 : 0.05;
-    cs_aabb box = {{-1e-3 * h, -1, -1}, {1e-3 * h, 1e3, 1e3}};
-    if (fix) {
-        d.fixed = &box;
-        d.n_fixed = 1;
-    }
-    const int rc = cs_world_add_object(s->w, &d, &s->id, err, sizeof err);
-    free(ijk);
-    if (rc != CS_OK) {
-        printf("    add: %s\n", err);
-        return -1;
-    }
-    s->o = cs_world_find_internal(s->w, s->id);
     *its_after = 0;
     for (int k = 0; k < steps; k++) {
         if (cs_world_step(s->w) != CS_OK)
