@@ -1425,28 +1425,6 @@ static bool wants_multigrid(const cs_world_t *w, const cs_object *o, bool any_si
     return any_size || o->cm.n_cells >= CS_MG_AUTO_CELLS || o->lag.small_mg;
 }
 
-/*
- * "auto" on an object below CS_MG_AUTO_CELLS cubes: after an implicit step solved by block
- * Jacobi in `iterations`. Multigrid breaks even with Jacobi on blocks of 1000–1700 cubes of a
- * soft material (E 1e5 Pa), where Jacobi takes 6–10 iterations a step; but the iterations grow
- * with the object's slenderness and stiffness, and multigrid's do not: at the default
- * tolerance (one thread, session 42) a 40×4×4 beam of 2.5 cm cubes took 41–84 Jacobi
- * iterations a step (E 1e5–1e11 Pa) and ran 1.7–4.4× faster with multigrid, a 20×20×2 plate
- * 49–98 (2.3–2.6× faster), an 8³ block of stiff material 30–44 (1.5–2.5×). Where Jacobi took
- * 19–21 the two were within 10–30 % either way, below 7 Jacobi was up to 35 % faster. So an
- * object whose Jacobi solves take more than CS_MG_AUTO_JACOBI_IT iterations in
- * CS_MG_AUTO_HARD_STEPS steps in a row (one impulse does not decide it) takes multigrid from
- * its next step on, for good (no back and forth). Iteration counts do not depend on the
- * thread count, so neither does the choice. Not past (ω_max dt)² = CS_MG_AUTO_MAX_OMEGA_DT2:
- * the V-cycle works in single precision, and where dt²K outweighs a node's mass by more than
- * float's resolution (1/ε ≈ 1.7e7) it cannot see the mass that alone holds a free body's rigid
- * motions. Small free blocks dropped on the ground took up to 2–4× longer with multigrid from
- * (ω dt)² ≈ 3e6 on (8³ and 13³ cubes), had energy spikes from 3e7, and a 4³ block at 3e11
- * ended with 4e4 J of elastic energy where Jacobi left 1e-12 J. That bound is for bodies
- * whose rigid motions only their mass holds: an object the scene holds rigidly (held_rigidly)
- * has none, and held beams and blocks ran 2× faster with multigrid up to (ω dt)² = 4.5e12
- * (40×4×4 and 8³ cubes, E up to 1e15 Pa).
- */
 /* Whether the scene holds the object's rigid motions: three nodes not on one line held in
  * every dof (fixed) or by penalty springs, at their rest positions. */
 static bool held_rigidly(const cs_object *o)
@@ -1486,6 +1464,28 @@ static bool held_rigidly(const cs_object *o)
     return false;
 }
 
+/*
+ * "auto" on an object below CS_MG_AUTO_CELLS cubes: after an implicit step solved by block
+ * Jacobi in `iterations`. Multigrid breaks even with Jacobi on blocks of 1000–1700 cubes of a
+ * soft material (E 1e5 Pa), where Jacobi takes 6–10 iterations a step; but the iterations grow
+ * with the object's slenderness and stiffness, and multigrid's do not: at the default
+ * tolerance (one thread, session 42) a 40×4×4 beam of 2.5 cm cubes took 41–84 Jacobi
+ * iterations a step (E 1e5–1e11 Pa) and ran 1.7–4.4× faster with multigrid, a 20×20×2 plate
+ * 49–98 (2.3–2.6× faster), an 8³ block of stiff material 30–44 (1.5–2.5×). Where Jacobi took
+ * 19–21 the two were within 10–30 % either way, below 7 Jacobi was up to 35 % faster. So an
+ * object whose Jacobi solves take more than CS_MG_AUTO_JACOBI_IT iterations in
+ * CS_MG_AUTO_HARD_STEPS steps in a row (one impulse does not decide it) takes multigrid from
+ * its next step on, for good (no back and forth). Iteration counts do not depend on the
+ * thread count, so neither does the choice. Not past (ω_max dt)² = CS_MG_AUTO_MAX_OMEGA_DT2:
+ * the V-cycle works in single precision, and where dt²K outweighs a node's mass by more than
+ * float's resolution (1/ε ≈ 1.7e7) it cannot see the mass that alone holds a free body's rigid
+ * motions. Small free blocks dropped on the ground took up to 2–4× longer with multigrid from
+ * (ω dt)² ≈ 3e6 on (8³ and 13³ cubes), had energy spikes from 3e7, and a 4³ block at 3e11
+ * ended with 4e4 J of elastic energy where Jacobi left 1e-12 J. That bound is for bodies
+ * whose rigid motions only their mass holds: an object the scene holds rigidly (held_rigidly)
+ * has none, and held beams and blocks ran 2× faster with multigrid up to (ω dt)² = 4.5e12
+ * (40×4×4 and 8³ cubes, E up to 1e15 Pa).
+ */
 static void auto_small_mg(const cs_world_t *w, cs_object *o, int iterations)
 {
     if (o->lag.small_mg || w->def.preconditioner != CS_PRECOND_AUTO ||
