@@ -38,7 +38,10 @@ static inline int cs_parse_decimal(const char *s, double *out)
     }
     if (*p)
         return -1;
-    const double v = strtod(s, NULL);
+    char *end = NULL;
+    const double v = strtod(s, &end);
+    if (end != p) /* strtod read another syntax (a locale with a decimal comma) */
+        return -1;
     if (!isfinite(v))
         return -2;
     *out = v;

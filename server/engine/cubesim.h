@@ -192,8 +192,9 @@ typedef enum cs_preconditioner {
                                  CS_MG_AUTO_CELLS cells, in statics, and for smaller ones once
                                  block Jacobi has taken more than CS_MG_AUTO_JACOBI_IT
                                  iterations in CS_MG_AUTO_HARD_STEPS implicit steps in a row
-                                 where (ω_max dt)² ≤ CS_MG_AUTO_MAX_OMEGA_DT2; block Jacobi
-                                 otherwise */
+                                 (until a reset or a change of its fields), if it is held by
+                                 three fixed nodes not on a line or (ω_max dt)² ≤
+                                 CS_MG_AUTO_MAX_OMEGA_DT2; block Jacobi otherwise */
     CS_PRECOND_JACOBI = 1,    /* 3×3 block Jacobi */
     CS_PRECOND_MULTIGRID = 2  /* a geometric multigrid V-cycle per iteration (FEM models; others
                                  keep block Jacobi) */

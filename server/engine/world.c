@@ -1426,7 +1426,8 @@ static bool wants_multigrid(const cs_world_t *w, const cs_object *o, bool any_si
 }
 
 /* Whether the scene holds the object's rigid motions: three nodes not on one line held in
- * every dof (fixed) or by penalty springs, at their rest positions. */
+ * every dof (fixed), at their rest positions. Penalty pins do not count: a pin of 1e-3 N/m
+ * holds nothing the float V-cycle can see. */
 static bool held_rigidly(const cs_object *o)
 {
     const double *X = o->cm.node_rest;
@@ -1434,8 +1435,7 @@ static bool held_rigidly(const cs_object *o)
     double best = 0;
     for (int pass = 0; pass < 3; pass++) {
         for (int i = 0; i < o->n; i++) {
-            const bool held = (o->mask[3 * i] && o->mask[3 * i + 1] && o->mask[3 * i + 2]) ||
-                              (o->pin && o->pin[i]);
+            const bool held = o->mask[3 * i] && o->mask[3 * i + 1] && o->mask[3 * i + 2];
             if (!held)
                 continue;
             if (pass == 0) {
@@ -1475,7 +1475,7 @@ static bool held_rigidly(const cs_object *o)
  * 19–21 the two were within 10–30 % either way, below 7 Jacobi was up to 35 % faster. So an
  * object whose Jacobi solves take more than CS_MG_AUTO_JACOBI_IT iterations in
  * CS_MG_AUTO_HARD_STEPS steps in a row (one impulse does not decide it) takes multigrid from
- * its next step on, for good (no back and forth). Iteration counts do not depend on the
+ * its next step on, until a reset or a change of its material (no back and forth). Iteration counts do not depend on the
  * thread count, so neither does the choice. Not past (ω_max dt)² = CS_MG_AUTO_MAX_OMEGA_DT2:
  * the V-cycle works in single precision, and where dt²K outweighs a node's mass by more than
  * float's resolution (1/ε ≈ 1.7e7) it cannot see the mass that alone holds a free body's rigid
@@ -3107,7 +3107,6 @@ static int step_implicit(cs_world_t *w, cs_object *o, cs_step_stats *st, bool tr
     }
     o->cg.stop = CS_CG_STOP_RHS; /* the other solves on this work (statics, impacts) */
     o->cg.stop_cap = 0;
-    auto_small_mg(w, o, r.iterations);
     momentum_exact(o, o->b, o->v1);
     active_end(w, o, av);
     o->fem.cell_active = NULL;
@@ -3141,6 +3140,8 @@ static int step_implicit(cs_world_t *w, cs_object *o, cs_step_stats *st, bool tr
             return step_implicit(w, o, st, false);
         }
     }
+    /* once per step: a Newmark step redone by implicit Euler counts as the redo's solve */
+    auto_small_mg(w, o, r.iterations);
     /* implicit Euler: a free body's rigid part along its rotation (o->cg.zo: scratch) */
     double Rt[9], mass = 0;
     const bool turned = !trap && free_body_rotation(w, o, o->cg.zo, Rt, &mass);
@@ -3663,25 +3664,35 @@ static void shift_frame(cs_object *o, const double c[3], double sign, const doub
     }
 }
 
-static int solve_static_in_frame(cs_world_t *w, cs_object *o, cs_step_stats *st, double fnorm);
+static int solve_static_in_frame(cs_world_t *w, cs_object *o, cs_step_stats *st, double fnorm,
+                                 bool mg_first);
 
 /*
- * One Newton solve of statics, A dx = res to ctol. Preconditioner "auto" takes multigrid for
- * linear and corotational objects of any size here, not from CS_MG_AUTO_CELLS cubes as in
- * dynamics: statics have no mass term, and the stiffness alone is as ill-conditioned as the
- * object is slender (the condition number grows as (L/h)² and, near incompressibility, as
- * 1/(1 − 2ν)). Block-Jacobi CG took 434–886 iterations a Newton solve on a 40×4×4 corotational
- * cantilever at ν = 0.49 where multigrid takes 3–10, and on the outside review's linear one at
- * ν = 0.4999 it did not converge in the 2000 it is given (session 31 then went on with
- * multigrid where Jacobi stopped; session 42 starts with it). "jacobi" asked for is block
- * Jacobi. Adds the iterations to st.
+ * One Newton solve of statics, A dx = res to ctol. With mg_first, preconditioner "auto" takes
+ * multigrid for linear and corotational objects of any size, not from CS_MG_AUTO_CELLS cubes
+ * as in dynamics: statics have no mass term, and the stiffness alone is as ill-conditioned as
+ * the object is slender (the condition number grows as (L/h)² and, near incompressibility, as
+ * 1/(1 − 2ν)). Block-Jacobi CG took 434–886 iterations a Newton solve on a 40×4×4
+ * corotational cantilever at ν = 0.49 where multigrid takes 3–10. Without mg_first (the
+ * retry of solve_static_object), as before session 42: the object's own choice, and where
+ * block Jacobi does not converge in its iterations, on from there with multigrid (the outside
+ * review's 40×4×4 linear beam at ν = 0.4999 needed more than the 2000 Jacobi is given).
+ * "jacobi" asked for is block Jacobi. Adds the iterations to st.
  */
 static cs_cg_result static_solve(cs_world_t *w, cs_object *o, cs_matvec_fn A, double *res,
-                                 double *dx, double ctol, cs_step_stats *st)
+                                 double *dx, double ctol, cs_step_stats *st, bool mg_first)
 {
-    const bool use_mg = setup_multigrid_ex(w, o, A, o->mask, true);
-    cs_cg_result r = solve(w, o, use_mg, A, o->mask, res, dx, ctol, w->def.cg_max_iterations * 4);
+    const int max_it = w->def.cg_max_iterations * 4;
+    const bool use_mg = setup_multigrid_ex(w, o, A, o->mask, mg_first);
+    cs_cg_result r = solve(w, o, use_mg, A, o->mask, res, dx, ctol, max_it);
     st->cg_iterations += r.iterations;
+    if (!r.converged && !use_mg && all_finite(dx, 3 * (size_t)o->n, cs_elastic_threads(o)) &&
+        setup_multigrid_ex(w, o, A, o->mask, true)) {
+        const int done = r.iterations;
+        r = solve(w, o, true, A, o->mask, res, dx, ctol, max_it);
+        st->cg_iterations += r.iterations;
+        r.iterations += done;
+    }
     return r;
 }
 
@@ -3713,7 +3724,32 @@ static int solve_static_object(cs_world_t *w, cs_object *o, cs_step_stats *st)
         return CS_ERR_NOMEM;
     memcpy(rest_save, o->cm.node_rest, (size_t)n3 * sizeof(double));
     shift_frame(o, c, -1.0, NULL);
-    const int rc = solve_static_in_frame(w, o, st, fnorm);
+    const bool converged0 = st->converged;
+    const double residual0 = st->cg_residual;
+    double *x0 = malloc((size_t)n3 * sizeof(double));
+    if (!x0) {
+        shift_frame(o, c, 1.0, rest_save);
+        free(rest_save);
+        return CS_ERR_NOMEM;
+    }
+    memcpy(x0, o->x, (size_t)n3 * sizeof(double));
+    int rc = solve_static_in_frame(w, o, st, fnorm, true);
+    /* Multigrid first is not always the way: on soft slender beams bent far (a 40×2×2
+     * corotational cantilever of E 1e4 Pa, ν 0.45, found by session 42's review) the
+     * multigrid-preconditioned Newton steps stall at 2e-3 of the loads while block Jacobi's
+     * converge (2463 CG iterations). Where "auto" would have given a small object Jacobi
+     * before session 42 and the search failed, it is redone that way from the start (from
+     * where multigrid stopped, Jacobi's load search failed too). */
+    if (rc == CS_ERR_NOT_CONVERGED && w->def.preconditioner == CS_PRECOND_AUTO &&
+        wants_multigrid(w, o, true) && !wants_multigrid(w, o, false)) {
+        st->converged = converged0;
+        st->cg_residual = residual0;
+        st->objects_stepped--;
+        memcpy(o->x, x0, (size_t)n3 * sizeof(double));
+        cs_elastic_update(o, o->x);
+        rc = solve_static_in_frame(w, o, st, fnorm, false);
+    }
+    free(x0);
     shift_frame(o, c, 1.0, rest_save);
     free(rest_save);
     cs_elastic_update(o, o->x);
@@ -3745,7 +3781,8 @@ static double static_floor(cs_object *o, double *delta, double *out)
 /* Newton steps without a new best residual before a load level counts as stalled. */
 #define STATIC_STALL 6
 
-static int solve_static_in_frame(cs_world_t *w, cs_object *o, cs_step_stats *st, double fnorm)
+static int solve_static_in_frame(cs_world_t *w, cs_object *o, cs_step_stats *st, double fnorm,
+                                 bool mg_first)
 {
     const int n3 = 3 * o->n;
     const bool linear = o->model == CS_MODEL_LINEAR;
@@ -3802,10 +3839,10 @@ static int solve_static_in_frame(cs_world_t *w, cs_object *o, cs_step_stats *st,
             cs_cg_result r = {0, 1, 0, 0};
             bool geometric = cs_elastic_prepare_tangent(o, o->x) == 0;
             if (geometric)
-                r = static_solve(w, o, tangent_operator, res, dx, ctol, st);
+                r = static_solve(w, o, tangent_operator, res, dx, ctol, st, mg_first);
             if (!geometric || !r.converged) {
                 memset(dx, 0, (size_t)n3 * sizeof(double));
-                r = static_solve(w, o, step_operator, res, dx, ctol, st);
+                r = static_solve(w, o, step_operator, res, dx, ctol, st, mg_first);
             }
             solved = r.converged;
             if (!all_finite(dx, (size_t)n3, cs_elastic_threads(o)))
@@ -3937,6 +3974,8 @@ void cs_world_reset(cs_world_t *w)
         o->still_steps = 0;
         o->act_wake_all = true;
         o->lag.valid = false;
+        o->lag.small_mg = false; /* "auto" decides again: a reset run repeats the first */
+        o->lag.hard_steps = 0;
         memset(o->contact, 0, (size_t)o->n);
         memset(o->ground, 0, (size_t)o->n * 3 * sizeof(double));
         o->elastic_energy_valid = false;

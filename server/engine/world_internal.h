@@ -139,7 +139,7 @@ typedef struct cs_pc_lag {
     int fresh_it;          /* CG iterations of the last round-0 solve on a fresh build */
     /* "auto" below CS_MG_AUTO_CELLS: implicit steps in a row whose block-Jacobi solves took
      * more than CS_MG_AUTO_JACOBI_IT iterations; at CS_MG_AUTO_HARD_STEPS the object takes
-     * multigrid (small_mg) for the rest of its life */
+     * multigrid (small_mg) until a reset or a change of its material fields */
     int hard_steps;
     bool small_mg;
     double drift;          /* the last step's max over cells of 3 − tr(R_builtᵀ R) */

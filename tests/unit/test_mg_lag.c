@@ -465,3 +465,61 @@ TEST(mg_auto_takes_multigrid_where_jacobi_works_hard)
         cs_world_destroy(j.w);
     }
 }
+
+/*
+ * The auto choice's life (session 42's review): a reset clears it, so a reset run repeats the
+ * first one bit for bit; a change of the material fields clears it (the bound on (ω dt)² is
+ * decided again); a Newmark step redone by implicit Euler counts once (it counted its
+ * trapezoidal solve and the redo's: a held beam switched after one step).
+ */
+TEST(mg_auto_choice_cleared_by_reset_and_fields_counted_once_per_step)
+{
+    scene a;
+    long its;
+    ENSURE(auto_box(&a, 40, 4, 4, 0.025, 1e7, 1000, true, CS_PRECOND_AUTO, 20, &its) == 0);
+    ENSURE(a.o->lag.small_mg);
+    const size_t n3 = 3 * (size_t)a.o->n;
+    double *x1 = malloc(n3 * sizeof *x1);
+    ENSURE(x1 != NULL);
+    memcpy(x1, a.o->x, n3 * sizeof *x1);
+    cs_world_reset(a.w);
+    ENSURE(!a.o->lag.small_mg && a.o->lag.hard_steps == 0);
+    for (int k = 0; k < 20; k++)
+        ENSURE(cs_world_step(a.w) == CS_OK);
+    ENSURE(memcmp(x1, a.o->x, n3 * sizeof *x1) == 0);
+    free(x1);
+    const double centre[3] = {0.5, 0.05, 1.05};
+    const cs_field_factors f = {.young = 2.0, .which = CS_FIELD_YOUNG};
+    int touched = 0;
+    ENSURE(cs_world_paint(a.w, a.id, centre, 0.1, &f, &touched, NULL, 0) == CS_OK && touched > 0);
+    ENSURE(!a.o->lag.small_mg);
+    cs_world_destroy(a.w);
+
+    /* Newmark at dt 0.1 s on a soft held beam: steps redone by implicit Euler count once */
+    scene n;
+    memset(&n, 0, sizeof n);
+    cs_world_def wd = cs_world_def_default();
+    wd.threads = 1;
+    wd.sleep_steps = 0;
+    wd.dt = 0.1;
+    ENSURE(cs_world_create(&wd, &n.w, NULL, 0) == CS_OK);
+    ENSURE(add_box(&n, 12, 4, 4, 0.025, 1e5, 1000, true, CS_INTEGRATOR_NEWMARK, 1.0) == 0);
+    int redone = 0, first = -1;
+    for (int k = 0; k < 20 && !n.o->lag.small_mg; k++) {
+        const int before = n.o->lag.hard_steps;
+        ENSURE(cs_world_step(n.w) == CS_OK);
+        const cs_step_stats *st = cs_world_last_stats(n.w);
+        if (st->newmark_redone && st->cg_iterations > 2 * CS_MG_AUTO_JACOBI_IT) {
+            if (first < 0)
+                first = k;
+            redone++;
+            ENSURE_MSG(n.o->lag.hard_steps == before + 1 &&
+                           (before + 1 >= CS_MG_AUTO_HARD_STEPS) == n.o->lag.small_mg,
+                       "step %d: hard steps %d -> %d", k, before, n.o->lag.hard_steps);
+        }
+    }
+    printf("    Newmark: %d redone steps of over %d CG iterations (first: step %d), %s\n",
+           redone, 2 * CS_MG_AUTO_JACOBI_IT, first, n.o->lag.small_mg ? "multigrid" : "jacobi");
+    ENSURE(redone > 0 && first == 0); /* the first step is one: counted once, not twice */
+    cs_world_destroy(n.w);
+}
