@@ -1425,41 +1425,48 @@ static bool wants_multigrid(const cs_world_t *w, const cs_object *o, bool any_si
     return any_size || o->cm.n_cells >= CS_MG_AUTO_CELLS || o->lag.small_mg;
 }
 
+/* Whether "auto" gives o block Jacobi by its size alone (below CS_MG_AUTO_CELLS cubes, not
+ * switched by auto_small_mg): the objects whose choice auto_small_mg and statics' retry make. */
+static bool auto_jacobi_by_size(const cs_world_t *w, const cs_object *o)
+{
+    return w->def.preconditioner == CS_PRECOND_AUTO && wants_multigrid(w, o, true) &&
+           !wants_multigrid(w, o, false);
+}
+
+static bool node_fixed(const cs_object *o, int i)
+{
+    const uint8_t *m = o->mask + 3 * (size_t)i;
+    return m[0] && m[1] && m[2];
+}
+
 /* Whether the scene holds the object's rigid motions: three nodes not on one line held in
  * every dof (fixed), at their rest positions. Penalty pins do not count: a pin of 1e-3 N/m
  * holds nothing the float V-cycle can see. */
 static bool held_rigidly(const cs_object *o)
 {
     const double *X = o->cm.node_rest;
-    int a = -1, b = -1;
+    int a = 0, b = -1;
+    while (a < o->n && !node_fixed(o, a))
+        a++;
     double best = 0;
-    for (int pass = 0; pass < 3; pass++) {
-        for (int i = 0; i < o->n; i++) {
-            const bool held = o->mask[3 * i] && o->mask[3 * i + 1] && o->mask[3 * i + 2];
-            if (!held)
-                continue;
-            if (pass == 0) {
-                a = i; /* the first held node */
-                break;
-            }
-            const double *p = X + 3 * i, *pa = X + 3 * a;
-            const double u[3] = {p[0] - pa[0], p[1] - pa[1], p[2] - pa[2]};
-            double m;
-            if (pass == 1) { /* the held node farthest from a */
-                m = u[0] * u[0] + u[1] * u[1] + u[2] * u[2];
-                if (m > best)
-                    best = m, b = i;
-            } else { /* one off the line a–b by more than a 1e-6 of |ab| */
-                const double *pb = X + 3 * b;
-                const double v[3] = {pb[0] - pa[0], pb[1] - pa[1], pb[2] - pa[2]};
-                const double c[3] = {u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2],
-                                     u[0] * v[1] - u[1] * v[0]};
-                if (c[0] * c[0] + c[1] * c[1] + c[2] * c[2] > 1e-12 * best * best)
-                    return true;
-            }
-        }
-        if ((pass == 0 && a < 0) || (pass == 1 && b < 0))
-            return false;
+    for (int i = a + 1; i < o->n; i++) { /* the fixed node farthest from a */
+        const double u[3] = {X[3 * i] - X[3 * a], X[3 * i + 1] - X[3 * a + 1],
+                             X[3 * i + 2] - X[3 * a + 2]};
+        const double d2 = u[0] * u[0] + u[1] * u[1] + u[2] * u[2];
+        if (node_fixed(o, i) && d2 > best)
+            best = d2, b = i;
+    }
+    if (b < 0)
+        return false;
+    const double v[3] = {X[3 * b] - X[3 * a], X[3 * b + 1] - X[3 * a + 1],
+                         X[3 * b + 2] - X[3 * a + 2]};
+    for (int i = a + 1; i < o->n; i++) { /* one off the line a–b by more than 1e-6 |ab| */
+        const double u[3] = {X[3 * i] - X[3 * a], X[3 * i + 1] - X[3 * a + 1],
+                             X[3 * i + 2] - X[3 * a + 2]};
+        const double c[3] = {u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2],
+                             u[0] * v[1] - u[1] * v[0]};
+        if (node_fixed(o, i) && c[0] * c[0] + c[1] * c[1] + c[2] * c[2] > 1e-12 * best * best)
+            return true;
     }
     return false;
 }
@@ -1488,8 +1495,7 @@ static bool held_rigidly(const cs_object *o)
  */
 static void auto_small_mg(const cs_world_t *w, cs_object *o, int iterations)
 {
-    if (o->lag.small_mg || w->def.preconditioner != CS_PRECOND_AUTO ||
-        !wants_multigrid(w, o, true) || wants_multigrid(w, o, false))
+    if (!auto_jacobi_by_size(w, o))
         return;
     if (iterations <= CS_MG_AUTO_JACOBI_IT) {
         o->lag.hard_steps = 0;
@@ -3665,7 +3671,7 @@ static void shift_frame(cs_object *o, const double c[3], double sign, const doub
 }
 
 static int solve_static_in_frame(cs_world_t *w, cs_object *o, cs_step_stats *st, double fnorm,
-                                 bool mg_first);
+                                 bool mg_first, double *relres);
 
 /*
  * One Newton solve of statics, A dx = res to ctol. With mg_first, preconditioner "auto" takes
@@ -3724,32 +3730,30 @@ static int solve_static_object(cs_world_t *w, cs_object *o, cs_step_stats *st)
         return CS_ERR_NOMEM;
     memcpy(rest_save, o->cm.node_rest, (size_t)n3 * sizeof(double));
     shift_frame(o, c, -1.0, NULL);
-    const bool converged0 = st->converged;
-    const double residual0 = st->cg_residual;
-    double *x0 = malloc((size_t)n3 * sizeof(double));
+    double *x0 = malloc((size_t)n3 * sizeof(double)), relres = 0;
     if (!x0) {
         shift_frame(o, c, 1.0, rest_save);
         free(rest_save);
         return CS_ERR_NOMEM;
     }
     memcpy(x0, o->x, (size_t)n3 * sizeof(double));
-    int rc = solve_static_in_frame(w, o, st, fnorm, true);
+    int rc = solve_static_in_frame(w, o, st, fnorm, true, &relres);
     /* Multigrid first is not always the way: on soft slender beams bent far (a 40×2×2
      * corotational cantilever of E 1e4 Pa, ν 0.45, found by session 42's review) the
      * multigrid-preconditioned Newton steps stall at 2e-3 of the loads while block Jacobi's
      * converge (2463 CG iterations). Where "auto" would have given a small object Jacobi
      * before session 42 and the search failed, it is redone that way from the start (from
      * where multigrid stopped, Jacobi's load search failed too). */
-    if (rc == CS_ERR_NOT_CONVERGED && w->def.preconditioner == CS_PRECOND_AUTO &&
-        wants_multigrid(w, o, true) && !wants_multigrid(w, o, false)) {
-        st->converged = converged0;
-        st->cg_residual = residual0;
-        st->objects_stepped--;
+    if (rc == CS_ERR_NOT_CONVERGED && auto_jacobi_by_size(w, o)) {
         memcpy(o->x, x0, (size_t)n3 * sizeof(double));
         cs_elastic_update(o, o->x);
-        rc = solve_static_in_frame(w, o, st, fnorm, false);
+        rc = solve_static_in_frame(w, o, st, fnorm, false, &relres);
     }
     free(x0);
+    st->cg_residual = fmax(st->cg_residual, relres);
+    if (rc != CS_OK)
+        st->converged = false;
+    st->objects_stepped++;
     shift_frame(o, c, 1.0, rest_save);
     free(rest_save);
     cs_elastic_update(o, o->x);
@@ -3782,7 +3786,7 @@ static double static_floor(cs_object *o, double *delta, double *out)
 #define STATIC_STALL 6
 
 static int solve_static_in_frame(cs_world_t *w, cs_object *o, cs_step_stats *st, double fnorm,
-                                 bool mg_first)
+                                 bool mg_first, double *relres)
 {
     const int n3 = 3 * o->n;
     const bool linear = o->model == CS_MODEL_LINEAR;
@@ -3921,11 +3925,7 @@ static int solve_static_in_frame(cs_world_t *w, cs_object *o, cs_step_stats *st,
     }
     /* the residual reported is the full load's: at a failed first level the state is the
      * rest state, whose residual at load 0 (1e-11 of nothing) read as nearly converged */
-    double final = static_residual(o, rc == CS_OK ? load : 1.0, res, NULL);
-    st->cg_residual = fmax(st->cg_residual, final / fnorm);
-    if (rc != CS_OK)
-        st->converged = false;
-    st->objects_stepped++;
+    *relres = static_residual(o, rc == CS_OK ? load : 1.0, res, NULL) / fnorm;
     free(x_save);
     cs_elastic_release_tangent(o);
     o->elastic_energy_valid = false;

@@ -960,6 +960,22 @@ TEST(world_nonfinite_state_after_the_solve_is_undone)
     }
 }
 
+/* A held nx×nyz×nyz beam of cubes of edge h (make_beam, one thread, preconditioner pc,
+ * tolerance tol or the default for 0) solved statically; returns the solve's status, b is the
+ * caller's to measure and free. */
+static int static_beam(beam *b, cs_model model, cs_material mat, int nx, int nyz, double h,
+                       cs_preconditioner pc, double tol)
+{
+    cs_world_def wd = cs_world_def_default();
+    wd.threads = 1;
+    wd.preconditioner = pc;
+    if (tol > 0)
+        wd.cg_tolerance = tol;
+    if (make_beam(b, wd, model, mat, nx, nyz, nyz, h, true, NULL) != 0)
+        return -100;
+    return cs_world_solve_static(b->w);
+}
+
 /*
  * Linear statics near incompressibility (the outside review's 40×4×4 beam of 2.5 cm cubes
  * held at one end under gravity, ν = 0.4999): the stiffness's condition number grows as
@@ -979,12 +995,9 @@ SLOW_TEST(world_linear_statics_near_incompressibility)
     int its[3], rc[3];
     double res[3];
     for (int k = 0; k < 3; k++) {
-        cs_world_def wd = cs_world_def_default();
-        wd.threads = 1;
-        wd.preconditioner = pcs[k];
         beam b;
-        ENSURE(make_beam(&b, wd, CS_MODEL_LINEAR, mat, 40, 4, 4, 0.025, true, NULL) == 0);
-        rc[k] = cs_world_solve_static(b.w);
+        rc[k] = static_beam(&b, CS_MODEL_LINEAR, mat, 40, 4, 0.025, pcs[k], 0);
+        ENSURE(rc[k] != -100);
         const cs_step_stats *st = cs_world_last_stats(b.w);
         its[k] = st->cg_iterations;
         res[k] = st->cg_residual;
@@ -1041,13 +1054,8 @@ SLOW_TEST(world_corotational_statics_of_a_slender_beam_bent_far)
     double tip[2], len[2];
     int its[2];
     for (int k = 0; k < 2; k++) {
-        cs_world_def wd = cs_world_def_default();
-        wd.threads = 1;
-        wd.cg_tolerance = 1e-8;
-        wd.preconditioner = pcs[k];
         beam b;
-        ENSURE(make_beam(&b, wd, CS_MODEL_COROTATIONAL, mat, nx, 4, 4, h, true, NULL) == 0);
-        ENSURE(cs_world_solve_static(b.w) == CS_OK);
+        ENSURE(static_beam(&b, CS_MODEL_COROTATIONAL, mat, nx, 4, h, pcs[k], 1e-8) == CS_OK);
         its[k] = cs_world_last_stats(b.w)->cg_iterations;
         double u[3];
         mean_disp_at_x(&b, nx * h, 1e-6, u);
@@ -1058,12 +1066,8 @@ SLOW_TEST(world_corotational_statics_of_a_slender_beam_bent_far)
                k == 0 ? "auto" : "jacobi", its[k], tip[k], len[k]);
     }
     /* the linear model's answer, for scale: its centre line stretches */
-    cs_world_def wd = cs_world_def_default();
-    wd.threads = 1;
-    wd.cg_tolerance = 1e-8;
     beam lb;
-    ENSURE(make_beam(&lb, wd, CS_MODEL_LINEAR, mat, nx, 4, 4, h, true, NULL) == 0);
-    ENSURE(cs_world_solve_static(lb.w) == CS_OK);
+    ENSURE(static_beam(&lb, CS_MODEL_LINEAR, mat, nx, 4, h, CS_PRECOND_AUTO, 1e-8) == CS_OK);
     double ul[3];
     mean_disp_at_x(&lb, nx * h, 1e-6, ul);
     const double len_lin = centre_line_length(&lb, nx, h);
@@ -1082,12 +1086,9 @@ SLOW_TEST(world_corotational_statics_of_a_slender_beam_bent_far)
     mat.poisson = 0.45;
     double tip2[2];
     for (int k = 0; k < 2; k++) {
-        cs_world_def wd2 = cs_world_def_default();
-        wd2.threads = 1;
-        wd2.preconditioner = pcs[k];
         beam b;
-        ENSURE(make_beam(&b, wd2, CS_MODEL_COROTATIONAL, mat, 40, 2, 2, h, true, NULL) == 0);
-        ENSURE_MSG(cs_world_solve_static(b.w) == CS_OK, "%s", k == 0 ? "auto" : "jacobi");
+        ENSURE_MSG(static_beam(&b, CS_MODEL_COROTATIONAL, mat, 40, 2, h, pcs[k], 0) == CS_OK,
+                   "%s", k == 0 ? "auto" : "jacobi");
         double u[3];
         mean_disp_at_x(&b, nx * h, 1e-6, u);
         tip2[k] = u[2];
