@@ -193,8 +193,7 @@ typedef enum cs_preconditioner {
                                  block Jacobi has taken more than CS_MG_AUTO_JACOBI_IT
                                  iterations in CS_MG_AUTO_HARD_STEPS implicit steps in a row
                                  (until a reset or a change of its fields), if it is held by
-                                 three fixed nodes not on a line or (ω_max dt)² ≤
-                                 CS_MG_AUTO_MAX_OMEGA_DT2; block Jacobi otherwise */
+                                 three fixed nodes not on a line; block Jacobi otherwise */
     CS_PRECOND_JACOBI = 1,    /* 3×3 block Jacobi */
     CS_PRECOND_MULTIGRID = 2  /* a geometric multigrid V-cycle per iteration (FEM models; others
                                  keep block Jacobi) */
@@ -202,7 +201,6 @@ typedef enum cs_preconditioner {
 #define CS_MG_AUTO_CELLS 2048
 #define CS_MG_AUTO_JACOBI_IT 25
 #define CS_MG_AUTO_HARD_STEPS 2
-#define CS_MG_AUTO_MAX_OMEGA_DT2 1e6
 
 /* Cubes a scene's boxes and cell sets may hold together, and a mesh may fill (the scene
  * parser and the voxelizer refuse more): a deformable cube costs the daemon about 1.7 kB, so

@@ -43,8 +43,8 @@ int cs_elastic_fields_changed(cs_object *o)
     const double *ky = o->fld.has_young ? o->fld.young : NULL;
     o->fem.kf = ky;
     o->lag.valid = false; /* the fields and masses the preconditioner was built from changed */
-    o->lag.small_mg = false; /* and "auto" decides again for the new material (its bound on */
-    o->lag.hard_steps = 0;   /* (ω dt)² may no longer hold) */
+    o->lag.small_mg = false; /* and "auto" decides again for the new material */
+    o->lag.hard_steps = 0;
     if (o->model == CS_MODEL_MSS)
         o->mss.ky = ky;
     if (o->lf) {

@@ -1483,15 +1483,13 @@ static bool held_rigidly(const cs_object *o)
  * object whose Jacobi solves take more than CS_MG_AUTO_JACOBI_IT iterations in
  * CS_MG_AUTO_HARD_STEPS steps in a row (one impulse does not decide it) takes multigrid from
  * its next step on, until a reset or a change of its material (no back and forth). Iteration counts do not depend on the
- * thread count, so neither does the choice. Not past (ω_max dt)² = CS_MG_AUTO_MAX_OMEGA_DT2:
- * the V-cycle works in single precision, and where dt²K outweighs a node's mass by more than
- * float's resolution (1/ε ≈ 1.7e7) it cannot see the mass that alone holds a free body's rigid
- * motions. Small free blocks dropped on the ground took up to 2–4× longer with multigrid from
- * (ω dt)² ≈ 3e6 on (8³ and 13³ cubes), had energy spikes from 3e7, and a 4³ block at 3e11
- * ended with 4e4 J of elastic energy where Jacobi left 1e-12 J. That bound is for bodies
- * whose rigid motions only their mass holds: an object the scene holds rigidly (held_rigidly)
- * has none, and held beams and blocks ran 2× faster with multigrid up to (ω dt)² = 4.5e12
- * (40×4×4 and 8³ cubes, E up to 1e15 Pa).
+ * thread count, so neither does the choice. Only for a body the scene holds rigidly
+ * (held_rigidly): held beams and blocks ran 2× faster with multigrid up to (ω dt)² = 4.5e12.
+ * A free body's rigid motions are held by its mass alone, which the single-precision V-cycle
+ * loses once dt²K outweighs it by float's resolution (a 4³ block at (ω dt)² 3e11 on the ground
+ * ended with 4e4 J of elastic energy under multigrid where Jacobi left 1e-12 J; free blocks
+ * dropped on the ground were 2–4× slower with it from 3e6), and a free body that turns
+ * rebuilds its hierarchy whenever a cell has turned 0.05 rad.
  */
 static void auto_small_mg(const cs_world_t *w, cs_object *o, int iterations)
 {
@@ -1501,10 +1499,7 @@ static void auto_small_mg(const cs_world_t *w, cs_object *o, int iterations)
         o->lag.hard_steps = 0;
         return;
     }
-    const double dt = w->def.dt;
-    if (!(cs_elastic_object_omega2(o, o->omega2_plain, false) * dt * dt <=
-          CS_MG_AUTO_MAX_OMEGA_DT2) &&
-        !held_rigidly(o))
+    if (!held_rigidly(o))
         return;
     if (++o->lag.hard_steps >= CS_MG_AUTO_HARD_STEPS)
         o->lag.small_mg = true;

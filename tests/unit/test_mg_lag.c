@@ -414,8 +414,9 @@ static int auto_box(scene *s, int nx, int ny, int nz, double h, double young, do
 /*
  * "auto" below CS_MG_AUTO_CELLS (session 42): block Jacobi, until its solves take more than
  * CS_MG_AUTO_JACOBI_IT iterations in CS_MG_AUTO_HARD_STEPS steps in a row; then multigrid
- * for good, unless the body is free and so stiff for its mass ((ω dt)² past
- * CS_MG_AUTO_MAX_OMEGA_DT2) that the float V-cycle cannot see what holds its rigid motions.
+ * for good if three fixed nodes not on a line hold it (a free body's rigid motions are held by
+ * its mass alone, which the float V-cycle loses when stiff, and a turning one rebuilds its
+ * hierarchy every step).
  * A held 40×4×4 beam (E 1e7 and 1e13 Pa, 41–84 Jacobi iterations a step) takes multigrid and
  * needs under a fifth of the iterations, to the same state as Jacobi's within the
  * tolerance's reach; a soft 8³ block (6 a step) keeps Jacobi; a free 4³ block of (ω dt)² 3e7
@@ -458,7 +459,7 @@ TEST(mg_auto_takes_multigrid_where_jacobi_works_hard)
             ENSURE_MSG(diff <= 1e-3 * umax, "%s: %g of %g", c[k].what, diff, umax);
         } else {
             ENSURE(its_a == its_j && diff == 0); /* Jacobi all along: the same bits */
-            if (!c[k].fix) /* the bound, not the iterations, kept it on Jacobi */
+            if (!c[k].fix) /* being free, not the iterations, kept it on Jacobi */
                 ENSURE(its_j > 20 * CS_MG_AUTO_JACOBI_IT);
         }
         cs_world_destroy(a.w);
@@ -468,8 +469,8 @@ TEST(mg_auto_takes_multigrid_where_jacobi_works_hard)
 
 /*
  * The auto choice's life (session 42's review): a reset clears it, so a reset run repeats the
- * first one bit for bit; a change of the material fields clears it (the bound on (ω dt)² is
- * decided again); a Newmark step redone by implicit Euler counts once (it counted its
+ * first one bit for bit; a change of the material fields clears it (decided again for the
+ * new material); a Newmark step redone by implicit Euler counts once (it counted its
  * trapezoidal solve and the redo's: a held beam switched after one step).
  */
 TEST(mg_auto_choice_cleared_by_reset_and_fields_counted_once_per_step)
