@@ -38,7 +38,8 @@ const char *cs_msg_path(const char *s, char *buf, size_t n);
 const char *cs_msg_text(const char *s, char *buf, size_t n, int path);
 
 /*
- * Load every mesh of a file assimp reads (OBJ, STL, PLY, OFF, glTF, ...), merged into one,
+ * Load every mesh of a file assimp reads (OBJ, STL, PLY, glTF, ...; OFF is read here, see
+ * mesh_io.c), merged into one,
  * node transforms applied, triangulated, identical vertices welded (by exact position after
  * import), degenerate triangles dropped. Returns 0, or -1 with a one-line message naming the
  * file and the problem (missing, unreadable, rejected by assimp, no triangles, non-finite).

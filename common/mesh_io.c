@@ -2,11 +2,13 @@
  * mesh_io.c — triangle surface import and export through assimp's C API (implements mesh.h;
  * the input side of seed 000 §2.1: "an arbitrary surface mesh" becomes one indexed triangle list).
  *
- * Import: assimp triangulates, pre-transforms (node transforms baked in) and splits primitive
- * types; we then merge every triangle mesh of the scene, weld vertices with bit-identical
- * positions across meshes (sort, O(n log n): STL shares none), drop points, lines, triangles with
- * a repeated index or exactly zero area, and vertices no triangle uses. Every coordinate is
- * checked with isfinite. Assimp stores float32 (ai_real), so that is the precision of any file.
+ * Import: assimp pre-transforms (node transforms baked in) and splits primitive types; we then
+ * merge every mesh of the scene with faces, cut polygons into triangles (triangulate_face), weld
+ * vertices with bit-identical positions across meshes (sort, O(n log n): STL shares none), drop
+ * points, lines, triangles with a repeated index or exactly zero area, and vertices no triangle
+ * uses. Every coordinate is checked with isfinite. Assimp stores float32 (ai_real), so that is
+ * the precision of any file it reads. OFF is read here instead (load_off, in double precision:
+ * assimp's reader drops faces of more than 9 corners), then cut, welded and cleaned the same way.
  * All of that runs in a forked child under a memory cap and a time limit (see "the guarded
  * import" below); the parent only reads the result from a pipe.
  *
@@ -277,6 +279,348 @@ static int triangulate_face(const double *v, const int32_t *idx, int k, int32_t 
     return nt;
 }
 
+/* ---------------------------------------------------------------- OFF, read here */
+
+/*
+ * OFF (Geomview's object file format) is read here, not by assimp: assimp's reader drops every
+ * face of more than 9 corners without a word (a 12-sided prism arrived without its two caps and
+ * was refused as "24 boundary edges: the surface is open"), replaces an index past the last
+ * vertex by the last vertex, and reads coordinates as floats. The format: an optional keyword
+ * [ST][C][N][4][n]OFF (n: the coordinate count follows; 4: a homogeneous w after the
+ * coordinates), the vertex, face and edge counts, one vertex per line (x y z, then whatever
+ * normals, colours or texture coordinates the keyword announces, ignored here), one face per
+ * line (its corner count, the corners' indices from 0, then an optional colour, ignored);
+ * '#' starts a comment. Binary OFF is refused. Positions are read in double precision.
+ */
+typedef struct off_reader {
+    const char *p, *end; /* the unread text */
+    int line;            /* of the text at p, from 1 */
+} off_reader;
+
+/* The next line that holds anything but blanks and a comment: [*b, *e) without the comment.
+ * Returns 0 at the end of the text. */
+static int off_line(off_reader *r, const char **b, const char **e)
+{
+    while (r->p < r->end) {
+        const char *s = r->p, *nl = memchr(s, '\n', (size_t)(r->end - s));
+        const char *stop = nl ? nl : r->end, *hash = memchr(s, '#', (size_t)(stop - s));
+        r->p = nl ? nl + 1 : r->end;
+        r->line++;
+        const char *t = hash ? hash : stop;
+        while (s < t && (*s == ' ' || *s == '\t' || *s == '\r' || *s == '\f' || *s == '\v'))
+            s++;
+        if (s < t) {
+            *b = s;
+            *e = t;
+            return 1;
+        }
+    }
+    return 0;
+}
+
+/* The next blank-separated word of [*b, e): [*b, returned end); NULL if none is left. */
+static const char *off_word(const char **b, const char *e)
+{
+    const char *s = *b;
+    while (s < e && (*s == ' ' || *s == '\t' || *s == '\r' || *s == '\f' || *s == '\v'))
+        s++;
+    *b = s;
+    while (s < e && !(*s == ' ' || *s == '\t' || *s == '\r' || *s == '\f' || *s == '\v'))
+        s++;
+    return s > *b ? s : NULL;
+}
+
+/* A number word [b, we) as a double (strtod's syntax, the whole word); 0 or -1. */
+static int off_number(const char *b, const char *we, double *x)
+{
+    char buf[64];
+    const size_t n = (size_t)(we - b);
+    if (n >= sizeof buf)
+        return -1;
+    memcpy(buf, b, n);
+    buf[n] = '\0';
+    char *stop;
+    *x = strtod(buf, &stop);
+    return *stop == '\0' ? 0 : -1;
+}
+
+/* A count or index word [b, we): digits only, below 2^31; 0 or -1. */
+static int off_count(const char *b, const char *we, long *k)
+{
+    long v = 0;
+    if (b == we)
+        return -1;
+    for (const char *s = b; s < we; s++) {
+        if (*s < '0' || *s > '9' || v > (INT32_MAX - 9) / 10)
+            return -1;
+        v = 10 * v + (*s - '0');
+    }
+    *k = v;
+    return 0;
+}
+
+/* The next word of the header (across lines), into [*wb, returned end); NULL at the end. */
+static const char *off_header_word(off_reader *r, const char **lb, const char **le, const char **wb)
+{
+    for (;;) {
+        if (*lb < *le) {
+            const char *we = off_word(lb, *le);
+            if (we) {
+                *wb = *lb;
+                *lb = we;
+                return we;
+            }
+        }
+        if (!off_line(r, lb, le))
+            return NULL;
+    }
+}
+
+static int load_off(const char *path, const char *shown, off_t size, cs_mesh *out, char *err,
+                    size_t errlen)
+{
+    char *text = NULL;
+    int32_t *poly = NULL;
+    int *rest = NULL;
+    FILE *f = fopen(path, "rb");
+    if (!f) {
+        snprintf(err, errlen, "mesh '%s': %s", shown, strerror(errno));
+        return -1;
+    }
+    text = malloc((size_t)size + 1);
+    if (!text) {
+        fclose(f);
+        snprintf(err, errlen, "mesh '%s': out of memory", shown);
+        return -1;
+    }
+    const size_t got = fread(text, 1, (size_t)size, f);
+    fclose(f);
+    if (got != (size_t)size) {
+        snprintf(err, errlen, "mesh '%s': read %zu of its %lld bytes", shown, got, (long long)size);
+        goto fail;
+    }
+    if (memchr(text, '\0', got)) {
+        snprintf(err, errlen, "mesh '%s': OFF: a zero byte in the text (binary OFF is not read)",
+                 shown);
+        goto fail;
+    }
+    off_reader r = {text, text + got, 0};
+    const char *lb = text, *le = text, *wb, *we;
+    /* the keyword: [ST][C][N][4][n]OFF, or none (the counts come first) */
+    int homogeneous = 0, dimension = 3, has_dim = 0;
+    if (!(we = off_header_word(&r, &lb, &le, &wb))) {
+        snprintf(err, errlen, "mesh '%s': OFF: no header (only blanks and comments)", shown);
+        goto fail;
+    }
+    const size_t wl = (size_t)(we - wb);
+    if (wl >= 3 && !memcmp(we - 3, "OFF", 3)) {
+        const char *k = wb, *kend = we - 3;
+        if (kend - k >= 2 && !memcmp(k, "ST", 2))
+            k += 2;
+        if (k < kend && *k == 'C')
+            k++;
+        if (k < kend && *k == 'N')
+            k++;
+        if (k < kend && *k == '4')
+            homogeneous = 1, k++;
+        if (k < kend && *k == 'n')
+            has_dim = 1, k++;
+        if (k != kend) {
+            snprintf(err, errlen, "mesh '%s': OFF: line %d: unknown keyword '%.*s'", shown, r.line,
+                     (int)(wl < 40 ? wl : 40), wb);
+            goto fail;
+        }
+        if (!(we = off_header_word(&r, &lb, &le, &wb)))
+            goto short_header;
+        if ((size_t)(we - wb) == 6 && !memcmp(wb, "BINARY", 6)) {
+            snprintf(err, errlen, "mesh '%s': OFF: binary OFF is not read (write it as text)",
+                     shown);
+            goto fail;
+        }
+        if (has_dim) {
+            long d;
+            if (off_count(wb, we, &d) != 0) {
+                snprintf(err, errlen, "mesh '%s': OFF: line %d: the dimension is not a count",
+                         shown, r.line);
+                goto fail;
+            }
+            dimension = (int)d;
+            if (!(we = off_header_word(&r, &lb, &le, &wb)))
+                goto short_header;
+        }
+    }
+    if (dimension != 3) {
+        snprintf(err, errlen, "mesh '%s': OFF: %d coordinates per vertex (only 3 are read)", shown,
+                 dimension);
+        goto fail;
+    }
+    /* the vertex and face counts; the edge count, which writers often leave out, is not
+     * used (whatever follows the face count on its line is skipped) */
+    long counts[2];
+    for (int c = 0; c < 2; c++) {
+        if (c > 0 && !(we = off_header_word(&r, &lb, &le, &wb)))
+            goto short_header;
+        if (off_count(wb, we, &counts[c]) != 0) {
+            snprintf(err, errlen, "mesh '%s': OFF: line %d: the %s count '%.*s' is not a count "
+                     "below 2^31", shown, r.line, c == 0 ? "vertex" : "face",
+                     (int)((we - wb) < 40 ? (we - wb) : 40), wb);
+            goto fail;
+        }
+    }
+    const long nv = counts[0], nf = counts[1];
+    /* a vertex line takes at least 6 bytes ("0 0 0\n"), a face line 8 ("3 0 1 2\n"): a
+     * header claiming far more is refused before anything is allocated for it (a file cut
+     * short is found below, with the line it ends at) */
+    if (nv > (long)(got / 4) + 64 || nf > (long)(got / 4) + 64 || nv > INT32_MAX / 3) {
+        snprintf(err, errlen, "mesh '%s': OFF: the header claims %ld vertices and %ld faces, more "
+                 "than its %zu bytes can hold", shown, nv, nf, got);
+        goto fail;
+    }
+    if (nv < 3 || nf < 1) {
+        snprintf(err, errlen, "mesh '%s': OFF: %ld vertices and %ld faces: no triangles", shown,
+                 nv, nf);
+        goto fail;
+    }
+    out->v = malloc((size_t)nv * 3 * sizeof(double));
+    long tcap = nf * 2 + 16;
+    out->t = malloc((size_t)tcap * 3 * sizeof(int32_t));
+    if (!out->v || !out->t)
+        goto nomem;
+    /* the vertices: a line each, from the line after the counts' */
+    const int ncoord = homogeneous ? 4 : 3;
+    for (long i = 0; i < nv; i++) {
+        if (!off_line(&r, &lb, &le)) {
+            snprintf(err, errlen, "mesh '%s': OFF: the header claims %ld vertices, the file ends "
+                     "after %ld", shown, nv, i);
+            goto fail;
+        }
+        double x[4];
+        for (int c = 0; c < ncoord; c++) {
+            if (!(we = off_word(&lb, le)) || off_number(lb, we, &x[c]) != 0) {
+                snprintf(err, errlen, "mesh '%s': OFF: line %d: vertex %ld needs %d numbers",
+                         shown, r.line, i, ncoord);
+                goto fail;
+            }
+            lb = we;
+        }
+        for (int c = 0; c < 3; c++) {
+            const double v = homogeneous ? x[c] / x[3] : x[c];
+            if (!isfinite(v)) {
+                snprintf(err, errlen, "mesh '%s': OFF: line %d: vertex %ld is not finite", shown,
+                         r.line, i);
+                goto fail;
+            }
+            out->v[3 * i + c] = v;
+        }
+    }
+    /* the faces: a line each; corners past 3 cut by triangulate_face, 1 or 2 corners (points,
+     * lines) have no area and are skipped */
+    long nt = 0, kcap = 0, budget = 100000000;
+    for (long fi = 0; fi < nf; fi++) {
+        if (!off_line(&r, &lb, &le)) {
+            snprintf(err, errlen, "mesh '%s': OFF: the header claims %ld faces, the file ends "
+                     "after %ld", shown, nf, fi);
+            goto fail;
+        }
+        long k;
+        if (!(we = off_word(&lb, le)) || off_count(lb, we, &k) != 0) {
+            snprintf(err, errlen, "mesh '%s': OFF: line %d: face %ld does not start with its "
+                     "corner count", shown, r.line, fi);
+            goto fail;
+        }
+        lb = we;
+        if (k > (le - lb) / 2 + 1) {
+            snprintf(err, errlen, "mesh '%s': OFF: line %d: face %ld claims %ld corners, more "
+                     "than its line holds", shown, r.line, fi, k);
+            goto fail;
+        }
+        if (k > kcap) {
+            kcap = k;
+            free(poly);
+            free(rest);
+            poly = malloc((size_t)kcap * sizeof *poly);
+            rest = malloc((size_t)kcap * sizeof *rest);
+            if (!poly || !rest)
+                goto nomem;
+        }
+        for (long c = 0; c < k; c++) {
+            long idx;
+            if (!(we = off_word(&lb, le)) || off_count(lb, we, &idx) != 0) {
+                snprintf(err, errlen, "mesh '%s': OFF: line %d: face %ld needs %ld vertex "
+                         "indices", shown, r.line, fi, k);
+                goto fail;
+            }
+            if (idx >= nv) {
+                snprintf(err, errlen, "mesh '%s': OFF: line %d: face %ld has vertex index %ld, "
+                         "past the %ld vertices", shown, r.line, fi, idx, nv);
+                goto fail;
+            }
+            lb = we;
+            poly[c] = (int32_t)idx;
+        }
+        if (k < 3)
+            continue;
+        if (nt + k - 2 > tcap) {
+            tcap = 2 * tcap + k;
+            int32_t *t = realloc(out->t, (size_t)tcap * 3 * sizeof *t);
+            if (!t)
+                goto nomem;
+            out->t = t;
+        }
+        if (nt + k - 2 > INT32_MAX / 3) {
+            snprintf(err, errlen, "mesh '%s': OFF: too many triangles", shown);
+            goto fail;
+        }
+        if (k == 3) {
+            memcpy(out->t + 3 * nt, poly, 3 * sizeof *poly);
+            nt++;
+        } else {
+            nt += triangulate_face(out->v, poly, (int)k, out->t + 3 * nt, rest, &budget);
+        }
+    }
+    free(text);
+    free(poly);
+    free(rest);
+    out->nv = (int)nv;
+    out->nt = (int)nt;
+    return 0;
+short_header:
+    snprintf(err, errlen, "mesh '%s': OFF: the header ends before its vertex and face counts",
+             shown);
+    goto fail;
+nomem:
+    snprintf(err, errlen, "mesh '%s': out of memory", shown);
+fail:
+    free(text);
+    free(poly);
+    free(rest);
+    cs_mesh_free(out);
+    return -1;
+}
+
+/* Does path end in ".off" (any case)? */
+static int is_off_path(const char *path)
+{
+    const size_t n = strlen(path);
+    return n >= 4 && !strcasecmp(path + n - 4, ".off");
+}
+
+/* Weld and clean a loaded triangle list (weld_and_clean); 0, or -1 with out freed. */
+static int finish_mesh(cs_mesh *out, const char *shown, char *err, size_t errlen)
+{
+    if (weld_and_clean(out) != 0) {
+        cs_mesh_free(out);
+        snprintf(err, errlen, "mesh '%s': out of memory", shown);
+        return -1;
+    }
+    if (out->nt == 0) {
+        cs_mesh_free(out);
+        snprintf(err, errlen, "mesh '%s': no triangles (all degenerate)", shown);
+        return -1;
+    }
+    return 0;
+}
+
 /* The import itself (in the child process of cs_mesh_load). */
 static int load_direct(const char *path, cs_mesh *out, char *err, size_t errlen)
 {
@@ -298,6 +642,11 @@ static int load_direct(const char *path, cs_mesh *out, char *err, size_t errlen)
     if (st.st_size == 0) {
         snprintf(err, errlen, "mesh '%s': empty file", shown);
         return -1;
+    }
+    if (is_off_path(path)) {
+        if (load_off(path, shown, st.st_size, out, err, errlen) != 0)
+            return -1;
+        return finish_mesh(out, shown, err, errlen);
     }
     const struct aiScene *sc =
         aiImportFile(path, aiProcess_PreTransformVertices | aiProcess_SortByPType |
@@ -394,17 +743,7 @@ static int load_direct(const char *path, cs_mesh *out, char *err, size_t errlen)
     aiReleaseImport(sc);
     out->nv = vbase;
     out->nt = tcount;
-    if (weld_and_clean(out) != 0) {
-        cs_mesh_free(out);
-        snprintf(err, errlen, "mesh '%s': out of memory", shown);
-        return -1;
-    }
-    if (out->nt == 0) {
-        cs_mesh_free(out);
-        snprintf(err, errlen, "mesh '%s': no triangles (all degenerate)", shown);
-        return -1;
-    }
-    return 0;
+    return finish_mesh(out, shown, err, errlen);
 fail:
     aiReleaseImport(sc);
     free(rest);
