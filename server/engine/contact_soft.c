@@ -24,19 +24,6 @@ static int grow_f64(double **p, size_t *cap, size_t n)
     return 0;
 }
 
-static void cross(const double a[3], const double b[3], double c[3])
-{
-    c[0] = a[1] * b[2] - a[2] * b[1];
-    c[1] = a[2] * b[0] - a[0] * b[2];
-    c[2] = a[0] * b[1] - a[1] * b[0];
-}
-
-static void mul3(const double M[9], const double v[3], double r[3])
-{
-    for (int a = 0; a < 3; a++)
-        r[a] = M[3 * a] * v[0] + M[3 * a + 1] * v[1] + M[3 * a + 2] * v[2];
-}
-
 /*
  * The coarse part: centre of mass, inverse mass per free axis and inverse inertia over the
  * free rotations, of the mass A gives the nodes (mass[i]). Held or pinned nodes: no coarse
@@ -220,13 +207,13 @@ static void prepare_stiff(cs_soft_resp *r, cs_object *D, double dt, double groun
             d[a] = D->x[k] - r->c[a];
             q[a] = D->mask[k] ? 0.0 : dt * D->f_const[k] - (mass[i] - D->m[i]) * v[k];
         }
-        cross(d, q, t);
+        cs_vec3_cross(d, q, t);
         for (int a = 0; a < 3; a++)
             L[a] += t[a];
     }
     for (int a = 0; a < 3; a++)
         U[a] = held ? 0.0 : r->minv[a] * P[a];
-    mul3(r->iinv, L, Wc);
+    cs_mat3_vec(r->iinv, L, Wc);
     if (held)
         Wc[0] = Wc[1] = Wc[2] = 0;
     memcpy(r->U0, U, sizeof U);
@@ -235,10 +222,10 @@ static void prepare_stiff(cs_soft_resp *r, cs_object *D, double dt, double groun
         double d[3], wd[3], res[3], du[3];
         for (int a = 0; a < 3; a++)
             d[a] = D->x[3 * i + a] - r->c[a];
-        cross(Wc, d, wd);
+        cs_vec3_cross(Wc, d, wd);
         for (int a = 0; a < 3; a++)
             res[a] = f[3 * i + a] - mass[i] * (U[a] + wd[a]);
-        mul3(r->ainv + 9 * i, res, du);
+        cs_mat3_vec(r->ainv + 9 * i, res, du);
         for (int a = 0; a < 3; a++)
             if (!D->mask[3 * i + a])
                 r->u[3 * i + a] += U[a] + wd[a] + du[a];
@@ -328,12 +315,12 @@ static void coarse_at(const cs_soft_resp *r, size_t i, const double V[3], const 
     double d[3], wd[3], t[3];
     for (int a = 0; a < 3; a++)
         d[a] = r->D->x[3 * i + a] - r->c[a];
-    cross(W, d, wd);
+    cs_vec3_cross(W, d, wd);
     for (int a = 0; a < 3; a++)
         out[a] = V[a] + wd[a];
     if (!r->two_level || !r->stiff || !movable(r->D, i))
         return;
-    mul3(r->ainv + 9 * i, out, t);
+    cs_mat3_vec(r->ainv + 9 * i, out, t);
     for (int a = 0; a < 3; a++)
         out[a] -= r->mass[i] * t[a];
 }
@@ -365,7 +352,7 @@ static double mode_velocity(const cs_soft_resp *r, int m, const int32_t *nodes, 
         if (!movable(r->D, i))
             continue;
         double t[3];
-        mul3(r->ainv + 9 * i, ae + 3 * i, t);
+        cs_mat3_vec(r->ainv + 9 * i, ae + 3 * i, t);
         for (int a = 0; a < 3; a++)
             s += w[j] * d[a] * (e[3 * i + a] - t[a]);
     }
@@ -416,7 +403,7 @@ static double block_compliance(const cs_soft_resp *r, const int32_t *nodes, cons
             continue;
         if (r->stiff) {
             double t[3];
-            mul3(r->ainv + 9 * i, d, t);
+            cs_mat3_vec(r->ainv + 9 * i, d, t);
             s += local * w[j] * w[j] * (d[0] * t[0] + d[1] * t[1] + d[2] * t[2]);
         } else {
             s += local * w[j] * w[j] * (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) / r->D->m[i];
@@ -437,7 +424,7 @@ double cs_soft_compliance(const cs_soft_resp *r, const int32_t *nodes, const dou
                 if (sq < 0)
                     continue;
                 double t[3];
-                mul3(r->S + 9 * ((size_t)sq * r->n_cn + sj), d, t);
+                cs_mat3_vec(r->S + 9 * ((size_t)sq * r->n_cn + sj), d, t);
                 s += local * w[j] * w[q] * (d[0] * t[0] + d[1] * t[1] + d[2] * t[2]);
             }
         }
@@ -452,8 +439,8 @@ double cs_soft_compliance(const cs_soft_resp *r, const int32_t *nodes, const dou
     if (r->coarse) {
         /* the coarse velocity the impulse d gives, seen at the point's nodes */
         double rd[3], dV[3], dW[3];
-        cross(arm, d, rd);
-        mul3(r->iinv, rd, dW);
+        cs_vec3_cross(arm, d, rd);
+        cs_mat3_vec(r->iinv, rd, dW);
         for (int a = 0; a < 3; a++)
             dV[a] = r->minv[a] * d[a];
         for (int j = 0; j < k; j++) {
@@ -486,7 +473,7 @@ void cs_soft_impulse(cs_soft_resp *r, const int32_t *nodes, const double *w, int
                 D->v[3 * i + a] += w[j] * J[a] / D->m[i]; /* the momentum, now */
             for (int q = 0; q < r->n_cn; q++) {
                 double du[3];
-                mul3(r->S + 9 * ((size_t)q * r->n_cn + sj), J, du);
+                cs_mat3_vec(r->S + 9 * ((size_t)q * r->n_cn + sj), J, du);
                 for (int a = 0; a < 3; a++)
                     r->u[3 * (size_t)r->cn[q] + a] += local * w[j] * du[a];
             }
@@ -500,7 +487,7 @@ void cs_soft_impulse(cs_soft_resp *r, const int32_t *nodes, const double *w, int
         any = true;
         double du[3];
         if (r->stiff)
-            mul3(r->ainv + 9 * i, J, du);
+            cs_mat3_vec(r->ainv + 9 * i, J, du);
         else
             for (int a = 0; a < 3; a++)
                 du[a] = J[a] / D->m[i];
@@ -514,8 +501,8 @@ void cs_soft_impulse(cs_soft_resp *r, const int32_t *nodes, const double *w, int
     if (!any || !r->coarse)
         return;
     double rj[3], dw[3];
-    cross(arm, J, rj);
-    mul3(r->iinv, rj, dw);
+    cs_vec3_cross(arm, J, rj);
+    cs_mat3_vec(r->iinv, rj, dw);
     for (int a = 0; a < 3; a++) {
         r->V[a] += r->minv[a] * J[a];
         r->W[a] += dw[a];
@@ -527,8 +514,8 @@ double cs_soft_coarse_compliance(const cs_soft_resp *r, const double arm[3], con
     if (!r->coarse)
         return 0;
     double rd[3], t[3];
-    cross(arm, d, rd);
-    mul3(r->iinv, rd, t);
+    cs_vec3_cross(arm, d, rd);
+    cs_mat3_vec(r->iinv, rd, t);
     double s = rd[0] * t[0] + rd[1] * t[1] + rd[2] * t[2];
     for (int a = 0; a < 3; a++)
         s += r->minv[a] * d[a] * d[a];
@@ -547,16 +534,16 @@ void cs_soft_coarse_velocity(const cs_soft_resp *r, const double arm[3], double 
         double d[3], t[3];
         for (int a = 0; a < 3; a++)
             d[a] = x[a] - r->c[a];
-        cross(d, u, t);
+        cs_vec3_cross(d, u, t);
         for (int a = 0; a < 3; a++) {
             P[a] += r->mass[i] * u[a];
             L[a] += r->mass[i] * t[a];
         }
     }
-    mul3(r->iinv, L, W);
+    cs_mat3_vec(r->iinv, L, W);
     for (int a = 0; a < 3; a++)
         W[a] += r->W0[a];
-    cross(W, arm, wa);
+    cs_vec3_cross(W, arm, wa);
     for (int a = 0; a < 3; a++)
         v[a] = r->minv[a] * P[a] + r->U0[a] + wa[a];
 }
@@ -831,7 +818,7 @@ int cs_soft_exact_solve(cs_soft_resp *r)
     cs_cholesky_solve(A, nf, x);
     for (int i = 0; i < r->n; i++) {
         double jac[3];
-        mul3(r->ainv + 9 * (size_t)i, r->res0 + 3 * (size_t)i, jac);
+        cs_mat3_vec(r->ainv + 9 * (size_t)i, r->res0 + 3 * (size_t)i, jac);
         for (int a = 0; a < 3; a++) {
             const size_t d = 3 * (size_t)i + a;
             if (dof_of[d])

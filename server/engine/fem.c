@@ -1413,13 +1413,6 @@ void cs_fem_precond_blocks(cs_fem *fem, const double *kf, double kcoef, const cs
     }
 }
 
-static void cross3(const double a[3], const double b[3], double c[3])
-{
-    c[0] = a[1] * b[2] - a[2] * b[1];
-    c[1] = a[2] * b[0] - a[0] * b[2];
-    c[2] = a[0] * b[1] - a[1] * b[0];
-}
-
 int cs_fem_prepare_tangent(cs_fem *fem, const double *x)
 {
     if (!fem->tg) {
@@ -1506,10 +1499,10 @@ static void tangent_batch(cs_fem *fem, int bt, double *fb, const void *ctx, doub
             double *qk = q + 3 * k, t[3];
             for (int i = 0; i < 3; i++)
                 qk[i] = R[i] * d[0] + R[3 + i] * d[1] + R[6 + i] * d[2];
-            cross3(SGN[k], qk, t);
+            cs_vec3_cross(SGN[k], qk, t);
             for (int i = 0; i < 3; i++)
                 a[i] += inv4h * t[i];
-            cross3(ku + 3 * k, qk, t);
+            cs_vec3_cross(ku + 3 * k, qk, t);
             for (int i = 0; i < 3; i++)
                 b[i] += t[i];
         }
@@ -1528,8 +1521,8 @@ static void tangent_batch(cs_fem *fem, int bt, double *fb, const void *ctx, doub
         double *out = fb + 24 * l;
         for (int k = 0; k < 8; k++) {
             double g1[3], g2[3], l3[3];
-            cross3(w1, ku + 3 * k, g1);
-            cross3(w2, SGN[k], g2);
+            cs_vec3_cross(w1, ku + 3 * k, g1);
+            cs_vec3_cross(w2, SGN[k], g2);
             for (int i = 0; i < 3; i++)
                 l3[i] = kq[3 * k + i] + 0.5 * (g1[i] + inv4h * g2[i]);
             for (int i = 0; i < 3; i++)

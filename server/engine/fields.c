@@ -11,16 +11,12 @@
 #include <string.h>
 
 #include "elastic.h"
+#include "mat3.h"
 #include "world_internal.h"
 
 static bool finite3(const double v[3])
 {
     return isfinite(v[0]) && isfinite(v[1]) && isfinite(v[2]);
-}
-
-static double norm3(const double v[3])
-{
-    return sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
 }
 
 static bool in_box(const cs_aabb *b, const double p[3])
@@ -192,7 +188,7 @@ int cs_fields_check_region(const cs_field_region *r, int i, char *err, size_t er
         break;
     case CS_FIELD_GRADIENT: {
         const double d[3] = {r->to[0] - r->from[0], r->to[1] - r->from[1], r->to[2] - r->from[2]};
-        if (!finite3(r->from) || !finite3(r->to) || !(norm3(d) > 0))
+        if (!finite3(r->from) || !finite3(r->to) || !(cs_vec3_norm(d) > 0))
             return cs_engine_fail(err, errlen, CS_ERR_INVALID,
                                   "%s: gradient from and to must be finite and distinct", what);
         break;
@@ -210,7 +206,7 @@ static double region_weight(const cs_field_region *r, const double p[3])
     switch (r->shape) {
     case CS_FIELD_SPHERE: {
         const double d[3] = {p[0] - r->centre[0], p[1] - r->centre[1], p[2] - r->centre[2]};
-        return norm3(d) <= r->radius ? 1.0 : 0.0;
+        return cs_vec3_norm(d) <= r->radius ? 1.0 : 0.0;
     }
     case CS_FIELD_BOX:
         return in_box(&r->box, p) ? 1.0 : 0.0;
@@ -226,7 +222,7 @@ static double region_weight(const cs_field_region *r, const double p[3])
     }
     case CS_FIELD_RADIAL: {
         const double d[3] = {p[0] - r->centre[0], p[1] - r->centre[1], p[2] - r->centre[2]};
-        const double q = norm3(d) / r->radius;
+        const double q = cs_vec3_norm(d) / r->radius;
         return q >= 1 ? 0.0 : (1 - q * q) * (1 - q * q);
     }
     }
@@ -297,7 +293,8 @@ int cs_world_paint(cs_world_t *w, cs_object_id id, const double centre[3], doubl
         for (int k = 0; k < 8; k++) {
             double p[3];
             gauss_point(o, o->x, c, k, p);
-            if (norm3((double[3]){p[0] - centre[0], p[1] - centre[1], p[2] - centre[2]}) > radius)
+            const double d[3] = {p[0] - centre[0], p[1] - centre[1], p[2] - centre[2]};
+            if (cs_vec3_norm(d) > radius)
                 continue;
             const size_t i = 8 * (size_t)c + k;
             if (f->which & CS_FIELD_YOUNG)

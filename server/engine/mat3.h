@@ -6,6 +6,50 @@
 
 #include <math.h>
 
+/* The small 3-vector helpers, one copy for the engine. Each result is formed in a temporary
+ * before it is stored, so the output may be one of the inputs. */
+static inline double cs_vec3_dot(const double a[3], const double b[3])
+{
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
+
+/* sqrt of the squares' sum: overflows past 1.3e154 (world.c's length3 does not) */
+static inline double cs_vec3_norm(const double v[3])
+{
+    return sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+}
+
+static inline void cs_vec3_cross(const double a[3], const double b[3], double c[3])
+{
+    const double r0 = a[1] * b[2] - a[2] * b[1], r1 = a[2] * b[0] - a[0] * b[2],
+                 r2 = a[0] * b[1] - a[1] * b[0];
+    c[0] = r0;
+    c[1] = r1;
+    c[2] = r2;
+}
+
+/* r = M v */
+static inline void cs_mat3_vec(const double M[9], const double v[3], double r[3])
+{
+    const double r0 = M[0] * v[0] + M[1] * v[1] + M[2] * v[2],
+                 r1 = M[3] * v[0] + M[4] * v[1] + M[5] * v[2],
+                 r2 = M[6] * v[0] + M[7] * v[1] + M[8] * v[2];
+    r[0] = r0;
+    r[1] = r1;
+    r[2] = r2;
+}
+
+/* r = Mᵀ v */
+static inline void cs_mat3_t_vec(const double M[9], const double v[3], double r[3])
+{
+    const double r0 = M[0] * v[0] + M[3] * v[1] + M[6] * v[2],
+                 r1 = M[1] * v[0] + M[4] * v[1] + M[7] * v[2],
+                 r2 = M[2] * v[0] + M[5] * v[1] + M[8] * v[2];
+    r[0] = r0;
+    r[1] = r1;
+    r[2] = r2;
+}
+
 /* Adjugate (transposed cofactors) of m into c; returns det(m). m⁻¹ = c / det. */
 static inline double cs_mat3_adjugate(const double m[9], double c[9])
 {

@@ -174,32 +174,6 @@ static double now_ms(void)
 
 /* ---------------------------------------------------------------- small vector algebra */
 
-static double dot3(const double a[3], const double b[3])
-{
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-}
-
-static void cross3(const double a[3], const double b[3], double c[3])
-{
-    double r[3] = {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
-                   a[0] * b[1] - a[1] * b[0]};
-    memcpy(c, r, sizeof r);
-}
-
-static void mat_vec(const double M[9], const double v[3], double r[3])
-{
-    double t[3] = {M[0] * v[0] + M[1] * v[1] + M[2] * v[2], M[3] * v[0] + M[4] * v[1] + M[5] * v[2],
-                   M[6] * v[0] + M[7] * v[1] + M[8] * v[2]};
-    memcpy(r, t, sizeof t);
-}
-
-static void mat_t_vec(const double M[9], const double v[3], double r[3])
-{
-    double t[3] = {M[0] * v[0] + M[3] * v[1] + M[6] * v[2], M[1] * v[0] + M[4] * v[1] + M[7] * v[2],
-                   M[2] * v[0] + M[5] * v[1] + M[8] * v[2]};
-    memcpy(r, t, sizeof t);
-}
-
 static void quat_mul(const double a[4], const double b[4], double r[4])
 {
     double t[4] = {a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3],
@@ -241,8 +215,8 @@ static void update_inertia(cs_rigid *rb)
 static void apply_impulse(cs_rigid *rb, const double r[3], const double J[3], double sign)
 {
     double rxj[3], dw[3];
-    cross3(r, J, rxj);
-    mat_vec(rb->I_inv_world, rxj, dw);
+    cs_vec3_cross(r, J, rxj);
+    cs_mat3_vec(rb->I_inv_world, rxj, dw);
     for (int a = 0; a < 3; a++) {
         rb->v[a] += sign * rb->inv_mass * J[a];
         rb->w[a] += sign * dw[a];
@@ -283,7 +257,7 @@ static int mass_properties(cs_object *o, cs_rigid *rb)
                 d[a] = cm->origin[a] +
                        h * (cm->cell_ijk[3 * (size_t)c + a] + 0.5 + (CS_CORNER[g][a] ? gq : -gq)) -
                        C[a];
-            const double dd = dot3(d, d);
+            const double dd = cs_vec3_dot(d, d);
             for (int i = 0; i < 3; i++)
                 for (int j = 0; j < 3; j++)
                     I[3 * i + j] += mg * ((i == j) * dd - d[i] * d[j]);
@@ -315,7 +289,7 @@ static int mass_properties(cs_object *o, cs_rigid *rb)
         double d[3];
         for (int a = 0; a < 3; a++)
             d[a] = cm->node_rest[3 * (size_t)i + a] - C[a];
-        rb->radius = fmax(rb->radius, sqrt(dot3(d, d)));
+        rb->radius = fmax(rb->radius, cs_vec3_norm(d));
     }
     return 0;
 }
@@ -347,8 +321,8 @@ static void place_nodes(cs_object *o)
         double d[3], r[3], wr[3];
         for (int a = 0; a < 3; a++)
             d[a] = o->cm.node_rest[3 * (size_t)i + a] - rb->com_rest[a];
-        mat_vec(rb->R, d, r);
-        cross3(rb->w, r, wr);
+        cs_mat3_vec(rb->R, d, r);
+        cs_vec3_cross(rb->w, r, wr);
         for (int a = 0; a < 3; a++) {
             o->x[3 * (size_t)i + a] = rb->c[a] + r[a];
             o->v[3 * (size_t)i + a] = rb->v[a] + wr[a];
@@ -399,8 +373,8 @@ int cs_rigid_refit(cs_object *o, const double q[4], const double c0[3], const do
     double d[3], r[3], wr[3];
     for (int a = 0; a < 3; a++)
         d[a] = rb->com_rest[a] - C0[a];
-    mat_vec(rb->R, d, r);
-    cross3(w0, r, wr);
+    cs_mat3_vec(rb->R, d, r);
+    cs_vec3_cross(w0, r, wr);
     for (int a = 0; a < 3; a++) {
         rb->c[a] = c0[a] + r[a];
         rb->v[a] = v0[a] + wr[a];
@@ -471,9 +445,9 @@ double cs_rigid_kinetic_energy(const cs_object *o)
 {
     const cs_rigid *rb = o->rb;
     double wb[3], Iw[3];
-    mat_t_vec(rb->R, rb->w, wb);
-    mat_vec(rb->I_body, wb, Iw);
-    return 0.5 * rb->mass * dot3(rb->v, rb->v) + 0.5 * dot3(wb, Iw);
+    cs_mat3_t_vec(rb->R, rb->w, wb);
+    cs_mat3_vec(rb->I_body, wb, Iw);
+    return 0.5 * rb->mass * cs_vec3_dot(rb->v, rb->v) + 0.5 * cs_vec3_dot(wb, Iw);
 }
 
 /* ---------------------------------------------------------------- broad phase: deformable */
@@ -732,16 +706,16 @@ static void rotate(cs_rigid *rb, double dt)
 {
     const double *I = rb->I_body;
     double w0[3], wm[3];
-    mat_t_vec(rb->R, rb->w, w0);
+    cs_mat3_t_vec(rb->R, rb->w, w0);
     memcpy(wm, w0, sizeof wm);
     for (int it = 0; it < 20; it++) {
         /* G(ωm) = 2 I (ωm − ω0) + dt ωm × I ωm */
         double Iw[3], d[3], G[3], c[3];
-        mat_vec(I, wm, Iw);
+        cs_mat3_vec(I, wm, Iw);
         for (int a = 0; a < 3; a++)
             d[a] = wm[a] - w0[a];
-        mat_vec(I, d, G);
-        cross3(wm, Iw, c);
+        cs_mat3_vec(I, d, G);
+        cs_vec3_cross(wm, Iw, c);
         for (int a = 0; a < 3; a++)
             G[a] = 2 * G[a] + dt * c[a];
         /* J = 2 I + dt ([ωm]× I − [I ωm]×) */
@@ -759,7 +733,7 @@ static void rotate(cs_rigid *rb, double dt)
         const double det = cs_mat3_adjugate(J, adj);
         if (det == 0 || !isfinite(det))
             break;
-        mat_vec(adj, G, step);
+        cs_mat3_vec(adj, G, step);
         double sn = 0, wn = 0;
         for (int a = 0; a < 3; a++) {
             wm[a] -= step[a] / det;
@@ -779,7 +753,7 @@ static void rotate(cs_rigid *rb, double dt)
     for (int a = 0; a < 4; a++)
         rb->q[a] = q[a] / qn;
     cs_quat_to_mat(rb->q, rb->R);
-    mat_vec(rb->R, w1, rb->w);
+    cs_mat3_vec(rb->R, w1, rb->w);
     update_inertia(rb);
 }
 
@@ -789,9 +763,9 @@ static void point_mass_matrix(const cs_rigid *rb, const double r[3], double K[9]
     for (int j = 0; j < 3; j++) {
         double e[3] = {0, 0, 0}, rxe[3], t[3], col[3];
         e[j] = 1;
-        cross3(r, e, rxe);
-        mat_vec(rb->I_inv_world, rxe, t);
-        cross3(t, r, col);
+        cs_vec3_cross(r, e, rxe);
+        cs_mat3_vec(rb->I_inv_world, rxe, t);
+        cs_vec3_cross(t, r, col);
         for (int i = 0; i < 3; i++)
             K[3 * i + j] = rb->inv_mass * e[i] + col[i];
     }
@@ -812,14 +786,14 @@ static void apply_inputs(const cs_world_t *w, cs_object *o)
             double r[3], t[3];
             for (int a = 0; a < 3; a++)
                 r[a] = o->x[3 * (size_t)i + a] - rb->c[a];
-            cross3(r, o->f_const + 3 * (size_t)i, t);
+            cs_vec3_cross(r, o->f_const + 3 * (size_t)i, t);
             for (int a = 0; a < 3; a++) {
                 F[a] += o->f_const[3 * (size_t)i + a];
                 tau[a] += t[a];
             }
         }
         double dw[3];
-        mat_vec(rb->I_inv_world, tau, dw);
+        cs_mat3_vec(rb->I_inv_world, tau, dw);
         for (int a = 0; a < 3; a++) {
             rb->v[a] += dt * F[a] * rb->inv_mass;
             rb->w[a] += dt * dw[a];
@@ -845,7 +819,7 @@ static void apply_inputs(const cs_world_t *w, cs_object *o)
             /* implicit spring on the point: (1 + dt² k K) J = dt k (e − dt v_p) */
             double K[9], A[9], adj[9], vp[3], wr[3], rhs[3];
             point_mass_matrix(rb, r, K);
-            cross3(rb->w, r, wr);
+            cs_vec3_cross(rb->w, r, wr);
             /* the target: fixed (drag) or moving along its segment (curve) */
             double tg[3];
             const double sc = in->kind == CS_INPUT_CURVE && in->steps_total > 0
@@ -861,7 +835,7 @@ static void apply_inputs(const cs_world_t *w, cs_object *o)
             for (int k = 0; k < 9; k++)
                 A[k] = dt * dt * in->stiffness * K[k] + (k % 4 == 0);
             const double det = cs_mat3_adjugate(A, adj);
-            mat_vec(adj, rhs, J);
+            cs_mat3_vec(adj, rhs, J);
             for (int a = 0; a < 3; a++)
                 J[a] /= det;
         }
@@ -914,7 +888,7 @@ static contact *new_contact(cs_rigid_world *rw)
 static double body_margin(const cs_object *o, double dt)
 {
     const cs_rigid *rb = o->rb;
-    return dt * (sqrt(dot3(rb->v, rb->v)) + sqrt(dot3(rb->w, rb->w)) * rb->radius) +
+    return dt * (cs_vec3_norm(rb->v) + cs_vec3_norm(rb->w) * rb->radius) +
            0.05 * o->cm.h;
 }
 
@@ -954,11 +928,11 @@ static void obox_support(const void *obj, const ccd_vec3_t *dir, ccd_vec3_t *out
 {
     const obox *b = obj;
     double d[3] = {dir->v[0], dir->v[1], dir->v[2]}, l[3];
-    mat_t_vec(b->R, d, l);
+    cs_mat3_t_vec(b->R, d, l);
     for (int a = 0; a < 3; a++)
         l[a] = l[a] >= 0 ? b->half : -b->half;
     double r[3];
-    mat_vec(b->R, l, r);
+    cs_mat3_vec(b->R, l, r);
     for (int a = 0; a < 3; a++)
         out->v[a] = b->c[a] + r[a];
 }
@@ -984,7 +958,7 @@ static void cell_centre_world(const cs_object *o, int32_t c, double p[3])
 static bool internal_direction(const cs_object *o, int32_t c, const double d[3])
 {
     double l[3];
-    mat_t_vec(o->rb->R, d, l);
+    cs_mat3_t_vec(o->rb->R, d, l);
     int ax = 0;
     for (int a = 1; a < 3; a++)
         if (fabs(l[a]) > fabs(l[ax]))
@@ -1001,7 +975,7 @@ static bool internal_direction(const cs_object *o, int32_t c, const double d[3])
 static bool in_obox(const obox *b, const double p[3], double g)
 {
     double d[3] = {p[0] - b->c[0], p[1] - b->c[1], p[2] - b->c[2]}, l[3];
-    mat_t_vec(b->R, d, l);
+    cs_mat3_t_vec(b->R, d, l);
     return fabs(l[0]) <= b->half + g && fabs(l[1]) <= b->half + g && fabs(l[2]) <= b->half + g;
 }
 
@@ -1048,8 +1022,8 @@ static int cube_pair(cs_rigid_world *rw, int ia, int32_t ca, int ib, int32_t cb,
             for (int i = 0; i < 3; i++)
                 for (int j = 3; j < 6; j++) {
                     double c[3];
-                    cross3(axes[i], axes[j], c);
-                    const double l = sqrt(dot3(c, c));
+                    cs_vec3_cross(axes[i], axes[j], c);
+                    const double l = cs_vec3_norm(c);
                     if (l < 1e-6)
                         continue;
                     for (int a = 0; a < 3; a++)
@@ -1061,10 +1035,10 @@ static int cube_pair(cs_rigid_world *rw, int ia, int32_t ca, int ib, int32_t cb,
         for (int k = 0; k < na; k++) {
             double ra = 0, rb = 0;
             for (int j = 0; j < 3; j++) {
-                ra += ba.half * fabs(dot3(axes[3 + j], axes[k]));
-                rb += bbx.half * fabs(dot3(axes[j], axes[k]));
+                ra += ba.half * fabs(cs_vec3_dot(axes[3 + j], axes[k]));
+                rb += bbx.half * fabs(cs_vec3_dot(axes[j], axes[k]));
             }
-            const double ov = ra + rb - fabs(dot3(d, axes[k]));
+            const double ov = ra + rb - fabs(cs_vec3_dot(d, axes[k]));
             if (ov < 0)
                 return 0;
             /* face axes win ties against edge axes (1e-9 of h) */
@@ -1073,7 +1047,7 @@ static int cube_pair(cs_rigid_world *rw, int ia, int32_t ca, int ib, int32_t cb,
                 best = k;
             }
         }
-        const double sg = dot3(d, axes[best]) >= 0 ? 1 : -1;
+        const double sg = cs_vec3_dot(d, axes[best]) >= 0 ? 1 : -1;
         for (int a = 0; a < 3; a++)
             n[a] = sg * axes[best][a];
     }
@@ -1086,7 +1060,7 @@ static int cube_pair(cs_rigid_world *rw, int ia, int32_t ca, int ib, int32_t cb,
             for (int ax = 0; ax < 3; ax++) {
                 const double *R = s ? B->rb->R : A->rb->R;
                 const double col[3] = {R[ax], R[3 + ax], R[6 + ax]};
-                const double d = dot3(col, n);
+                const double d = cs_vec3_dot(col, n);
                 if (fabs(d) > best) {
                     best = fabs(d);
                     for (int a = 0; a < 3; a++)
@@ -1103,8 +1077,8 @@ static int cube_pair(cs_rigid_world *rw, int ia, int32_t ca, int ib, int32_t cb,
     const int32_t *na = A->cm.cell_nodes + 8 * (size_t)ca, *nb = B->cm.cell_nodes + 8 * (size_t)cb;
     double minA = INFINITY, maxB = -INFINITY;
     for (int k = 0; k < 8; k++) {
-        minA = fmin(minA, dot3(A->x + 3 * (size_t)na[k], n));
-        maxB = fmax(maxB, dot3(B->x + 3 * (size_t)nb[k], n));
+        minA = fmin(minA, cs_vec3_dot(A->x + 3 * (size_t)na[k], n));
+        maxB = fmax(maxB, cs_vec3_dot(B->x + 3 * (size_t)nb[k], n));
     }
     if (minA - maxB >= margin)
         return 0; /* apart along the (snapped) normal */
@@ -1116,13 +1090,13 @@ static int cube_pair(cs_rigid_world *rw, int ia, int32_t ca, int ib, int32_t cb,
         for (int k = 0; k < 8; k++) {
             const int32_t node = side == 0 ? na[k] : nb[k];
             const double *p = (side == 0 ? A->x : B->x) + 3 * (size_t)node;
-            const double sep = side == 0 ? dot3(p, n) - maxB : minA - dot3(p, n);
+            const double sep = side == 0 ? cs_vec3_dot(p, n) - maxB : minA - cs_vec3_dot(p, n);
             if (sep >= margin || !in_obox(side == 0 ? &bbx : &ba, p, fabs(sep) + tol))
                 continue;
             /* only points on the facing side: a corner of A near B's face, not behind it */
-            if (side == 0 && dot3(p, n) > minA + fmax(margin, 0.25 * A->cm.h))
+            if (side == 0 && cs_vec3_dot(p, n) > minA + fmax(margin, 0.25 * A->cm.h))
                 continue;
-            if (side == 1 && dot3(p, n) < maxB - fmax(margin, 0.25 * B->cm.h))
+            if (side == 1 && cs_vec3_dot(p, n) < maxB - fmax(margin, 0.25 * B->cm.h))
                 continue;
             contact *c = new_contact(rw);
             if (!c)
@@ -1197,7 +1171,7 @@ static int body_pair(const cs_world_t *w, cs_rigid_world *rw, int ia, int ib)
             continue;
         for (int a = 0; a < 3; a++)
             d[a] = xa[a] - B->rb->c[a];
-        mat_t_vec(B->rb->R, d, X);
+        cs_mat3_t_vec(B->rb->R, d, X);
         double u[3];
         for (int a = 0; a < 3; a++)
             u[a] = (X[a] + B->rb->com_rest[a] - B->cm.origin[a]) / hB - 0.5;
@@ -1213,7 +1187,7 @@ static int body_pair(const cs_world_t *w, cs_rigid_world *rw, int ia, int ib)
             for (int j = lo[1]; j <= hi[1]; j++)
                 for (int k = lo[2]; k <= hi[2]; k++) {
                     const double e[3] = {i - u[0], j - u[1], k - u[2]};
-                    if (dot3(e, e) > rc * rc)
+                    if (cs_vec3_dot(e, e) > rc * rc)
                         continue;
                     int32_t cb = cs_cubemesh_find(&B->cm, i, j, k);
                     if (cb >= 0 && cube_pair(rw, ia, ca, ib, cb, margin) != 0)
@@ -1240,11 +1214,11 @@ static void tangents(const double n[3], double t1[3], double t2[3])
 {
     double a[3] = {0, 0, 0};
     a[fabs(n[0]) < 0.57 ? 0 : (fabs(n[1]) < 0.57 ? 1 : 2)] = 1;
-    cross3(n, a, t1);
-    const double l = sqrt(dot3(t1, t1));
+    cs_vec3_cross(n, a, t1);
+    const double l = cs_vec3_norm(t1);
     for (int k = 0; k < 3; k++)
         t1[k] /= l;
-    cross3(n, t1, t2);
+    cs_vec3_cross(n, t1, t2);
 }
 
 static double eff_mass(const cs_rigid_world *rw, const contact *c, const double d[3], double local)
@@ -1256,9 +1230,9 @@ static double eff_mass(const cs_rigid_world *rw, const contact *c, const double 
             continue;
         const cs_rigid *rb = body_rb(rw, i);
         double rxd[3], t[3];
-        cross3(s ? c->rb : c->ra, d, rxd);
-        mat_vec(rb->I_inv_world, rxd, t);
-        k += rb->inv_mass + dot3(rxd, t);
+        cs_vec3_cross(s ? c->rb : c->ra, d, rxd);
+        cs_mat3_vec(rb->I_inv_world, rxd, t);
+        k += rb->inv_mass + cs_vec3_dot(rxd, t);
     }
     if (c->D)
         k += cs_soft_compliance(c->S, c->dn, c->dw, 4, c->rd, d, local);
@@ -1276,7 +1250,7 @@ static void rel_velocity_at(const cs_rigid_world *rw, const contact *c, double v
         const cs_rigid *rb = body_rb(rw, i);
         const double *bv = pre ? rb->v_pre : rb->v, *bw = pre ? rb->w_pre : rb->w;
         double wr[3];
-        cross3(bw, s ? c->rb : c->ra, wr);
+        cs_vec3_cross(bw, s ? c->rb : c->ra, wr);
         for (int a = 0; a < 3; a++)
             v[a] += (s ? -1 : 1) * (bv[a] + wr[a]);
     }
@@ -1308,7 +1282,7 @@ static void contact_impulse(cs_rigid_world *rw, const contact *c, const double J
 static void prepare_contacts(const cs_world_t *w, cs_rigid_world *rw)
 {
     const double dt = w->rigid->dt;
-    const double gn = sqrt(dot3(w->def.gravity, w->def.gravity));
+    const double gn = cs_vec3_norm(w->def.gravity);
     const double v_bounce = 2 * gn * dt + 1e-3;
     for (int i = 0; i < rw->nc; i++) {
         contact *c = &rw->c[i];
@@ -1325,9 +1299,9 @@ static void prepare_contacts(const cs_world_t *w, cs_rigid_world *rw)
         c->kt2 = eff_mass(rw, c, c->t2, FRICTION_LOCAL);
         double vr[3];
         rel_velocity(rw, c, vr);
-        const double vn0 = dot3(vr, c->n);
+        const double vn0 = cs_vec3_dot(vr, c->n);
         rel_velocity_at(rw, c, vr, true);
-        const double vn_pre = dot3(vr, c->n);
+        const double vn_pre = cs_vec3_dot(vr, c->n);
         const double slop = 0.01 * A->cm.h;
         c->target = c->sep > 0 ? -c->sep / dt
                                : BAUMGARTE * fmin(fmax(0, -c->sep - slop), 0.1 * A->cm.h) / dt;
@@ -1375,12 +1349,12 @@ static void warm_start(cs_rigid_world *rw)
         double sg;
         kept_impulse k = contact_id(rw, c, &sg);
         const kept_impulse *f = bsearch(&k, rw->kept, (size_t)rw->n_kept, sizeof k, cmp_kept);
-        if (!f || sg * dot3(f->n, c->n) < 0.99)
+        if (!f || sg * cs_vec3_dot(f->n, c->n) < 0.99)
             continue;
-        c->jn = fmax(0, sg * dot3(f->J, c->n));
+        c->jn = fmax(0, sg * cs_vec3_dot(f->J, c->n));
         const double lim = c->mu * c->jn;
-        c->jt1 = fmin(lim, fmax(-lim, sg * dot3(f->J, c->t1)));
-        c->jt2 = fmin(lim, fmax(-lim, sg * dot3(f->J, c->t2)));
+        c->jt1 = fmin(lim, fmax(-lim, sg * cs_vec3_dot(f->J, c->t1)));
+        c->jt2 = fmin(lim, fmax(-lim, sg * cs_vec3_dot(f->J, c->t2)));
         double J[3], T[3];
         for (int a = 0; a < 3; a++) {
             J[a] = c->jn * c->n[a];
@@ -1428,7 +1402,7 @@ static void solve_contacts(cs_rigid_world *rw)
                 continue;
             double vr[3];
             rel_velocity(rw, c, vr);
-            double dj = (c->target - dot3(vr, c->n)) * c->kn;
+            double dj = (c->target - cs_vec3_dot(vr, c->n)) * c->kn;
             double jn = fmax(0, c->jn + dj);
             dj = jn - c->jn;
             c->jn = jn;
@@ -1442,7 +1416,7 @@ static void solve_contacts(cs_rigid_world *rw)
             double *jt[2] = {&c->jt1, &c->jt2};
             const double *t[2] = {c->t1, c->t2}, kt[2] = {c->kt1, c->kt2};
             for (int s = 0; s < 2; s++) {
-                double d = -dot3(vr, t[s]) * kt[s];
+                double d = -cs_vec3_dot(vr, t[s]) * kt[s];
                 double nj = fmin(lim, fmax(-lim, *jt[s] + d));
                 d = nj - *jt[s];
                 *jt[s] = nj;
@@ -1492,12 +1466,12 @@ static void bounce_positions(const cs_world_t *w, cs_rigid_world *rw)
             continue;
         const contact *c = &rw->c[k];
         cs_rigid *rb = rw->body[i]->rb;
-        const double d = (1 + c->bounce) * c->sep, gn = -dot3(w->def.gravity, c->n);
+        const double d = (1 + c->bounce) * c->sep, gn = -cs_vec3_dot(w->def.gravity, c->n);
         /* gravity's work over the extra drop d goes into the rebound: symplectic Euler
          * keeps ½v² + g z − ½ g dt v exactly in flight, so keep it across the shift too
          * (the position update that follows moves by dt v, so the shift makes up for the
          * velocity change) */
-        const double vn = dot3(rb->v, c->n);
+        const double vn = cs_vec3_dot(rb->v, c->n);
         const double disc = 0.25 * gn * gn * dt * dt + vn * vn - gn * dt * vn + 2 * gn * d;
         const double vn1 = vn > 0 && disc >= 0 ? 0.5 * gn * dt + sqrt(disc) : vn;
         for (int a = 0; a < 3; a++) {
@@ -1598,7 +1572,7 @@ static int node_body(cs_world_t *w, cs_rigid_world *rw, cs_object *D, int b, int
     int32_t ijk[3];
     for (int a = 0; a < 3; a++)
         dl[a] = x[a] - rb->c[a];
-    mat_t_vec(rb->R, dl, X);
+    cs_mat3_t_vec(rb->R, dl, X);
     for (int a = 0; a < 3; a++) {
         u[a] = (X[a] + rb->com_rest[a] - B->cm.origin[a]) / h;
         ijk[a] = (int32_t)floor(u[a]);
@@ -1623,10 +1597,10 @@ static int node_body(cs_world_t *w, cs_rigid_world *rw, cs_object *D, int b, int
     double vrel_l[3], rr[3], wrr[3], vv[3];
     for (int a = 0; a < 3; a++)
         rr[a] = x[a] - rb->c[a];
-    cross3(rb->w, rr, wrr);
+    cs_vec3_cross(rb->w, rr, wrr);
     for (int a = 0; a < 3; a++)
         vv[a] = v[a] - rb->v[a] - wrr[a];
-    mat_t_vec(rb->R, vv, vrel_l);
+    cs_mat3_t_vec(rb->R, vv, vrel_l);
     double best = INFINITY, score_best = INFINITY;
     int bax = -1, bdir = 0;
     for (int ax = 0; ax < 3; ax++)
@@ -1651,7 +1625,7 @@ static int node_body(cs_world_t *w, cs_rigid_world *rw, cs_object *D, int b, int
         return 0;
     double nl[3] = {0, 0, 0}, n[3];
     nl[bax] = bdir;
-    mat_vec(rb->R, nl, n);
+    cs_mat3_vec(rb->R, nl, n);
     contact *c = new_contact(rw);
     if (!c)
         return -1;
@@ -1730,7 +1704,7 @@ static bool hex_local(const double x[8][3], const double p[3], double u[3], doub
         const double det = cs_mat3_adjugate(J, Ja);
         if (!(fabs(det) > 0))
             return false;
-        mat_vec(Ja, r, du);
+        cs_mat3_vec(Ja, r, du);
         double m = 0;
         for (int a = 0; a < 3; a++) {
             u[a] -= du[a] / det;
@@ -1801,7 +1775,7 @@ static bool point_in_cell(const cs_object *D, int32_t cell, const double X[8][3]
         const int dir = u[a] > 1 ? 1 : -1;
         const double side = dir > 0 ? 1 : 0;
         if (pn && fabs(u[a] - side) < COPLANAR &&
-            dir * dot3(E[a], pn) > 0.3 * sqrt(dot3(E[a], E[a]))) {
+            dir * cs_vec3_dot(E[a], pn) > 0.3 * cs_vec3_norm(E[a])) {
             u[a] = side;
             continue;
         }
@@ -1817,7 +1791,7 @@ static bool point_in_cell(const cs_object *D, int32_t cell, const double X[8][3]
         for (int dir = -1; dir <= 1; dir += 2) {
             if (n_out && (ax != oax || (dir > 0) != (u[ax] > 1)))
                 continue;
-            if (pn && dir * dot3(E[ax], pn) > -0.3 * sqrt(dot3(E[ax], E[ax])))
+            if (pn && dir * cs_vec3_dot(E[ax], pn) > -0.3 * cs_vec3_norm(E[ax]))
                 continue;
             int32_t nb[3] = {ijk[0], ijk[1], ijk[2]};
             nb[ax] += dir;
@@ -1840,7 +1814,7 @@ static bool point_in_cell(const cs_object *D, int32_t cell, const double X[8][3]
         for (int a = 0; a < 3; a++)
             e[a] += sg * X[k][a];
     }
-    const double el = sqrt(dot3(e, e));
+    const double el = cs_vec3_norm(e);
     if (!(el > 0) || -bf * el >= margin)
         return false;
     for (int a = 0; a < 3; a++)
@@ -2066,7 +2040,7 @@ static double soft_now_normal(const soft_contact *c)
         for (int k = 0; k < 4; k++)
             v[a] -= c->bw[k] * B->v[3 * (size_t)c->bn[k] + a];
     }
-    return dot3(v, c->n);
+    return cs_vec3_dot(v, c->n);
 }
 
 /* Room in rw->sbox for n objects' boxes (7 doubles each). */
@@ -2123,12 +2097,12 @@ static bool node_normal(const cs_object *A, int i, double n[3])
                 for (int a = 0; a < 3; a++)
                     d[a] += sg * A->x[3 * (size_t)cn[q] + a];
             }
-            const double l = sqrt(dot3(d, d));
+            const double l = cs_vec3_norm(d);
             for (int a = 0; l > 0 && a < 3; a++)
                 n[a] += dir * d[a] / l;
         }
     }
-    const double l = sqrt(dot3(n, n));
+    const double l = cs_vec3_norm(n);
     if (!(l > 1e-6))
         return false;
     for (int a = 0; a < 3; a++)
@@ -2345,12 +2319,12 @@ static int born_contacts(cs_rigid_world *rw, double dt, double v_rest, cs_object
                 v[a] -= best.dw[k] * B->v[3 * (size_t)best.dn[k] + a];
         }
         if (first)
-            R->ref[i] = (float)fmin(0, best.sep - dt * dot3(v, best.n));
+            R->ref[i] = (float)fmin(0, best.sep - dt * cs_vec3_dot(v, best.n));
         else
             R->ref[i] = (float)fmin(0, fmax(R->ref[i], best.sep));
         if (best.sep < -0.5 * B->cm.h) /* as soft_nodes_in_cells: met inside, left there */
             continue;
-        if (dot3(v, best.n) < -v_rest)
+        if (cs_vec3_dot(v, best.n) < -v_rest)
             continue; /* an impact, not pieces resting on each other */
         /* its restitution never applies: v_rest */
         if (!add_soft_contact(rw, A, B, SA, SB, i, &best, best.sep - R->ref[i]))
@@ -2437,7 +2411,7 @@ static bool pair_impact(const cs_rigid_world *rw, int k0, int k1, double n[3], d
         }
         m++;
     }
-    const double l = sqrt(dot3(n, n));
+    const double l = cs_vec3_norm(n);
     if (m == 0 || !(l > 0))
         return false;
     double vp[3], vq[3];
@@ -2510,7 +2484,7 @@ static void pair_restitution(cs_rigid_world *rw, double v_bounce)
         for (int k = k0; k < k1; k++) {
             const soft_contact *c = &rw->sc[k];
             if (c->vimp < 0)
-                sd += (sj > 0 ? c->jn : 1.0) * fabs(dot3(c->n, n));
+                sd += (sj > 0 ? c->jn : 1.0) * fabs(cs_vec3_dot(c->n, n));
         }
         for (int k = k0; k < k1 && sd > 0; k++) {
             soft_contact *c = &rw->sc[k];
@@ -2731,7 +2705,7 @@ static int soft_contacts(cs_world_t *w, cs_rigid_world *rw, cs_step_stats *st)
     const double t0 = now_ms();
     const double dt = w->def.dt;
     /* the approach that is an impact, not resting contact (restitution's threshold below) */
-    const double v_rest = 2 * sqrt(dot3(w->def.gravity, w->def.gravity)) * dt + 1e-3;
+    const double v_rest = 2 * cs_vec3_norm(w->def.gravity) * dt + 1e-3;
     rw->nsc = 0;
     rw->pending = false;
     int soft = 0;
@@ -2810,7 +2784,7 @@ static int soft_contacts(cs_world_t *w, cs_rigid_world *rw, cs_step_stats *st)
         c->kt2 = soft_eff_mass(c, c->t2);
         double vr[3];
         soft_rel_velocity(c, vr);
-        const double vn0 = dot3(vr, c->n), slop = 0.01 * c->hB;
+        const double vn0 = cs_vec3_dot(vr, c->n), slop = 0.01 * c->hB;
         c->target = c->sep > 0 ? -c->sep / dt
                                : BAUMGARTE * fmin(fmax(0, -c->sep - slop), 0.1 * c->hB) / dt;
         /* an impact is judged on the approach the objects have now (their velocities after
@@ -2830,7 +2804,7 @@ static int soft_contacts(cs_world_t *w, cs_rigid_world *rw, cs_step_stats *st)
                 continue;
             double vr[3], J[3];
             soft_rel_velocity(c, vr);
-            double dj = (c->target - dot3(vr, c->n)) * c->kn;
+            double dj = (c->target - cs_vec3_dot(vr, c->n)) * c->kn;
             const double jn = fmax(0, c->jn + dj);
             dj = jn - c->jn;
             c->jn = jn;
@@ -2842,7 +2816,7 @@ static int soft_contacts(cs_world_t *w, cs_rigid_world *rw, cs_step_stats *st)
             double *jt[2] = {&c->jt1, &c->jt2};
             const double *t[2] = {c->t1, c->t2}, kt[2] = {c->kt1, c->kt2};
             for (int s = 0; s < 2; s++) {
-                double d = -dot3(vr, t[s]) * kt[s];
+                double d = -cs_vec3_dot(vr, t[s]) * kt[s];
                 const double nj = fmin(lim, fmax(-lim, *jt[s] + d));
                 d = nj - *jt[s];
                 *jt[s] = nj;
@@ -2938,7 +2912,7 @@ static void add_load(const cs_object *o, double *f, int32_t node, int32_t cell, 
     double d[3], X[3], u[3];
     for (int a = 0; a < 3; a++)
         d[a] = p[a] - rb->c[a];
-    mat_t_vec(rb->R, d, X);
+    cs_mat3_t_vec(rb->R, d, X);
     for (int a = 0; a < 3; a++) {
         u[a] = (X[a] + rb->com_rest[a] - o->cm.origin[a]) / o->cm.h - o->cm.cell_ijk[3 * (size_t)cell + a];
         u[a] = fmin(1, fmax(0, u[a]));
@@ -2983,11 +2957,11 @@ static int impact_fracture(cs_world_t *w, cs_rigid_world *rw, int bi, cs_step_st
     double Ft[3] = {0, 0, 0}, tau[3] = {0, 0, 0};
     for (int i = 0; i < n; i++) {
         double fb[3], d[3], t[3];
-        mat_t_vec(rb->R, f + 3 * (size_t)i, fb);
+        cs_mat3_t_vec(rb->R, f + 3 * (size_t)i, fb);
         memcpy(f + 3 * (size_t)i, fb, sizeof fb);
         for (int a = 0; a < 3; a++)
             d[a] = o->cm.node_rest[3 * (size_t)i + a] - rb->com_rest[a];
-        cross3(d, fb, t);
+        cs_vec3_cross(d, fb, t);
         for (int a = 0; a < 3; a++) {
             Ft[a] += fb[a];
             tau[a] += t[a];
@@ -3000,13 +2974,13 @@ static int impact_fracture(cs_world_t *w, cs_rigid_world *rw, int bi, cs_step_st
         double d[3];
         for (int a = 0; a < 3; a++)
             d[a] = o->cm.node_rest[3 * (size_t)i + a] - rb->com_rest[a];
-        const double dd = dot3(d, d);
+        const double dd = cs_vec3_dot(d, d);
         for (int r = 0; r < 3; r++)
             for (int c = 0; c < 3; c++)
                 Il[3 * r + c] += o->m[i] * ((r == c) * dd - d[r] * d[c]);
     }
     const double il_det = cs_mat3_adjugate(Il, Il_adj);
-    mat_vec(Il_adj, tau, alpha);
+    cs_mat3_vec(Il_adj, tau, alpha);
     for (int a = 0; a < 3; a++) {
         alpha[a] /= il_det;
         acc[a] = Ft[a] * rb->inv_mass;
@@ -3015,7 +2989,7 @@ static int impact_fracture(cs_world_t *w, cs_rigid_world *rw, int bi, cs_step_st
         double d[3], axd[3];
         for (int a = 0; a < 3; a++)
             d[a] = o->cm.node_rest[3 * (size_t)i + a] - rb->com_rest[a];
-        cross3(alpha, d, axd);
+        cs_vec3_cross(alpha, d, axd);
         for (int a = 0; a < 3; a++)
             f[3 * (size_t)i + a] -= o->m[i] * (acc[a] + axd[a]);
     }
@@ -3051,16 +3025,16 @@ static int impact_fracture(cs_world_t *w, cs_rigid_world *rw, int bi, cs_step_st
                 d[a] = o->cm.node_rest[3 * (size_t)i + a] - rb->com_rest[a];
                 t[a] += o->m[i] * u[3 * (size_t)i + a] * rb->inv_mass;
             }
-            cross3(d, u + 3 * (size_t)i, dxu);
+            cs_vec3_cross(d, u + 3 * (size_t)i, dxu);
             for (int a = 0; a < 3; a++)
                 L[a] += o->m[i] * dxu[a];
         }
-        mat_vec(Il_adj, L, wv);
+        cs_mat3_vec(Il_adj, L, wv);
         for (int i = 0; i < n; i++) {
             double d[3], wxd[3];
             for (int a = 0; a < 3; a++)
                 d[a] = o->cm.node_rest[3 * (size_t)i + a] - rb->com_rest[a];
-            cross3(wv, d, wxd);
+            cs_vec3_cross(wv, d, wxd);
             for (int a = 0; a < 3; a++)
                 u[3 * (size_t)i + a] -= t[a] + wxd[a] / il_det;
         }
@@ -3069,7 +3043,7 @@ static int impact_fracture(cs_world_t *w, cs_rigid_world *rw, int bi, cs_step_st
         double d[3], r[3];
         for (int a = 0; a < 3; a++)
             d[a] = o->cm.node_rest[3 * (size_t)i + a] - rb->com_rest[a] + u[3 * (size_t)i + a];
-        mat_vec(rb->R, d, r);
+        cs_mat3_vec(rb->R, d, r);
         for (int a = 0; a < 3; a++)
             o->x[3 * (size_t)i + a] = rb->c[a] + r[a];
     }
@@ -3193,7 +3167,7 @@ static int substep(cs_world_t *w, cs_rigid_world *rw, bool last, cs_step_stats *
             cs_object *o = rw->body[sl];
             if (!o->sleeping || o->n_fixed_nodes > 0 ||
                 (rw->body[mv]->n_inputs == 0 &&
-                 sqrt(dot3(m->v_pre, m->v_pre)) + sqrt(dot3(m->w_pre, m->w_pre)) * m->radius <=
+                 cs_vec3_norm(m->v_pre) + cs_vec3_norm(m->w_pre) * m->radius <=
                      2 * w->def.sleep_speed))
                 continue;
             o->sleeping = false;
@@ -3267,8 +3241,8 @@ static int substep(cs_world_t *w, cs_rigid_world *rw, bool last, cs_step_stats *
             continue;
         }
         if (!finite_n(rb->v, 3) || !finite_n(rb->w, 3) ||
-            sqrt(dot3(rb->v, rb->v)) > MAX_SPEED ||
-            sqrt(dot3(rb->w, rb->w)) * rb->radius > MAX_SPEED) {
+            cs_vec3_norm(rb->v) > MAX_SPEED ||
+            cs_vec3_norm(rb->w) * rb->radius > MAX_SPEED) {
             memset(rb->v, 0, sizeof rb->v);
             memset(rb->w, 0, sizeof rb->w);
             o->n_inputs = 0;
@@ -3284,7 +3258,7 @@ static int substep(cs_world_t *w, cs_rigid_world *rw, bool last, cs_step_stats *
         if (!last)
             continue;
         expire(o);
-        const double speed = sqrt(dot3(rb->v, rb->v)) + sqrt(dot3(rb->w, rb->w)) * rb->radius;
+        const double speed = cs_vec3_norm(rb->v) + cs_vec3_norm(rb->w) * rb->radius;
         if (w->def.sleep_steps > 0 && o->n_inputs == 0 && speed < w->def.sleep_speed) {
             o->still_steps++;
         } else {
@@ -3320,7 +3294,7 @@ static int substep(cs_world_t *w, cs_rigid_world *rw, bool last, cs_step_stats *
     }
     const double t3 = now_ms();
     /* 5. impact fracture */
-    const double gn = sqrt(dot3(w->def.gravity, w->def.gravity));
+    const double gn = cs_vec3_norm(w->def.gravity);
     const int n_body = rw->n_body;
     for (int i = 0; i < n_body; i++) {
         cs_object *o = rw->body[i];
@@ -3504,18 +3478,18 @@ int cs_rigid_step(cs_world_t *w, cs_step_stats *st)
         return CS_ERR_NOMEM;
     if (cs_rigid_sync(w) != CS_OK || wake_near_movers(w, rw) != CS_OK)
         return CS_ERR_NOMEM;
-    const double dt = w->def.dt, gn = sqrt(dot3(w->def.gravity, w->def.gravity));
+    const double dt = w->def.dt, gn = cs_vec3_norm(w->def.gravity);
     int n_sub = 1;
     for (int i = 0; i < w->n_objects; i++) {
         const cs_object *o = w->objects[i];
         if (o->model != CS_MODEL_RIGID || !o->rb || o->sleeping)
             continue;
         const cs_rigid *rb = o->rb;
-        double travel = dt * (sqrt(dot3(rb->v, rb->v)) + gn * dt +
-                              sqrt(dot3(rb->w, rb->w)) * rb->radius);
+        double travel = dt * (cs_vec3_norm(rb->v) + gn * dt +
+                              cs_vec3_norm(rb->w) * rb->radius);
         for (int k = 0; k < o->n_inputs; k++)
             if (o->inputs[k].kind == CS_INPUT_FORCE)
-                travel += dt * dt * sqrt(dot3(o->inputs[k].force, o->inputs[k].force)) *
+                travel += dt * dt * cs_vec3_norm(o->inputs[k].force) *
                           rb->inv_mass;
         const double s = ceil(travel / o->cm.h - 1e-9);
         if (s > n_sub)

@@ -24,18 +24,6 @@
 #define SLACK 1e-9         /* relative: a cell just projected onto a bound is in bounds */
 #define TARGET 0.9         /* a cell out of bounds is projected into [smin / TARGET, smax · TARGET] */
 
-static double dot3(const double a[3], const double b[3])
-{
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-}
-
-static void cross3(const double a[3], const double b[3], double c[3])
-{
-    c[0] = a[1] * b[2] - a[2] * b[1];
-    c[1] = a[2] * b[0] - a[0] * b[2];
-    c[2] = a[0] * b[1] - a[1] * b[0];
-}
-
 /* Eigen-decomposition of a symmetric 3×3 matrix by cyclic Jacobi rotations, the eigenvalues in
  * descending order: a = Σ_k l_k v_k v_kᵀ, v_k orthonormal and v₂ = v₀ × v₁. */
 static void sym_eigen3(const double a_in[9], double l[3], double v[3][3])
@@ -67,15 +55,15 @@ static void sym_eigen3(const double a_in[9], double l[3], double v[3][3])
         for (int i = 0; i < 3; i++)
             v[k][i] = V[3 * i + o[k]];
     }
-    cross3(v[0], v[1], v[2]);
+    cs_vec3_cross(v[0], v[1], v[2]);
 }
 
 /* A unit vector orthogonal to the unit vector u. */
 static void any_orthogonal(const double u[3], double w[3])
 {
     const double e[3] = {fabs(u[0]) < 0.6 ? 1.0 : 0.0, fabs(u[0]) < 0.6 ? 0.0 : 1.0, 0.0};
-    cross3(u, e, w);
-    const double n = sqrt(dot3(w, w));
+    cs_vec3_cross(u, e, w);
+    const double n = cs_vec3_norm(w);
     for (int i = 0; i < 3; i++)
         w[i] /= n;
 }
@@ -90,26 +78,26 @@ static double left_vectors(const double A[9], double v[3][3], double u[3][3], do
     for (int k = 0; k < 3; k++)
         for (int i = 0; i < 3; i++)
             av[k][i] = A[3 * i] * v[k][0] + A[3 * i + 1] * v[k][1] + A[3 * i + 2] * v[k][2];
-    const double n0 = sqrt(dot3(av[0], av[0]));
+    const double n0 = cs_vec3_norm(av[0]);
     s01[0] = n0;
-    s01[1] = sqrt(dot3(av[1], av[1]));
+    s01[1] = cs_vec3_norm(av[1]);
     if (!(n0 > 0 && isfinite(n0))) {
         memcpy(u, v, 9 * sizeof(double));
         return 0;
     }
     for (int i = 0; i < 3; i++)
         u[0][i] = av[0][i] / n0;
-    const double d = dot3(av[1], u[0]);
+    const double d = cs_vec3_dot(av[1], u[0]);
     for (int i = 0; i < 3; i++)
         u[1][i] = av[1][i] - d * u[0][i];
-    const double n1 = sqrt(dot3(u[1], u[1]));
+    const double n1 = cs_vec3_norm(u[1]);
     if (n1 > 1e-12 * n0)
         for (int i = 0; i < 3; i++)
             u[1][i] /= n1;
     else
         any_orthogonal(u[0], u[1]);
-    cross3(u[0], u[1], u[2]);
-    return dot3(u[2], av[2]);
+    cs_vec3_cross(u[0], u[1], u[2]);
+    return cs_vec3_dot(u[2], av[2]);
 }
 
 /* F = Σ_k s_k u_k v_kᵀ: the singular values descending (s₂ with the sign of det F) and the
@@ -133,7 +121,7 @@ void cs_strain_singular_values(const double F[9], double s[3])
 /* Whether some singular value of E lies outside [smin, smax] (a negative one does). */
 static bool stretch_out(const double E[9], double smin, double smax)
 {
-    const double n2 = dot3(E, E) + dot3(E + 3, E + 3) + dot3(E + 6, E + 6);
+    const double n2 = cs_vec3_dot(E, E) + cs_vec3_dot(E + 3, E + 3) + cs_vec3_dot(E + 6, E + 6);
     const double det = E[0] * (E[4] * E[8] - E[5] * E[7]) - E[1] * (E[3] * E[8] - E[5] * E[6]) +
                        E[2] * (E[3] * E[7] - E[4] * E[6]);
     if (n2 <= smax * smax && det >= 0.5 * smin * n2)
@@ -184,7 +172,7 @@ static bool cell_out(const double *x, const int32_t *nd, double h, double smin, 
                  nc = fabs(c[0]) + fabs(c[1]) + fabs(c[2]);
     const double p0 = nb0 + nb2 + nc, p1 = nb1 + nb0 + nc, p2 = nb2 + nb1 + nc;
     const double eta = g * sqrt(p0 * p0 + p1 * p1 + p2 * p2);
-    const double n2 = dot3(F, F) + dot3(F + 3, F + 3) + dot3(F + 6, F + 6);
+    const double n2 = cs_vec3_dot(F, F) + cs_vec3_dot(F + 3, F + 3) + cs_vec3_dot(F + 6, F + 6);
     const double det = F[0] * (F[4] * F[8] - F[5] * F[7]) - F[1] * (F[3] * F[8] - F[5] * F[6]) +
                        F[2] * (F[3] * F[7] - F[4] * F[6]);
     if (sqrt(n2) + eta <= smax && det > 0 && 2 * det / n2 - eta >= smin)
@@ -241,7 +229,7 @@ static void project_cell(cs_object *o, int c, double smin, double smax, double d
         for (int j = 0; j < 3; j++)
             dX[j] = 0.5 * h * (2 * CS_CORNER[k][j] - 1);
         for (int r = 0; r < 3; r++)
-            P[k][r] = dot3(S + 3 * r, dX);
+            P[k][r] = cs_vec3_dot(S + 3 * r, dX);
         held[k] = node_held(o, i);
         w[k] = (o->m[i] > 0 ? o->m[i] : 1.0) * (held[k] ? HELD_WEIGHT : 1.0);
         sw += w[k];
@@ -277,14 +265,15 @@ static void project_cell(cs_object *o, int c, double smin, double smax, double d
             d[r] = P[k][r] - pw[r];
         double *xi = o->x + 3 * i, *vi = o->v + 3 * i;
         for (int r = 0; r < 3; r++) {
-            const double dx = xw[r] + dot3(R + 3 * r, d) - xi[r];
+            const double dx = xw[r] + cs_vec3_dot(R + 3 * r, d) - xi[r];
             xi[r] += dx;
             vn[r] = vi[r] + dx / dt;
         }
         /* the velocity that ends the step where the node now is, no faster than before: the
          * move takes back motion the step made, and gives none for a shape that was out of
          * bounds before it */
-        const double v2 = dot3(vi, vi), n2 = dot3(vn, vn), f = n2 > v2 ? sqrt(v2 / n2) : 1.0;
+        const double v2 = cs_vec3_dot(vi, vi), n2 = cs_vec3_dot(vn, vn);
+        const double f = n2 > v2 ? sqrt(v2 / n2) : 1.0;
         for (int r = 0; r < 3; r++)
             vi[r] = f * vn[r];
     }

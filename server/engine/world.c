@@ -63,12 +63,7 @@ static bool finite3(const double v[3])
     return isfinite(v[0]) && isfinite(v[1]) && isfinite(v[2]);
 }
 
-static double norm3(const double v[3])
-{
-    return sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
-}
-
-/* |v| without overflow for any finite v (norm3's squares overflow past 1.3e154): what the
+/* |v| without overflow for any finite v (cs_vec3_norm's squares overflow past 1.3e154): what the
  * refusals of inputs check and quote, so that a 1e300 N force reads "1e+300 N", not "inf N". */
 static double length3(const double v[3])
 {
@@ -196,7 +191,7 @@ int cs_world_create(const cs_world_def *def, cs_world_t **out, char *err, size_t
     if (!(def->dt >= CS_MIN_DT && def->dt <= 1.0))
         return cs_engine_fail(err, errlen, CS_ERR_INVALID, "dt must be in [%g, 1] s, got %g",
                               CS_MIN_DT, def->dt);
-    if (!finite3(def->gravity) || norm3(def->gravity) > 1e4)
+    if (!finite3(def->gravity) || cs_vec3_norm(def->gravity) > 1e4)
         return cs_engine_fail(err, errlen, CS_ERR_INVALID, "gravity must be finite and below 1e4 m/s^2");
     if (!isfinite(def->ground_height))
         return cs_engine_fail(err, errlen, CS_ERR_INVALID, "ground height must be finite");
@@ -1115,7 +1110,7 @@ static double surface_area(const cs_object *o)
         const double v[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
         const double n[3] = {u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2],
                              u[0] * v[1] - u[1] * v[0]};
-        area += 0.5 * norm3(n);
+        area += 0.5 * cs_vec3_norm(n);
     }
     return area;
 }
@@ -2759,7 +2754,7 @@ static int active_reactions(const cs_world_t *w, cs_object *o, const double *av)
         }
         if (w->def.has_ground && o->x[3 * i + 2] <= g + eps && r[2] < 0)
             r[2] = 0;
-        if (norm3(r) >= CS_ACTIVE_WAKE * s * o->m[i])
+        if (cs_vec3_norm(r) >= CS_ACTIVE_WAKE * s * o->m[i])
             active_wake(o, i);
     }
     return before - o->n_frozen;
@@ -2790,7 +2785,7 @@ static void active_end(const cs_world_t *w, cs_object *o, const double *av)
         const int32_t *nd = o->cm.cell_nodes + 8 * (size_t)c;
         bool fast = false;
         for (int k = 0; k < 8 && !fast; k++)
-            fast = norm3(o->v1 + 3 * (size_t)nd[k]) >= s;
+            fast = cs_vec3_norm(o->v1 + 3 * (size_t)nd[k]) >= s;
         if (fast)
             for (int k = 0; k < 8; k++)
                 if (o->frozen[nd[k]])
@@ -2799,7 +2794,7 @@ static void active_end(const cs_world_t *w, cs_object *o, const double *av)
     for (int i = 0; i < o->n; i++) {
         if (o->frozen[i])
             continue;
-        bool calm = norm3(o->v1 + 3 * (size_t)i) < s;
+        bool calm = cs_vec3_norm(o->v1 + 3 * (size_t)i) < s;
         double f[3] = {0, 0, 0};
         for (int a = 0; a < 3 && calm; a++) {
             const size_t d = 3 * (size_t)i + a;
@@ -2807,7 +2802,7 @@ static void active_end(const cs_world_t *w, cs_object *o, const double *av)
                 continue;
             f[a] = (o->smask[d] && av ? av[d] : o->b[d]) - o->m[i] * o->v[d];
         }
-        calm = calm && norm3(f) < 0.5 * CS_ACTIVE_WAKE * s * o->m[i];
+        calm = calm && cs_vec3_norm(f) < 0.5 * CS_ACTIVE_WAKE * s * o->m[i];
         if (!calm) {
             o->calm[i] = 0;
             continue;
