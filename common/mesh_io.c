@@ -330,7 +330,9 @@ static const char *off_word(const char **b, const char *e)
     return s > *b ? s : NULL;
 }
 
-/* A number word [b, we) as a double (strtod's syntax, the whole word); 0 or -1. */
+/* A number word [b, we) as a double (strtod's syntax, the whole word: OFF writers use C's
+ * forms, ".5" and "1." among them, which cs_parse_decimal's JSON syntax refuses); 0 or -1.
+ * NaN and inf words parse and are refused by the caller's isfinite. */
 static int off_number(const char *b, const char *we, double *x)
 {
     char buf[64];
@@ -560,16 +562,16 @@ static int load_off(const char *path, const char *shown, off_t size, cs_mesh *ou
         }
         if (k < 3)
             continue;
+        if (nt + k - 2 > INT32_MAX / 3) {
+            snprintf(err, errlen, "mesh '%s': OFF: too many triangles", shown);
+            goto fail;
+        }
         if (nt + k - 2 > tcap) {
-            tcap = 2 * tcap + k;
+            tcap = 2 * tcap + k; /* below 2^32 by the check above */
             int32_t *t = realloc(out->t, (size_t)tcap * 3 * sizeof *t);
             if (!t)
                 goto nomem;
             out->t = t;
-        }
-        if (nt + k - 2 > INT32_MAX / 3) {
-            snprintf(err, errlen, "mesh '%s': OFF: too many triangles", shown);
-            goto fail;
         }
         if (k == 3) {
             memcpy(out->t + 3 * nt, poly, 3 * sizeof *poly);
