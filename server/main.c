@@ -86,6 +86,13 @@ static void on_signal(int sig)
     g_stop = 1;
 }
 
+/* cs_world_set_cancel's question: a SIGINT or SIGTERM stops a long --static solve too */
+static bool stop_asked(void *ctx)
+{
+    (void)ctx;
+    return g_stop != 0;
+}
+
 static void usage(FILE *f)
 {
     fputs("usage: cubesimd --scene FILE [--lcm URL] [--steps N | --duration S] [--realtime]\n"
@@ -921,9 +928,15 @@ int main(int argc, char **argv)
     int rc = 0;
     if (d.opt.static_solve) {
         double t0 = cs_dlog_now();
+        cs_world_set_cancel(d.world, stop_asked, NULL);
         int sr = cs_world_solve_static(d.world);
         const cs_step_stats *st = cs_world_last_stats(d.world);
-        if (sr != CS_OK) {
+        if (sr == CS_ERR_CANCELLED) {
+            cs_dlog_warn(&d.log, NULL, "static solve stopped by signal after %.1f s and %d "
+                         "iterations; objects left at their last load level reached",
+                         cs_dlog_now() - t0, st ? st->cg_iterations : -1);
+            rc = 1;
+        } else if (sr != CS_OK) {
             char hint[200] = "";
             static_hint(d.world, hint, sizeof hint);
             cs_dlog_warn(&d.log, NULL, "static solve: %s (residual %.3g of the loads after %d "

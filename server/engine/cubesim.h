@@ -39,7 +39,8 @@ typedef enum cs_status {
     CS_ERR_NOMEM = -3,          /* an allocation failed; the world is unchanged */
     CS_ERR_GEOMETRY = -4,       /* a mesh cannot be voxelized (open, empty, degenerate) */
     CS_ERR_NOT_CONVERGED = -5,  /* a solve hit its iteration limit; state is still finite */
-    CS_ERR_DIVERGED = -6        /* a step produced non-finite values; the step was undone */
+    CS_ERR_DIVERGED = -6,       /* a step produced non-finite values; the step was undone */
+    CS_ERR_CANCELLED = -7       /* a static solve stopped by cs_world_set_cancel's function */
 } cs_status;
 
 /* Human-readable name of a status code ("ok", "invalid argument", ...). Never NULL. */
@@ -324,6 +325,14 @@ int cs_world_step(cs_world_t *w);
  * Newton iterations with the corotated tangent). Velocities are zeroed.
  */
 int cs_world_solve_static(cs_world_t *w);
+/*
+ * A function cs_world_solve_static asks, between its Newton steps and its CG iterations,
+ * whether to stop (a daemon's SIGTERM: a large static solve runs for minutes). When it says
+ * yes the solve returns CS_ERR_CANCELLED with each object at its last load level reached
+ * (the rest state if none) and the objects after it untouched. NULL (the default): never.
+ * The function is called from the solving thread only.
+ */
+void cs_world_set_cancel(cs_world_t *w, bool (*cancel)(void *ctx), void *ctx);
 /* Every object back to its rest shape, at rest; time and inputs cleared. Painted material
  * fields are kept (they are the material, not the state), and so is fracture: an object that
  * broke stays broken and its pieces stay objects, each back at its own rest shape (the engine

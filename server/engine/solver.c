@@ -631,6 +631,8 @@ static cs_cg_result pcg(cs_cg_work *w, cs_matvec_fn A, void *ctx, cs_precond_fn 
     /* p and z are zero at held dofs (B's contract), so pᵀq needs no masking of q and
      * update_xr keeps r zero there. */
     while (rnorm > stop && it < max_iter && isfinite(rnorm)) {
+        if (w->cancel && w->cancel(w->cancel_ctx))
+            break;
         A(ctx, p, q);
         const double pq = cs_dot(w, p, q, n, threads);
         if (!(pq > 0))

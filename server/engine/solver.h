@@ -59,6 +59,10 @@ typedef struct cs_cg_work {
     bool hist_valid, dir_ready;
     int threads;               /* threads of cs_cg_guess's and cs_cg_record's passes (0: one;
                                   the solves take theirs as an argument) */
+    /* Asked before every iteration where set (NULL after init): true ends the solve there,
+     * not converged (a long static solve stopped by a signal, world.c). */
+    bool (*cancel)(void *ctx);
+    void *cancel_ctx;
 } cs_cg_work;
 
 int cs_cg_work_init(cs_cg_work *w, int n);

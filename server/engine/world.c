@@ -80,6 +80,7 @@ const char *cs_status_str(int status)
     case CS_ERR_GEOMETRY: return "bad geometry";
     case CS_ERR_NOT_CONVERGED: return "not converged";
     case CS_ERR_DIVERGED: return "diverged";
+    case CS_ERR_CANCELLED: return "stopped before it converged";
     default: return "unknown status";
     }
 }
@@ -3727,6 +3728,8 @@ static int solve_static_object(cs_world_t *w, cs_object *o, cs_step_stats *st)
         return CS_ERR_NOMEM;
     }
     memcpy(x0, o->x, (size_t)n3 * sizeof(double));
+    o->cg.cancel = w->cancel;
+    o->cg.cancel_ctx = w->cancel_ctx;
     int rc = solve_static_in_frame(w, o, st, fnorm, true, &relres);
     /* Multigrid first is not always the way: on soft slender beams bent far (a 40×2×2
      * corotational cantilever of E 1e4 Pa, ν 0.45, found by session 42's review) the
@@ -3739,6 +3742,8 @@ static int solve_static_object(cs_world_t *w, cs_object *o, cs_step_stats *st)
         cs_elastic_update(o, o->x);
         rc = solve_static_in_frame(w, o, st, fnorm, false, &relres);
     }
+    o->cg.cancel = NULL;
+    o->cg.cancel_ctx = NULL;
     free(x0);
     st->cg_residual = fmax(st->cg_residual, relres);
     if (rc != CS_OK)
@@ -3770,6 +3775,19 @@ static double static_floor(cs_object *o, double *delta, double *out)
     }
     step_operator(o, delta, out);
     return masked_norm(o, out);
+}
+
+void cs_world_set_cancel(cs_world_t *w, bool (*cancel)(void *ctx), void *ctx)
+{
+    if (!w)
+        return;
+    w->cancel = cancel;
+    w->cancel_ctx = ctx;
+}
+
+static bool static_cancelled(const cs_world_t *w)
+{
+    return w->cancel && w->cancel(w->cancel_ctx);
 }
 
 /* Newton steps without a new best residual before a load level counts as stalled. */
@@ -3818,8 +3836,12 @@ static int solve_static_in_frame(cs_world_t *w, cs_object *o, cs_step_stats *st,
          * supports raise it). */
         const double floor4 = 4.0 * static_floor(o, dx, o->cg.q);
         double rn_last = INFINITY; /* the residual before the last step */
-        bool ok = false, solved = true;
+        bool ok = false, solved = true, stopped = false;
         for (int it = 0; it < 60 && isfinite(rn); it++) {
+            if (static_cancelled(w)) {
+                stopped = true;
+                break;
+            }
             const double ltol = target < 1 ? level_tol * target * fnorm : tol;
             const bool at_floor = it > 0 && rn <= floor4 && (linear || rn > 0.5 * rn_last);
             if (rn <= ltol || at_floor) {
@@ -3847,6 +3869,10 @@ static int solve_static_in_frame(cs_world_t *w, cs_object *o, cs_step_stats *st,
                 r = static_solve(w, o, step_operator, res, dx, ctol, st, mg_first);
             }
             solved = r.converged;
+            if (static_cancelled(w)) { /* the solve may have stopped short for it */
+                stopped = true;
+                break;
+            }
             if (!all_finite(dx, (size_t)n3, cs_elastic_threads(o)))
                 break;
             /* Backtracking (Armijo) on the total potential energy, the natural merit function
@@ -3903,6 +3929,12 @@ static int solve_static_in_frame(cs_world_t *w, cs_object *o, cs_step_stats *st,
          * the loads has met the round-off floor of the internal forces, which for a lightly
          * loaded slender object lies above the 1e-8 asked for (3e-8 for a 10:1 cantilever
          * under 1e-3 g): keep that state rather than fall back to the last load level. */
+        if (stopped) { /* back to the last level reached */
+            memcpy(o->x, x_save, (size_t)n3 * sizeof(double));
+            cs_elastic_update(o, o->x);
+            rc = CS_ERR_CANCELLED;
+            break;
+        }
         if (!ok && target == 1 && isfinite(rn) && rn <= 1e-6 * fnorm)
             ok = true;
         if (ok) {
@@ -3942,6 +3974,10 @@ int cs_world_solve_static(cs_world_t *w)
         cs_object *o = w->objects[i];
         if (o->n_fixed_nodes == 0 || o->n_fixed_nodes == o->n || o->model == CS_MODEL_RIGID)
             continue; /* no equilibrium without supports; nothing to do when all held */
+        if (static_cancelled(w)) {
+            rc = CS_ERR_CANCELLED;
+            break;
+        }
         int r = solve_static_object(w, o, &st);
         if (r != CS_OK)
             rc = r;

@@ -325,6 +325,9 @@ struct cs_world {
     /* a lagged solve stops at twice the last fresh one's iterations + 2 (at least 8) and
      * goes on with a fresh build (true unless a test clears it) */
     bool pc_lag_cap;
+    /* cs_world_set_cancel's function and its argument (NULL: statics never stop early) */
+    bool (*cancel)(void *ctx);
+    void *cancel_ctx;
 };
 
 #define CS_BROADPHASE_BODIES 4

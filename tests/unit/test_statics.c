@@ -5,7 +5,9 @@
  * - its answer does not depend on the solver tolerance beyond that tolerance (a partial level
  *   used to be "reached" at the rest state whenever its loads were below 1e3·tol of the full
  *   ones, which at tolerance 1e-3 was every level: only the full load was ever solved, and
- *   the solve failed and returned the rest state).
+ *   the solve failed and returned the rest state);
+ * - cs_world_set_cancel stops it between CG iterations, leaves the object at a load level it
+ *   reached (the rest state when none), and a second solve from there reaches the same answer.
  */
 #include <math.h>
 #include <stdio.h>
@@ -107,4 +109,62 @@ TEST(statics_load_levels_are_solved_at_a_loose_tolerance)
     ENSURE(tip[0] < -0.05);
     ENSURE_NEAR(tip[1], tip[0], 1e-4 * fabs(tip[0]));
     ENSURE_NEAR(tip[2], tip[0], 1e-2 * fabs(tip[0]));
+}
+
+typedef struct counter {
+    int calls, at;
+} counter;
+
+static bool cancel_at(void *ctx)
+{
+    counter *c = ctx;
+    return ++c->calls >= c->at;
+}
+
+TEST(statics_stop_when_asked_and_go_on_from_there)
+{
+    /* the uninterrupted answer */
+    bracket ref;
+    ENSURE(bracket_make(&ref, 1e-6) == 0);
+    ENSURE(cs_world_solve_static(ref.w) == CS_OK);
+    const int its_ref = cs_world_last_stats(ref.w)->cg_iterations;
+    const double tip_ref = bracket_tip(&ref, NULL);
+    cs_world_destroy(ref.w);
+
+    /* asked at once: nothing moves */
+    bracket b;
+    ENSURE(bracket_make(&b, 1e-6) == 0);
+    counter c = {0, 1};
+    cs_world_set_cancel(b.w, cancel_at, &c);
+    ENSURE(cs_world_solve_static(b.w) == CS_ERR_CANCELLED);
+    double umax;
+    bracket_tip(&b, &umax);
+    ENSURE(umax == 0 && c.calls == 1);
+    cs_world_destroy(b.w);
+
+    /* asked part way (a third of the iterations): stopped within an iteration of it, at a
+     * finite state that is a load level reached, from which a second solve converges to the
+     * same answer */
+    const int ats[2] = {its_ref / 3, 2 * its_ref / 3};
+    for (int k = 0; k < 2; k++) {
+        ENSURE(bracket_make(&b, 1e-6) == 0);
+        c = (counter){0, ats[k]};
+        cs_world_set_cancel(b.w, cancel_at, &c);
+        ENSURE(cs_world_solve_static(b.w) == CS_ERR_CANCELLED);
+        const int its = cs_world_last_stats(b.w)->cg_iterations;
+        const double tip_part = bracket_tip(&b, &umax);
+        /* the question is asked before each CG iteration (and between Newton steps and
+         * objects, where a yes is asked again on the way out) */
+        ENSURE_MSG(its < ats[k] && c.calls >= ats[k] && c.calls <= ats[k] + 4,
+                   "%d iterations, %d calls, asked at %d", its, c.calls, ats[k]);
+        ENSURE(isfinite(tip_part) && isfinite(umax));
+        cs_world_set_cancel(b.w, NULL, NULL);
+        ENSURE(cs_world_solve_static(b.w) == CS_OK);
+        const double tip = bracket_tip(&b, NULL);
+        printf("    stopped after %d of %d iterations at tip %.6g m; resumed: tip %.9g m "
+               "(uninterrupted %.9g)\n", its, its_ref, tip_part, tip, tip_ref);
+        cs_world_destroy(b.w);
+        ENSURE(tip_part > 0.999 * tip_ref); /* short of the answer: a partial level */
+        ENSURE_NEAR(tip, tip_ref, 1e-5 * fabs(tip_ref));
+    }
 }
