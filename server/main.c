@@ -870,6 +870,29 @@ static void static_hint(const cs_world_t *w, char *out, size_t len)
                  best.name, best.material.poisson);
 }
 
+/* After a static solve: a line for each object with cubes turned inside out (a solve can
+ * converge there: the elastic models are linear in the strain, and a load far beyond what
+ * they represent, concentrated on a few cubes, turns them inside out without a word). */
+static void warn_inverted(cs_daemon *d)
+{
+    const int n = cs_world_object_ids(d->world, NULL, 0);
+    cs_object_id *ids = n > 0 ? malloc((size_t)n * sizeof *ids) : NULL;
+    const int m = ids ? cs_world_object_ids(d->world, ids, n) : 0;
+    for (int i = 0; i < m && i < n; i++) {
+        cs_object_info info;
+        int count = 0;
+        double lo = 1;
+        if (cs_object_get_info(d->world, ids[i], &info) != CS_OK ||
+            info.model == CS_MODEL_RIGID ||
+            cs_object_inverted_cells(d->world, ids[i], &count, &lo) != CS_OK || count == 0)
+            continue;
+        cs_dlog_warn(&d->log, NULL, "static solve: object '%.40s': %d of %d cubes turned inside "
+                     "out (smallest corner volume ratio %.3g): its loads are beyond what the "
+                     "model represents there", info.name, count, info.n_cells, lo);
+    }
+    free(ids);
+}
+
 int main(int argc, char **argv)
 {
     cs_daemon d;
@@ -947,6 +970,7 @@ int main(int argc, char **argv)
             cs_dlog_info(&d.log, "static solve converged in %.1f ms (%d iterations)",
                          1e3 * (cs_dlog_now() - t0), st ? st->cg_iterations : -1);
         }
+        warn_inverted(&d);
     } else {
         /* the daemon receives too (inputs, bursts of them, a load's long argument): its udpm
          * socket gets the clients' 4 MiB receive buffer unless the URL names one */

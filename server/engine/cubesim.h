@@ -362,6 +362,12 @@ typedef struct cs_object_info {
 
 int cs_object_get_info(const cs_world_t *w, cs_object_id id, cs_object_info *info);
 
+/* How many of the object's cubes are turned inside out now: a corner where the deformation
+ * gradient's determinant is ≤ 0 (a load beyond what the model represents there: the elastic
+ * models are linear in the strain and nothing in a static solve stops a cube from inverting).
+ * *min_det (if non-NULL): the smallest corner determinant (1 at rest: the local volume ratio). */
+int cs_object_inverted_cells(const cs_world_t *w, cs_object_id id, int *count, double *min_det);
+
 /* Cube-mesh nodes: rest and current positions, 3 doubles each; n nodes. */
 int cs_object_nodes(const cs_world_t *w, cs_object_id id, const double **rest,
                     const double **pos, const double **vel, int *n);

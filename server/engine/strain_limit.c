@@ -194,6 +194,39 @@ static bool cell_out(const double *x, const int32_t *nd, double h, double smin, 
     return false;
 }
 
+int cs_strain_inverted_cells(const double *x, const int32_t *cell_nodes, int n_cells, double h,
+                             double *min_det)
+{
+    int count = 0;
+    double lo = INFINITY;
+    const double g = 2 / h;
+    for (int c = 0; c < n_cells; c++) {
+        double a[3][3], b[3][3], m[3], cell_lo = INFINITY;
+        cell_modes(x, cell_nodes + 8 * (size_t)c, a, b, m);
+        for (int k = 0; k < 8; k++) {
+            const double s[3] = {2 * CS_CORNER[k][0] - 1, 2 * CS_CORNER[k][1] - 1,
+                                 2 * CS_CORNER[k][2] - 1};
+            double E[9];
+            for (int j = 0; j < 3; j++) {
+                const int j1 = (j + 1) % 3, jm = (j + 2) % 3;
+                for (int r = 0; r < 3; r++)
+                    E[3 * r + j] = g * (a[j][r] + b[j][r] * s[j1] + b[jm][r] * s[jm] +
+                                        m[r] * s[j1] * s[jm]);
+            }
+            const double det = E[0] * (E[4] * E[8] - E[5] * E[7]) -
+                               E[1] * (E[3] * E[8] - E[5] * E[6]) +
+                               E[2] * (E[3] * E[7] - E[4] * E[6]);
+            cell_lo = fmin(cell_lo, det);
+        }
+        if (!(cell_lo > 0))
+            count++;
+        lo = fmin(lo, cell_lo);
+    }
+    if (min_det)
+        *min_det = n_cells > 0 ? lo : 1.0;
+    return count;
+}
+
 static bool node_held(const cs_object *o, size_t i)
 {
     return o->mask[3 * i] || o->mask[3 * i + 1] || o->mask[3 * i + 2] || o->pin[i] ||

@@ -39,6 +39,13 @@
  * (o->mask), penalty pins and frozen nodes (active regions) never move. */
 int cs_strain_limit(cs_object *o, double dt);
 
+/* The cells among n_cells (8 node indices each, positions x, edge h) turned inside out: a
+ * corner where the deformation gradient's determinant is ≤ 0 (a trilinear cube's Jacobian
+ * takes its extremes at the corners). *min_det (if non-NULL): the smallest corner
+ * determinant of all cells (1 at rest, the volume ratio there). */
+int cs_strain_inverted_cells(const double *x, const int32_t *cell_nodes, int n_cells, double h,
+                             double *min_det);
+
 /* The singular values of F (row-major, F[3i + j] = ∂x_i/∂X_j) in descending order, the
  * smallest negative when det F < 0. For tests. */
 void cs_strain_singular_values(const double F[9], double s[3]);

@@ -4061,6 +4061,18 @@ int cs_object_get_info(const cs_world_t *w, cs_object_id id, cs_object_info *inf
     return CS_OK;
 }
 
+int cs_object_inverted_cells(const cs_world_t *w, cs_object_id id, int *count, double *min_det)
+{
+    const cs_object *o = cs_world_find_internal(w, id);
+    if (!o)
+        return CS_ERR_UNKNOWN_OBJECT;
+    const int k = cs_strain_inverted_cells(o->x, o->cm.cell_nodes, o->cm.n_cells, o->cm.h,
+                                           min_det);
+    if (count)
+        *count = k;
+    return CS_OK;
+}
+
 int cs_object_nodes(const cs_world_t *w, cs_object_id id, const double **rest,
                     const double **pos, const double **vel, int *n)
 {

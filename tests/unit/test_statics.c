@@ -7,7 +7,9 @@
  *   ones, which at tolerance 1e-3 was every level: only the full load was ever solved, and
  *   the solve failed and returned the rest state);
  * - cs_world_set_cancel stops it between CG iterations, leaves the object at a load level it
- *   reached (the rest state when none), and a second solve from there reaches the same answer.
+ *   reached (the rest state when none), and a second solve from there reaches the same answer;
+ * - a converged solve can leave cubes turned inside out (a point load on a block), and
+ *   cs_object_inverted_cells counts them (cubesimd warns).
  */
 #include <math.h>
 #include <stdio.h>
@@ -15,7 +17,10 @@
 #include <string.h>
 
 #include "check.h"
+#include "cubemesh.h"
 #include "cubesim.h"
+#include "lattice.h"
+#include "strain_limit.h"
 
 #define LB_H 0.025
 
@@ -167,4 +172,81 @@ TEST(statics_stop_when_asked_and_go_on_from_there)
         ENSURE(tip_part > 0.999 * tip_ref); /* short of the answer: a partial level */
         ENSURE_NEAR(tip, tip_ref, 1e-5 * fabs(tip_ref));
     }
+}
+
+/* One unit cube whose corner (1,1,1) is pushed down through the bottom face to z = −0.5: at
+ * that corner and at (1,1,0) the edge vectors give det = −0.5 (the others 1 or more). */
+TEST(statics_inverted_cells_counted_at_their_corners)
+{
+    double x[24];
+    int32_t nodes[8];
+    for (int k = 0; k < 8; k++) {
+        nodes[k] = k;
+        for (int a = 0; a < 3; a++)
+            x[3 * k + a] = CS_CORNER[k][a];
+    }
+    double lo;
+    ENSURE(cs_strain_inverted_cells(x, nodes, 1, 1.0, &lo) == 0);
+    ENSURE_NEAR(lo, 1.0, 1e-15);
+    for (int k = 0; k < 8; k++)
+        if (CS_CORNER[k][0] && CS_CORNER[k][1] && CS_CORNER[k][2])
+            x[3 * k + 2] = -0.5;
+    ENSURE(cs_strain_inverted_cells(x, nodes, 1, 1.0, &lo) == 1);
+    ENSURE_NEAR(lo, -0.5, 1e-15);
+    /* the same corner only flattened to z = 0: det 0 there, which counts (degenerate) */
+    for (int k = 0; k < 8; k++)
+        if (CS_CORNER[k][0] && CS_CORNER[k][1] && CS_CORNER[k][2])
+            x[3 * k + 2] = 0.0;
+    ENSURE(cs_strain_inverted_cells(x, nodes, 1, 1.0, &lo) == 1);
+    ENSURE_NEAR(lo, 0.0, 1e-15);
+}
+
+/* A corotational 8×8×8 block of 2.5 cm cubes held at its base, a load on the central 2×2
+ * faces of its top (session 43's sweep, F3): at 0.005 E·A of the whole top the cubes stay
+ * upright; at 0.05 E·A (20 % of E on the loaded faces' area) the solve converges with the
+ * loaded cubes turned inside out, and the count says so. */
+TEST(statics_converged_with_inverted_cubes_are_counted)
+{
+    const double F[2] = {200.0, 2000.0};
+    int count[2];
+    double lo[2];
+    for (int k = 0; k < 2; k++) {
+        cs_world_def wd = cs_world_def_default();
+        wd.gravity[2] = 0;
+        wd.threads = 1;
+        cs_world_t *w;
+        ENSURE(cs_world_create(&wd, &w, NULL, 0) == CS_OK);
+        cs_object_def d = cs_object_def_default();
+        d.name = "blk";
+        d.model = CS_MODEL_COROTATIONAL;
+        d.material.young = 1e6;
+        d.material.poisson = 0.3;
+        d.cube_size = 0.025;
+        int32_t *cells = cs_box_cells(8, 8, 8);
+        ENSURE(cells);
+        d.geometry = CS_GEOMETRY_CELLS;
+        d.cells_ijk = cells;
+        d.n_cells = 512;
+        d.cells_origin[0] = d.cells_origin[1] = -0.1;
+        const cs_aabb fix = {{-1, -1, -2.5e-5}, {1, 1, 2.5e-5}};
+        d.fixed = &fix;
+        d.n_fixed = 1;
+        const cs_load load = {{{-0.012525, -0.012525, 0.199975}, {0.012525, 0.012525, 0.200025}},
+                              {0, 0, -F[k]}};
+        d.loads = &load;
+        d.n_loads = 1;
+        cs_object_id id;
+        const int added = cs_world_add_object(w, &d, &id, NULL, 0);
+        free(cells);
+        ENSURE(added == CS_OK);
+        const int rc = cs_world_solve_static(w);
+        ENSURE(cs_object_inverted_cells(w, id, &count[k], &lo[k]) == CS_OK);
+        printf("    %g N: %s, %d inverted cubes, smallest corner volume ratio %.3g\n", F[k],
+               cs_status_str(rc), count[k], lo[k]);
+        ENSURE(cs_object_inverted_cells(w, id + 1000, NULL, NULL) == CS_ERR_UNKNOWN_OBJECT);
+        cs_world_destroy(w);
+        ENSURE(rc == CS_OK);
+    }
+    ENSURE(count[0] == 0 && lo[0] > 0 && lo[0] < 1);
+    ENSURE(count[1] > 0 && lo[1] < 0);
 }
