@@ -870,8 +870,9 @@ static void static_hint(const cs_world_t *w, char *out, size_t len)
                  best.name, best.material.poisson);
 }
 
-/* After a static solve: a line for each object with cubes turned inside out (a solve can
- * converge there: the elastic models are linear in the strain, and a load far beyond what
+/* After a static solve: a line for each object whose equilibrium is unstable (a buckled
+ * column held straight by symmetry), and one for each with cubes turned inside out (a solve
+ * can converge there: the elastic models are linear in the strain, and a load far beyond what
  * they represent, concentrated on a few cubes, turns them inside out without a word). */
 static void warn_inverted(cs_daemon *d)
 {
@@ -882,13 +883,18 @@ static void warn_inverted(cs_daemon *d)
         cs_object_info info;
         int count = 0;
         double lo = 1;
-        if (cs_object_get_info(d->world, ids[i], &info) != CS_OK ||
-            info.model == CS_MODEL_RIGID ||
-            cs_object_inverted_cells(d->world, ids[i], &count, &lo) != CS_OK || count == 0)
+        bool unstable = false;
+        if (cs_object_get_info(d->world, ids[i], &info) != CS_OK || info.model == CS_MODEL_RIGID)
             continue;
-        cs_dlog_warn(&d->log, NULL, "static solve: object '%.40s': %d of %d cubes turned inside "
-                     "out (smallest corner volume ratio %.3g): its loads are beyond what the "
-                     "model represents there", info.name, count, info.n_cells, lo);
+        if (cs_object_static_unstable(d->world, ids[i], &unstable) == CS_OK && unstable)
+            cs_dlog_warn(&d->log, NULL, "static solve: object '%.40s': the equilibrium found is "
+                         "unstable (its tangent stiffness has a direction of negative "
+                         "curvature: a column past its buckling load, held straight by "
+                         "symmetry); a small disturbance leaves it", info.name);
+        if (cs_object_inverted_cells(d->world, ids[i], &count, &lo) == CS_OK && count > 0)
+            cs_dlog_warn(&d->log, NULL, "static solve: object '%.40s': %d of %d cubes turned "
+                         "inside out (smallest corner volume ratio %.3g): its loads are beyond "
+                         "what the model represents there", info.name, count, info.n_cells, lo);
     }
     free(ids);
 }

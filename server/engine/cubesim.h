@@ -368,6 +368,12 @@ int cs_object_get_info(const cs_world_t *w, cs_object_id id, cs_object_info *inf
  * *min_det (if non-NULL): the smallest corner determinant (1 at rest: the local volume ratio). */
 int cs_object_inverted_cells(const cs_world_t *w, cs_object_id id, int *count, double *min_det);
 
+/* Whether the object's equilibrium from the last cs_world_solve_static is unstable: converged,
+ * but its tangent stiffness has a direction of negative curvature (a column loaded past its
+ * buckling load, held straight by symmetry; corotational and mss objects are probed, the
+ * other models' operators are positive definite). false before any static solve. */
+int cs_object_static_unstable(const cs_world_t *w, cs_object_id id, bool *unstable);
+
 /* Cube-mesh nodes: rest and current positions, 3 doubles each; n nodes. */
 int cs_object_nodes(const cs_world_t *w, cs_object_id id, const double **rest,
                     const double **pos, const double **vel, int *n);

@@ -590,7 +590,7 @@ static cs_cg_result pcg(cs_cg_work *w, cs_matvec_fn A, void *ctx, cs_precond_fn 
 {
     const int n = w->n;
     double *r = w->r, *z = w->z, *p = w->p, *q = w->q, *zo = w->zo;
-    cs_cg_result res = {0, 0, 0, 0};
+    cs_cg_result res = {0, 0, 0, 0, 0};
     const int nd = w->dir_ready ? w->ndirs : 0; /* armed by cs_cg_guess for this solve only */
     w->dir_ready = false;
 
@@ -635,8 +635,10 @@ static cs_cg_result pcg(cs_cg_work *w, cs_matvec_fn A, void *ctx, cs_precond_fn 
             break;
         A(ctx, p, q);
         const double pq = cs_dot(w, p, q, n, threads);
-        if (!(pq > 0))
-            break; /* not positive definite along p (or breakdown): stop with what we have */
+        if (!(pq > 0)) {
+            res.indefinite = pq <= 0; /* not positive definite along p (NaN: breakdown) */
+            break; /* stop with what we have */
+        }
         it++;
         rnorm = sqrt(update_xr(w, mask, rz / pq, p, q, x, r, n, threads));
         if (rnorm <= stop)

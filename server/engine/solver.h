@@ -121,6 +121,7 @@ typedef struct cs_cg_result {
     double relres;   /* ‖r‖/ref at exit: the relative residual the solve stopped on */
     double ref;      /* the norm tol was relative to (‖b‖ projected, ‖b − A x0‖, or given) */
     int converged;
+    int indefinite;  /* stopped on a direction p with pᵀA p ≤ 0: A is not positive definite */
 } cs_cg_result;
 
 /*

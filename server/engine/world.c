@@ -2976,7 +2976,7 @@ static int step_implicit(cs_world_t *w, cs_object *o, cs_step_stats *st, bool tr
     int ground_rounds = 0;
     bool landed = false; /* Newmark: a node reached the ground in this step */
     bool relinearized = false; /* relinearize_turn has run */
-    cs_cg_result r = {0, 0, 1, 0};
+    cs_cg_result r = {0, 0, 1, 0, 0};
     /* The tolerance is relative to ‖b − A v1‖ at the guess above (w->def.cg_relative_to):
      * the Δv form's right-hand side; a re-solve of this step keeps that reference. */
     o->cg.stop = w->def.cg_relative_to == CS_CG_RELATIVE_STEP ? CS_CG_STOP_START : CS_CG_STOP_RHS;
@@ -3269,7 +3269,7 @@ static int step_central_difference(cs_world_t *w, cs_object *o, cs_step_stats *s
     /* forces enter b as 2dt·f: the held rows' residual is the ground's reaction, 2dt·f_c */
     int contacts = constrain_ground(w, o, 2.0 * dt);
     double t3 = now_ms();
-    cs_cg_result r = {0, 0, 1, 0};
+    cs_cg_result r = {0, 0, 1, 0, 0};
     for (int round = 0;; round++) {
         const cs_cg_result rr =
             cs_pcg(&o->cg, cd_operator, o, o->blocks, o->smask, o->b, o->v1,
@@ -3697,6 +3697,39 @@ static cs_cg_result static_solve(cs_world_t *w, cs_object *o, cs_matvec_fn A, do
 }
 
 /*
+ * Whether o's static equilibrium (x, solved in its frame) is unstable: its tangent stiffness
+ * (the geometric one for corotational objects, the full spring Jacobian for mss) has a
+ * direction of negative curvature. A straight column loaded past its buckling load is in
+ * equilibrium, and the load stepping reaches that state along the symmetric path and reports
+ * it as converged (session 43's sweep: a clamped-free block at 0.25–0.30 E·A, buckling near
+ * 0.17). Probed by CG on the tangent from a fixed pseudo-random right-hand side: its pivots
+ * pᵀA p are those of the Lanczos matrix, whose smallest Ritz value soon approaches a negative
+ * eigenvalue, which then gives a negative pivot (with the preconditioner, the inertia is the
+ * same). Measured: a negative pivot within 0–4 iterations wherever the sweep's columns were
+ * past buckling, where positive definite tangents take 9–22 iterations to 1e-6; so 1e-3 and
+ * at most 30 iterations (6–12 more CG iterations a converged solve). Linear and localframe
+ * objects' operators are positive definite and are not probed.
+ */
+static bool probe_unstable(cs_world_t *w, cs_object *o, cs_step_stats *st, bool mg_first)
+{
+    if (o->model != CS_MODEL_COROTATIONAL && o->model != CS_MODEL_MSS)
+        return false;
+    const int n3 = 3 * o->n;
+    double *rhs = o->b, *dx = o->v1;
+    for (int d = 0; d < n3; d++) {
+        const uint32_t hsh = (uint32_t)(d + 1) * 2654435761u;
+        rhs[d] = o->mask[d] ? 0.0 : (double)(hsh >> 8) / 16777216.0 - 0.5;
+        dx[d] = 0;
+    }
+    const bool geometric = cs_elastic_prepare_tangent(o, o->x) == 0;
+    build_preconditioner(o);
+    const cs_cg_result r = static_solve(w, o, geometric ? tangent_operator : step_operator, rhs,
+                                        dx, 1e-3, st, mg_first, 30);
+    cs_elastic_release_tangent(o);
+    return r.indefinite;
+}
+
+/*
  * Static equilibrium of one object: Newton iterations with the corotated (warped) tangent
  * R K Rᵀ, a backtracking line search on the residual norm, and adaptive load stepping for
  * large rotations; linear objects take one solve, to the tolerance (and a second where
@@ -3714,6 +3747,7 @@ static int solve_static_object(cs_world_t *w, cs_object *o, cs_step_stats *st)
     const int n3 = 3 * o->n;
     gather_forces_ex(o, false); /* the penalty springs are in static_residual */
     const double fnorm = masked_norm(o, o->f);
+    o->static_unstable = false;
     memset(o->v, 0, (size_t)n3 * sizeof(double));
     if (fnorm == 0)
         return CS_OK;
@@ -3745,6 +3779,7 @@ static int solve_static_object(cs_world_t *w, cs_object *o, cs_step_stats *st)
         cs_elastic_update(o, o->x);
         rc = solve_static_in_frame(w, o, st, fnorm, false, &relres);
     }
+    o->static_unstable = rc == CS_OK && probe_unstable(w, o, st, true);
     o->cg.cancel = NULL;
     o->cg.cancel_ctx = NULL;
     free(x0);
@@ -3868,7 +3903,7 @@ static int solve_static_in_frame(cs_world_t *w, cs_object *o, cs_step_stats *st,
              * asked; the warped stiffness then took 8) stops at 10 times the iterations its
              * converged solves took, and where it got within 0.1 of its right-hand side its
              * step is taken as it is: an inexact Newton step, checked by the line search. */
-            cs_cg_result r = {0, 1, 0, 0};
+            cs_cg_result r = {0, 1, 0, 0, 0};
             bool geometric = cs_elastic_prepare_tangent(o, o->x) == 0, stagnated = false;
             if (geometric) {
                 r = static_solve(w, o, tangent_operator, res, dx, ctol, st, mg_first, geo_cap);
@@ -4072,6 +4107,15 @@ int cs_object_get_info(const cs_world_t *w, cs_object_id id, cs_object_info *inf
         .topology_version = o->topology_version, .sleeping = o->sleeping,
         .fracture = o->fracture, .volume = o->cm.n_cells * o->cm.h * o->cm.h * o->cm.h,
         .mass = o->mass};
+    return CS_OK;
+}
+
+int cs_object_static_unstable(const cs_world_t *w, cs_object_id id, bool *unstable)
+{
+    const cs_object *o = cs_world_find_internal(w, id);
+    if (!o || !unstable)
+        return CS_ERR_UNKNOWN_OBJECT;
+    *unstable = o->static_unstable;
     return CS_OK;
 }
 

@@ -238,6 +238,7 @@ typedef struct cs_object {
                             object's next step is implicit Euler's, whose response the contact
                             solve modelled (contact_soft.h) */
     bool sleeping;
+    bool static_unstable; /* the last static solve's equilibrium has negative stiffness */
     /* The velocity the step in which it fell asleep started from (world.c, wake_velocity): at
      * rest, what the contacts' impulses left on its nodes, the load of what rests on it. The
      * first step after it wakes (wake_armed) starts from it if no contact reached the object

@@ -212,6 +212,17 @@ if [ $rc -eq 0 ] && [ "$(grep -c . <<<"$err")" -eq 1 ] &&
 else
     cs_fail static-inverted-cubes-warned "exit $rc, stderr: ${err//$'\n'/ | }"
 fi
+# A static solve that converges to an unstable equilibrium (a clamped-free 8x8x8 block under a
+# dead top load of 0.25 E*A, past its buckling load near 0.16, held straight by symmetry) says
+# so in one line; exit 0.
+printf '{ "gravity": [0, 0, 0], "solver": { "threads": 1 }, "objects": [ { "name": "col", "model": "corotational", "cube_size": 0.025, "material": { "young": 1e6, "poisson": 0.3 }, "box": { "min": [0, 0, 0], "size": [0.2, 0.2, 0.2] }, "fixed": [ { "min": [-1, -1, -2.5e-5], "max": [1, 1, 2.5e-5] } ], "loads": [ { "min": [-1, -1, 0.199975], "max": [1, 1, 0.200025], "force": [0, 0, -10000] } ] } ] }\n' >"$CS_TMP/column.json"
+err=$(timeout 60 "$D" --scene "$CS_TMP/column.json" --static --quiet 2>&1 >/dev/null); rc=$?
+if [ $rc -eq 0 ] && [ "$(grep -c . <<<"$err")" -eq 1 ] &&
+   grep -q "^cubesimd: static solve: object 'col': the equilibrium found is unstable (its tangent stiffness has a direction of negative curvature: a column past its buckling load, held straight by symmetry); a small disturbance leaves it$" <<<"$err"; then
+    cs_pass static-unstable-equilibrium-warned
+else
+    cs_fail static-unstable-equilibrium-warned "exit $rc, stderr: ${err//$'\n'/ | }"
+fi
 # SIGTERM stops a long static solve (a localframe 40x4x4 cantilever bent far: about 14 s on
 # one core) within moments, not when the solve ends: exit 1, one line saying so, and the nodes
 # written at the last load level reached (before, only SIGKILL stopped it).
