@@ -155,6 +155,26 @@ static void cell_modes(const double *x, const int32_t *nd, double a[3][3], doubl
     }
 }
 
+/* The deformation gradient at corner k of a cell with modes a, b, c (cell_modes), g = 2/h. */
+static void corner_jacobian(const double a[3][3], const double b[3][3], const double c[3],
+                            double g, int k, double E[9])
+{
+    const double s[3] = {2 * CS_CORNER[k][0] - 1, 2 * CS_CORNER[k][1] - 1,
+                         2 * CS_CORNER[k][2] - 1};
+    for (int j = 0; j < 3; j++) {
+        const int j1 = (j + 1) % 3, jm = (j + 2) % 3;
+        for (int r = 0; r < 3; r++)
+            E[3 * r + j] = g * (a[j][r] + b[j][r] * s[j1] + b[jm][r] * s[jm] +
+                                c[r] * s[j1] * s[jm]);
+    }
+}
+
+static double det3(const double F[9])
+{
+    return F[0] * (F[4] * F[8] - F[5] * F[7]) - F[1] * (F[3] * F[8] - F[5] * F[6]) +
+           F[2] * (F[3] * F[7] - F[4] * F[6]);
+}
+
 /* Whether the cell has a corner (or its centre) outside the bounds. */
 static bool cell_out(const double *x, const int32_t *nd, double h, double smin, double smax)
 {
@@ -173,21 +193,14 @@ static bool cell_out(const double *x, const int32_t *nd, double h, double smin, 
     const double p0 = nb0 + nb2 + nc, p1 = nb1 + nb0 + nc, p2 = nb2 + nb1 + nc;
     const double eta = g * sqrt(p0 * p0 + p1 * p1 + p2 * p2);
     const double n2 = cs_vec3_dot(F, F) + cs_vec3_dot(F + 3, F + 3) + cs_vec3_dot(F + 6, F + 6);
-    const double det = F[0] * (F[4] * F[8] - F[5] * F[7]) - F[1] * (F[3] * F[8] - F[5] * F[6]) +
-                       F[2] * (F[3] * F[7] - F[4] * F[6]);
+    const double det = det3(F);
     if (sqrt(n2) + eta <= smax && det > 0 && 2 * det / n2 - eta >= smin)
         return false; /* every corner within bounds (the usual case) */
     if (stretch_out(F, smin, smax))
         return true;
     for (int k = 0; k < 8; k++) {
-        double s[3] = {2 * CS_CORNER[k][0] - 1, 2 * CS_CORNER[k][1] - 1, 2 * CS_CORNER[k][2] - 1};
         double E[9];
-        for (int j = 0; j < 3; j++) {
-            const int j1 = (j + 1) % 3, jm = (j + 2) % 3;
-            for (int r = 0; r < 3; r++)
-                E[3 * r + j] = g * (a[j][r] + b[j][r] * s[j1] + b[jm][r] * s[jm] +
-                                    c[r] * s[j1] * s[jm]);
-        }
+        corner_jacobian(a, b, c, g, k, E);
         if (stretch_out(E, smin, smax))
             return true;
     }
@@ -204,19 +217,9 @@ int cs_strain_inverted_cells(const double *x, const int32_t *cell_nodes, int n_c
         double a[3][3], b[3][3], m[3], cell_lo = INFINITY;
         cell_modes(x, cell_nodes + 8 * (size_t)c, a, b, m);
         for (int k = 0; k < 8; k++) {
-            const double s[3] = {2 * CS_CORNER[k][0] - 1, 2 * CS_CORNER[k][1] - 1,
-                                 2 * CS_CORNER[k][2] - 1};
             double E[9];
-            for (int j = 0; j < 3; j++) {
-                const int j1 = (j + 1) % 3, jm = (j + 2) % 3;
-                for (int r = 0; r < 3; r++)
-                    E[3 * r + j] = g * (a[j][r] + b[j][r] * s[j1] + b[jm][r] * s[jm] +
-                                        m[r] * s[j1] * s[jm]);
-            }
-            const double det = E[0] * (E[4] * E[8] - E[5] * E[7]) -
-                               E[1] * (E[3] * E[8] - E[5] * E[6]) +
-                               E[2] * (E[3] * E[7] - E[4] * E[6]);
-            cell_lo = fmin(cell_lo, det);
+            corner_jacobian(a, b, m, g, k, E);
+            cell_lo = fmin(cell_lo, det3(E));
         }
         if (!(cell_lo > 0))
             count++;
