@@ -9,7 +9,7 @@ set -u
 source "$(dirname "$0")/lib.sh"
 case "$CS_IT_BIN" in */san/bin) exit 0 ;; esac
 B="$CS_IT_BIN/bench_blocks"
-T=$(mktemp -d); trap 'rm -rf "$T"' EXIT
+T="$CS_TMP" # lib.sh's scratch folder (an EXIT trap of our own would replace lib.sh's, which removes it)
 if timeout 120 "$B" --sizes 4,6 --runs 1 --threads 1,2 --precond jacobi,multigrid --csv "$T/b.csv" \
        >"$T/b.md" 2>"$T/b.err" &&
    [ "$(grep -c '^| [46]³' "$T/b.md")" -eq 8 ] && [ "$(wc -l <"$T/b.csv")" -eq 9 ] &&

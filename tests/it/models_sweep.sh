@@ -13,7 +13,7 @@ if [ ! -d /usr/share/assimp/models ]; then
     cs_fail models-sweep "/usr/share/assimp/models missing (make deps installs assimp-testmodels)"
     cs_finish
 fi
-T=$(mktemp); trap 'rm -f "$T"' EXIT
+T="$CS_TMP/sweep.out" # in lib.sh's scratch folder (an EXIT trap of our own would replace lib.sh's, which removes it)
 timeout 500 "$CS_IT_BIN/cs_stress_models" --timeout 120 >"$T" 2>&1
 rc=$?
 last=$(tail -n 1 "$T")
