@@ -279,6 +279,18 @@ static int triangulate_face(const double *v, const int32_t *idx, int k, int32_t 
     return nt;
 }
 
+/* The triangles of face idx[0..k) (k >= 3) appended to t: a triangle as it is, a polygon by
+ * triangulate_face. Returns their count. */
+static int face_triangles(const double *v, const int32_t *idx, int k, int32_t *t, int *rest,
+                          long *budget)
+{
+    if (k == 3) {
+        memcpy(t, idx, 3 * sizeof *idx);
+        return 1;
+    }
+    return triangulate_face(v, idx, k, t, rest, budget);
+}
+
 /* ---------------------------------------------------------------- OFF, read here */
 
 /*
@@ -297,6 +309,12 @@ typedef struct off_reader {
     int line;            /* of the text at p, from 1 */
 } off_reader;
 
+/* A blank between OFF's words (a space, a tab, a carriage return, a form or vertical feed). */
+static int off_blank(char c)
+{
+    return c == ' ' || c == '\t' || c == '\r' || c == '\f' || c == '\v';
+}
+
 /* The next line that holds anything but blanks and a comment: [*b, *e) without the comment.
  * Returns 0 at the end of the text. */
 static int off_line(off_reader *r, const char **b, const char **e)
@@ -307,7 +325,7 @@ static int off_line(off_reader *r, const char **b, const char **e)
         r->p = nl ? nl + 1 : r->end;
         r->line++;
         const char *t = hash ? hash : stop;
-        while (s < t && (*s == ' ' || *s == '\t' || *s == '\r' || *s == '\f' || *s == '\v'))
+        while (s < t && off_blank(*s))
             s++;
         if (s < t) {
             *b = s;
@@ -322,10 +340,10 @@ static int off_line(off_reader *r, const char **b, const char **e)
 static const char *off_word(const char **b, const char *e)
 {
     const char *s = *b;
-    while (s < e && (*s == ' ' || *s == '\t' || *s == '\r' || *s == '\f' || *s == '\v'))
+    while (s < e && off_blank(*s))
         s++;
     *b = s;
-    while (s < e && !(*s == ' ' || *s == '\t' || *s == '\r' || *s == '\f' || *s == '\v'))
+    while (s < e && !off_blank(*s))
         s++;
     return s > *b ? s : NULL;
 }
@@ -573,12 +591,7 @@ static int load_off(const char *path, const char *shown, off_t size, cs_mesh *ou
                 goto nomem;
             out->t = t;
         }
-        if (k == 3) {
-            memcpy(out->t + 3 * nt, poly, 3 * sizeof *poly);
-            nt++;
-        } else {
-            nt += triangulate_face(out->v, poly, (int)k, out->t + 3 * nt, rest, &budget);
-        }
+        nt += face_triangles(out->v, poly, (int)k, out->t + 3 * nt, rest, &budget);
     }
     free(text);
     free(poly);
@@ -730,13 +743,8 @@ static int load_direct(const char *path, cs_mesh *out, char *err, size_t errlen)
                 }
                 poly[c] = vbase + (int32_t)fc->mIndices[c];
             }
-            if (k == 3) {
-                memcpy(out->t + 3 * (size_t)tcount, poly, 3 * sizeof *poly);
-                tcount++;
-            } else {
-                tcount += triangulate_face(out->v, poly, k, out->t + 3 * (size_t)tcount, rest,
-                                           &budget);
-            }
+            tcount += face_triangles(out->v, poly, k, out->t + 3 * (size_t)tcount, rest,
+                                     &budget);
         }
         vbase += (int)am->mNumVertices;
     }
