@@ -874,7 +874,7 @@ static void static_hint(const cs_world_t *w, char *out, size_t len)
  * column held straight by symmetry), and one for each with cubes turned inside out (a solve
  * can converge there: the elastic models are linear in the strain, and a load far beyond what
  * they represent, concentrated on a few cubes, turns them inside out without a word). */
-static void warn_inverted(cs_daemon *d)
+static void warn_static_state(cs_daemon *d)
 {
     const int n = cs_world_object_ids(d->world, NULL, 0);
     cs_object_id *ids = n > 0 ? malloc((size_t)n * sizeof *ids) : NULL;
@@ -976,7 +976,7 @@ int main(int argc, char **argv)
             cs_dlog_info(&d.log, "static solve converged in %.1f ms (%d iterations)",
                          1e3 * (cs_dlog_now() - t0), st ? st->cg_iterations : -1);
         }
-        warn_inverted(&d);
+        warn_static_state(&d);
     } else {
         /* the daemon receives too (inputs, bursts of them, a load's long argument): its udpm
          * socket gets the clients' 4 MiB receive buffer unless the URL names one */

@@ -3823,6 +3823,11 @@ void cs_world_set_cancel(cs_world_t *w, bool (*cancel)(void *ctx), void *ctx)
     w->cancel_ctx = ctx;
 }
 
+static int imax(int a, int b)
+{
+    return a > b ? a : b;
+}
+
 static bool static_cancelled(const cs_world_t *w)
 {
     return w->cancel && w->cancel(w->cancel_ctx);
@@ -3908,8 +3913,7 @@ static int solve_static_in_frame(cs_world_t *w, cs_object *o, cs_step_stats *st,
             if (geometric) {
                 r = static_solve(w, o, tangent_operator, res, dx, ctol, st, mg_first, geo_cap);
                 if (r.converged)
-                    geo_cap = geo_cap > 10 * r.iterations ? geo_cap
-                              : 10 * r.iterations > 50 ? 10 * r.iterations : 50;
+                    geo_cap = imax(geo_cap, imax(50, 10 * r.iterations));
                 else
                     stagnated = geo_cap > 0 && r.iterations >= geo_cap && r.relres <= 0.1;
             }

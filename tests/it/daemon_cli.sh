@@ -202,27 +202,30 @@ if [ $rc -eq 1 ] && grep -q "static solve: not converged (residual 1 of the load
 else
     cs_fail static-near-incompressible-jacobi-fails-fast "exit $rc: $(tr '\n' '|' <<<"$err" | tail -c 300)"
 fi
+# static_warns NAME LOADS-BOX FORCE PATTERN: a corotational 8x8x8 block of 2.5 cm cubes held
+# at its base, a dead load on the faces in LOADS-BOX ("min": [...], "max": [...]), solved with
+# --static: exit 0 and exactly one stderr line, matching PATTERN.
+static_warns() {
+    printf '{ "gravity": [0, 0, 0], "solver": { "threads": 1 }, "objects": [ { "name": "blk", "model": "corotational", "cube_size": 0.025, "material": { "young": 1e6, "poisson": 0.3 }, "box": { "min": [-0.1, -0.1, 0], "size": [0.2, 0.2, 0.2] }, "fixed": [ { "min": [-1, -1, -2.5e-5], "max": [1, 1, 2.5e-5] } ], "loads": [ { %s, "force": [0, 0, %s] } ] } ] }\n' "$2" "$3" >"$CS_TMP/$1.json"
+    local err rc
+    err=$(timeout 60 "$D" --scene "$CS_TMP/$1.json" --static --quiet 2>&1 >/dev/null); rc=$?
+    if [ $rc -eq 0 ] && [ "$(grep -c . <<<"$err")" -eq 1 ] && grep -q "$4" <<<"$err"; then
+        cs_pass "$1"
+    else
+        cs_fail "$1" "exit $rc, stderr: ${err//$'\n'/ | }"
+    fi
+}
 # A static solve that converges with cubes turned inside out (a load of 20 % of E on the
-# central 2x2 top faces of a corotational 8x8x8 block) says so in one line; exit 0.
-printf '{ "gravity": [0, 0, 0], "solver": { "threads": 1 }, "objects": [ { "name": "blk", "model": "corotational", "cube_size": 0.025, "material": { "young": 1e6, "poisson": 0.3 }, "box": { "min": [-0.1, -0.1, 0], "size": [0.2, 0.2, 0.2] }, "fixed": [ { "min": [-1, -1, -2.5e-5], "max": [1, 1, 2.5e-5] } ], "loads": [ { "min": [-0.012525, -0.012525, 0.199975], "max": [0.012525, 0.012525, 0.200025], "force": [0, 0, -2000] } ] } ] }\n' >"$CS_TMP/poke.json"
-err=$(timeout 60 "$D" --scene "$CS_TMP/poke.json" --static --quiet 2>&1 >/dev/null); rc=$?
-if [ $rc -eq 0 ] && [ "$(grep -c . <<<"$err")" -eq 1 ] &&
-   grep -q "^cubesimd: static solve: object 'blk': 4 of 512 cubes turned inside out (smallest corner volume ratio -1.1[0-9]): its loads are beyond what the model represents there$" <<<"$err"; then
-    cs_pass static-inverted-cubes-warned
-else
-    cs_fail static-inverted-cubes-warned "exit $rc, stderr: ${err//$'\n'/ | }"
-fi
-# A static solve that converges to an unstable equilibrium (a clamped-free 8x8x8 block under a
+# central 2x2 top faces) says so in one line.
+static_warns static-inverted-cubes-warned \
+    '"min": [-0.012525, -0.012525, 0.199975], "max": [0.012525, 0.012525, 0.200025]' -2000 \
+    "^cubesimd: static solve: object 'blk': 4 of 512 cubes turned inside out (smallest corner volume ratio -1.1[0-9]): its loads are beyond what the model represents there$"
+# A static solve that converges to an unstable equilibrium (the clamped-free block under a
 # dead top load of 0.25 E*A, past its buckling load near 0.16, held straight by symmetry) says
-# so in one line; exit 0.
-printf '{ "gravity": [0, 0, 0], "solver": { "threads": 1 }, "objects": [ { "name": "col", "model": "corotational", "cube_size": 0.025, "material": { "young": 1e6, "poisson": 0.3 }, "box": { "min": [0, 0, 0], "size": [0.2, 0.2, 0.2] }, "fixed": [ { "min": [-1, -1, -2.5e-5], "max": [1, 1, 2.5e-5] } ], "loads": [ { "min": [-1, -1, 0.199975], "max": [1, 1, 0.200025], "force": [0, 0, -10000] } ] } ] }\n' >"$CS_TMP/column.json"
-err=$(timeout 60 "$D" --scene "$CS_TMP/column.json" --static --quiet 2>&1 >/dev/null); rc=$?
-if [ $rc -eq 0 ] && [ "$(grep -c . <<<"$err")" -eq 1 ] &&
-   grep -q "^cubesimd: static solve: object 'col': the equilibrium found is unstable (its tangent stiffness has a direction of negative curvature: a column past its buckling load, held straight by symmetry); a small disturbance leaves it$" <<<"$err"; then
-    cs_pass static-unstable-equilibrium-warned
-else
-    cs_fail static-unstable-equilibrium-warned "exit $rc, stderr: ${err//$'\n'/ | }"
-fi
+# so in one line.
+static_warns static-unstable-equilibrium-warned \
+    '"min": [-1, -1, 0.199975], "max": [1, 1, 0.200025]' -10000 \
+    "^cubesimd: static solve: object 'blk': the equilibrium found is unstable (its tangent stiffness has a direction of negative curvature: a column past its buckling load, held straight by symmetry); a small disturbance leaves it$"
 # SIGTERM stops a long static solve (a localframe 40x4x4 cantilever bent far: about 14 s on
 # one core) within moments, not when the solve ends: exit 1, one line saying so, and the nodes
 # written at the last load level reached (before, only SIGKILL stopped it).
