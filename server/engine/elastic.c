@@ -222,8 +222,8 @@ int cs_elastic_prepare_tangent(cs_object *o, const double *x)
      * is what cs_mss_apply_K gives while `geometric` is set, from here to the release (every
      * update in between, trial points included, keeps the term); no separate tangent. */
     if (o->model == CS_MODEL_MSS) {
-        if (!o->mss.geometric) {
-            o->mss.geometric = true;
+        if (!o->mss.geometric || !o->mss.compressed) {
+            o->mss.geometric = o->mss.compressed = true; /* exact first (mss.h) */
             cs_mss_update(&o->mss, x);
         }
         return -1;
@@ -239,10 +239,19 @@ void cs_elastic_apply_tangent(cs_object *o, const double *p, double *y)
     cs_fem_apply_tangent(&o->fem, p, y);
 }
 
+bool cs_elastic_clamp_tangent(cs_object *o, const double *x)
+{
+    if (o->model != CS_MODEL_MSS || !o->mss.compressed)
+        return false;
+    o->mss.compressed = false;
+    cs_mss_update(&o->mss, x);
+    return true;
+}
+
 void cs_elastic_release_tangent(cs_object *o)
 {
-    if (o->model == CS_MODEL_MSS)
-        o->mss.geometric = false; /* the next update (every step begins with one) drops it */
+    if (o->model == CS_MODEL_MSS) /* the next update (every step begins with one) drops them */
+        o->mss.geometric = o->mss.compressed = false;
     cs_fem_release_tangent(&o->fem);
 }
 

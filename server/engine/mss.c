@@ -177,7 +177,7 @@ static void project_rotation(const double *st, const double *p, double *out)
 }
 
 /* y (24) = K_s p (24) with the springs' Jacobian stored in st: the axial part k n nᵀ plus the
- * transverse part k g (I − n nᵀ), g = max(0, 1 − L0/L). Statics (`geometric`) take it as it
+ * transverse part k g (I − n nᵀ), g = max(0, 1 − L0/L) (1 − L0/L with `compressed`). Statics (`geometric`) take it as it
  * is; implicit steps take Pᵀ (transverse) P with P the projection off the cube's rigid
  * rotation (project_rotation), see mss.h. */
 static void spring_apply(const cs_mss *m, const double *st, const double *p, double *y)
@@ -262,7 +262,7 @@ static void element_state(const cs_mss *m, const double *pos, double *st)
         const double inv = L > 0 ? 1.0 / L : 0.0;
         for (int i = 0; i < 3; i++)
             st[4 * s + i] = d[i] * inv;
-        st[4 * s + 3] = L > L0 ? 1 - L0 / L : 0.0;
+        st[4 * s + 3] = L > L0 || (m->compressed && L > 0) ? 1 - L0 / L : 0.0;
     }
     rotation_frame(pos, st);
     double len[3];

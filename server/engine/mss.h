@@ -33,8 +33,12 @@
  * plus the correction's Jacobian with the axes frozen, symmetrized (it is symmetric at rest).
  * Matrix-free: per cell 178 numbers. The springs' Jacobian is k[n nᵀ + g (I − n nᵀ)], g =
  * max(0, 1 − L0/L): the transverse term clamped at zero so that compressed springs never make
- * it indefinite. Static Newton solves (`geometric`, cs_elastic_prepare_tangent) take it as it
- * is. Implicit steps take k n nᵀ + Pᵀ k g (I − n nᵀ) P, P the orthogonal projection off the
+ * it indefinite. Static Newton solves (`geometric`, cs_elastic_prepare_tangent) take it
+ * unprojected and, first, unclamped too (`compressed`: g = 1 − L0/L, the springs' exact
+ * Jacobian; the clamped one where CG finds that indefinite). Clamped alone, a bent slender
+ * cantilever's tangent lacks the compressed half's negative transverse stiffness, and Newton
+ * stalled at 0.1–0.7 of the loads (session 43's sweep: 1 m beams of 2.5 and 1.25 cm cubes
+ * bent to half their length, 7–80 s then exit 1; converged in 0.6 s unclamped). Implicit steps take k n nᵀ + Pᵀ k g (I − n nᵀ) P, P the orthogonal projection off the
  * cube's three infinitesimal rigid rotations ω × (x_a − c) (k n nᵀ has them in its null space
  * already): the analogue of corotational FEM's warped stiffness R K Rᵀ, whose null space holds
  * the rotations of the current state, so implicit Euler does not brake a rotating object (a
@@ -104,6 +108,9 @@ typedef struct cs_mss {
      * whole element, correction forces included, and a uniform factor equals E·factor. */
     const double *ky;
     bool geometric; /* statics: the transverse spring term unprojected (the full Jacobian) */
+    /* statics: compressed springs' transverse term too, negative (g = 1 − L0/L < 0): the
+     * springs' exact Jacobian, which may be indefinite; read by cs_mss_update */
+    bool compressed;
 } cs_mss;
 
 /* Spring constants of seed 004 §3.2 for a cube of edge h. */

@@ -3662,7 +3662,7 @@ static void shift_frame(cs_object *o, const double c[3], double sign, const doub
 }
 
 static int solve_static_in_frame(cs_world_t *w, cs_object *o, cs_step_stats *st, double fnorm,
-                                 bool mg_first, double *relres);
+                                 bool mg_first, bool mss_exact, double *relres);
 
 /*
  * One Newton solve of statics, A dx = res to ctol. With mg_first, preconditioner "auto" takes
@@ -3722,6 +3722,10 @@ static bool probe_unstable(cs_world_t *w, cs_object *o, cs_step_stats *st, bool 
         dx[d] = 0;
     }
     const bool geometric = cs_elastic_prepare_tangent(o, o->x) == 0;
+    /* mss: the clamped Jacobian, as before session 45: the exact one has negative curvature
+     * along the cubes' zero-energy modes under any compression (a 0.2 m block at 1 %), which
+     * the dynamics' tangent does not have either */
+    cs_elastic_clamp_tangent(o, o->x);
     build_preconditioner(o);
     const cs_cg_result r = static_solve(w, o, geometric ? tangent_operator : step_operator, rhs,
                                         dx, 1e-3, st, mg_first, 30);
@@ -3767,7 +3771,7 @@ static int solve_static_object(cs_world_t *w, cs_object *o, cs_step_stats *st)
     memcpy(x0, o->x, (size_t)n3 * sizeof(double));
     o->cg.cancel = w->cancel;
     o->cg.cancel_ctx = w->cancel_ctx;
-    int rc = solve_static_in_frame(w, o, st, fnorm, true, &relres);
+    int rc = solve_static_in_frame(w, o, st, fnorm, true, true, &relres);
     /* Multigrid first is not always the way: on soft slender beams bent far (a 40×2×2
      * corotational cantilever of E 1e4 Pa, ν 0.45, found by session 42's review) the
      * multigrid-preconditioned Newton steps stall at 2e-3 of the loads while block Jacobi's
@@ -3777,7 +3781,16 @@ static int solve_static_object(cs_world_t *w, cs_object *o, cs_step_stats *st)
     if (rc == CS_ERR_NOT_CONVERGED && auto_jacobi_by_size(w, o)) {
         memcpy(o->x, x0, (size_t)n3 * sizeof(double));
         cs_elastic_update(o, o->x);
-        rc = solve_static_in_frame(w, o, st, fnorm, false, &relres);
+        rc = solve_static_in_frame(w, o, st, fnorm, false, true, &relres);
+    }
+    /* mss: Newton on the springs' exact Jacobian (mss.h) converged where the clamped one
+     * stalled on slender beams bent far, but not everywhere the clamped one did (session 45,
+     * session 43's sweep: a 1 m beam of 5 cm cubes at ν 0.45 bent to half its length: 0.8 s
+     * clamped, exit 1 exact); where it fails, the clamped Newton from the start. */
+    if (rc == CS_ERR_NOT_CONVERGED && o->model == CS_MODEL_MSS) {
+        memcpy(o->x, x0, (size_t)n3 * sizeof(double));
+        cs_elastic_update(o, o->x);
+        rc = solve_static_in_frame(w, o, st, fnorm, true, false, &relres);
     }
     o->static_unstable = rc == CS_OK && probe_unstable(w, o, st, true);
     o->cg.cancel = NULL;
@@ -3837,7 +3850,7 @@ static bool static_cancelled(const cs_world_t *w)
 #define STATIC_STALL 6
 
 static int solve_static_in_frame(cs_world_t *w, cs_object *o, cs_step_stats *st, double fnorm,
-                                 bool mg_first, double *relres)
+                                 bool mg_first, bool mss_exact, double *relres)
 {
     const int n3 = 3 * o->n;
     const bool linear = o->model == CS_MODEL_LINEAR;
@@ -3910,6 +3923,8 @@ static int solve_static_in_frame(cs_world_t *w, cs_object *o, cs_step_stats *st,
              * step is taken as it is: an inexact Newton step, checked by the line search. */
             cs_cg_result r = {0, 1, 0, 0, 0};
             bool geometric = cs_elastic_prepare_tangent(o, o->x) == 0, stagnated = false;
+            if (!mss_exact)
+                cs_elastic_clamp_tangent(o, o->x);
             if (geometric) {
                 r = static_solve(w, o, tangent_operator, res, dx, ctol, st, mg_first, geo_cap);
                 if (r.converged)
@@ -3918,8 +3933,24 @@ static int solve_static_in_frame(cs_world_t *w, cs_object *o, cs_step_stats *st,
                     stagnated = geo_cap > 0 && r.iterations >= geo_cap && r.relres <= 0.1;
             }
             if (!geometric || (!r.converged && !stagnated)) {
+                /* mss: K is the springs' exact Jacobian here (cs_elastic_prepare_tangent,
+                 * unless mss_exact is off), capped like the geometric tangent. Where CG meets
+                 * negative curvature (compressed springs), the iterate it has reached is the
+                 * step (truncated Newton–CG: a descent direction of the quadratic model, the
+                 * line search below checks it); where it meets it at once or does not
+                 * converge, the clamped Jacobian (mss.h), positive semi-definite. */
+                const bool exact = o->model == CS_MODEL_MSS && mss_exact;
                 memset(dx, 0, (size_t)n3 * sizeof(double));
-                r = static_solve(w, o, step_operator, res, dx, ctol, st, mg_first, 0);
+                r = static_solve(w, o, step_operator, res, dx, ctol, st, mg_first,
+                                 exact ? geo_cap : 0);
+                if (exact && r.converged)
+                    geo_cap = imax(geo_cap, imax(50, 10 * r.iterations));
+                if (!r.converged && !(exact && r.indefinite && r.iterations > 0) &&
+                    cs_elastic_clamp_tangent(o, o->x)) {
+                    build_preconditioner(o);
+                    memset(dx, 0, (size_t)n3 * sizeof(double));
+                    r = static_solve(w, o, step_operator, res, dx, ctol, st, mg_first, 0);
+                }
             }
             solved = r.converged;
             if (static_cancelled(w)) { /* the solve may have stopped short for it */
