@@ -216,14 +216,15 @@ const double *cs_elastic_mass_rows(const cs_object *o)
     return o->lf ? o->lf->mrow : NULL;
 }
 
-int cs_elastic_prepare_tangent(cs_object *o, const double *x)
+int cs_elastic_prepare_tangent(cs_object *o, const double *x, bool exact)
 {
     /* mss: the full spring Jacobian (transverse term included) is its Newton operator, and it
      * is what cs_mss_apply_K gives while `geometric` is set, from here to the release (every
      * update in between, trial points included, keeps the term); no separate tangent. */
     if (o->model == CS_MODEL_MSS) {
-        if (!o->mss.geometric || !o->mss.compressed) {
-            o->mss.geometric = o->mss.compressed = true; /* exact first (mss.h) */
+        if (!o->mss.geometric || o->mss.compressed != exact) {
+            o->mss.geometric = true;
+            o->mss.compressed = exact; /* mss.h */
             cs_mss_update(&o->mss, x);
         }
         return -1;

@@ -41,12 +41,13 @@ const double *cs_elastic_mass_diag(const cs_object *o);
 const double *cs_elastic_mass_rows(const cs_object *o);
 
 /* Static solves: returns 0 when a tangent better than K is ready for apply_tangent. For mss
- * (returns -1) K itself becomes the springs' exact Jacobian, compressed springs included. */
-int cs_elastic_prepare_tangent(cs_object *o, const double *x);
+ * (returns -1) K itself becomes the springs' Jacobian, with exact its compressed springs'
+ * transverse term too (else clamped at zero: mss.h). */
+int cs_elastic_prepare_tangent(cs_object *o, const double *x, bool exact);
 void cs_elastic_apply_tangent(cs_object *o, const double *p, double *y);
-/* mss: K with compressed springs' transverse term clamped at zero again (positive
- * semi-definite springs), updated at x; true if that changed K (false for other models, or
- * already clamped). Until the next cs_elastic_prepare_tangent. */
+/* mss: K with compressed springs' transverse term clamped at zero (positive semi-definite
+ * springs), updated at x; true if that changed K (false for other models, or already
+ * clamped). Until the next cs_elastic_prepare_tangent. */
 bool cs_elastic_clamp_tangent(cs_object *o, const double *x);
 void cs_elastic_release_tangent(cs_object *o);
 

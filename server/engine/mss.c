@@ -177,9 +177,9 @@ static void project_rotation(const double *st, const double *p, double *out)
 }
 
 /* y (24) = K_s p (24) with the springs' Jacobian stored in st: the axial part k n nᵀ plus the
- * transverse part k g (I − n nᵀ), g = max(0, 1 − L0/L) (1 − L0/L with `compressed`). Statics (`geometric`) take it as it
- * is; implicit steps take Pᵀ (transverse) P with P the projection off the cube's rigid
- * rotation (project_rotation), see mss.h. */
+ * transverse part k g (I − n nᵀ), g = max(0, 1 − L0/L) (1 − L0/L with `compressed`).
+ * Statics (`geometric`) take it as it is; implicit steps take Pᵀ (transverse) P with P the
+ * projection off the cube's rigid rotation (project_rotation), see mss.h. */
 static void spring_apply(const cs_mss *m, const double *st, const double *p, double *y)
 {
     double pp[24], yt[24];

@@ -38,7 +38,8 @@
  * Jacobian; the clamped one where CG finds that indefinite). Clamped alone, a bent slender
  * cantilever's tangent lacks the compressed half's negative transverse stiffness, and Newton
  * stalled at 0.1–0.7 of the loads (session 43's sweep: 1 m beams of 2.5 and 1.25 cm cubes
- * bent to half their length, 7–80 s then exit 1; converged in 0.6 s unclamped). Implicit steps take k n nᵀ + Pᵀ k g (I − n nᵀ) P, P the orthogonal projection off the
+ * bent to half their length, 7–80 s then exit 1; converged in 0.6 s unclamped).
+ * Implicit steps take k n nᵀ + Pᵀ k g (I − n nᵀ) P, P the orthogonal projection off the
  * cube's three infinitesimal rigid rotations ω × (x_a − c) (k n nᵀ has them in its null space
  * already): the analogue of corotational FEM's warped stiffness R K Rᵀ, whose null space holds
  * the rotations of the current state, so implicit Euler does not brake a rotating object (a

@@ -3664,6 +3664,15 @@ static void shift_frame(cs_object *o, const double c[3], double sign, const doub
 static int solve_static_in_frame(cs_world_t *w, cs_object *o, cs_step_stats *st, double fnorm,
                                  bool mg_first, bool mss_exact, double *relres);
 
+/* solve_static_in_frame again from x0 (the state before the first attempt), another way. */
+static int resolve_static(cs_world_t *w, cs_object *o, const double *x0, cs_step_stats *st,
+                          double fnorm, bool mg_first, bool mss_exact, double *relres)
+{
+    memcpy(o->x, x0, (size_t)o->n * 3 * sizeof(double));
+    cs_elastic_update(o, o->x);
+    return solve_static_in_frame(w, o, st, fnorm, mg_first, mss_exact, relres);
+}
+
 /*
  * One Newton solve of statics, A dx = res to ctol. With mg_first, preconditioner "auto" takes
  * multigrid for linear and corotational objects of any size, not from CS_MG_AUTO_CELLS cubes
@@ -3721,11 +3730,10 @@ static bool probe_unstable(cs_world_t *w, cs_object *o, cs_step_stats *st, bool 
         rhs[d] = o->mask[d] ? 0.0 : (double)(hsh >> 8) / 16777216.0 - 0.5;
         dx[d] = 0;
     }
-    const bool geometric = cs_elastic_prepare_tangent(o, o->x) == 0;
     /* mss: the clamped Jacobian, as before session 45: the exact one has negative curvature
      * along the cubes' zero-energy modes under any compression (a 0.2 m block at 1 %), which
      * the dynamics' tangent does not have either */
-    cs_elastic_clamp_tangent(o, o->x);
+    const bool geometric = cs_elastic_prepare_tangent(o, o->x, false) == 0;
     build_preconditioner(o);
     const cs_cg_result r = static_solve(w, o, geometric ? tangent_operator : step_operator, rhs,
                                         dx, 1e-3, st, mg_first, 30);
@@ -3778,20 +3786,14 @@ static int solve_static_object(cs_world_t *w, cs_object *o, cs_step_stats *st)
      * converge (2463 CG iterations). Where "auto" would have given a small object Jacobi
      * before session 42 and the search failed, it is redone that way from the start (from
      * where multigrid stopped, Jacobi's load search failed too). */
-    if (rc == CS_ERR_NOT_CONVERGED && auto_jacobi_by_size(w, o)) {
-        memcpy(o->x, x0, (size_t)n3 * sizeof(double));
-        cs_elastic_update(o, o->x);
-        rc = solve_static_in_frame(w, o, st, fnorm, false, true, &relres);
-    }
+    if (rc == CS_ERR_NOT_CONVERGED && auto_jacobi_by_size(w, o))
+        rc = resolve_static(w, o, x0, st, fnorm, false, true, &relres);
     /* mss: Newton on the springs' exact Jacobian (mss.h) converged where the clamped one
      * stalled on slender beams bent far, but not everywhere the clamped one did (session 45,
      * session 43's sweep: a 1 m beam of 5 cm cubes at ν 0.45 bent to half its length: 0.8 s
      * clamped, exit 1 exact); where it fails, the clamped Newton from the start. */
-    if (rc == CS_ERR_NOT_CONVERGED && o->model == CS_MODEL_MSS) {
-        memcpy(o->x, x0, (size_t)n3 * sizeof(double));
-        cs_elastic_update(o, o->x);
-        rc = solve_static_in_frame(w, o, st, fnorm, true, false, &relres);
-    }
+    if (rc == CS_ERR_NOT_CONVERGED && o->model == CS_MODEL_MSS)
+        rc = resolve_static(w, o, x0, st, fnorm, true, false, &relres);
     o->static_unstable = rc == CS_OK && probe_unstable(w, o, st, true);
     o->cg.cancel = NULL;
     o->cg.cancel_ctx = NULL;
@@ -3922,9 +3924,8 @@ static int solve_static_in_frame(cs_world_t *w, cs_object *o, cs_step_stats *st,
              * converged solves took, and where it got within 0.1 of its right-hand side its
              * step is taken as it is: an inexact Newton step, checked by the line search. */
             cs_cg_result r = {0, 1, 0, 0, 0};
-            bool geometric = cs_elastic_prepare_tangent(o, o->x) == 0, stagnated = false;
-            if (!mss_exact)
-                cs_elastic_clamp_tangent(o, o->x);
+            bool geometric = cs_elastic_prepare_tangent(o, o->x, mss_exact) == 0;
+            bool stagnated = false;
             if (geometric) {
                 r = static_solve(w, o, tangent_operator, res, dx, ctol, st, mg_first, geo_cap);
                 if (r.converged)

@@ -23,6 +23,17 @@
 #include "cubesim_pressure_t.h"
 #include "server/bus.h"
 
+/* A bus reading the event log at path as fast as it can (NULL, with err, if it cannot). */
+static cs_bus_t *log_bus(const char *path, cs_dlog *dl, char *err, size_t errlen)
+{
+    char url[128];
+    snprintf(url, sizeof url, "file://%s?mode=r&speed=0", path);
+    memset(dl, 0, sizeof *dl);
+    dl->quiet = true;
+    cs_bus_t *b = NULL;
+    return cs_bus_create(url, dl, &b, err, errlen) == 0 ? b : NULL;
+}
+
 TEST(bus_sculpt_inputs_decoded_and_refused)
 {
     char path[64], url[128];
@@ -69,13 +80,10 @@ TEST(bus_sculpt_inputs_decoded_and_refused)
     ENSURE(cubesim_pressure_t_publish(lw, CS_CH_PAINT, &prm) == 0);
     lcm_destroy(lw);
 
-    snprintf(url, sizeof url, "file://%s?mode=r&speed=0", path);
     cs_dlog dl;
-    memset(&dl, 0, sizeof dl);
-    dl.quiet = true;
-    cs_bus_t *b = NULL;
     char err[256];
-    ENSURE_MSG(cs_bus_create(url, &dl, &b, err, sizeof err) == 0, "%s", err);
+    cs_bus_t *b = log_bus(path, &dl, err, sizeof err);
+    ENSURE_MSG(b, "%s", err);
     cs_input in[16];
     int n = 0;
     for (int tries = 0; tries < 400 && n < 9; tries++) {
@@ -117,6 +125,21 @@ TEST(bus_sculpt_inputs_decoded_and_refused)
  * old ones (the ring wraps) in arrival order. 5000 forces and 200 commands from a log: handle
  * 4300 of them (4096 queued, 204 refused), take 1000 out, handle the other 900 (all queued).
  */
+/* Handle messages until `handled` reaches want exactly (the log's reader may lag behind:
+ * poll, up to 2 s); returns the count reached (-1 on a bus error). */
+static int drain_to(cs_bus_t *b, int handled, int want)
+{
+    for (int tries = 0; handled < want && tries < 2000; tries++) {
+        const int n = cs_bus_drain(b, want - handled);
+        if (n < 0)
+            return -1;
+        handled += n;
+        if (handled < want)
+            nanosleep(&(struct timespec){0, 1000000}, NULL);
+    }
+    return handled;
+}
+
 TEST(bus_input_queue_full_refuses_the_rest_and_recovers)
 {
     enum { NF = 5000, NC = 200, FIRST = 4300, TAKEN = 1000 };
@@ -140,22 +163,11 @@ TEST(bus_input_queue_full_refuses_the_rest_and_recovers)
     }
     lcm_destroy(lw);
 
-    snprintf(url, sizeof url, "file://%s?mode=r&speed=0", path);
     cs_dlog dl;
-    memset(&dl, 0, sizeof dl);
-    dl.quiet = true;
-    cs_bus_t *b = NULL;
     char err[256];
-    ENSURE_MSG(cs_bus_create(url, &dl, &b, err, sizeof err) == 0, "%s", err);
-    /* handle exactly `want` messages (the log's reader may lag behind: poll) */
-    int handled = 0;
-    for (int want = FIRST, tries = 0; handled < want && tries < 2000; tries++) {
-        int n = cs_bus_drain(b, want - handled);
-        ENSURE(n >= 0);
-        handled += n;
-        if (handled < want)
-            nanosleep(&(struct timespec){0, 1000000}, NULL);
-    }
+    cs_bus_t *b = log_bus(path, &dl, err, sizeof err);
+    ENSURE_MSG(b, "%s", err);
+    int handled = drain_to(b, 0, FIRST);
     ENSURE_MSG(handled == FIRST, "handled %d of %d", handled, FIRST);
     int64_t *ids = malloc(sizeof *ids * (NF + NC));
     ENSURE(ids);
@@ -166,13 +178,7 @@ TEST(bus_input_queue_full_refuses_the_rest_and_recovers)
         cs_input_clear(&in);
     }
     ENSURE(got == TAKEN);
-    for (int tries = 0; handled < NF + NC && tries < 2000; tries++) {
-        int n = cs_bus_drain(b, NF + NC - handled);
-        ENSURE(n >= 0);
-        handled += n;
-        if (handled < NF + NC)
-            nanosleep(&(struct timespec){0, 1000000}, NULL);
-    }
+    handled = drain_to(b, handled, NF + NC);
     ENSURE_MSG(handled == NF + NC, "handled %d of %d", handled, NF + NC);
     while (cs_bus_next_input(b, &in)) {
         if (got < NF + NC)
