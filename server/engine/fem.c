@@ -17,6 +17,7 @@
 
 #include "cubesim.h"
 #include "mat3.h"
+#include "segments.h"
 #include "solver.h"
 
 /* Sign pattern (2·corner − 1) of each corner: the gradient directions of the shape functions. */
@@ -1175,12 +1176,26 @@ static double fused_pass(cs_fem *fem, batch_fn fn, const void *ctx, double *out,
                 node_sum(fem, fem->norder[q], out, sign, na ? na->m : NULL,
                          na ? na->p : NULL, na ? na->mcoef : 0.0);
 #pragma omp barrier
-        for (int sg = t; sg < fem->nseg; sg += nt) {
-            const int b0 = seg_start(fem, nb, sg), b1 = seg_start(fem, nb, sg + 1);
-            /* a node whose first batch is below b0 has its last within span of it */
-            const int bs = b0 + fem->span + 1 < b1 ? b0 + fem->span + 1 : b1;
-            if (b0 > 0)
-                node_range(fem, fem->nfirst[b0], fem->nfirst[bs], b0, 1, out, sign, na);
+        /* a node whose first batch is below b0 has its last within span of it; all
+         * segments' such positions shared out equally among the threads (segments.h) */
+        int64_t total = 0;
+        for (int pass = 0; pass < 2; pass++) {
+            int64_t before = 0;
+            for (int sg = 0; sg < fem->nseg; sg++) {
+                const int b0 = seg_start(fem, nb, sg), b1 = seg_start(fem, nb, sg + 1);
+                const int bs = b0 + fem->span + 1 < b1 ? b0 + fem->span + 1 : b1;
+                if (b0 == 0)
+                    continue;
+                const int q0 = fem->nfirst[b0], len = fem->nfirst[bs] - q0;
+                if (pass == 1) {
+                    int64_t lo, hi;
+                    cs_segment_share(before, len, total, t, nt, &lo, &hi);
+                    if (lo < hi)
+                        node_range(fem, q0 + (int)lo, q0 + (int)hi, b0, 1, out, sign, na);
+                }
+                before += len;
+            }
+            total = before;
         }
     }
     return e_sum;

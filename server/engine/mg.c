@@ -11,6 +11,7 @@
 #include <omp.h>
 
 #include "mat3.h"
+#include "segments.h"
 
 #define MG_NU 1           /* smoothing sweeps before and after the coarse correction */
 #ifndef MG_CHEB
@@ -1333,13 +1334,25 @@ static inline __attribute__((always_inline)) void path_share(const mg_level *l, 
     }
 #pragma omp barrier
     /* a node shared with a lower segment has its last cell within span batches of the
-     * segment's start: only those positions are scanned (none in the first segment) */
-    for (int sg = t > 0 ? t : nt; sg < l->nseg; sg += nt) {
-        const int b0 = seg_start(l, sg), b1 = seg_start(l, sg + 1);
-        const int e = b0 + l->span < b1 ? b0 + l->span : b1;
-        for (int q = l->nfirst[b0]; q < l->nfirst[e]; q++)
-            if (l->nminb[q] < b0)
-                node_out(l, l->norder[q], x, b, y, cs, mode);
+     * segment's start: only those positions are scanned (none in the first segment), all
+     * segments' together shared out equally among the threads (segments.h) */
+    int64_t total = 0;
+    for (int pass = 0; pass < 2; pass++) {
+        int64_t before = 0;
+        for (int sg = 1; sg < l->nseg; sg++) {
+            const int b0 = seg_start(l, sg), b1 = seg_start(l, sg + 1);
+            const int e = b0 + l->span < b1 ? b0 + l->span : b1;
+            const int q0 = l->nfirst[b0], len = l->nfirst[e] - q0;
+            if (pass == 1) {
+                int64_t lo, hi;
+                cs_segment_share(before, len, total, t, nt, &lo, &hi);
+                for (int64_t q = q0 + lo; q < q0 + hi; q++)
+                    if (l->nminb[q] < b0)
+                        node_out(l, l->norder[q], x, b, y, cs, mode);
+            }
+            before += len;
+        }
+        total = before;
     }
 }
 

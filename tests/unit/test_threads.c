@@ -184,7 +184,8 @@ TEST(threads_warm_started_solves_bit_identical)
 
 /* The V-cycle of a 42×20×20 cantilever (16800 cubes: levels 0 and 1 at 2048 cubes or more run
  * on the world's threads) applied to r, 2r and float(r) into z[0..2]. 0 on success. */
-static int vcycles(int threads, double *z[3], int *n3_out, uint8_t **mask_out, int *lv1_nodes)
+static int vcycles(int threads, double *z[3], int *n3_out, uint8_t **mask_out, int *lv1_nodes,
+                   double **x_out)
 {
     char err[256];
     cs_world_def wd = cs_world_def_default();
@@ -219,6 +220,10 @@ static int vcycles(int threads, double *z[3], int *n3_out, uint8_t **mask_out, i
             goto out;
     cs_object *o = cs_world_find_internal(w, id);
     const int n3 = 3 * o->n;
+    *x_out = malloc(sizeof(double) * n3); /* the stepped positions (the fem's fused passes) */
+    if (!*x_out)
+        goto out;
+    memcpy(*x_out, o->x, sizeof(double) * n3);
     mk_opctx c = {o, 1.0 / 3600};
     inv = malloc(sizeof(double) * 9 * o->n);
     r = malloc(sizeof(double) * n3);
@@ -268,13 +273,16 @@ out:
  * (--quick) leaves it out; it passed under valgrind when written. */
 SLOW_TEST(threads_vcycle_fused_conversions)
 {
-    double *z[2][3] = {{NULL}};
-    uint8_t *mask[2] = {NULL, NULL};
-    int n3[2] = {0, 0}, lv1[2];
-    for (int t = 0; t < 2; t++)
-        ENSURE_MSG(vcycles(t + 1, z[t], &n3[t], &mask[t], &lv1[t]) == 0, "%d threads: set-up",
-                   t + 1);
-    ENSURE(n3[0] == n3[1] && n3[0] > 0);
+    /* 3 threads too (oversubscribed here): three segments per pass, two boundaries' shared
+     * nodes cut among three threads (segments.h) */
+    enum { T = 3 };
+    double *z[T][3] = {{NULL}}, *x[T] = {NULL};
+    uint8_t *mask[T] = {NULL};
+    int n3[T] = {0}, lv1[T];
+    for (int t = 0; t < T; t++)
+        ENSURE_MSG(vcycles(t + 1, z[t], &n3[t], &mask[t], &lv1[t], &x[t]) == 0,
+                   "%d threads: set-up", t + 1);
+    ENSURE(n3[0] == n3[1] && n3[0] == n3[2] && n3[0] > 0);
     const int n = n3[0];
     long bad_float = 0, bad_held = 0, bad_scale = 0, bad_round = 0;
     for (int q = 0; q < n; q++) {
@@ -291,12 +299,17 @@ SLOW_TEST(threads_vcycle_fused_conversions)
     for (int q = 0; q < n; q++)
         nonzero += z[0][0][q] != 0;
     ENSURE(nonzero > n / 2);
-    for (int k = 0; k < 3; k++)
-        ENSURE_MSG(memcmp(z[0][k], z[1][k], sizeof(double) * n) == 0,
-                   "V-cycle %d differs between 1 and 2 threads", k);
-    for (int t = 0; t < 2; t++) {
+    for (int t = 1; t < T; t++) {
+        ENSURE_MSG(memcmp(x[0], x[t], sizeof(double) * n) == 0,
+                   "the stepped positions differ between 1 and %d threads", t + 1);
+        for (int k = 0; k < 3; k++)
+            ENSURE_MSG(memcmp(z[0][k], z[t][k], sizeof(double) * n) == 0,
+                       "V-cycle %d differs between 1 and %d threads", k, t + 1);
+    }
+    for (int t = 0; t < T; t++) {
         for (int k = 0; k < 3; k++)
             free(z[t][k]);
         free(mask[t]);
+        free(x[t]);
     }
 }
