@@ -189,15 +189,16 @@ cs_object_def cs_object_def_default(void);
 
 /* The CG preconditioner of the FEM solves (implicit Euler, statics). */
 typedef enum cs_preconditioner {
-    CS_PRECOND_AUTO = 0,      /* multigrid for linear/corotational FEM objects of at least
+    CS_PRECOND_AUTO = 0,      /* multigrid for linear, corotational and localframe objects of at least
                                  CS_MG_AUTO_CELLS cells, in statics, and for smaller ones once
                                  block Jacobi has taken more than CS_MG_AUTO_JACOBI_IT
                                  iterations in CS_MG_AUTO_HARD_STEPS implicit steps in a row
                                  (until a reset or a change of its fields), if it is held by
                                  three fixed nodes not on a line; block Jacobi otherwise */
     CS_PRECOND_JACOBI = 1,    /* 3×3 block Jacobi */
-    CS_PRECOND_MULTIGRID = 2  /* a geometric multigrid V-cycle per iteration (FEM models; others
-                                 keep block Jacobi) */
+    CS_PRECOND_MULTIGRID = 2  /* a geometric multigrid V-cycle per iteration (built from the
+                                 FEM's cubes: linear, corotational and localframe; mss keeps
+                                 block Jacobi) */
 } cs_preconditioner;
 #define CS_MG_AUTO_CELLS 2048
 #define CS_MG_AUTO_JACOBI_IT 25
