@@ -233,6 +233,9 @@ typedef struct cs_world_def {
     int cg_max_iterations;   /* >= 1; default 500 */
     cs_preconditioner preconditioner; /* default CS_PRECOND_AUTO */
     int threads;             /* worker threads inside a step, >= 0; 0 = all cores; default 0 */
+    int simd_width;          /* element kernels' vectors [bits]: 256, 512 (with AVX-512) or 0 = by
+                              * the CPU (server/engine/simd.h); the same results either way;
+                              * default 0 */
     double sleep_speed;      /* an object whose fastest node is slower than this [m/s] ... */
     int sleep_steps;         /* ... for this many steps in a row sleeps; 0 = never; default 30 */
     /* Active regions inside awake objects (linear/corotational FEM, implicit Euler, not

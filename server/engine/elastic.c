@@ -13,13 +13,15 @@
 #include "localframe.h"
 #include "mat3.h"
 #include "rigid.h"
+#include "simd.h"
 
-int cs_elastic_init(cs_object *o, int threads)
+int cs_elastic_init(cs_object *o, int threads, int simd_width)
 {
     /* Every model keeps the FEM record: fracture uses its adjacency and rotations. */
     if (cs_fem_init(&o->fem, &o->cm, o->mat.young, o->mat.poisson,
                     o->model != CS_MODEL_LINEAR, threads) != 0)
         return -1;
+    o->fem.wide = cs_simd_wide(simd_width);
     /* the stiffness field (world_internal.h); NULL while uniform 1 */
     o->fem.kf = o->fld.has_young ? o->fld.young : NULL;
     if (o->model == CS_MODEL_LOCALFRAME) {

@@ -24,7 +24,7 @@
 
 #include "world_internal.h"
 
-int cs_elastic_init(cs_object *o, int threads);
+int cs_elastic_init(cs_object *o, int threads, int simd_width);
 void cs_elastic_free(cs_object *o);
 /* After fracture changed o->cm's cell → node links (nodes were duplicated). */
 int cs_elastic_relink(cs_object *o);

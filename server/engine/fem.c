@@ -18,6 +18,7 @@
 #include "cubesim.h"
 #include "mat3.h"
 #include "segments.h"
+#include "simd.h"
 #include "solver.h"
 
 /* Sign pattern (2·corner − 1) of each corner: the gradient directions of the shape functions. */
@@ -284,6 +285,7 @@ int cs_fem_init(cs_fem *fem, const cs_cubemesh *cm, double young, double poisson
      * thread barrier costs when the other core is busy (a descheduled worker stalls each
      * barrier for a scheduler timeslice): small objects run on one thread. */
     fem->threads = threads > 1 && cm->n_cells >= CS_FEM_PARALLEL_CELLS ? threads : 1;
+    fem->wide = cs_simd_wide_default();
     cs_cube_stiffness(young, poisson, cm->h, fem->K);
     fem->lambda = young * poisson / ((1 + poisson) * (1 - 2 * poisson));
     fem->mu = young / (2 * (1 + poisson));
@@ -472,6 +474,7 @@ typedef struct mlanes {
     /* A plain batch's rotations as unit quaternions (w, x, y, z) contiguous from Q (NULL: R
      * is read): the kernel rebuilds R from them, 32 bytes a cell to stream instead of 72. */
     const double *Q;
+    bool wide; /* a plain batch in one 512-bit vector (modal_wide_body) */
 } mlanes;
 
 typedef double vd4 __attribute__((vector_size(32)));
@@ -606,10 +609,95 @@ modal_avx512_body(mlanes *restrict b, int rot, double rest, int energy, const in
     }
 }
 
+/* A plain batch's 8 lanes in one 512-bit vector (mlanes.wide: CPUs that execute 512-bit
+ * vectors at full width, simd.h), rotations (if rot) from the quaternions Q: the same
+ * arithmetic per lane as modal_avx512_body, so the same bits. The inputs: two masked loads per
+ * pair of lanes (the second shifted, so that its 3 doubles land in the upper half), then two
+ * unpacks and three two-source permutes per corner for 8 lanes (the 256-bit body: 14 shuffles);
+ * the results: three 8 × 8 transposes (72 shuffles for 24 whole stores; 96 for 48 there). On
+ * the 2-core Intel Xeon of session 47, cs_fem_apply_K on 32³ (one thread, fast mode, 7 rounds)
+ * 1.01–1.04 → 0.78–0.83 ms. */
+typedef double vd8 __attribute__((vector_size(64)));
+#define MODAL_NAME modal_core8
+#define MODAL_V vd8
+#define MODAL_S double
+#include "modal_core.h"
+
+__attribute__((optimize("fp-contract=fast"), target("arch=x86-64-v4"))) static inline
+    __attribute__((always_inline)) void
+modal_wide_body(mlanes *restrict b, int rot, double rest, int energy)
+{
+    vd8 u[24], R[9], y[24], e, L, M;
+    const double *x = b->x;
+    const __m512i lo = _mm512_setr_epi64(0, 1, 8, 9, 4, 5, 12, 13);
+    const __m512i hi = _mm512_setr_epi64(2, 3, 10, 11, 6, 7, 14, 15);
+#pragma GCC unroll 8
+    for (int k = 0; k < 8; k++) {
+        __m512d r[4]; /* (x, y, z, 0) of lanes j | j + 4 */
+        for (int j = 0; j < 4; j++) /* the second load from 4 doubles before its node: its
+                                     * masked-out lanes are never read (fault suppression) */
+            r[j] = _mm512_mask_loadu_pd(
+                _mm512_maskz_loadu_pd(0x07, x + 3 * b->cn[8 * j + k]), 0x70,
+                (const void *)((uintptr_t)(x + 3 * b->cn[8 * (j + 4) + k]) - 4 * sizeof(double)));
+        const __m512d t0 = _mm512_unpacklo_pd(r[0], r[1]), t1 = _mm512_unpackhi_pd(r[0], r[1]);
+        const __m512d t2 = _mm512_unpacklo_pd(r[2], r[3]), t3 = _mm512_unpackhi_pd(r[2], r[3]);
+        u[3 * k] = (vd8)_mm512_permutex2var_pd(t0, lo, t2);
+        u[3 * k + 1] = (vd8)_mm512_permutex2var_pd(t1, lo, t3);
+        u[3 * k + 2] = (vd8)_mm512_permutex2var_pd(t0, hi, t2);
+    }
+    if (rot) {
+        /* 8 cells' (w, x, y, z): two cells per vector, regrouped by component */
+        const double *Qp = b->Q;
+        const __m512d A = _mm512_loadu_pd(Qp), B = _mm512_loadu_pd(Qp + 8),
+                      C = _mm512_loadu_pd(Qp + 16), D = _mm512_loadu_pd(Qp + 24);
+        const __m512i wx = _mm512_setr_epi64(0, 4, 8, 12, 1, 5, 9, 13);
+        const __m512i yz = _mm512_setr_epi64(2, 6, 10, 14, 3, 7, 11, 15);
+        const __m512d p0 = _mm512_permutex2var_pd(A, wx, B), p1 = _mm512_permutex2var_pd(A, yz, B);
+        const __m512d p2 = _mm512_permutex2var_pd(C, wx, D), p3 = _mm512_permutex2var_pd(C, yz, D);
+        const vd8 w = (vd8)_mm512_shuffle_f64x2(p0, p2, 0x44),
+                  x1 = (vd8)_mm512_shuffle_f64x2(p0, p2, 0xEE),
+                  y1 = (vd8)_mm512_shuffle_f64x2(p1, p3, 0x44),
+                  z1 = (vd8)_mm512_shuffle_f64x2(p1, p3, 0xEE);
+        CS_QUAT_TO_MAT(w, x1, y1, z1, R);
+    }
+    memcpy(&L, b->lam, sizeof L);
+    memcpy(&M, b->mu, sizeof M);
+    modal_core8(u, rot ? R : NULL, rest, &L, &M, energy ? &e : NULL, y);
+    if (energy)
+        memcpy(b->e, &e, sizeof e);
+    /* lane l's 24 results contiguous at ob + 24 l: three 8 × 8 transposes, whole stores */
+    double *o = b->ob;
+    for (int m = 0; m < 3; m++) {
+        __m512d v[8], t[8];
+        for (int i = 0; i < 8; i++)
+            v[i] = (__m512d)y[8 * m + i];
+        for (int i = 0; i < 8; i += 2) {
+            t[i] = _mm512_unpacklo_pd(v[i], v[i + 1]);
+            t[i + 1] = _mm512_unpackhi_pd(v[i], v[i + 1]);
+        }
+        /* t0 = (a0 b0 | a2 b2 | a4 b4 | a6 b6), t1 = (a1 b1 | a3 b3 | ...) (a = v0, b = v1) */
+        for (int i = 0; i < 8; i += 4)
+            for (int j = 0; j < 2; j++) {
+                v[i + j] = _mm512_shuffle_f64x2(t[i + j], t[i + j + 2], 0x88);     /* 0 2 | 0 2 */
+                v[i + j + 2] = _mm512_shuffle_f64x2(t[i + j], t[i + j + 2], 0xDD); /* 1 3 | 1 3 */
+            }
+        /* v0 = (a0 b0 | a4 b4 | c0 d0 | c4 d4), v1 = (a1 b1 | a5 b5 | c1 d1 | c5 d5),
+         * v2 = (a2 b2 | a6 b6 | c2 d2 | c6 d6), v3 = (a3 b3 | a7 b7 | c3 d3 | c7 d7); the same
+         * for e..h in v4..v7 */
+        for (int j = 0; j < 4; j++) {
+            t[j] = _mm512_shuffle_f64x2(v[j], v[j + 4], 0x88);     /* lane j: a b c d e f g h */
+            t[j + 4] = _mm512_shuffle_f64x2(v[j], v[j + 4], 0xDD); /* lane j + 4 */
+        }
+        for (int l = 0; l < 8; l++)
+            _mm512_storeu_pd(o + 24 * l + 8 * m, t[l]);
+    }
+}
+
 /* The same with AVX-512VL: each corner's 4 nodal vectors by masked 3-double loads transposed
  * into x, y, z across the lanes, and back the same way into masked 3-double stores (fewer
  * instructions than element by element; 256-bit vectors with 32 registers: 512-bit vectors of
- * 8 lanes measured slower on this Zen 4, which splits them in two). A plain batch (cn) reads
+ * 8 lanes with gathers measured slower on Zen 4, which splits them in two; modal_wide_body for
+ * the cores that do not, simd.h). A plain batch (cn) reads
  * its corner indices from the cells' node lists, its rotations and writes its results with
  * whole vectors transposed in registers (no per-batch tables). A product's plain batch (rotated,
  * no rest shape, no energy: cs_fem_apply_K's) gets its own instance with those flags constant
@@ -623,7 +711,11 @@ modal_avx512_body(mlanes *restrict b, int rot, double rest, int energy, const in
 __attribute__((optimize("fp-contract=fast"), target("arch=x86-64-v4")))
 static void modal_kernel_avx512(mlanes *restrict b, int rot, double rest, int energy)
 {
-    if (b->cn && rot && rest == 0 && !energy)
+    if (b->cn && b->wide && rot && b->Q && rest == 0 && !energy)
+        modal_wide_body(b, 1, 0.0, 0); /* a product's batch: the flags constant */
+    else if (b->cn && b->wide && (!rot || b->Q))
+        modal_wide_body(b, rot, rest, energy);
+    else if (b->cn && rot && rest == 0 && !energy)
         modal_avx512_body(b, 1, 0.0, 0, 1); /* a product's batch: the flags constant */
     else if (b->cn)
         modal_avx512_body(b, rot, rest, energy, 1);
@@ -730,6 +822,7 @@ static void batch_product(const cs_fem *fem, const double *kf, int c0, const dou
     B.R = Rb;
     B.Q = Rb ? Qb : NULL;
     B.cn = NULL;
+    B.wide = fem->wide;
     if (fb && c0 + LANES <= fem->n_cells && __builtin_cpu_supports("x86-64-v4")) {
         /* a plain batch if every cell is uniform */
         int l = 0;

@@ -46,6 +46,8 @@ typedef struct cs_fem {
     double h;
     bool corotational;
     int threads;        /* worker threads for this object's products (1 when small) */
+    bool wide;          /* 512-bit element kernels (simd.h; the same bits as 256-bit ones):
+                         * cs_fem_init sets the CPU's default, callers may change it */
     double K[24 * 24];
     double *Kg;         /* 8 × 576: the unit matrix of each Gauss point (Σ_g = K) */
     double gq[8][8][3]; /* ∂N_k/∂x at Gauss point g: graded products as Σ_g B_gᵀ C B_g */

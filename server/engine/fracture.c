@@ -2909,7 +2909,7 @@ static cs_object *make_piece(cs_world_t *w, const cs_object *o, const int32_t *c
     ps->cell_tri_list = NULL;
     if (rebuild_cell_lists(ps, pm) != 0)
         goto fail;
-    if (cs_elastic_init(p, w->threads) != 0)
+    if (cs_elastic_init(p, w->threads, w->def.simd_width) != 0)
         goto fail;
     /* a vertex bound to a cell of another piece follows a cell of this one (skinned after
      * cs_elastic_init: a localframe piece's B-spline cells are known then) */

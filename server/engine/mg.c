@@ -74,6 +74,7 @@ _Static_assert(MG_CHEB_KIND != 4 ||
 #endif
 #define MG_LANES 16        /* cells per batch of the element pass (one float SIMD lane each) */
 #define VF_LANES 8         /* lanes per vector of the element pass's arithmetic */
+enum { SIMD_256 = 1, SIMD_512 = 2 }; /* cs_mg.simd */
 typedef float vf __attribute__((vector_size(4 * VF_LANES)));
 #define MODAL_NAME modal_core_f
 #define MODAL_V vf
@@ -185,7 +186,7 @@ struct cs_mg {
     const int32_t *fine_links;
     double K[576];
     double hl, hm;     /* hλ, hμ of K (cs_cube_lame_h) */
-    bool avx512;       /* the element pass gathers with AVX-512 */
+    int simd;          /* the element pass: 0 portable, SIMD_256 or SIMD_512 (AVX-512) */
     double *dense;     /* coarsest: Cholesky factor (lower), NULL if swept */
     double *dense_x;   /* its right-hand side and solution in double */
     int dense_n;
@@ -929,7 +930,7 @@ cs_mg *cs_mg_build(const cs_cubemesh *cm, const cs_fem *fem, uint32_t version)
     cs_cube_lame_h(fem->K, &mg->hl, &mg->hm);
     if (!corner_blocks_ok(mg->K))
         goto fail;
-    mg->avx512 = __builtin_cpu_supports("x86-64-v4");
+    mg->simd = !__builtin_cpu_supports("x86-64-v4") ? 0 : fem->wide ? SIMD_512 : SIMD_256;
     mg_level *l0 = &mg->lv[0];
     l0->n_cells = cm->n_cells;
     l0->n_nodes = cm->n_nodes;
@@ -1073,7 +1074,8 @@ double *cs_mg_node_diag(cs_mg *mg)
 
 /* The element pass of half h (lanes 8h..8h+7) of batch b: fe = s R K Rᵀ x per lane, by the
  * modal kernel (fem.c, modal_core.h) in single precision, 8 lanes in 256-bit vectors (512-bit
- * vectors of 16 lanes with gathers measured slower on this Zen 4, which splits them in two). */
+ * vectors of 16 lanes with gathers measured slower on Zen 4, which splits them in two; the whole
+ * batch in one 512-bit vector, wide_body, on the cores that do not, simd.h). */
 typedef int vi8 __attribute__((vector_size(32)));
 static inline __attribute__((always_inline)) void half_rest(const mg_level *l, int b, int h,
                                                             const vf u[24])
@@ -1197,6 +1199,91 @@ static void batches_avx512(const mg_level *l, const float *restrict x, int b0, i
         avx512_body(l, x, b0, b1, false);
 }
 
+/* The whole batch of 16 lanes in one 512-bit vector (cs_mg.simd SIMD_512: CPUs that execute
+ * 512-bit vectors at full width, simd.h): the same arithmetic per lane as half_rest, so the
+ * same bits. A corner's inputs by four masked loads per group of four lanes (each shifted so
+ * that its 3 floats land in its 128-bit quarter), then avx512_body's unpacks and shuffles
+ * within the quarters; the results stored a quarter (a lane's corner) at a time. On the 2-core
+ * Intel Xeon of session 47 a 64³ V-cycle's finest product went from 5.0 to 4.9 ms (one
+ * thread): the float pass waits on its loads and stores more than on its arithmetic. */
+typedef float vf16 __attribute__((vector_size(64)));
+typedef int vi16 __attribute__((vector_size(64)));
+#define MODAL_NAME modal_core_f16
+#define MODAL_V vf16
+#define MODAL_S float
+#include "modal_core.h"
+
+static inline __attribute__((always_inline, target("arch=x86-64-v4"))) void
+wide_body(const mg_level *l, const float *restrict x, int b0, int b1, const bool narrow)
+{
+    _Static_assert(MG_LANES == 16, "one 512-bit vector per batch");
+    for (int b = b0; b < b1; b++) {
+        const float *xb = batch_x(l, x, b, narrow);
+        vf16 u[24];
+        for (int k = 0; k < 8; k++) {
+            __m512 r[4]; /* (x, y, z, 0) of lanes j | j + 4 | j + 8 | j + 12 */
+            for (int j = 0; j < 4; j++) { /* quarter g from 4g floats before its node: the
+                                           * masked-out lanes are never read */
+                __m512 v = _mm512_maskz_loadu_ps(0x0007, xb + corner_at(l, b, 0, k, j, narrow));
+                for (int g = 1; g < 4; g++)
+                    v = _mm512_mask_loadu_ps(
+                        v, (__mmask16)(0x7 << 4 * g),
+                        (const void *)((uintptr_t)(xb + corner_at(l, b, 0, k, j + 4 * g, narrow)) -
+                                       4 * g * sizeof(float)));
+                r[j] = v;
+            }
+            const __m512 t0 = _mm512_unpacklo_ps(r[0], r[1]);
+            const __m512 t1 = _mm512_unpackhi_ps(r[0], r[1]);
+            const __m512 t2 = _mm512_unpacklo_ps(r[2], r[3]);
+            const __m512 t3 = _mm512_unpackhi_ps(r[2], r[3]);
+            u[3 * k] = (vf16)_mm512_shuffle_ps(t0, t2, _MM_SHUFFLE(1, 0, 1, 0));
+            u[3 * k + 1] = (vf16)_mm512_shuffle_ps(t0, t2, _MM_SHUFFLE(3, 2, 3, 2));
+            u[3 * k + 2] = (vf16)_mm512_shuffle_ps(t1, t3, _MM_SHUFFLE(1, 0, 1, 0));
+        }
+        vf16 R[9], y[24], L, M;
+        const size_t o = (size_t)b * MG_LANES;
+        if (l->bQ_ok) {
+            vf16 q[4];
+            for (int j = 0; j < 4; j++)
+                memcpy(&q[j], l->bQ + 4 * MG_LANES * (size_t)b + MG_LANES * j, sizeof(vf16));
+            const vf16 w = q[0], qx = q[1], qy = q[2], qz = q[3];
+            CS_QUAT_TO_MAT(w, qx, qy, qz, R);
+        } else {
+            for (int j = 0; j < 9; j++)
+                memcpy(&R[j], l->bR + 9 * MG_LANES * (size_t)b + MG_LANES * j, sizeof(vf16));
+        }
+        memcpy(&L, l->bL + o, sizeof L);
+        memcpy(&M, l->bM + o, sizeof M);
+        modal_core_f16(u, R, 0.0f, &L, &M, NULL, y);
+        float *out = l->fe + 32 * ((size_t)MG_LANES * l->bslot[b]);
+        for (int k = 0; k < 8; k++) {
+            const __m512 X = (__m512)y[3 * k], Y = (__m512)y[3 * k + 1], Z = (__m512)y[3 * k + 2];
+            const __m512 t0 = _mm512_unpacklo_ps(X, Y), t1 = _mm512_unpackhi_ps(X, Y);
+            const __m512 t2 = _mm512_unpacklo_ps(Z, Z), t3 = _mm512_unpackhi_ps(Z, Z);
+            __m512 r[4];
+            r[0] = _mm512_shuffle_ps(t0, t2, _MM_SHUFFLE(1, 0, 1, 0));
+            r[1] = _mm512_shuffle_ps(t0, t2, _MM_SHUFFLE(3, 2, 3, 2));
+            r[2] = _mm512_shuffle_ps(t1, t3, _MM_SHUFFLE(1, 0, 1, 0));
+            r[3] = _mm512_shuffle_ps(t1, t3, _MM_SHUFFLE(3, 2, 3, 2));
+            for (int j = 0; j < 4; j++) {
+                _mm_storeu_ps(out + 32 * j + 4 * k, _mm512_castps512_ps128(r[j]));
+                _mm_storeu_ps(out + 32 * (j + 4) + 4 * k, _mm512_extractf32x4_ps(r[j], 1));
+                _mm_storeu_ps(out + 32 * (j + 8) + 4 * k, _mm512_extractf32x4_ps(r[j], 2));
+                _mm_storeu_ps(out + 32 * (j + 12) + 4 * k, _mm512_extractf32x4_ps(r[j], 3));
+            }
+        }
+    }
+}
+
+__attribute__((optimize("fp-contract=fast"), target("arch=x86-64-v4")))
+static void batches_wide(const mg_level *l, const float *restrict x, int b0, int b1)
+{
+    if (l->bidx16)
+        wide_body(l, x, b0, b1, true);
+    else
+        wide_body(l, x, b0, b1, false);
+}
+
 /* A Chebyshev step fused into a residual's node pass: d = a d + c D⁻¹ r (d = c D⁻¹ r if
  * first; d NULL: first, and d is not stored), x += d at free dofs, 0 at held ones
  * (cheb_update's arithmetic, node by node); with
@@ -1311,7 +1398,7 @@ static inline __attribute__((always_inline)) void node_out(const mg_level *l, in
 /* One thread's share of apply_path (mode compile-time once inlined): its segments' element
  * and node passes chunk by chunk, then (after the barrier) the nodes they share with lower
  * segments. */
-static inline __attribute__((always_inline)) void path_share(const mg_level *l, bool avx512,
+static inline __attribute__((always_inline)) void path_share(const mg_level *l, int simd,
                                                              const float *x, const float *b,
                                                              float *y, const cheb_step *csp,
                                                              const int mode)
@@ -1323,7 +1410,9 @@ static inline __attribute__((always_inline)) void path_share(const mg_level *l, 
         const int b0 = seg_start(l, sg), b1 = seg_start(l, sg + 1);
         for (int j0 = b0; j0 < b1; j0 += MG_CHUNK) {
             const int j1 = j0 + MG_CHUNK < b1 ? j0 + MG_CHUNK : b1;
-            if (avx512)
+            if (simd == SIMD_512)
+                batches_wide(l, x, j0, j1);
+            else if (simd == SIMD_256)
                 batches_avx512(l, x, j0, j1);
             else
                 batches_generic(l, x, j0, j1);
@@ -1360,10 +1449,10 @@ static inline __attribute__((always_inline)) void path_share(const mg_level *l, 
  * forms: fewer register copies in the node pass; no FMA contraction, the same values). */
 #define PATH_VARIANT(NAME, MODE)                                                               \
     __attribute__((noinline, target_clones("arch=x86-64-v3", "default"))) static void NAME(    \
-        const mg_level *l, bool avx512, const float *x, const float *b, float *y,              \
+        const mg_level *l, int simd, const float *x, const float *b, float *y,                 \
         const cheb_step *cs)                                                                   \
     {                                                                                          \
-        path_share(l, avx512, x, b, y, cs, MODE);                                              \
+        path_share(l, simd, x, b, y, cs, MODE);                                                 \
     }
 PATH_VARIANT(path_apply, NP_APPLY)
 PATH_VARIANT(path_resid, NP_RESID)
@@ -1375,7 +1464,7 @@ PATH_VARIANT(path_cheb_out, NP_CHEB_OUT)
 /* y = Σ s R K Rᵀ x + dg x on any level (the finest too: rediscretized like the coarse ones);
  * with b, the residual y = b − (that) at free dofs and 0 at held ones, in the same pass; with
  * cs (and b), the Chebyshev step on that residual instead of y (cs->x is x). */
-static void apply_path(const cs_mg *mg, int level, bool avx512, const float *x, const float *b,
+static void apply_path(const cs_mg *mg, int level, int simd, const float *x, const float *b,
                        float *y, const cheb_step *cs)
 {
     const mg_level *l = &mg->lv[level];
@@ -1394,29 +1483,29 @@ static void apply_path(const cs_mg *mg, int level, bool avx512, const float *x, 
 #pragma omp parallel num_threads(l->threads)
     switch (mode) {
     case NP_APPLY:
-        path_apply(l, avx512, x, b, y, cs);
+        path_apply(l, simd, x, b, y, cs);
         break;
     case NP_RESID:
-        path_resid(l, avx512, x, b, y, cs);
+        path_resid(l, simd, x, b, y, cs);
         break;
     case NP_CHEB_FIRST:
-        path_cheb_first(l, avx512, x, b, y, cs);
+        path_cheb_first(l, simd, x, b, y, cs);
         break;
     case NP_CHEB:
-        path_cheb(l, avx512, x, b, y, cs);
+        path_cheb(l, simd, x, b, y, cs);
         break;
     case NP_CHEB_FIRST_OUT:
-        path_cheb_first_out(l, avx512, x, b, y, cs);
+        path_cheb_first_out(l, simd, x, b, y, cs);
         break;
     default:
-        path_cheb_out(l, avx512, x, b, y, cs);
+        path_cheb_out(l, simd, x, b, y, cs);
         break;
     }
 }
 
 static void apply_ex(const cs_mg *mg, int level, const float *x, const float *b, float *y)
 {
-    apply_path(mg, level, mg->avx512, x, b, y, NULL);
+    apply_path(mg, level, mg->simd, x, b, y, NULL);
 }
 
 static void apply(const cs_mg *mg, int level, const float *x, float *y)
@@ -1427,13 +1516,13 @@ static void apply(const cs_mg *mg, int level, const float *x, float *y)
 void cs_mg_apply_level(const cs_mg *mg, int level, bool portable, const float *x, float *y)
 {
     if (level >= 0 && level < mg->n_levels)
-        apply_path(mg, level, mg->avx512 && !portable, x, NULL, y, NULL);
+        apply_path(mg, level, portable ? 0 : mg->simd, x, NULL, y, NULL);
 }
 
 void cs_mg_residual_level(const cs_mg *mg, int level, const float *x, const float *b, float *y)
 {
     if (level >= 0 && level < mg->n_levels)
-        apply_path(mg, level, mg->avx512, x, b, y, NULL);
+        apply_path(mg, level, mg->simd, x, b, y, NULL);
 }
 
 void cs_mg_cheb_step_level(const cs_mg *mg, int level, const float *b, float *x, float *d,
@@ -1442,7 +1531,7 @@ void cs_mg_cheb_step_level(const cs_mg *mg, int level, const float *b, float *x,
     if (level < 0 || level >= mg->n_levels)
         return;
     const cheb_step cs = {d, x, a, c, first, NULL};
-    apply_path(mg, level, mg->avx512, x, b, NULL, &cs);
+    apply_path(mg, level, mg->simd, x, b, NULL, &cs);
 }
 
 int cs_mg_level_layout(const cs_mg *mg, int level)
@@ -1546,7 +1635,7 @@ static void cheb(const cs_mg *mg, int level, const float *b, float *x, bool zero
             } else {
                 const cheb_step cs = {NULL, x, 0.0f, c, true,
                                       k == l->cheb_deg - 1 ? out : NULL};
-                apply_path(mg, level, mg->avx512, x, b, NULL, &cs);
+                apply_path(mg, level, mg->simd, x, b, NULL, &cs);
             }
         }
         return;
@@ -1562,13 +1651,13 @@ static void cheb(const cs_mg *mg, int level, const float *b, float *x, bool zero
         /* apply_ex into l->t, then cheb_update: fused */
         const cheb_step cs = {l->d, x, 0.0f, (float)(1.0 / theta), true,
                               l->cheb_deg == 1 ? out : NULL};
-        apply_path(mg, level, mg->avx512, x, b, NULL, &cs);
+        apply_path(mg, level, mg->simd, x, b, NULL, &cs);
     }
     for (int k = 1; k < l->cheb_deg; k++) {
         const double rn = 1.0 / (2.0 * sigma - rho);
         const cheb_step cs = {l->d, x, (float)(rn * rho), (float)(2.0 * rn / delta), false,
                               k == l->cheb_deg - 1 ? out : NULL};
-        apply_path(mg, level, mg->avx512, x, b, NULL, &cs);
+        apply_path(mg, level, mg->simd, x, b, NULL, &cs);
         rho = rn;
     }
 }

@@ -211,6 +211,8 @@ int cs_world_create(const cs_world_def *def, cs_world_t **out, char *err, size_t
         return cs_engine_fail(err, errlen, CS_ERR_INVALID, "solver max_iterations must be in [1, 1e6]");
     if (def->threads < 0 || def->threads > 256)
         return cs_engine_fail(err, errlen, CS_ERR_INVALID, "threads must be in [0, 256]");
+    if (def->simd_width != 0 && def->simd_width != 256 && def->simd_width != 512)
+        return cs_engine_fail(err, errlen, CS_ERR_INVALID, "simd_width must be 0, 256 or 512");
     if (!(def->sleep_speed >= 0 && isfinite(def->sleep_speed)) || def->sleep_steps < 0)
         return cs_engine_fail(err, errlen, CS_ERR_INVALID, "sleep speed and steps must be >= 0");
     if (def->active_steps < 0 ||
@@ -756,7 +758,7 @@ int cs_world_add_object(cs_world_t *w, const cs_object_def *def, cs_object_id *i
         goto fail;
     o->n = o->cm.n_nodes;
     if (cs_object_alloc_state(o) != 0 ||
-        cs_elastic_init(o, w->threads) != 0) {
+        cs_elastic_init(o, w->threads, w->def.simd_width) != 0) {
         rc = cs_engine_fail(err, errlen, CS_ERR_NOMEM, "out of memory for %d nodes", o->n);
         goto fail;
     }
