@@ -499,13 +499,16 @@ static int parse_world(sc_ctx *c, const cJSON *root, cs_scene *s)
         return -1;
     if (o) {
         static const char *const keys[] = {"tolerance", "max_iterations", "threads",
-                                           "preconditioner", "relative_to", NULL};
+                                           "preconditioner", "relative_to", "simd_width", NULL};
         if (check_keys(c, o, "solver", keys) ||
             get_number(c, o, "solver", "tolerance", &w->cg_tolerance,
                        (sc_range){LO_GT, 0, HI_LT, 1}, 0) ||
             get_int(c, o, "solver", "max_iterations", &w->cg_max_iterations, 1, 1000000) ||
-            get_int(c, o, "solver", "threads", &w->threads, 0, 256))
+            get_int(c, o, "solver", "threads", &w->threads, 0, 256) ||
+            get_int(c, o, "solver", "simd_width", &w->simd_width, 0, 512))
             return -1;
+        if (w->simd_width != 0 && w->simd_width != 256 && w->simd_width != 512)
+            return fail(c, "solver.simd_width", "must be 0, 256 or 512, got %d", w->simd_width);
         const cJSON *pc = cJSON_GetObjectItemCaseSensitive(o, "preconditioner");
         if (pc) {
             char b[SC_SHOW_NAME + 1];

@@ -138,7 +138,8 @@ TEST(scene_every_field_round_trip)
         "  \"max_fractures\": 9,\n"
         "  \"ground\": { \"height\": -0.25, \"friction\": 0.8 },\n"
         "  \"solver\": { \"tolerance\": 1e-8, \"max_iterations\": 77, \"threads\": 2,\n"
-        "              \"preconditioner\": \"multigrid\", \"relative_to\": \"rhs\" },\n"
+        "              \"preconditioner\": \"multigrid\", \"relative_to\": \"rhs\",\n"
+        "              \"simd_width\": 256 },\n"
         "  \"materials\": { \"a\": { \"young\": 2e5, \"poisson\": 0.45, \"density\": 900,\n"
         "                          \"damping\": [0.1, 0.02], \"strength\": 3e4 },\n"
         "                 \"b\": { \"young\": 5 } },\n"
@@ -178,6 +179,7 @@ TEST(scene_every_field_round_trip)
     ENSURE_NEAR(s.world.cg_tolerance, 1e-8, 0);
     ENSURE(s.world.cg_max_iterations == 77);
     ENSURE(s.world.threads == 2);
+    ENSURE(s.world.simd_width == 256);
     ENSURE(s.world.preconditioner == CS_PRECOND_MULTIGRID);
     ENSURE(s.world.cg_relative_to == CS_CG_RELATIVE_RHS);
     ENSURE(s.n_objects == 5);
@@ -380,6 +382,9 @@ static const bad_case BAD[] = {
     {"{\"solver\": {\"max_iterations\": 0}, \"objects\": []}",
      "solver.max_iterations: must be in [1, 1000000], got 0"},
     {"{\"solver\": {\"threads\": -1}, \"objects\": []}", "solver.threads: must be in [0, 256]"},
+    {"{\"solver\": {\"simd_width\": 128}, \"objects\": []}",
+     "solver.simd_width: must be 0, 256 or 512, got 128"},
+    {"{\"solver\": {\"simd_width\": 1024}, \"objects\": []}", "solver.simd_width: must be in [0, 512]"},
     {"{\"sleep\": {\"speed\": -1}, \"objects\": []}", "sleep.speed: must be >= 0"},
     {"{\"sleep\": {\"steps\": -1}, \"objects\": []}", "sleep.steps: must be in [0, "},
     {"{\"materials\": {\"soft\": {\"poisson\": 0.5}}, \"objects\": []}",
