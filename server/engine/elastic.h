@@ -37,6 +37,15 @@ void cs_elastic_apply_K(cs_object *o, const double *p, double *y);
 void cs_elastic_diag_blocks(cs_object *o, double *blocks);
 
 void cs_elastic_apply_M(cs_object *o, const double *p, double *y, double coef);
+/* The factor of the scalar mass (M = m ⊗ I₃, a localframe's consistent mass) for z = M⁻¹ r:
+ * built on first use (o->mfac), 0 when it exists; -1 when the object has no consistent mass,
+ * its nodes are not one per lattice point (mid-fracture duplicates), it is too large (the band
+ * over 4e6 entries: 32 MB) or M is not positive definite. cs_elastic_mass_solve: z = c·M⁻¹ r
+ * per component (r, z 3 per node; may alias). cs_elastic_mass_factor_drop: forget it (the mass
+ * changed). */
+int cs_elastic_mass_factor(cs_object *o);
+void cs_elastic_mass_solve(const cs_object *o, double c, const double *r, double *z);
+void cs_elastic_mass_factor_drop(cs_object *o);
 const double *cs_elastic_mass_diag(const cs_object *o);
 const double *cs_elastic_mass_rows(const cs_object *o);
 

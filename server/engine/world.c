@@ -3238,6 +3238,20 @@ static void cd_preconditioner(cs_object *o)
     cs_invert_blocks(o->blocks, o->n);
 }
 
+/* z = (mcoef·M)⁻¹ r by the mass factor, 0 at the solve's held dofs: the preconditioner of a
+ * localframe object's central-difference solves, whose operator is mostly its consistent
+ * mass (on the localframe bench's 1080-cube beam: 95 block-Jacobi iterations a step, the
+ * B-spline mass having a constant diagonal and a condition number near 18.5³). Symmetric
+ * positive definite on the free dofs (the restriction of M⁻¹ to them). */
+static void cd_mass_precond(void *ctx, const double *r, double *z)
+{
+    const cs_object *o = ctx;
+    cs_elastic_mass_solve(o, 1.0 / o->mcoef, r, z);
+    for (size_t d = 0; d < 3 * (size_t)o->n; d++)
+        if (o->smask[d])
+            z[d] = 0;
+}
+
 /*
  * Central differences, seed 001 Eq. (20): (2M + dt D) p⁺ = 2dt²(f − K_R p) + 4M p −
  * (2M − dt D) p⁻, D = αM + βK_R (Rayleigh; the mass part is §3.2.1's ∫γΓᵀΓ with γ = αρ),
@@ -3291,15 +3305,22 @@ static int step_central_difference(cs_world_t *w, cs_object *o, cs_step_stats *s
     o->ckcoef = dfield ? dt * be : 0.0;
     o->dcoef = 2.0 * dt * dt;
     o->pcoef = 2.0 * dt * dt; /* penalty springs at p⁺: no limit on k_p */
-    cd_preconditioner(o);
+    /* a localframe object's consistent mass: its factor (unless Jacobi is asked for) */
+    const bool mfac = o->lf && w->def.preconditioner != CS_PRECOND_JACOBI &&
+                      cs_elastic_mass_factor(o) == 0;
+    if (!mfac)
+        cd_preconditioner(o);
     /* forces enter b as 2dt·f: the held rows' residual is the ground's reaction, 2dt·f_c */
     int contacts = constrain_ground(w, o, 2.0 * dt);
     double t3 = now_ms();
     cs_cg_result r = {0, 0, 1, 0, 0};
     for (int round = 0;; round++) {
         const cs_cg_result rr =
-            cs_pcg(&o->cg, cd_operator, o, o->blocks, o->smask, o->b, o->v1,
-                   w->def.cg_tolerance, w->def.cg_max_iterations, cs_elastic_threads(o));
+            mfac ? cs_pcg_ex(&o->cg, cd_operator, o, cd_mass_precond, o, o->smask, o->b, o->v1,
+                             w->def.cg_tolerance, w->def.cg_max_iterations,
+                             cs_elastic_threads(o))
+                 : cs_pcg(&o->cg, cd_operator, o, o->blocks, o->smask, o->b, o->v1,
+                          w->def.cg_tolerance, w->def.cg_max_iterations, cs_elastic_threads(o));
         r.iterations += rr.iterations;
         r.relres = rr.relres;
         r.converged = rr.converged;

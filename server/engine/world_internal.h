@@ -288,6 +288,11 @@ typedef struct cs_object {
     /* CS_MODEL_RIGID: pose, velocities and mass properties (rigid.h); NULL otherwise */
     struct cs_rigid *rb;
     cs_pc_lag lag;         /* the implicit step's lagged multigrid preconditioner */
+    /* localframe: the Cholesky factor of its scalar consistent mass, the preconditioner of
+     * its central-difference steps (elastic.c cs_elastic_mass_factor); NULL until built, after
+     * a change of the mass (fields, fracture) or when it could not be built (mfac_failed) */
+    struct cs_mass_factor *mfac;
+    bool mfac_failed;
 } cs_object;
 
 /* The topology changes of one mutating call: their arrays live in one arena. */
