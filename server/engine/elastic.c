@@ -363,13 +363,13 @@ static int build_mass_factor(cs_object *o, cs_mass_factor *mf)
     const cs_cubemesh *cm = &o->cm;
     int rc = -1;
     int32_t *lat = malloc(sizeof(int32_t) * 3 * (size_t)n);
-    int32_t *order = malloc(sizeof(int32_t) * (size_t)n);
+    int32_t *colour = malloc(sizeof(int32_t) * (size_t)n); /* (i, j, k) mod 7, one number */
     double *e = calloc(3 * (size_t)n, sizeof *e), *y = calloc(3 * (size_t)n, sizeof *y);
     cs_ijk_hash h;
     bool hash_ok = cs_ijk_hash_init(&h, n) == 0;
     mf->row = malloc(sizeof(int32_t) * (size_t)n);
     mf->t = malloc(sizeof(double) * 3 * (size_t)n);
-    if (!lat || !order || !e || !y || !hash_ok || !mf->row || !mf->t)
+    if (!lat || !colour || !e || !y || !hash_ok || !mf->row || !mf->t)
         goto out;
     int32_t lo[3] = {INT32_MAX, INT32_MAX, INT32_MAX}, hi[3] = {INT32_MIN, INT32_MIN, INT32_MIN};
     for (int a = 0; a < n; a++)
@@ -393,7 +393,7 @@ static int build_mass_factor(cs_object *o, cs_mass_factor *mf)
                 ax[i] = ax[j];
                 ax[j] = t;
             }
-    /* a counting order over the bounding box: key = Σ (l − lo) · stride, slowest axis first */
+    /* rows sorted by key = Σ (l − lo) · stride over the bounding box, slowest axis first */
     const int64_t ext[3] = {hi[ax[0]] - lo[ax[0]] + 1, hi[ax[1]] - lo[ax[1]] + 1,
                             hi[ax[2]] - lo[ax[2]] + 1};
     /* a full box's band is about MF_REACH layers of the two shorter axes: a body whose bounding
@@ -401,29 +401,19 @@ static int build_mass_factor(cs_object *o, cs_mass_factor *mf)
      * the scan below costs 343 lookups a node) */
     if ((double)n * MF_REACH * (double)ext[1] * (double)ext[2] > 8 * MF_MAX_BAND)
         goto out;
-    int64_t *key = malloc(sizeof(int64_t) * (size_t)n);
-    if (!key)
+    int64_t *kk = malloc(sizeof(int64_t) * 2 * (size_t)n); /* (key, node) pairs */
+    if (!kk)
         goto out;
-    for (int a = 0; a < n; a++)
-        key[a] = ((lat[3 * a + ax[0]] - lo[ax[0]]) * ext[1] + (lat[3 * a + ax[1]] - lo[ax[1]])) *
-                     ext[2] +
-                 (lat[3 * a + ax[2]] - lo[ax[2]]);
-    {   /* node indices sorted by key (distinct: one node per lattice point) */
-        int64_t *kk = malloc(sizeof(int64_t) * 2 * (size_t)n);
-        if (!kk) {
-            free(key);
-            goto out;
-        }
-        for (int a = 0; a < n; a++)
-            kk[2 * a] = key[a], kk[2 * a + 1] = a;
-        qsort(kk, (size_t)n, 2 * sizeof(int64_t), cmp_pairs);
-        for (int r = 0; r < n; r++) {
-            order[r] = (int32_t)kk[2 * r + 1];
-            mf->row[order[r]] = r;
-        }
-        free(kk);
+    for (int a = 0; a < n; a++) {
+        const int32_t *q = lat + 3 * a;
+        kk[2 * a] = ((q[ax[0]] - lo[ax[0]]) * ext[1] + (q[ax[1]] - lo[ax[1]])) * ext[2] +
+                    (q[ax[2]] - lo[ax[2]]);
+        kk[2 * a + 1] = a;
     }
-    free(key);
+    qsort(kk, (size_t)n, 2 * sizeof(int64_t), cmp_pairs); /* keys distinct: one node a point */
+    for (int r = 0; r < n; r++)
+        mf->row[kk[2 * r + 1]] = r;
+    free(kk);
     /* the band: the farthest row among each node's lattice neighbours within reach */
     int b = 0;
     for (int a = 0; a < n; a++) {
@@ -440,14 +430,18 @@ static int build_mass_factor(cs_object *o, cs_mass_factor *mf)
         goto out;
     /* columns by colour: e = 1 at the colour's nodes (x components), y = M e */
     const int S = 2 * MF_REACH + 1;
+    for (int a = 0; a < n; a++) {
+        const int32_t *q = lat + 3 * a;
+        int m[3];
+        for (int k = 0; k < 3; k++)
+            m[k] = ((q[k] % S) + S) % S;
+        colour[a] = m[0] + S * (m[1] + S * m[2]);
+    }
     for (int col = 0; col < S * S * S; col++) {
         bool any = false;
         for (int a = 0; a < n; a++) {
-            const int32_t *q = lat + 3 * a;
-            const int ca = (((q[0] % S) + S) % S) + S * ((((q[1] % S) + S) % S) +
-                                                         S * (((q[2] % S) + S) % S));
-            e[3 * a] = ca == col;
-            any |= ca == col;
+            e[3 * a] = colour[a] == col;
+            any |= colour[a] == col;
         }
         if (!any)
             continue;
@@ -474,7 +468,7 @@ out:
     if (hash_ok)
         cs_ijk_hash_free(&h);
     free(lat);
-    free(order);
+    free(colour);
     free(e);
     free(y);
     if (rc != 0) {
