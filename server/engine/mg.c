@@ -74,6 +74,10 @@ _Static_assert(MG_CHEB_KIND != 4 ||
 #endif
 #define MG_LANES 16        /* cells per batch of the element pass (one float SIMD lane each) */
 #define VF_LANES 8         /* lanes per vector of the element pass's arithmetic */
+/* A row batch's node rows r = (dy, dz) = (0, 0), (1, 0), (0, 1), (1, 1): the corners at dx = 0
+ * and dx = 1 in each (CS_CORNER), and each corner's row. */
+static const int ROW_K0[4] = {0, 3, 4, 7}, ROW_K1[4] = {1, 2, 5, 6};
+static const int ROW_OF[8] = {0, 0, 1, 1, 2, 2, 3, 3};
 enum { SIMD_256 = 1, SIMD_512 = 2 }; /* cs_mg.simd */
 typedef float vf __attribute__((vector_size(4 * VF_LANES)));
 #define MODAL_NAME modal_core_f
@@ -159,7 +163,18 @@ typedef struct mg_level {
      * window stays in L2 instead of going out to memory. */
     float *fe;
     int32_t *bslot;                   /* per batch: its slot in fe */
-    int32_t *fadj;                    /* per adj link: its corner's x component in fe */
+    /* Row batches (product_layout): a batch of 16 cells along x in one lattice row whose four
+     * node rows (one per (dy, dz)) are each 17 consecutive nodes; rowb[4b + r] = 3·(the first
+     * node of node row r), rowb[4b] = -1: not a row batch. Its element pass reads each node row
+     * with whole-vector loads and adds each node's two results in the row (the cell before it
+     * at dx = 1 and the cell after at dx = 0) before storing them: fe holds per node row 17
+     * nodes' (x, y, z) from the batch's slot + 64 r, the last one the row's end node. */
+    int32_t *rowb;
+    int n_row_batches;
+    /* per link of the node pass (nstart: per node, its first; n_nodes + 1): its x component
+     * in fe. The links of adj in adj's order, less those a row batch added into another. */
+    int32_t *nstart;
+    int32_t *fadj;
     int nseg;                         /* segments of batches: l->threads */
     int span;                         /* the most batches between a node's first and last cell */
     /* the node pass follows the element pass chunk by chunk (apply_ex): the nodes ordered by
@@ -517,13 +532,44 @@ static int product_layout(mg_level *l)
         total += b1 - b0 < head + ring ? b1 - b0 : head + ring;
     }
     l->fe = aligned_alloc(64, (size_t)(total ? total : 1) * 32 * MG_LANES * sizeof(float));
-    if (!l->fe)
+    free(l->rowb);
+    free(l->nstart);
+    l->rowb = malloc(((size_t)l->n_batches * 4 + 1) * sizeof(int32_t));
+    l->nstart = malloc(((size_t)l->n_nodes + 1) * sizeof(int32_t));
+    if (!l->fe || !l->rowb || !l->nstart)
         return -1;
-    for (int n = 0; n < l->n_nodes; n++)
-        for (int a = l->adj_start[n]; a < l->adj_start[n + 1]; a++) {
-            const int c = l->adj[a] / 8, k = l->adj[a] % 8;
-            l->fadj[a] = 32 * (MG_LANES * l->bslot[c / MG_LANES] + c % MG_LANES) + 4 * k;
+    _Static_assert(MG_LANES == 16, "a row batch's layout: 17 nodes' 3 floats within 64");
+    l->n_row_batches = 0;
+    for (int b = 0; b < l->n_batches; b++) {
+        const int c0 = b * MG_LANES;
+        bool row = c0 + MG_LANES <= l->n_cells;
+        for (int r = 0; r < 4 && row; r++) {
+            const int32_t base = 3 * l->cell_nodes[8 * c0 + ROW_K0[r]];
+            for (int p = 0; p < MG_LANES && row; p++)
+                row = 3 * l->cell_nodes[8 * (c0 + p) + ROW_K0[r]] == base + 3 * p &&
+                      3 * l->cell_nodes[8 * (c0 + p) + ROW_K1[r]] == base + 3 * p + 3;
+            l->rowb[4 * b + r] = base;
         }
+        l->rowb[4 * b] = row ? l->rowb[4 * b] : -1;
+        l->n_row_batches += row;
+    }
+    int32_t m = 0;
+    for (int n = 0; n < l->n_nodes; n++) {
+        l->nstart[n] = m;
+        for (int a = l->adj_start[n]; a < l->adj_start[n + 1]; a++) {
+            const int c = l->adj[a] / 8, k = l->adj[a] % 8, b = c / MG_LANES, p = c % MG_LANES;
+            if (l->rowb[4 * b] < 0) {
+                l->fadj[m++] = 32 * (MG_LANES * l->bslot[b] + p) + 4 * k;
+                continue;
+            }
+            /* in a row batch: corner k in node row ROW_OF[k]; at dx = 1 it is the next
+             * lane's dx = 0 node, added there, except for the last lane's (the row's end) */
+            const int r = ROW_OF[k], off = CS_CORNER[k][0] ? (p + 1 < MG_LANES ? -1 : 48) : 3 * p;
+            if (off >= 0)
+                l->fadj[m++] = 32 * MG_LANES * l->bslot[b] + 64 * r + off;
+        }
+    }
+    l->nstart[l->n_nodes] = m;
     return 0;
 }
 
@@ -885,6 +931,8 @@ static void free_level(mg_level *l)
     free(l->bL);
     free(l->bM);
     free(l->fadj);
+    free(l->rowb);
+    free(l->nstart);
     free(l->norder);
     free(l->nminb);
     free(l->nfirst);
@@ -1078,7 +1126,7 @@ double *cs_mg_node_diag(cs_mg *mg)
  * batch in one 512-bit vector, wide_body, on the cores that do not, simd.h). */
 typedef int vi8 __attribute__((vector_size(32)));
 static inline __attribute__((always_inline)) void half_rest(const mg_level *l, int b, int h,
-                                                            const vf u[24])
+                                                            const vf u[24], float *yt)
 {
     vf R[9], y[24], L, M;
     const size_t o = (size_t)b * MG_LANES + VF_LANES * h;
@@ -1098,6 +1146,11 @@ static inline __attribute__((always_inline)) void half_rest(const mg_level *l, i
     memcpy(&L, l->bL + o, sizeof L);
     memcpy(&M, l->bM + o, sizeof M);
     modal_core_f(u, R, 0.0f, &L, &M, NULL, y);
+    if (yt) { /* a row batch's: component i of corner k of lane p at yt[16 (3k + i) + p] */
+        for (int i = 0; i < 24; i++)
+            memcpy(yt + MG_LANES * i + VF_LANES * h, &y[i], sizeof y[i]);
+        return;
+    }
     /* lane p's corner k at out + 32 p + 4 k as (x, y, z, z): the components transposed across
      * lanes in registers (lanes j and j + 4 per 256-bit vector), whole 16-byte stores */
     float *out = l->fe + 32 * ((size_t)MG_LANES * l->bslot[b] + VF_LANES * h);
@@ -1120,6 +1173,24 @@ static inline __attribute__((always_inline)) void half_rest(const mg_level *l, i
     }
 }
 
+/* A row batch's results (yt as half_rest leaves them) into its rows in fe: node p of row r
+ * gets corner ROW_K0[r] of lane p plus corner ROW_K1[r] of lane p − 1 (0 for p = 0), the row's
+ * end node corner ROW_K1[r] of lane 15 (row_wide: the same sums). */
+static inline __attribute__((always_inline)) void row_store(const mg_level *l, int b,
+                                                            const float *yt)
+{
+    float *out = l->fe + 32 * ((size_t)MG_LANES * l->bslot[b]);
+    for (int r = 0; r < 4; r++)
+        for (int i = 0; i < 3; i++) {
+            const float *y0 = yt + MG_LANES * (3 * ROW_K0[r] + i);
+            const float *y1 = yt + MG_LANES * (3 * ROW_K1[r] + i);
+            out[64 * r + i] = y0[0] + 0.0f;
+            for (int p = 1; p < MG_LANES; p++)
+                out[64 * r + 3 * p + i] = y0[p] + y1[p - 1];
+            out[64 * r + 48 + i] = y1[MG_LANES - 1];
+        }
+}
+
 /* Corner k of lane p of half h of batch b: its 3·node index, as an offset from x_b (x moved
  * to the batch's base with 16-bit offsets, bidx16; x itself with 32-bit indices, bidx). */
 static inline __attribute__((always_inline)) const float *batch_x(const mg_level *l,
@@ -1140,7 +1211,9 @@ static inline __attribute__((always_inline)) int32_t corner_at(const mg_level *l
 static inline __attribute__((always_inline)) void
 generic_body(const mg_level *l, const float *restrict x, int b0, int b1, const bool narrow)
 {
-    for (int b = b0; b < b1; b++)
+    for (int b = b0; b < b1; b++) {
+        float yt[24 * MG_LANES];
+        const bool row = l->rowb[4 * b] >= 0;
         for (int h = 0; h < MG_LANES / VF_LANES; h++) {
             const float *xb = batch_x(l, x, b, narrow);
             vf u[24];
@@ -1148,8 +1221,11 @@ generic_body(const mg_level *l, const float *restrict x, int b0, int b1, const b
                 for (int i = 0; i < 3; i++)
                     for (int p = 0; p < VF_LANES; p++)
                         u[3 * k + i][p] = xb[corner_at(l, b, h, k, p, narrow) + i];
-            half_rest(l, b, h, u);
+            half_rest(l, b, h, u, row ? yt : NULL);
         }
+        if (row)
+            row_store(l, b, yt);
+    }
 }
 
 __attribute__((optimize("fp-contract=fast"), target_clones("arch=x86-64-v3", "default")))
@@ -1167,7 +1243,9 @@ static inline __attribute__((always_inline, target("arch=x86-64-v4"))) void
 avx512_body(const mg_level *l, const float *restrict x, int b0, int b1, const bool narrow)
 {
     _Static_assert(VF_LANES == 8, "two 4-lane groups per 256-bit vector");
-    for (int b = b0; b < b1; b++)
+    for (int b = b0; b < b1; b++) {
+        float yt[24 * MG_LANES];
+        const bool row = l->rowb[4 * b] >= 0;
         for (int h = 0; h < MG_LANES / VF_LANES; h++) {
             const float *xb = batch_x(l, x, b, narrow);
             vf u[24];
@@ -1186,8 +1264,11 @@ avx512_body(const mg_level *l, const float *restrict x, int b0, int b1, const bo
                 u[3 * k + 1] = (vf)_mm256_shuffle_ps(t0, t2, _MM_SHUFFLE(3, 2, 3, 2));
                 u[3 * k + 2] = (vf)_mm256_shuffle_ps(t1, t3, _MM_SHUFFLE(1, 0, 1, 0));
             }
-            half_rest(l, b, h, u);
+            half_rest(l, b, h, u, row ? yt : NULL);
         }
+        if (row)
+            row_store(l, b, yt);
+    }
 }
 
 __attribute__((optimize("fp-contract=fast"), target("arch=x86-64-v4")))
@@ -1213,6 +1294,70 @@ typedef int vi16 __attribute__((vector_size(64)));
 #define MODAL_S float
 #include "modal_core.h"
 
+/* A row batch's inputs (row_store's layout): each node row's 16 nodes by three whole loads
+ * deinterleaved into x, y, z (two two-source permutes each), its dx = 1 corners the same shifted
+ * by one lane with the row's end node; the same values as the gathers. */
+static inline __attribute__((always_inline, target("arch=x86-64-v4"))) void
+row_inputs(const float *restrict x, const int32_t *rowb, vf16 u[24])
+{
+    const __m512i lo[3] = {
+        _mm512_setr_epi32(0, 3, 6, 9, 12, 15, 18, 21, 24, 27, 30, 0, 0, 0, 0, 0),
+        _mm512_setr_epi32(1, 4, 7, 10, 13, 16, 19, 22, 25, 28, 31, 0, 0, 0, 0, 0),
+        _mm512_setr_epi32(2, 5, 8, 11, 14, 17, 20, 23, 26, 29, 0, 0, 0, 0, 0, 0)};
+    const __m512i hi[3] = {
+        _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 17, 20, 23, 26, 29),
+        _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 18, 21, 24, 27, 30),
+        _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 16, 19, 22, 25, 28, 31)};
+    for (int r = 0; r < 4; r++) {
+        const float *p = x + rowb[r];
+        const __m512 A = _mm512_loadu_ps(p), B = _mm512_loadu_ps(p + 16),
+                     C = _mm512_loadu_ps(p + 32);
+        for (int i = 0; i < 3; i++) {
+            const __m512 v = _mm512_permutex2var_ps(_mm512_permutex2var_ps(A, lo[i], B), hi[i], C);
+            /* the end node's component i in lane 0 */
+            const __m512i e = _mm512_castps_si512(_mm512_maskz_loadu_ps(1, p + 48 + i));
+            u[3 * ROW_K0[r] + i] = (vf16)v;
+            u[3 * ROW_K1[r] + i] =
+                (vf16)_mm512_castsi512_ps(_mm512_alignr_epi32(e, _mm512_castps_si512(v), 1));
+        }
+    }
+}
+
+/* A row batch's results into fe (row_store's sums): per node row, the dx = 1 corner shifted a
+ * lane up and added to the dx = 0 one, interleaved into 48 floats by two permutes per vector;
+ * the last lane's dx = 1 corner as the row's end node. */
+static inline __attribute__((always_inline, target("arch=x86-64-v4"))) void
+row_outputs(const vf16 y[24], float *out)
+{
+    const __m512i ia[3] = {
+        _mm512_setr_epi32(0, 16, 0, 1, 17, 0, 2, 18, 0, 3, 19, 0, 4, 20, 0, 5),
+        _mm512_setr_epi32(21, 0, 6, 22, 0, 7, 23, 0, 8, 24, 0, 9, 25, 0, 10, 26),
+        _mm512_setr_epi32(0, 11, 27, 0, 12, 28, 0, 13, 29, 0, 14, 30, 0, 15, 31, 0)};
+    const __m512i ib[3] = {
+        _mm512_setr_epi32(0, 1, 16, 3, 4, 17, 6, 7, 18, 9, 10, 19, 12, 13, 20, 15),
+        _mm512_setr_epi32(0, 21, 2, 3, 22, 5, 6, 23, 8, 9, 24, 11, 12, 25, 14, 15),
+        _mm512_setr_epi32(26, 1, 2, 27, 4, 5, 28, 7, 8, 29, 10, 11, 30, 13, 14, 31)};
+    const __m512i e0 = _mm512_setr_epi32(15, 31, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0);
+    const __m512i e1 = _mm512_setr_epi32(0, 1, 31, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0);
+    const __m512i zero = _mm512_setzero_si512();
+    for (int r = 0; r < 4; r++) {
+        __m512 S[3];
+        for (int i = 0; i < 3; i++) {
+            const __m512i y1 = _mm512_castps_si512((__m512)y[3 * ROW_K1[r] + i]);
+            S[i] = _mm512_add_ps((__m512)y[3 * ROW_K0[r] + i],
+                                 _mm512_castsi512_ps(_mm512_alignr_epi32(y1, zero, 15)));
+        }
+        float *o = out + 64 * r;
+        for (int v = 0; v < 3; v++)
+            _mm512_storeu_ps(o + 16 * v, _mm512_permutex2var_ps(
+                                             _mm512_permutex2var_ps(S[0], ia[v], S[1]), ib[v], S[2]));
+        const __m512 end = _mm512_permutex2var_ps(
+            _mm512_permutex2var_ps((__m512)y[3 * ROW_K1[r]], e0, (__m512)y[3 * ROW_K1[r] + 1]), e1,
+            (__m512)y[3 * ROW_K1[r] + 2]);
+        _mm512_mask_storeu_ps(o + 48, 0x7, end);
+    }
+}
+
 static inline __attribute__((always_inline, target("arch=x86-64-v4"))) void
 wide_body(const mg_level *l, const float *restrict x, int b0, int b1, const bool narrow)
 {
@@ -1220,6 +1365,10 @@ wide_body(const mg_level *l, const float *restrict x, int b0, int b1, const bool
     for (int b = b0; b < b1; b++) {
         const float *xb = batch_x(l, x, b, narrow);
         vf16 u[24];
+        const bool row = l->rowb[4 * b] >= 0;
+        if (row)
+            row_inputs(x, l->rowb + 4 * b, u);
+        else
         for (int k = 0; k < 8; k++) {
             __m512 r[4]; /* (x, y, z, 0) of lanes j | j + 4 | j + 8 | j + 12 */
             for (int j = 0; j < 4; j++) { /* quarter g from 4g floats before its node: the
@@ -1256,6 +1405,10 @@ wide_body(const mg_level *l, const float *restrict x, int b0, int b1, const bool
         memcpy(&M, l->bM + o, sizeof M);
         modal_core_f16(u, R, 0.0f, &L, &M, NULL, y);
         float *out = l->fe + 32 * ((size_t)MG_LANES * l->bslot[b]);
+        if (row) {
+            row_outputs(y, out);
+            continue;
+        }
         for (int k = 0; k < 8; k++) {
             const __m512 X = (__m512)y[3 * k], Y = (__m512)y[3 * k + 1], Z = (__m512)y[3 * k + 2];
             const __m512 t0 = _mm512_unpacklo_ps(X, Y), t1 = _mm512_unpackhi_ps(X, Y);
@@ -1353,8 +1506,8 @@ static inline __attribute__((always_inline)) void node_out(const mg_level *l, in
                                                            float *y, const cheb_step *cs,
                                                            const int mode)
 {
-    const int32_t *fadj = l->fadj + l->adj_start[n];
-    const int links = l->adj_start[n + 1] - l->adj_start[n];
+    const int32_t *fadj = l->fadj + l->nstart[n];
+    const int links = l->nstart[n + 1] - l->nstart[n];
     /* (x, y, z, ·) per link: one 16-byte load and add each, the same sums per component */
     vf4 s = {0, 0, 0, 0};
     const float *fe = __builtin_assume_aligned(l->fe, 16);
@@ -1364,6 +1517,13 @@ static inline __attribute__((always_inline)) void node_out(const mg_level *l, in
         for (int a = 0; a < 8; a++)
             memcpy(&v[a], fe + fadj[a], sizeof v[a]);
         for (int a = 0; a < 8; a++)
+            s += v[a];
+    } else if (links == 4) {
+        /* ... the same inside row batches (one link per node row) */
+        vf4 v[4];
+        for (int a = 0; a < 4; a++)
+            memcpy(&v[a], fe + fadj[a], sizeof v[a]);
+        for (int a = 0; a < 4; a++)
             s += v[a];
     } else {
         for (int a = 0; a < links; a++) {
@@ -1540,7 +1700,8 @@ int cs_mg_level_layout(const cs_mg *mg, int level)
         return 0;
     const mg_level *l = &mg->lv[level];
     return (l->bidx16 ? CS_MG_NARROW_CORNERS : 0) | (l->bQ_ok ? CS_MG_QUAT_ROTATIONS : 0) |
-           (l->pc_ent ? CS_MG_CELL_PROLONGATION : 0) | (l->r_pk ? CS_MG_PACKED_RESTRICTION : 0);
+           (l->pc_ent ? CS_MG_CELL_PROLONGATION : 0) | (l->r_pk ? CS_MG_PACKED_RESTRICTION : 0) |
+           (l->n_row_batches ? CS_MG_ROW_BATCHES : 0);
 }
 
 void cs_mg_level_smoother(const cs_mg *mg, int level, float *inv, uint8_t *mask)

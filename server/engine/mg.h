@@ -135,6 +135,11 @@ void cs_mg_level_smoother(const cs_mg *mg, int level, float *inv, uint8_t *mask)
 /* CS_MG_PACKED_RESTRICTION: its restriction to the next coarser level reads (fine node,
  * weight) pairs packed into 4 bytes (the weight 2^−e as e in the top bits; else 8-byte pairs). */
 #define CS_MG_PACKED_RESTRICTION 8
+/* CS_MG_ROW_BATCHES: some of its batches are row batches (16 cells along x whose four node rows
+ * are numbered consecutively: a lattice-ordered block's inside), read by whole-vector loads of
+ * those rows and each node's two results in a row added in the pass (the same sums on every
+ * path). */
+#define CS_MG_ROW_BATCHES 16
 int cs_mg_level_layout(const cs_mg *mg, int level);
 
 /* The transfers between level `level` and the next coarser one, without masks (for tests):

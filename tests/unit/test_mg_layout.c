@@ -243,6 +243,15 @@ TEST(mg_compact_layouts_match_reference)
         /* one cell's R not a rotation: the matrices */
         {20, 12, 10, 7, false, true,
          CS_MG_NARROW_CORNERS | CS_MG_CELL_PROLONGATION | CS_MG_PACKED_RESTRICTION},
+        /* a whole block in lattice order, rows of two batches: row batches inside (not on
+         * the first row and layer, whose nodes the cells number as they come) */
+        {32, 7, 6, 0, false, false,
+         CS_MG_NARROW_CORNERS | CS_MG_QUAT_ROTATIONS | CS_MG_CELL_PROLONGATION |
+             CS_MG_PACKED_RESTRICTION | CS_MG_ROW_BATCHES},
+        /* rows of 24 cells: batches across rows, some of them row batches */
+        {24, 9, 5, 0, false, false,
+         CS_MG_NARROW_CORNERS | CS_MG_QUAT_ROTATIONS | CS_MG_CELL_PROLONGATION |
+             CS_MG_PACKED_RESTRICTION | CS_MG_ROW_BATCHES},
     };
     for (size_t c = 0; c < sizeof cases / sizeof cases[0]; c++) {
         const lay_case k = cases[c];
