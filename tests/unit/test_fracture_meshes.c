@@ -1545,20 +1545,28 @@ TEST(fracture_meshes_harness_mirror)
  * pass went on to its next overstressed cube with the old cell count and read past its cells
  * (SIGSEGV in the fracture demo's daemon; a heap-buffer-overflow under the sanitizers, which
  * `make test` runs this in). The icosphere at h = 0.017 m, held at its bottom, with a strength
- * of 1 Pa and 64 fractures a step, drops such a cube in its fifth step while other cubes of
- * the same object are still overstressed. Asserted: the case is reached, and every step ends
- * with every piece closed, consistently oriented and of positive volume.
+ * of 1 Pa and 64 fractures a step, drops such a cube while other cubes of the same object are
+ * still overstressed (in its fifth step until session 48). Asserted: the case is reached at one
+ * of a few cube sizes near 0.017 m within 10 steps, and every step ends with every piece
+ * closed, consistently oriented and of positive volume.
  */
-TEST(fracture_meshes_dropped_grazing_cube_ends_the_objects_step)
+/* One run of the case below at cube size h: steps until the first grazing piece is dropped, at
+ * most max_steps, each ending with every piece closed; returns the pieces dropped (-1: failed,
+ * the message in err). */
+static int grazing_run(double h, int max_steps, int *steps, int *fractures, char *err, size_t errlen)
 {
-    char path[600], err[600];
+    char path[600];
     snprintf(path, sizeof path, "%s/scenes/meshes/icosphere.obj", source_dir());
     cs_mesh m;
-    ENSURE_MSG(cs_mesh_load(path, &m, err, sizeof err) == 0, "%s", err);
+    if (cs_mesh_load(path, &m, err, errlen) != 0)
+        return -1;
     cs_world_def wd = cs_world_def_default();
     wd.max_fractures = 64;
     cs_world_t *w = NULL;
-    ENSURE(cs_world_create(&wd, &w, err, sizeof err) == CS_OK);
+    if (cs_world_create(&wd, &w, err, errlen) != CS_OK) {
+        cs_mesh_free(&m);
+        return -1;
+    }
     cs_object_def d = cs_object_def_default();
     d.name = "ball";
     d.model = CS_MODEL_COROTATIONAL;
@@ -1566,7 +1574,7 @@ TEST(fracture_meshes_dropped_grazing_cube_ends_the_objects_step)
     d.material.density = 1000;
     d.material.strength = 1;
     d.fracture = true;
-    d.cube_size = 0.017;
+    d.cube_size = h;
     d.geometry = CS_GEOMETRY_MESH;
     d.mesh_vertices = m.v;
     d.n_mesh_vertices = m.nv;
@@ -1576,19 +1584,21 @@ TEST(fracture_meshes_dropped_grazing_cube_ends_the_objects_step)
     d.fixed = &fix;
     d.n_fixed = 1;
     cs_object_id id;
-    const int rc = cs_world_add_object(w, &d, &id, err, sizeof err);
+    const int rc = cs_world_add_object(w, &d, &id, err, errlen);
     cs_mesh_free(&m);
-    if (rc != CS_OK)
+    if (rc != CS_OK) {
         cs_world_destroy(w);
-    ENSURE_MSG(rc == CS_OK, "%s", err);
-    int dropped = 0, fractures = 0;
-    for (int s = 0; s < 6; s++) {
+        return -1;
+    }
+    int dropped = 0, s = 0;
+    *fractures = 0;
+    for (; s < max_steps && !dropped; s++) {
         const int src = cs_world_step(w);
         int ne;
         const cs_event *ev = cs_world_events(w, &ne);
         for (int i = 0; i < ne; i++)
             if (ev[i].kind == CS_EVENT_FRACTURE) {
-                fractures++;
+                (*fractures)++;
                 dropped += ev[i].dropped_pieces;
             }
         cs_object_id ids[512];
@@ -1598,15 +1608,35 @@ TEST(fracture_meshes_dropped_grazing_cube_ends_the_objects_step)
             cs_object_surface(w, ids[i], &pv[i].v, &pv[i].nv, &pv[i].t, &pv[i].nt);
             pv[i].name = NULL;
         }
-        const int ok = cs_check_pieces(pv, n < 512 ? n : 512, NAN, 0, NULL, err, sizeof err);
-        if (src != CS_OK || !ok || n > 512)
+        char why[400];
+        const int ok = cs_check_pieces(pv, n < 512 ? n : 512, NAN, 0, NULL, why, sizeof why);
+        if (src != CS_OK || !ok || n > 512) {
+            snprintf(err, errlen, "h %g step %d: status %d, %d objects, %s", h, s, src, n,
+                     ok ? "pieces closed" : why);
             cs_world_destroy(w);
-        ENSURE_MSG(src == CS_OK, "step %d: %d", s, src);
-        ENSURE_MSG(ok, "step %d: %s", s, err);
-        ENSURE(n <= 512);
+            return -1;
+        }
     }
-    printf("    %d stress-driven fractures in 6 steps, %d grazing pieces dropped\n", fractures,
-           dropped);
+    *steps = s;
     cs_world_destroy(w);
+    return dropped;
+}
+
+TEST(fracture_meshes_dropped_grazing_cube_ends_the_objects_step)
+{
+    /* which cube breaks first at 1 Pa turns on the last bits of the stresses (session 48's row
+     * batches, which sum the nodes' forces in another order, moved the first drop at 0.017 m
+     * from the fifth step to the eighth, and past the sixteenth in the sanitizer build): a few
+     * cube sizes, until one drops a piece */
+    static const double sizes[] = {0.017, 0.016, 0.018, 0.015, 0.019};
+    int dropped = 0;
+    for (size_t i = 0; i < sizeof sizes / sizeof sizes[0] && !dropped; i++) {
+        char err[600];
+        int steps = 0, fractures = 0;
+        dropped = grazing_run(sizes[i], 10, &steps, &fractures, err, sizeof err);
+        ENSURE_MSG(dropped >= 0, "%s", err);
+        printf("    h %.3f m: %d stress-driven fractures in %d steps, %d grazing pieces dropped\n",
+               sizes[i], fractures, steps, dropped);
+    }
     ENSURE(dropped >= 1);
 }
