@@ -329,6 +329,9 @@ void cs_fem_free(cs_fem *fem)
     free(fem->nfirst);
     free(fem->bslot);
     free(fem->fadj);
+    free(fem->fcell);
+    free(fem->rowb);
+    free(fem->nstart);
     memset(fem, 0, sizeof *fem);
 }
 
@@ -453,6 +456,10 @@ static void graded_kmul(const cs_fem *fem, const double *f, const double *restri
  * stores of the nodal 3-vectors transposed in registers (modal_kernel_avx512).
  */
 #define LANES 8
+/* A row batch's node rows r = (dy, dz) = (0, 0), (1, 0), (0, 1), (1, 1): the corners at dx = 0
+ * and dx = 1 in each (CS_CORNER), and each corner's row (fem.h, rowb). */
+static const int ROW_K0[4] = {0, 3, 4, 7}, ROW_K1[4] = {1, 2, 5, 6};
+static const int ROW_OF[8] = {0, 0, 1, 1, 2, 2, 3, 3};
 
 /* One batch: where each lane's cell reads its nodal vectors and writes its results. A lane
  * without a cell repeats another lane's inputs with lam = mu = 0 and writes to scratch. */
@@ -475,6 +482,9 @@ typedef struct mlanes {
      * is read): the kernel rebuilds R from them, 32 bytes a cell to stream instead of 72. */
     const double *Q;
     bool wide; /* a plain batch in one 512-bit vector (modal_wide_body) */
+    /* A row batch (fem.h, rowb) read and written by rows (modal_wide_body only; NULL: not):
+     * its 4 rows' first 3·node, and ob its slot */
+    const int32_t *row;
 } mlanes;
 
 typedef double vd4 __attribute__((vector_size(32)));
@@ -623,6 +633,66 @@ typedef double vd8 __attribute__((vector_size(64)));
 #define MODAL_S double
 #include "modal_core.h"
 
+/* A row batch's inputs (fem.h, rowb): each node row's 8 nodes by three whole loads
+ * deinterleaved into x, y, z (two two-source permutes each), its dx = 1 corners the same shifted
+ * by one lane with the row's end node; the same values as the corner loads. */
+__attribute__((target("arch=x86-64-v4"))) static inline __attribute__((always_inline)) void
+row_inputs(const double *restrict x, const int32_t *row, vd8 u[24])
+{
+    const __m512i lo[3] = {_mm512_setr_epi64(0, 3, 6, 9, 12, 15, 0, 0),
+                           _mm512_setr_epi64(1, 4, 7, 10, 13, 0, 0, 0),
+                           _mm512_setr_epi64(2, 5, 8, 11, 14, 0, 0, 0)};
+    const __m512i hi[3] = {_mm512_setr_epi64(0, 1, 2, 3, 4, 5, 10, 13),
+                           _mm512_setr_epi64(0, 1, 2, 3, 4, 8, 11, 14),
+                           _mm512_setr_epi64(0, 1, 2, 3, 4, 9, 12, 15)};
+    for (int r = 0; r < 4; r++) {
+        const double *p = x + row[r];
+        const __m512d A = _mm512_loadu_pd(p), B = _mm512_loadu_pd(p + 8),
+                      C = _mm512_loadu_pd(p + 16);
+        for (int i = 0; i < 3; i++) {
+            const __m512d v = _mm512_permutex2var_pd(_mm512_permutex2var_pd(A, lo[i], B), hi[i], C);
+            /* the end node's component i in lane 0 */
+            const __m512i e = _mm512_castpd_si512(_mm512_maskz_loadu_pd(1, p + 24 + i));
+            u[3 * ROW_K0[r] + i] = (vd8)v;
+            u[3 * ROW_K1[r] + i] =
+                (vd8)_mm512_castsi512_pd(_mm512_alignr_epi64(e, _mm512_castpd_si512(v), 1));
+        }
+    }
+}
+
+/* A row batch's results into its slot (row_store's sums): per node row, the dx = 1 corner
+ * shifted a lane up and added to the dx = 0 one, interleaved into 24 doubles by two permutes
+ * per vector; the last lane's dx = 1 corner as the row's end node. */
+__attribute__((target("arch=x86-64-v4"))) static inline __attribute__((always_inline)) void
+row_outputs(const vd8 y[24], double *out)
+{
+    const __m512i ia[3] = {_mm512_setr_epi64(0, 8, 0, 1, 9, 0, 2, 10),
+                           _mm512_setr_epi64(0, 3, 11, 0, 4, 12, 0, 5),
+                           _mm512_setr_epi64(13, 0, 6, 14, 0, 7, 15, 0)};
+    const __m512i ib[3] = {_mm512_setr_epi64(0, 1, 8, 3, 4, 9, 6, 7),
+                           _mm512_setr_epi64(10, 1, 2, 11, 4, 5, 12, 7),
+                           _mm512_setr_epi64(0, 13, 2, 3, 14, 5, 6, 15)};
+    const __m512i e0 = _mm512_setr_epi64(7, 15, 0, 0, 0, 0, 0, 0);
+    const __m512i e1 = _mm512_setr_epi64(0, 1, 15, 0, 0, 0, 0, 0);
+    const __m512i zero = _mm512_setzero_si512();
+    for (int r = 0; r < 4; r++) {
+        __m512d S[3];
+        for (int i = 0; i < 3; i++) {
+            const __m512i y1 = _mm512_castpd_si512((__m512d)y[3 * ROW_K1[r] + i]);
+            S[i] = _mm512_add_pd((__m512d)y[3 * ROW_K0[r] + i],
+                                 _mm512_castsi512_pd(_mm512_alignr_epi64(y1, zero, 7)));
+        }
+        double *o = out + 32 * r;
+        for (int v = 0; v < 3; v++)
+            _mm512_storeu_pd(o + 8 * v, _mm512_permutex2var_pd(
+                                            _mm512_permutex2var_pd(S[0], ia[v], S[1]), ib[v], S[2]));
+        const __m512d end = _mm512_permutex2var_pd(
+            _mm512_permutex2var_pd((__m512d)y[3 * ROW_K1[r]], e0, (__m512d)y[3 * ROW_K1[r] + 1]),
+            e1, (__m512d)y[3 * ROW_K1[r] + 2]);
+        _mm512_mask_storeu_pd(o + 24, 0x7, end);
+    }
+}
+
 __attribute__((optimize("fp-contract=fast"), target("arch=x86-64-v4"))) static inline
     __attribute__((always_inline)) void
 modal_wide_body(mlanes *restrict b, int rot, double rest, int energy)
@@ -631,6 +701,9 @@ modal_wide_body(mlanes *restrict b, int rot, double rest, int energy)
     const double *x = b->x;
     const __m512i lo = _mm512_setr_epi64(0, 1, 8, 9, 4, 5, 12, 13);
     const __m512i hi = _mm512_setr_epi64(2, 3, 10, 11, 6, 7, 14, 15);
+    if (b->row)
+        row_inputs(x, b->row, u);
+    else
 #pragma GCC unroll 8
     for (int k = 0; k < 8; k++) {
         __m512d r[4]; /* (x, y, z, 0) of lanes j | j + 4 */
@@ -665,6 +738,10 @@ modal_wide_body(mlanes *restrict b, int rot, double rest, int energy)
     modal_core8(u, rot ? R : NULL, rest, &L, &M, energy ? &e : NULL, y);
     if (energy)
         memcpy(b->e, &e, sizeof e);
+    if (b->row) {
+        row_outputs(y, b->ob);
+        return;
+    }
     /* lane l's 24 results contiguous at ob + 24 l: three 8 × 8 transposes, whole stores */
     double *o = b->ob;
     for (int m = 0; m < 3; m++) {
@@ -802,6 +879,26 @@ static void graded_cell(const cs_fem *fem, const double *f, const int32_t *nd, c
         *e = 0.5 * en;
 }
 
+/* A row batch's results from lanes (t: 24 per lane, as a batch's fb) into its rows in fb (fem.h,
+ * rowb): node l of row r gets corner ROW_K0[r] of lane l plus corner ROW_K1[r] of lane l − 1 (0
+ * for l = 0), the row's end node corner ROW_K1[r] of lane 7 (modal_wide_body's row_outputs: the
+ * same sums); the lanes of inactive cells (an active region) give 0. */
+static void row_store(const cs_fem *fem, int c0, double *t, double *fb)
+{
+    if (fem->cell_active)
+        for (int l = 0; l < LANES; l++)
+            if (!fem->cell_active[c0 + l])
+                memset(t + 24 * l, 0, 24 * sizeof(double));
+    for (int r = 0; r < 4; r++)
+        for (int i = 0; i < 3; i++) {
+            const int k0 = 3 * ROW_K0[r] + i, k1 = 3 * ROW_K1[r] + i;
+            fb[32 * r + i] = t[k0] + 0.0;
+            for (int l = 1; l < LANES; l++)
+                fb[32 * r + 3 * l + i] = t[24 * l + k0] + t[24 * (l - 1) + k1];
+            fb[32 * r + 24 + i] = t[24 * (LANES - 1) + k1];
+        }
+}
+
 /*
  * One batch of cells [c0, c0 + LANES) ∩ [0, n_cells): fb[24l..] = R_c K_c (R_cᵀ x − rest) for
  * cell c = c0 + l (Rb: the rotations of the batch's cells, 9 each from c0, NULL: none; fb: the
@@ -822,7 +919,12 @@ static void batch_product(const cs_fem *fem, const double *kf, int c0, const dou
     B.R = Rb;
     B.Q = Rb ? Qb : NULL;
     B.cn = NULL;
+    B.row = NULL;
     B.wide = fem->wide;
+    /* a row batch's lanes into t first (row_store), unless the wide kernel writes its rows */
+    const bool row = fb && fem->rowb[4 * (c0 / LANES)] >= 0;
+    double t[24 * LANES];
+    double *const dst = row ? t : fb;
     if (fb && c0 + LANES <= fem->n_cells && __builtin_cpu_supports("x86-64-v4")) {
         /* a plain batch if every cell is uniform */
         int l = 0;
@@ -832,8 +934,12 @@ static void batch_product(const cs_fem *fem, const double *kf, int c0, const dou
         }
         if (l == LANES) {
             B.cn = fem->cell_nodes + 8 * (size_t)c0;
-            B.ob = fb;
+            if (row && B.wide && (!Rb || B.Q) && !fem->cell_active)
+                B.row = fem->rowb + 4 * (c0 / LANES);
+            B.ob = B.row ? fb : dst;
             modal_kernel(&B, Rb != NULL, rest, e != NULL);
+            if (row && !B.row)
+                row_store(fem, c0, t, fb);
             for (int k = 0; e && k < LANES; k++)
                 e[k] = B.e[k];
             return;
@@ -851,7 +957,7 @@ static void batch_product(const cs_fem *fem, const double *kf, int c0, const dou
             B.rix[l] = 9 * l;
             B.lam[l] = c16 * fem->lambda * f;
             B.mu[l] = c16 * fem->mu * f;
-            B.out[l] = fb ? fb + 24 * l : sink;
+            B.out[l] = fb ? dst + 24 * l : sink;
             if (first < 0)
                 first = l;
             live |= 1 << l;
@@ -874,11 +980,13 @@ static void batch_product(const cs_fem *fem, const double *kf, int c0, const dou
         const int c = c0 + l;
         if (graded & (1 << l))
             graded_cell(fem, kf + 8 * (size_t)c, fem->cell_nodes + 8 * (size_t)c,
-                        Rb ? Rb + 9 * l : NULL, x, rest, fb ? fb + 24 * l : NULL,
+                        Rb ? Rb + 9 * l : NULL, x, rest, fb ? dst + 24 * l : NULL,
                         e ? e + l : NULL);
         else if (e)
             e[l] = B.e[l];
     }
+    if (row)
+        row_store(fem, c0, t, fb);
 }
 
 static int n_batches(int n_cells)
@@ -898,6 +1006,7 @@ static void batch_local(const cs_fem *fem, const double *kf, int c0, const doubl
     B.x = us;
     B.R = NULL;
     B.cn = NULL;
+    B.row = NULL;
     B.Q = NULL;
     for (int l = 0; l < LANES; l++) {
         const int c = c0 + l;
@@ -948,6 +1057,7 @@ void cs_cube_cells_product(const double K[24 * 24], int n_cells, const int32_t *
         B.x = x;
         B.R = R + 9 * (size_t)b * LANES;
         B.cn = NULL;
+    B.row = NULL;
         B.Q = NULL;
         for (int l = 0; l < LANES; l++) {
             const int c = b * LANES + l, cc = c < n_cells ? c : b * LANES;
@@ -1022,6 +1132,12 @@ static bool batch_active(const cs_fem *fem, int c0)
     return false;
 }
 
+/* Whether the node pass reads link v of fcell (fem.h): its cell's, or a row batch's whole. */
+static inline bool link_active(const cs_fem *fem, int32_t v)
+{
+    return v >= 0 ? fem->cell_active[v] != 0 : batch_active(fem, (-1 - v) * LANES);
+}
+
 /* Where the fused passes keep the element pass's results (the fields after tg in fem.h): the
  * nodes ordered by the batch of their last cell, each segment's batches in a window of fe.
  * A chunk's node pass reads results back up to `span` batches old (the largest distance
@@ -1045,6 +1161,9 @@ static int product_layout(cs_fem *fem)
     free(fem->nfirst);
     free(fem->bslot);
     free(fem->fadj);
+    free(fem->fcell);
+    free(fem->rowb);
+    free(fem->nstart);
     const int nb = n_batches(fem->n_cells), nn = fem->n_nodes;
     const size_t nn1 = nn ? (size_t)nn : 1;
     fem->nseg = fem->threads > 1 ? fem->threads : 1;
@@ -1053,8 +1172,12 @@ static int product_layout(cs_fem *fem)
     fem->nfirst = calloc((size_t)nb + 2, sizeof(int32_t));
     fem->bslot = malloc(((size_t)nb + 1) * sizeof(int32_t));
     fem->fadj = malloc(((size_t)fem->n_cells * 8 + 1) * sizeof(int32_t));
+    fem->fcell = malloc(((size_t)fem->n_cells * 8 + 1) * sizeof(int32_t));
+    fem->rowb = malloc(((size_t)nb * 4 + 1) * sizeof(int32_t));
+    fem->nstart = malloc((nn1 + 1) * sizeof(int32_t));
     int32_t *fill = malloc(((size_t)nb + 1) * sizeof(int32_t));
-    if (!fem->norder || !fem->nminb || !fem->nfirst || !fem->bslot || !fem->fadj || !fill) {
+    if (!fem->norder || !fem->nminb || !fem->nfirst || !fem->bslot || !fem->fadj || !fem->fcell ||
+        !fem->rowb || !fem->nstart || !fill) {
         free(fill);
         return -1;
     }
@@ -1089,10 +1212,40 @@ static int product_layout(cs_fem *fem)
         }
         total += b1 - b0 < head + ring ? b1 - b0 : head + ring;
     }
-    for (int a = 0; a < 8 * fem->n_cells; a++) {
-        const int c = adj[a] / 8, k = adj[a] % 8;
-        fem->fadj[a] = 24 * (LANES * fem->bslot[c / LANES] + c % LANES) + 3 * k;
+    fem->n_row_batches = 0;
+    for (int b = 0; b < nb; b++) {
+        const int c0 = b * LANES;
+        bool row = c0 + LANES <= fem->n_cells;
+        for (int r = 0; r < 4 && row; r++) {
+            const int32_t base = 3 * fem->cell_nodes[8 * c0 + ROW_K0[r]];
+            for (int l = 0; l < LANES && row; l++)
+                row = 3 * fem->cell_nodes[8 * (c0 + l) + ROW_K0[r]] == base + 3 * l &&
+                      3 * fem->cell_nodes[8 * (c0 + l) + ROW_K1[r]] == base + 3 * l + 3;
+            fem->rowb[4 * b + r] = base;
+        }
+        fem->rowb[4 * b] = row ? fem->rowb[4 * b] : -1;
+        fem->n_row_batches += row;
     }
+    int32_t m = 0;
+    for (int n = 0; n < nn; n++) {
+        fem->nstart[n] = m;
+        for (int a = as[n]; a < as[n + 1]; a++) {
+            const int c = adj[a] / 8, k = adj[a] % 8, b = c / LANES, l = c % LANES;
+            if (fem->rowb[4 * b] < 0) {
+                fem->fcell[m] = c;
+                fem->fadj[m++] = 24 * (LANES * fem->bslot[b] + l) + 3 * k;
+                continue;
+            }
+            /* in a row batch: corner k in node row ROW_OF[k]; at dx = 1 it is the next
+             * lane's dx = 0 node, added there, except for the last lane's (the row's end) */
+            const int off = CS_CORNER[k][0] ? (l + 1 < LANES ? -1 : 24) : 3 * l;
+            if (off >= 0) {
+                fem->fcell[m] = -1 - b;
+                fem->fadj[m++] = 24 * LANES * fem->bslot[b] + 32 * ROW_OF[k] + off;
+            }
+        }
+    }
+    fem->nstart[nn] = m;
     return 0;
 }
 
@@ -1116,7 +1269,7 @@ node_sum(const cs_fem *fem, int n, double *restrict out, double sign, const doub
     const int32_t *restrict fadj = fem->fadj;
     const double *restrict fe = fem->fe;
     const uint8_t *act = fem->cell_active;
-    const int a0 = fem->adj_start[n], a1 = fem->adj_start[n + 1];
+    const int a0 = fem->nstart[n], a1 = fem->nstart[n + 1];
     double s0 = 0, s1 = 0, s2 = 0;
     if (a1 - a0 == 8 && !act) {
         const double *v[8];
@@ -1127,9 +1280,18 @@ node_sum(const cs_fem *fem, int n, double *restrict out, double sign, const doub
             s1 += v[k][1];
             s2 += v[k][2];
         }
+    } else if (a1 - a0 == 4 && !act) {
+        const double *v[4];
+        for (int k = 0; k < 4; k++)
+            v[k] = fe + fadj[a0 + k];
+        for (int k = 0; k < 4; k++) {
+            s0 += v[k][0];
+            s1 += v[k][1];
+            s2 += v[k][2];
+        }
     } else {
         for (int a = a0; a < a1; a++) {
-            if (act && !act[fem->adj[a] >> 3])
+            if (act && !link_active(fem, fem->fcell[a]))
                 continue;
             const double *v = fe + fadj[a];
             s0 += v[0];
@@ -1179,9 +1341,9 @@ __attribute__((target("arch=x86-64-v4"))) static inline __attribute__((always_in
 node_range_avx512_body(const cs_fem *fem, int q0, int q1, int b0, int after, double *out,
                        double sign, const node_add *na, const int mass)
 {
-    const int32_t *restrict fadj = fem->fadj, *restrict as = fem->adj_start;
+    const int32_t *restrict fadj = fem->fadj, *restrict as = fem->nstart;
     const int32_t *restrict norder = fem->norder, *restrict nminb = fem->nminb;
-    const int32_t *restrict adj = fem->adj;
+    const int32_t *restrict fcell = fem->fcell;
     const uint8_t *act = fem->cell_active;
     const double *restrict fe = fem->fe;
     const double *restrict m = mass ? na->m : NULL, *restrict p = mass ? na->p : NULL;
@@ -1196,9 +1358,13 @@ node_range_avx512_body(const cs_fem *fem, int q0, int q1, int b0, int after, dou
             const int32_t *f = fadj + a0;
             for (int k = 0; k < 8; k++)
                 s = _mm256_add_pd(s, _mm256_maskz_loadu_pd(7, fe + f[k]));
+        } else if (a1 - a0 == 4 && !act) {
+            const int32_t *f = fadj + a0;
+            for (int k = 0; k < 4; k++)
+                s = _mm256_add_pd(s, _mm256_maskz_loadu_pd(7, fe + f[k]));
         } else {
             for (int a = a0; a < a1; a++)
-                if (!act || act[adj[a] >> 3])
+                if (!act || link_active(fem, fcell[a]))
                     s = _mm256_add_pd(s, _mm256_maskz_loadu_pd(7, fe + fadj[a]));
         }
         __m256d r = _mm256_mul_pd(sg, s);
@@ -1594,7 +1760,8 @@ static void tangent_batch(cs_fem *fem, int bt, double *fb, const void *ctx, doub
       const double *p = ((const tangent_ctx *)ctx)->p;
       const double inv4h = 1.0 / (4.0 * fem->h);
       const int c0 = bt * LANES;
-      double qs[24 * LANES], kqs[24 * LANES], as[LANES][3], bs[LANES][3];
+      double qs[24 * LANES], kqs[24 * LANES], as[LANES][3], bs[LANES][3], lanes[24 * LANES];
+      const bool row = fem->rowb[4 * bt] >= 0;
       for (int l = 0; l < LANES && c0 + l < fem->n_cells; l++) {
         const int c = c0 + l;
         const int32_t *nd = fem->cell_nodes + 8 * c;
@@ -1626,7 +1793,7 @@ static void tangent_batch(cs_fem *fem, int bt, double *fb, const void *ctx, doub
             w1[i] = G[3 * i] * a[0] + G[3 * i + 1] * a[1] + G[3 * i + 2] * a[2];
             w2[i] = G[3 * i] * b[0] + G[3 * i + 1] * b[1] + G[3 * i + 2] * b[2];
         }
-        double *out = fb + 24 * l;
+        double *out = (row ? lanes : fb) + 24 * l;
         for (int k = 0; k < 8; k++) {
             double g1[3], g2[3], l3[3];
             cs_vec3_cross(w1, ku + 3 * k, g1);
@@ -1637,6 +1804,8 @@ static void tangent_batch(cs_fem *fem, int bt, double *fb, const void *ctx, doub
                 out[3 * k + i] = R[3 * i] * l3[0] + R[3 * i + 1] * l3[1] + R[3 * i + 2] * l3[2];
         }
       }
+      if (row)
+          row_store(fem, c0, lanes, fb);
 }
 
 void cs_fem_apply_tangent(cs_fem *fem, const double *p, double *y)

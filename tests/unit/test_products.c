@@ -351,3 +351,158 @@ TEST(fem_products_K_mass_match_unfused_operator)
     cs_fem_free(&f[1]);
     cs_cubemesh_free(&cm);
 }
+
+/* The node of cm at lattice point (i, j, k) for every node of ref: the same block numbered
+ * otherwise (nodes at multiples of h from the origin). */
+static int *node_map(const cs_cubemesh *ref, const cs_cubemesh *cm, int nx, int ny)
+{
+    const int n = ref->n_nodes;
+    int *at = malloc(sizeof(int) * (size_t)(nx + 1) * (ny + 1) * (n / ((nx + 1) * (ny + 1)) + 2));
+    int *map = malloc(sizeof(int) * (size_t)n);
+    if (!at || !map) {
+        free(at);
+        free(map);
+        return NULL;
+    }
+    for (int pass = 0; pass < 2; pass++) {
+        const cs_cubemesh *m = pass ? ref : cm;
+        for (int a = 0; a < n; a++) {
+            const double *X = m->node_rest + 3 * a;
+            const int i = (int)lround(X[0] / m->h), j = (int)lround(X[1] / m->h),
+                      k = (int)lround(X[2] / m->h), key = i + (nx + 1) * (j + (ny + 1) * k);
+            if (pass)
+                map[a] = at[key];
+            else
+                at[key] = a;
+        }
+    }
+    free(at);
+    return map;
+}
+
+/* Row batches (fem.c, product_layout: 8 cells along a lattice row whose node rows are numbered
+ * consecutively, read by rows and each node's two results in a row added in the element pass)
+ * against the same block scrambled, which has none: the products, the elastic force and energy,
+ * the static tangent and the product with the mass term agree node for node to rounding, with
+ * uniform cells (the whole-row kernel where the cores run 512-bit vectors), with graded ones
+ * (their lanes stored first) and in an active region (inactive lanes add nothing). */
+TEST(fem_row_batches_match_scrambled_block)
+{
+    const int nx = 32, ny = 6, nz = 5;
+    cs_cubemesh cm[2];
+    ENSURE(block(&cm[0], nx, ny, nz, 0.05, false) == 0);
+    ENSURE(block(&cm[1], nx, ny, nz, 0.05, true) == 0);
+    const int n = cm[0].n_nodes, nc = cm[0].n_cells;
+    int *map = node_map(&cm[0], &cm[1], nx, ny);
+    int *cmap = malloc(sizeof(int) * nc); /* cell of cm[1] at cell c of cm[0] */
+    ENSURE(map && cmap);
+    {
+        int *at = malloc(sizeof(int) * nc);
+        ENSURE(at);
+        for (int pass = 0; pass < 2; pass++)
+            for (int c = 0; c < nc; c++) {
+                const int32_t *q = cm[pass ? 0 : 1].cell_ijk + 3 * c;
+                const int key = q[0] + nx * (q[1] + ny * q[2]);
+                if (pass)
+                    cmap[c] = at[key];
+                else
+                    at[key] = c;
+            }
+        free(at);
+    }
+    double *x[2], *p[2], *y[2], *kf[2];
+    uint8_t *act[2];
+    for (int s = 0; s < 2; s++) {
+        x[s] = malloc(sizeof(double) * 3 * n);
+        p[s] = malloc(sizeof(double) * 3 * n);
+        y[s] = malloc(sizeof(double) * 3 * n);
+        kf[s] = malloc(sizeof(double) * 8 * nc);
+        act[s] = malloc((size_t)nc);
+        ENSURE(x[s] && p[s] && y[s] && kf[s] && act[s]);
+    }
+    unsigned seed = 5;
+    bent(&cm[0], x[0], &seed);
+    for (int i = 0; i < 3 * n; i++)
+        p[0][i] = urand(&seed);
+    for (int a = 0; a < n; a++)
+        for (int i = 0; i < 3; i++) {
+            x[1][3 * map[a] + i] = x[0][3 * a + i];
+            p[1][3 * map[a] + i] = p[0][3 * a + i];
+        }
+    double *m = malloc(sizeof(double) * n), *m1 = malloc(sizeof(double) * n);
+    ENSURE(m && m1);
+    for (int a = 0; a < n; a++)
+        m1[map[a]] = m[a] = 0.1 + 0.01 * (a % 7);
+    for (int graded = 0; graded < 2; graded++)
+        for (int threads = 1; threads <= 2; threads++) {
+            cs_fem f[2];
+            for (int s = 0; s < 2; s++)
+                ENSURE(cs_fem_init(&f[s], &cm[s], 2e6, 0.3, true, threads) == 0);
+            ENSURE_MSG(f[0].n_row_batches >= nc / 8 / 4 && f[1].n_row_batches == 0,
+                       "row batches: %d in lattice order, %d scrambled", f[0].n_row_batches,
+                       f[1].n_row_batches);
+            for (int c = 0; c < nc; c++) {
+                act[0][c] = c % 13 != 4 && (c / 64) % 3 != 1;
+                act[1][cmap[c]] = act[0][c];
+                for (int g = 0; g < 8; g++) { /* graded: every ninth cell */
+                    kf[0][8 * c + g] = graded && c % 9 == 0 ? 0.5 + 0.2 * g : 1.0 + 0.25 * (c % 3);
+                    kf[1][8 * cmap[c] + g] = kf[0][8 * c + g];
+                }
+            }
+            double e[2], big = 0;
+            for (int s = 0; s < 2; s++) {
+                f[s].kf = kf[s];
+                cs_fem_update_rotations(&f[s], x[s]);
+            }
+            /* compare y[0] with y[1] node for node, relative to the largest entry */
+#define ROWS_AGREE(what)                                                                        \
+    do {                                                                                        \
+        big = 0;                                                                                \
+        for (int i = 0; i < 3 * n; i++)                                                         \
+            big = fmax(big, fabs(y[0][i]));                                                     \
+        double worst = 0;                                                                       \
+        for (int a = 0; a < n; a++)                                                             \
+            for (int i = 0; i < 3; i++)                                                         \
+                worst = fmax(worst, fabs(y[0][3 * a + i] - y[1][3 * map[a] + i]));              \
+        ENSURE_MSG(big > 0 && worst <= 1e-13 * big, "%s (graded %d, %d threads): %.3g of %.3g", \
+                   what, graded, threads, worst, big);                                          \
+    } while (0)
+            for (int s = 0; s < 2; s++)
+                cs_fem_apply_K(&f[s], p[s], y[s]);
+            ROWS_AGREE("apply_K");
+            for (int s = 0; s < 2; s++)
+                cs_fem_elastic_force(&f[s], x[s], y[s], &e[s]);
+            ROWS_AGREE("elastic force");
+            ENSURE_NEAR(e[0], e[1], 1e-12 * fabs(e[0]));
+            for (int s = 0; s < 2; s++)
+                cs_fem_apply_K_mass(&f[s], 0.3, 2.0, s ? m1 : m, p[s], y[s]);
+            ROWS_AGREE("apply_K_mass");
+            for (int s = 0; s < 2; s++) {
+                ENSURE(cs_fem_prepare_tangent(&f[s], x[s]) == 0);
+                cs_fem_apply_tangent(&f[s], p[s], y[s]);
+                cs_fem_release_tangent(&f[s]);
+            }
+            ROWS_AGREE("tangent");
+            for (int s = 0; s < 2; s++) {
+                f[s].cell_active = act[s];
+                cs_fem_apply_K(&f[s], p[s], y[s]);
+                f[s].cell_active = NULL;
+            }
+            ROWS_AGREE("active region");
+#undef ROWS_AGREE
+            for (int s = 0; s < 2; s++)
+                cs_fem_free(&f[s]);
+        }
+    for (int s = 0; s < 2; s++) {
+        free(x[s]);
+        free(p[s]);
+        free(y[s]);
+        free(kf[s]);
+        free(act[s]);
+        cs_cubemesh_free(&cm[s]);
+    }
+    free(m);
+    free(m1);
+    free(map);
+    free(cmap);
+}
