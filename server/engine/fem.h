@@ -73,14 +73,14 @@ typedef struct cs_fem {
      * cs_fem_relink. */
     int nseg;
     int32_t *norder, *nminb, *nfirst, *bslot;
-    /* Row batches (fem.c, product_layout): a batch of 8 cells along x in one lattice row whose
-     * four node rows (one per (dy, dz)) are each 9 consecutive nodes; rowb[4b + r] = 3·(the
-     * first node of node row r), rowb[4b] = -1: not a row batch. Its results are stored per node
-     * row (32 doubles from the slot's 32 r: 9 nodes' (x, y, z)), each node's two results in the
-     * row added in the element pass. The node pass's links (nstart: per node, its first; n_nodes
-     * + 1) in adj's order less those a row batch added into another: fadj, where each reads its
-     * x component in fe, and fcell, its cell (-1 − batch for a row batch's link: active if its
-     * batch is). */
+    /* Row batches (fem.c, product_layout; only where cs_simd_wide_default, simd.h): a batch of 8
+     * cells along x in one lattice row whose four node rows (one per (dy, dz)) are each 9
+     * consecutive nodes; rowb[4b + r] = 3·(the first node of node row r), rowb[4b] = -1: not a
+     * row batch. Its results are stored per node row (32 doubles from the slot's 32 r: 9 nodes'
+     * (x, y, z)), each node's two results in the row added in the element pass. The node pass's
+     * links (nstart: per node, its first; n_nodes + 1) in adj's order less those a row batch
+     * added into another: fadj, where each reads its x component in fe, and fcell, its cell
+     * (-1 − batch for a row batch's link: active if its batch is). */
     int32_t *rowb, *nstart, *fadj, *fcell;
     int n_row_batches;
     int span; /* the largest distance between a node's first and last batch */

@@ -12,6 +12,7 @@
 
 #include "mat3.h"
 #include "segments.h"
+#include "simd.h"
 
 #define MG_NU 1           /* smoothing sweeps before and after the coarse correction */
 #ifndef MG_CHEB
@@ -539,10 +540,12 @@ static int product_layout(mg_level *l)
     if (!l->fe || !l->rowb || !l->nstart)
         return -1;
     _Static_assert(MG_LANES == 16, "a row batch's layout: 17 nodes' 3 floats within 64");
+    /* row batches only on the CPUs whose default is the 512-bit kernel (fem.c, product_layout) */
+    const bool rows = cs_simd_wide_default();
     l->n_row_batches = 0;
     for (int b = 0; b < l->n_batches; b++) {
         const int c0 = b * MG_LANES;
-        bool row = c0 + MG_LANES <= l->n_cells;
+        bool row = rows && c0 + MG_LANES <= l->n_cells;
         for (int r = 0; r < 4 && row; r++) {
             const int32_t base = 3 * l->cell_nodes[8 * c0 + ROW_K0[r]];
             for (int p = 0; p < MG_LANES && row; p++)

@@ -138,7 +138,7 @@ void cs_mg_level_smoother(const cs_mg *mg, int level, float *inv, uint8_t *mask)
 /* CS_MG_ROW_BATCHES: some of its batches are row batches (16 cells along x whose four node rows
  * are numbered consecutively: a lattice-ordered block's inside), read by whole-vector loads of
  * those rows and each node's two results in a row added in the pass (the same sums on every
- * path). */
+ * path). Only on CPUs whose default is the 512-bit kernel (simd.h, cs_simd_wide_default). */
 #define CS_MG_ROW_BATCHES 16
 int cs_mg_level_layout(const cs_mg *mg, int level);
 
