@@ -1272,6 +1272,21 @@ typedef struct node_add {
  * 8 cells (every interior node of a block) sums them unrolled, in the same order: its 8 slots
  * are loaded at once instead of one per trip of a loop whose length varies from node to node
  * (measured 20–30 % faster on 32³–64³ blocks). */
+/* nl (a constant once inlined) links' 3-vectors loaded at once and summed in order */
+static inline __attribute__((always_inline)) void sum_links(const double *restrict fe,
+                                                           const int32_t *restrict f, const int nl,
+                                                           double *s0, double *s1, double *s2)
+{
+    const double *v[8];
+    for (int k = 0; k < nl; k++)
+        v[k] = fe + f[k];
+    for (int k = 0; k < nl; k++) {
+        *s0 += v[k][0];
+        *s1 += v[k][1];
+        *s2 += v[k][2];
+    }
+}
+
 static inline __attribute__((always_inline)) void
 node_sum(const cs_fem *fem, int n, double *restrict out, double sign, const double *restrict m,
          const double *restrict p, double mcoef)
@@ -1281,24 +1296,10 @@ node_sum(const cs_fem *fem, int n, double *restrict out, double sign, const doub
     const uint8_t *act = fem->cell_active;
     const int a0 = fem->nstart[n], a1 = fem->nstart[n + 1];
     double s0 = 0, s1 = 0, s2 = 0;
-    if (a1 - a0 == 8 && !act) {
-        const double *v[8];
-        for (int k = 0; k < 8; k++)
-            v[k] = fe + fadj[a0 + k];
-        for (int k = 0; k < 8; k++) {
-            s0 += v[k][0];
-            s1 += v[k][1];
-            s2 += v[k][2];
-        }
-    } else if (a1 - a0 == 4 && !act) {
-        const double *v[4];
-        for (int k = 0; k < 4; k++)
-            v[k] = fe + fadj[a0 + k];
-        for (int k = 0; k < 4; k++) {
-            s0 += v[k][0];
-            s1 += v[k][1];
-            s2 += v[k][2];
-        }
+    if (a1 - a0 == 8 && !act) { /* a block's inside */
+        sum_links(fe, fadj + a0, 8, &s0, &s1, &s2);
+    } else if (a1 - a0 == 4 && !act) { /* inside row batches */
+        sum_links(fe, fadj + a0, 4, &s0, &s1, &s2);
     } else {
         for (int a = a0; a < a1; a++) {
             if (act && !link_active(fem, fem->fcell[a]))
@@ -1365,13 +1366,11 @@ node_range_avx512_body(const cs_fem *fem, int q0, int q1, int b0, int after, dou
         const int n = norder[q], a0 = as[n], a1 = as[n + 1];
         __m256d s = _mm256_setzero_pd();
         if (a1 - a0 == 8 && !act) {
-            const int32_t *f = fadj + a0;
             for (int k = 0; k < 8; k++)
-                s = _mm256_add_pd(s, _mm256_maskz_loadu_pd(7, fe + f[k]));
-        } else if (a1 - a0 == 4 && !act) {
-            const int32_t *f = fadj + a0;
+                s = _mm256_add_pd(s, _mm256_maskz_loadu_pd(7, fe + fadj[a0 + k]));
+        } else if (a1 - a0 == 4 && !act) { /* inside row batches */
             for (int k = 0; k < 4; k++)
-                s = _mm256_add_pd(s, _mm256_maskz_loadu_pd(7, fe + f[k]));
+                s = _mm256_add_pd(s, _mm256_maskz_loadu_pd(7, fe + fadj[a0 + k]));
         } else {
             for (int a = a0; a < a1; a++)
                 if (!act || link_active(fem, fcell[a]))

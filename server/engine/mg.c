@@ -1504,6 +1504,18 @@ static inline vf4 and4(vf4 v, vf4 m)
     return (vf4)((vi4)v & (vi4)m);
 }
 
+/* nl (a constant once inlined) links' (x, y, z, ·) loaded at once and summed in order */
+static inline __attribute__((always_inline)) vf4 sum_links(const float *fe, const int32_t *fadj,
+                                                          const int nl)
+{
+    vf4 v[8], s = {0, 0, 0, 0};
+    for (int a = 0; a < nl; a++)
+        memcpy(&v[a], fe + fadj[a], sizeof v[a]);
+    for (int a = 0; a < nl; a++)
+        s += v[a];
+    return s;
+}
+
 /* Node n's row of y (see apply_path): its cells' products summed in the adj order; in the
  * Chebyshev variants, instead of storing it, the step on node n (its cells are all done: no
  * later cell of this pass reads its x). Component by component the same arithmetic in the
@@ -1518,21 +1530,11 @@ static inline __attribute__((always_inline)) void node_out(const mg_level *l, in
     /* (x, y, z, ·) per link: one 16-byte load and add each, the same sums per component */
     vf4 s = {0, 0, 0, 0};
     const float *fe = __builtin_assume_aligned(l->fe, 16);
-    if (links == 8) {
-        /* an interior node: its 8 links loaded at once, summed in the same order */
-        vf4 v[8];
-        for (int a = 0; a < 8; a++)
-            memcpy(&v[a], fe + fadj[a], sizeof v[a]);
-        for (int a = 0; a < 8; a++)
-            s += v[a];
-    } else if (links == 4) {
-        /* ... the same inside row batches (one link per node row) */
-        vf4 v[4];
-        for (int a = 0; a < 4; a++)
-            memcpy(&v[a], fe + fadj[a], sizeof v[a]);
-        for (int a = 0; a < 4; a++)
-            s += v[a];
-    } else {
+    if (links == 8) /* an interior node: its 8 links loaded at once, summed in the same order */
+        s = sum_links(fe, fadj, 8);
+    else if (links == 4) /* ... inside row batches (one link per node row) */
+        s = sum_links(fe, fadj, 4);
+    else {
         for (int a = 0; a < links; a++) {
             vf4 v;
             memcpy(&v, fe + fadj[a], sizeof v);
