@@ -65,6 +65,27 @@ static inline double cs_mat3_adjugate(const double m[9], double c[9])
     return m[0] * c[0] + m[1] * c[3] + m[2] * c[6];
 }
 
+/* m = m⁻¹ in place by the adjugate; a (near) singular m (|det| ≤ 1e-12 of its diagonal's scale
+ * cubed) becomes its diagonal's inverse (1 where an entry is 0). cs_invert_block (solver.h),
+ * inline for the node passes that invert a block each (block Jacobi, the V-cycle's D⁻¹). */
+static inline void cs_mat3_invert_block(double m[9])
+{
+    double c[9];
+    const double det = cs_mat3_adjugate(m, c);
+    const double scale = fabs(m[0]) + fabs(m[4]) + fabs(m[8]);
+    if (fabs(det) > 1e-12 * scale * scale * scale && det != 0) {
+        const double id = 1.0 / det;
+        for (int k = 0; k < 9; k++)
+            m[k] = c[k] * id;
+    } else {
+        const double d[3] = {m[0], m[4], m[8]};
+        for (int k = 0; k < 9; k++)
+            m[k] = 0.0;
+        for (int k = 0; k < 3; k++)
+            m[4 * k] = d[k] != 0 ? 1.0 / d[k] : 1.0;
+    }
+}
+
 /* The mean m = tr(s)/3 of the symmetric s's eigenvalues and their spread
  * p = √(‖s − m I‖²_F / 6) (returned): s = m I + p B with B's eigenvalues in [−2, 2]. */
 static inline double cs_mat3_sym_spread(const double s[9], double *m)

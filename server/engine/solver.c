@@ -198,19 +198,7 @@ void cs_cholesky_solve(const double *L, int n, double *x)
 
 void cs_invert_block(double m[9])
 {
-    double c[9];
-    const double det = cs_mat3_adjugate(m, c);
-    double scale = fabs(m[0]) + fabs(m[4]) + fabs(m[8]);
-    if (fabs(det) > 1e-12 * scale * scale * scale && det != 0) {
-        const double id = 1.0 / det;
-        for (int k = 0; k < 9; k++)
-            m[k] = c[k] * id;
-    } else {
-        double d[3] = {m[0], m[4], m[8]};
-        memset(m, 0, 9 * sizeof(double));
-        for (int k = 0; k < 3; k++)
-            m[4 * k] = d[k] != 0 ? 1.0 / d[k] : 1.0;
-    }
+    cs_mat3_invert_block(m);
 }
 
 void cs_invert_blocks(double *blocks, int n_nodes)

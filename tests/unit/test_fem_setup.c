@@ -140,6 +140,50 @@ TEST(fem_diag_blocks_match_dense_blocks)
         ENSURE_MSG(worst < 1e-9, "pass %d: (kcoef K + d) P - I up to %g", pass, worst);
     }
     f1.cell_active = f2.cell_active = NULL;
+    /* The plain case's blocks (8 nodes side by side, fem.c precond_blocks_plain) where the
+     * inversion's sign and branch matter: negative definite blocks (kcoef and mcoef < 0: det and
+     * the diagonal negative) and, with kcoef = 0 and some masses 0, zero blocks (the diagonal
+     * fallback, 1 on the diagonal) among pure mass ones; 1 and 2 threads, bit for bit the blocks
+     * scaled, shifted and inverted one by one. */
+    uint8_t *all = malloc((size_t)n);
+    ENSURE(all);
+    for (int i = 0; i < n; i++) {
+        md[i] = i % 5 == 0 ? 0.0 : m[i];
+        all[i] = 1; /* every node pinned */
+    }
+    /* and singular blocks with a nonzero diagonal: d = −kcoef (α − β) leaves a corner node
+     * (one cell) kcoef β v vᵀ, of rank 1 (the fallback's inverted diagonal) */
+    const double kc = 3e-4, sing = -kc * (f1.K[0] - f1.K[1]);
+    const struct {
+        double kcoef;
+        cs_fem_node_terms t;
+    } edge[3] = {{-3e-4, {m, NULL, pin, -1.5, 0, -7.0}},
+                 {0.0, {md, NULL, pin, 1.5, 0, 0.0}},
+                 {kc, {m, NULL, all, 0.0, 0, sing}}};
+    cs_fem_diag_blocks_w(&f1, NULL, ref);
+    for (int pass = 0; pass < 3; pass++) {
+        cs_fem_precond_blocks(&f1, NULL, edge[pass].kcoef, &edge[pass].t, p1);
+        cs_fem_precond_blocks(&f2, NULL, edge[pass].kcoef, &edge[pass].t, p2);
+        ENSURE_MSG(memcmp(p1, p2, sizeof(double) * 9 * n) == 0, "edge %d: 1 and 2 threads differ",
+                   pass);
+        int fallback = 0;
+        for (int i = 0; i < n; i++) {
+            const cs_fem_node_terms *t = &edge[pass].t;
+            double B[9];
+            const double d = t->mcoef * t->m[i] + (t->pin[i] ? t->pk : 0.0);
+            for (int k = 0; k < 9; k++)
+                B[k] = ref[9 * (size_t)i + k] * edge[pass].kcoef;
+            for (int a = 0; a < 3; a++)
+                B[4 * a] += d;
+            fallback += d == 0.0 && pass == 1;
+            cs_invert_block(B);
+            fallback += pass == 2 && B[1] == 0 && B[2] == 0 && B[5] == 0 && B[0] != 1.0;
+            ENSURE_MSG(memcmp(B, p1 + 9 * (size_t)i, sizeof B) == 0,
+                       "edge %d, node %d: not the block scaled, shifted and inverted", pass, i);
+        }
+        ENSURE_MSG(pass == 0 || fallback > 0, "edge %d: no singular block", pass);
+    }
+    free(all);
     /* no factors (diag_node's plain loop) against factors all 1 (its general loop): f·β = β */
     for (int d = 0; d < 8 * nc; d++)
         kf[d] = 1.0;
