@@ -214,6 +214,13 @@ struct cs_mg {
     float pos_w[27][8];
     int setups;
     double key[3];
+    /* What the last setup's level 0 was built from besides the rotations (its cell scales s,
+     * node diagonal dg and held dofs; NULL before the first): a setup whose three are the same
+     * (a lagged hierarchy rebuilt because the rotations turned) keeps every level's derived
+     * copies of them (cs_mg_setup: coarse s, dg and held dofs, bL, bM, dgf, held). */
+    double *prev_s, *prev_dg;
+    uint8_t *prev_mask;
+    bool prev_ok; /* they hold a whole setup's (a failed one clears it) */
 };
 
 static bool corner_blocks_ok(const double *K);
@@ -961,6 +968,9 @@ void cs_mg_free(cs_mg *mg)
     free(mg->lv);
     free(mg->dense);
     free(mg->dense_x);
+    free(mg->prev_s);
+    free(mg->prev_dg);
+    free(mg->prev_mask);
     free(mg);
 }
 
@@ -1061,10 +1071,25 @@ bool cs_mg_matches(const cs_mg *mg, const cs_cubemesh *cm, const cs_fem *fem, ui
            mg->lv[0].adj == fem->adj && mg->lv[0].adj_start == fem->adj_start;
 }
 
-double cs_mg_rotation_drift(const cs_mg *mg, const double *R)
+double cs_mg_rotation_drift(const cs_mg *mg, const double *R, const double *q)
 {
     const mg_level *l = &mg->lv[0];
     double dmax = 0;
+    if (l->bQ_ok) {
+        /* from the quaternions (16 + 32 bytes a cell instead of 36 + 72): for unit a and b,
+         * tr(R(a)ᵀ R(b)) = 4 (a·b)² − 1, so 3 − tr = 4 (1 − (a·b)²) (the float q's rounding
+         * moves it by about 1e-7, as bR's did) */
+#pragma omp parallel for num_threads(l->threads) schedule(static) reduction(max : dmax)
+        for (int c = 0; c < l->n_cells; c++) {
+            const int b = c / MG_LANES, p = c % MG_LANES;
+            double t = 0;
+            for (int j = 0; j < 4; j++)
+                t += (double)l->bQ[(4 * b + j) * MG_LANES + p] * q[4 * (size_t)c + j];
+            const double d = 4.0 * (1.0 - t * t);
+            dmax = isfinite(d) ? (d > dmax ? d : dmax) : INFINITY;
+        }
+        return dmax;
+    }
 #pragma omp parallel for num_threads(l->threads) schedule(static) reduction(max : dmax)
     for (int c = 0; c < l->n_cells; c++) {
         const int b = c / MG_LANES, p = c % MG_LANES;
@@ -1851,8 +1876,33 @@ static void add_rotated_block(const double *K, const double *R, double s, int k,
                                   T[3 * a + 2] * R[3 * b + 2]);
 }
 
-/* Level l (>= 1) from level l−1: rotations, stiffness multipliers, diagonal, mask, D⁻¹. */
-static void setup_coarse(cs_mg *mg, int level, bool corotational)
+/* Level c's node diagonal dg (the restriction of f's) and held dofs (those of its fine nodes of
+ * largest weight), node by node. */
+static void restrict_diagonal(const mg_level *f, mg_level *c)
+{
+#pragma omp parallel for num_threads(c->threads) schedule(static)
+    for (int p = 0; p < c->n_nodes; p++) {
+        const int J = c->nwalk[p];
+        double d = 0, wmax = 0;
+        uint8_t held[3] = {0, 0, 0};
+        for (int a = f->r_start[J]; a < f->r_start[J + 1]; a++) {
+            d += f->r_w[a] * f->dg[f->r_node[a]];
+            if (f->r_w[a] > wmax)
+                wmax = f->r_w[a];
+        }
+        for (int a = f->r_start[J]; a < f->r_start[J + 1]; a++)
+            if (f->r_w[a] >= wmax * (1 - 1e-9))
+                for (int k = 0; k < 3; k++)
+                    held[k] |= f->mask[3 * f->r_node[a] + k];
+        c->dg[J] = d;
+        for (int k = 0; k < 3; k++)
+            c->own_mask[3 * J + k] = held[k] ? 1 : 0;
+    }
+}
+
+/* Level l (>= 1) from level l−1: rotations, stiffness multipliers, D⁻¹, and the diagonal and
+ * held dofs unless `same` (level 0's are the last setup's, and so are these). */
+static void setup_coarse(cs_mg *mg, int level, bool corotational, bool same)
 {
     mg_level *f = &mg->lv[level - 1], *c = &mg->lv[level];
     /* Cells by first child (walk: the fine rotations are read forward, not once per k row),
@@ -1886,24 +1936,8 @@ static void setup_coarse(cs_mg *mg, int level, bool corotational)
             cs_quat_to_mat(q[l], c->own_R + 9 * C);
         }
     }
-#pragma omp parallel for num_threads(c->threads) schedule(static)
-    for (int p = 0; p < c->n_nodes; p++) {
-        const int J = c->nwalk[p];
-        double d = 0, wmax = 0;
-        uint8_t held[3] = {0, 0, 0};
-        for (int a = f->r_start[J]; a < f->r_start[J + 1]; a++) {
-            d += f->r_w[a] * f->dg[f->r_node[a]];
-            if (f->r_w[a] > wmax)
-                wmax = f->r_w[a];
-        }
-        for (int a = f->r_start[J]; a < f->r_start[J + 1]; a++)
-            if (f->r_w[a] >= wmax * (1 - 1e-9))
-                for (int k = 0; k < 3; k++)
-                    held[k] |= f->mask[3 * f->r_node[a] + k];
-        c->dg[J] = d;
-        for (int k = 0; k < 3; k++)
-            c->own_mask[3 * J + k] = held[k] ? 1 : 0;
-    }
+    if (!same)
+        restrict_diagonal(f, c);
     /* D⁻¹: node by node (the cells of a node in adj order, so any thread count gives the same
      * sums), each corner block by R K_kk Rᵀ = (K00 − K01) I + K01 (R σ)(R σ)ᵀ, σ the corner's
      * signs (2·CS_CORNER − 1): the cube's corner block is K00 on the diagonal and K01 σ_a σ_b
@@ -1934,7 +1968,7 @@ static void setup_coarse(cs_mg *mg, int level, bool corotational)
         }
         for (int i = 0; i < 3; i++)
             m[4 * i] += c->dg[J];
-        cs_invert_block(m);
+        cs_mat3_invert_block(m);
         memcpy(c->own_inv + 9 * J, m, sizeof m);
     }
 }
@@ -2064,7 +2098,7 @@ static void rotation_layout(mg_level *l)
                 for (int j = 0; j < 4; j++)
                     qf[j] = (float)l->rq[4 * (size_t)c + j];
                 double Rq[9];
-                cs_quat_to_mat(qf, Rq);
+                CS_QUAT_TO_MAT(qf[0], qf[1], qf[2], qf[3], Rq); /* cs_quat_to_mat's, inline */
                 for (int j = 0; j < 9; j++)
                     bad += !(fabs(Rq[j] - l->R[9 * (size_t)c + j]) <= 1e-6);
             }
@@ -2074,30 +2108,75 @@ static void rotation_layout(mg_level *l)
     l->bQ_ok = bad == 0;
 }
 
-/* The single-precision copies the V-cycle reads. */
-static void to_single(mg_level *l, double hl, double hm)
+/* The single-precision copies the V-cycle reads: the rotations (bQ; bR only where the element
+ * pass reads it, i.e. not bQ_ok) and D⁻¹ every setup, the scales, diagonal and held dofs unless
+ * `same` (cs_mg_setup: what they are made from has not changed since the last setup). */
+static void to_single(mg_level *l, double hl, double hm, bool same)
 {
+    rotation_layout(l);
+    const bool rot = !l->bQ_ok;
+    if (rot || !same) {
 #pragma omp parallel for num_threads(l->threads) schedule(static)
-    for (int b = 0; b < l->n_batches; b++)
-        for (int p = 0; p < MG_LANES; p++) {
-            const int c = b * MG_LANES + p;
-            const bool live = c < l->n_cells;
-            for (int k = 0; k < 9; k++)
-                l->bR[(9 * b + k) * MG_LANES + p] = live ? (float)l->R[9 * c + k] : k % 4 == 0;
-            l->bL[b * MG_LANES + p] = live ? (float)(l->s[c] * hl / 16.0) : 0.0f;
-            l->bM[b * MG_LANES + p] = live ? (float)(l->s[c] * hm / 16.0) : 0.0f;
-        }
+        for (int b = 0; b < l->n_batches; b++)
+            for (int p = 0; p < MG_LANES; p++) {
+                const int c = b * MG_LANES + p;
+                const bool live = c < l->n_cells;
+                for (int k = 0; rot && k < 9; k++)
+                    l->bR[(9 * b + k) * MG_LANES + p] =
+                        live ? (float)l->R[9 * c + k] : k % 4 == 0;
+                if (same)
+                    continue;
+                l->bL[b * MG_LANES + p] = live ? (float)(l->s[c] * hl / 16.0) : 0.0f;
+                l->bM[b * MG_LANES + p] = live ? (float)(l->s[c] * hm / 16.0) : 0.0f;
+            }
+    }
 #pragma omp parallel for num_threads(l->threads) schedule(static)
     for (int n = 0; n < l->n_nodes; n++) {
         for (int j = 0; j < 3; j++)
             for (int k = 0; k < 3; k++)
                 l->invf[9 * n + 3 * j + k] = (float)l->inv[9 * n + 3 * k + j];
+        if (same)
+            continue;
         l->dgf[n] = (float)l->dg[n];
         l->held[n] = (uint8_t)((l->mask[3 * n] ? 1 : 0) | (l->mask[3 * n + 1] ? 2 : 0) |
                                (l->mask[3 * n + 2] ? 4 : 0));
     }
     l->invf[9 * (size_t)l->n_nodes] = 0.0f; /* the tail dinv's last column load reads */
-    rotation_layout(l);
+}
+
+/* Whether level 0's s, dg and held dofs are the last whole setup's (mg->prev_*, remember_setup;
+ * false before the first and when the copies could not be allocated). */
+static bool same_as_last_setup(const cs_mg *mg)
+{
+    const mg_level *l = &mg->lv[0];
+    return mg->prev_ok &&
+           memcmp(mg->prev_s, l->s, (size_t)l->n_cells * sizeof(double)) == 0 &&
+           memcmp(mg->prev_dg, l->dg, (size_t)l->n_nodes * sizeof(double)) == 0 &&
+           memcmp(mg->prev_mask, l->mask, 3 * (size_t)l->n_nodes) == 0;
+}
+
+/* After a whole setup: what same_as_last_setup compares with (not kept if out of memory). */
+static void remember_setup(cs_mg *mg)
+{
+    const mg_level *l = &mg->lv[0];
+    const size_t ns = (size_t)l->n_cells * sizeof(double), nd = (size_t)l->n_nodes * sizeof(double),
+                 nm = 3 * (size_t)l->n_nodes;
+    if (!mg->prev_s) {
+        mg->prev_s = malloc(ns ? ns : 1);
+        mg->prev_dg = malloc(nd ? nd : 1);
+        mg->prev_mask = malloc(nm ? nm : 1);
+    }
+    if (!mg->prev_s || !mg->prev_dg || !mg->prev_mask)
+        return;
+    memcpy(mg->prev_s, l->s, ns);
+    memcpy(mg->prev_dg, l->dg, nd);
+    memcpy(mg->prev_mask, l->mask, nm);
+    mg->prev_ok = true;
+}
+
+void cs_mg_setup_forget(cs_mg *mg)
+{
+    mg->prev_ok = false;
 }
 
 int cs_mg_setup(cs_mg *mg, const cs_fem *fem, cs_matvec_fn A, void *ctx, const double *inv0,
@@ -2110,12 +2189,16 @@ int cs_mg_setup(cs_mg *mg, const cs_fem *fem, cs_matvec_fn A, void *ctx, const d
     l0->rq = fem->q;
     l0->inv = inv0;
     l0->mask = mask0;
+    /* a rebuild for the rotations alone keeps what the scales, diagonal and held dofs give */
+    const bool same = same_as_last_setup(mg);
+    mg->prev_ok = false; /* until this setup is whole */
     for (int l = 1; l < mg->n_levels; l++)
-        setup_coarse(mg, l, fem->corotational);
+        setup_coarse(mg, l, fem->corotational, same);
     if (mg->dense && setup_dense(mg))
         return -1;
     for (int l = 0; l < mg->n_levels; l++)
-        to_single(&mg->lv[l], mg->hl, mg->hm);
+        to_single(&mg->lv[l], mg->hl, mg->hm, same);
+    remember_setup(mg);
     /* Smoothing weights: re-estimated when the operator's kind changes, and now and then. */
     const double key[3] = {l0->s[0], l0->dg[0], (double)mg->n_levels};
     if (mg->setups % MG_LAMBDA_EVERY == 0 || memcmp(key, mg->key, sizeof key) != 0) {

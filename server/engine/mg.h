@@ -90,6 +90,10 @@ double *cs_mg_node_diag(cs_mg *mg);
  */
 int cs_mg_setup(cs_mg *mg, const cs_fem *fem, cs_matvec_fn A, void *ctx, const double *inv0,
                 const uint8_t *mask0);
+/* The next cs_mg_setup derives every level's scales, diagonal and held dofs again, as if they
+ * had changed (a setup keeps them when level 0's are the last setup's: mg.c,
+ * same_as_last_setup; for tests that compare the two). */
+void cs_mg_setup_forget(cs_mg *mg);
 
 /* z = B r, one V-cycle (a cs_precond_fn; ctx is the cs_mg). */
 void cs_mg_vcycle(void *ctx, const double *r, double *z);
@@ -155,9 +159,10 @@ void cs_mg_restrict_level(const cs_mg *mg, int level, const float *xf, float *xc
 
 /* Against the finest level's copies made by the last cs_mg_setup (what a lagged hierarchy was
  * built from, world.c): the max over cells of 3 − tr(R_builtᵀ R) = 2(1 − cos θ), θ the angle
- * a cell has turned by since (+inf if R is not finite); and whether mask (3 per node) holds
- * the same dofs. */
-double cs_mg_rotation_drift(const cs_mg *mg, const double *R);
+ * a cell has turned by since (+inf if not finite), from the cells' unit quaternions q (4 per
+ * cell; R where the level keeps its rotations as matrices); and whether mask (3 per node)
+ * holds the same dofs. */
+double cs_mg_rotation_drift(const cs_mg *mg, const double *R, const double *q);
 bool cs_mg_held_matches(const cs_mg *mg, const uint8_t *mask);
 
 #endif

@@ -1644,7 +1644,7 @@ static bool pc_lag_reusable(const cs_world_t *w, cs_object *o, const uint8_t *ma
     if (!cs_mg_held_matches(o->mg, mask))
         return false;
     mg_frames(o);
-    L->drift = o->fem.corotational ? cs_mg_rotation_drift(o->mg, o->fem.R) : 0.0;
+    L->drift = o->fem.corotational ? cs_mg_rotation_drift(o->mg, o->fem.R, o->fem.q) : 0.0;
     return L->drift <= 2.0 * (1.0 - cos(w->pc_lag_angle));
 }
 

@@ -285,3 +285,143 @@ TEST(mg_compact_layouts_match_reference)
         }
     }
 }
+
+/* Every level's setup outputs as the V-cycle reads them: its product and residual on a fixed
+ * x and b, its smoother's D⁻¹ and held dofs; appended to out (NULL: counted only). */
+static size_t level_outputs(const cs_mg *mg, float *out)
+{
+    size_t at = 0;
+    for (int lv = 0; lv < cs_mg_levels(mg); lv++) {
+        const int n = cs_mg_level_nodes(mg, lv);
+        float *x = malloc(sizeof(float) * (3 * (size_t)n + 1)),
+              *b = malloc(sizeof(float) * (3 * (size_t)n + 1));
+        uint8_t *mask = malloc(3 * (size_t)n + 1);
+        if (!x || !b || !mask) {
+            free(x);
+            free(b);
+            free(mask);
+            return 0;
+        }
+        unsigned seed = 5 + (unsigned)lv;
+        for (int d = 0; d < 3 * n; d++) {
+            x[d] = (float)urand(&seed);
+            b[d] = (float)urand(&seed);
+        }
+        if (out) {
+            cs_mg_apply_level(mg, lv, false, x, out + at);
+            cs_mg_residual_level(mg, lv, x, b, out + at + 3 * (size_t)n);
+            cs_mg_level_smoother(mg, lv, out + at + 6 * (size_t)n, mask);
+            for (int d = 0; d < 3 * n; d++)
+                out[at + 15 * (size_t)n + d] = mask[d];
+        }
+        at += 18 * (size_t)n;
+        free(x);
+        free(b);
+        free(mask);
+    }
+    return at;
+}
+
+/* Bent about y by th·z (and jiggled): every cell turned differently. */
+static void bend(const cs_cubemesh *cm, double th, unsigned seed, double *x)
+{
+    for (int a = 0; a < cm->n_nodes; a++) {
+        const double *X = cm->node_rest + 3 * a, t = th * X[2];
+        x[3 * a] = X[0] * cos(t) + X[2] * sin(t) + 0.01 * urand(&seed);
+        x[3 * a + 1] = X[1] + 0.01 * urand(&seed);
+        x[3 * a + 2] = -X[0] * sin(t) + X[2] * cos(t);
+    }
+}
+
+/*
+ * A setup whose scales, diagonal and held dofs are the last setup's (a lagged hierarchy
+ * rebuilt because its cells turned) keeps what those give on every level and converts only
+ * the rotations and D⁻¹ (mg.c, same_as_last_setup): through a sequence of setups (the cells
+ * turned; held dofs changed; the diagonal changed; a cell's R not a rotation, its matrices
+ * converted too) every level's product, residual, D⁻¹ and held dofs are those of the same
+ * hierarchy set up alongside with everything derived again (cs_mg_setup_forget: the coarse
+ * rotations are warm-started from the last setup's, so the twin has the same history), bit
+ * for bit. The rotation drift against the hierarchy is 0 for the rotations it was set up with
+ * and 2(1 − cos θ) for a uniform turn by θ.
+ */
+TEST(mg_setup_for_turned_cells_matches_a_whole_one)
+{
+    cs_cubemesh cm;
+    ENSURE(block(&cm, 24, 9, 5, 0, false) == 0);
+    cs_fem fem;
+    ENSURE(cs_fem_init(&fem, &cm, 2e6, 0.3, true, 2) == 0);
+    const int n = cm.n_nodes, nc = cm.n_cells;
+    double *x = malloc(sizeof(double) * 3 * n), *inv = malloc(sizeof(double) * 9 * n);
+    uint8_t *mask = calloc(3 * (size_t)n, 1);
+    ENSURE(x && inv && mask);
+    cs_mg *mg = cs_mg_build(&cm, &fem, 1), *twin = cs_mg_build(&cm, &fem, 1);
+    ENSURE(mg && twin);
+    const size_t len = level_outputs(mg, NULL);
+    float *got = malloc(sizeof(float) * len), *want = malloc(sizeof(float) * len);
+    ENSURE(len > 0 && got && want);
+    double *s = cs_mg_cell_scale(mg), *dg = cs_mg_node_diag(mg);
+    unsigned seed = 7;
+    for (int c = 0; c < nc; c++)
+        s[c] = exp(2.0 * (urand(&seed) + 0.5));
+    for (int a = 0; a < n; a++) {
+        dg[a] = 50.0 * (1.0 + urand(&seed));
+        for (int j = 0; j < 9; j++)
+            inv[9 * a + j] = j % 4 == 0 ? 1e-3 * (1.5 + urand(&seed)) : 0.0;
+        mask[3 * a + 2] = a % 13 == 0;
+    }
+    bend(&cm, 0.4, 3, x);
+    cs_fem_update_rotations(&fem, x);
+    for (int step = 0; step < 5; step++) {
+        /* 1: the cells turned (bent further); 2: held dofs changed; 3: the diagonal; 4: a
+         * cell's R not a rotation */
+        if (step == 1) {
+            bend(&cm, 0.9, 4, x);
+            cs_fem_update_rotations(&fem, x);
+        } else if (step == 2) {
+            for (int a = 0; a < n; a++)
+                mask[3 * a] = a % 7 == 0;
+        } else if (step == 3) {
+            for (int a = 0; a < n; a += 5)
+                dg[a] *= 1.5;
+        } else if (step == 4) {
+            for (int j = 0; j < 9; j++)
+                fem.R[9 * (nc / 2) + j] *= 1.01;
+        }
+        ENSURE(cs_mg_setup(mg, &fem, NULL, NULL, inv, mask) == 0);
+        memcpy(cs_mg_cell_scale(twin), s, sizeof(double) * nc);
+        memcpy(cs_mg_node_diag(twin), dg, sizeof(double) * n);
+        cs_mg_setup_forget(twin);
+        ENSURE(cs_mg_setup(twin, &fem, NULL, NULL, inv, mask) == 0);
+        ENSURE(level_outputs(mg, got) == len && level_outputs(twin, want) == len);
+        ENSURE_MSG(memcmp(got, want, sizeof(float) * len) == 0,
+                   "step %d: the set-up differs from a whole one", step);
+        ENSURE_MSG((cs_mg_level_layout(mg, 0) & CS_MG_QUAT_ROTATIONS) ==
+                       (step < 4 ? CS_MG_QUAT_ROTATIONS : 0),
+                   "step %d: layout %d", step, cs_mg_level_layout(mg, 0));
+        if (step == 0) {
+            ENSURE(cs_mg_rotation_drift(mg, fem.R, fem.q) <= 1e-6);
+            /* the whole body turned by 0.1 rad about z: every cell's drift 2(1 − cos 0.1),
+             * to the float copies' rounding (about 1e-7 a quaternion entry) */
+            double *xt = malloc(sizeof(double) * 3 * n);
+            ENSURE(xt);
+            for (int a = 0; a < n; a++) {
+                xt[3 * a] = cos(0.1) * x[3 * a] - sin(0.1) * x[3 * a + 1];
+                xt[3 * a + 1] = sin(0.1) * x[3 * a] + cos(0.1) * x[3 * a + 1];
+                xt[3 * a + 2] = x[3 * a + 2];
+            }
+            cs_fem_update_rotations(&fem, xt);
+            const double dr = cs_mg_rotation_drift(mg, fem.R, fem.q), w = 2 * (1 - cos(0.1));
+            ENSURE_MSG(fabs(dr - w) < 2e-6, "drift %.9g, want %.9g", dr, w);
+            free(xt);
+        }
+    }
+    cs_mg_free(mg);
+    cs_mg_free(twin);
+    free(got);
+    free(want);
+    free(x);
+    free(inv);
+    free(mask);
+    cs_fem_free(&fem);
+    cs_cubemesh_free(&cm);
+}
