@@ -17,6 +17,7 @@
 
 #include "cubesim.h"
 #include "mat3.h"
+#include "rowbatch.h"
 #include "segments.h"
 #include "simd.h"
 #include "solver.h"
@@ -462,10 +463,6 @@ static void graded_kmul(const cs_fem *fem, const double *f, const double *restri
  * sessions 47–48 (one thread, medians of 5 interleaved rounds).
  */
 #define LANES 8
-/* A row batch's node rows r = (dy, dz) = (0, 0), (1, 0), (0, 1), (1, 1): the corners at dx = 0
- * and dx = 1 in each (CS_CORNER), and each corner's row (fem.h, rowb). */
-static const int ROW_K0[4] = {0, 3, 4, 7}, ROW_K1[4] = {1, 2, 5, 6};
-static const int ROW_OF[8] = {0, 0, 1, 1, 2, 2, 3, 3};
 
 /* One batch: where each lane's cell reads its nodal vectors and writes its results. A lane
  * without a cell repeats another lane's inputs with lam = mu = 0 and writes to scratch. */
@@ -659,8 +656,8 @@ row_inputs(const double *restrict x, const int32_t *row, vd8 u[24])
             const __m512d v = _mm512_permutex2var_pd(_mm512_permutex2var_pd(A, lo[i], B), hi[i], C);
             /* the end node's component i in lane 0 */
             const __m512i e = _mm512_castpd_si512(_mm512_maskz_loadu_pd(1, p + 24 + i));
-            u[3 * ROW_K0[r] + i] = (vd8)v;
-            u[3 * ROW_K1[r] + i] =
+            u[3 * CS_ROW_K0[r] + i] = (vd8)v;
+            u[3 * CS_ROW_K1[r] + i] =
                 (vd8)_mm512_castsi512_pd(_mm512_alignr_epi64(e, _mm512_castpd_si512(v), 1));
         }
     }
@@ -684,8 +681,8 @@ row_outputs(const vd8 y[24], double *out)
     for (int r = 0; r < 4; r++) {
         __m512d S[3];
         for (int i = 0; i < 3; i++) {
-            const __m512i y1 = _mm512_castpd_si512((__m512d)y[3 * ROW_K1[r] + i]);
-            S[i] = _mm512_add_pd((__m512d)y[3 * ROW_K0[r] + i],
+            const __m512i y1 = _mm512_castpd_si512((__m512d)y[3 * CS_ROW_K1[r] + i]);
+            S[i] = _mm512_add_pd((__m512d)y[3 * CS_ROW_K0[r] + i],
                                  _mm512_castsi512_pd(_mm512_alignr_epi64(y1, zero, 7)));
         }
         double *o = out + 32 * r;
@@ -693,8 +690,8 @@ row_outputs(const vd8 y[24], double *out)
             _mm512_storeu_pd(o + 8 * v, _mm512_permutex2var_pd(
                                             _mm512_permutex2var_pd(S[0], ia[v], S[1]), ib[v], S[2]));
         const __m512d end = _mm512_permutex2var_pd(
-            _mm512_permutex2var_pd((__m512d)y[3 * ROW_K1[r]], e0, (__m512d)y[3 * ROW_K1[r] + 1]),
-            e1, (__m512d)y[3 * ROW_K1[r] + 2]);
+            _mm512_permutex2var_pd((__m512d)y[3 * CS_ROW_K1[r]], e0, (__m512d)y[3 * CS_ROW_K1[r] + 1]),
+            e1, (__m512d)y[3 * CS_ROW_K1[r] + 2]);
         _mm512_mask_storeu_pd(o + 24, 0x7, end);
     }
 }
@@ -886,8 +883,8 @@ static void graded_cell(const cs_fem *fem, const double *f, const int32_t *nd, c
 }
 
 /* A row batch's results from lanes (t: 24 per lane, as a batch's fb) into its rows in fb (fem.h,
- * rowb): node l of row r gets corner ROW_K0[r] of lane l plus corner ROW_K1[r] of lane l − 1 (0
- * for l = 0), the row's end node corner ROW_K1[r] of lane 7 (modal_wide_body's row_outputs: the
+ * rowb): node l of row r gets corner CS_ROW_K0[r] of lane l plus corner CS_ROW_K1[r] of lane l − 1 (0
+ * for l = 0), the row's end node corner CS_ROW_K1[r] of lane 7 (modal_wide_body's row_outputs: the
  * same sums); the lanes of inactive cells (an active region) give 0. */
 static void row_store(const cs_fem *fem, int c0, double *t, double *fb)
 {
@@ -897,7 +894,7 @@ static void row_store(const cs_fem *fem, int c0, double *t, double *fb)
                 memset(t + 24 * l, 0, 24 * sizeof(double));
     for (int r = 0; r < 4; r++)
         for (int i = 0; i < 3; i++) {
-            const int k0 = 3 * ROW_K0[r] + i, k1 = 3 * ROW_K1[r] + i;
+            const int k0 = 3 * CS_ROW_K0[r] + i, k1 = 3 * CS_ROW_K1[r] + i;
             fb[32 * r + i] = t[k0] + 0.0;
             for (int l = 1; l < LANES; l++)
                 fb[32 * r + 3 * l + i] = t[24 * l + k0] + t[24 * (l - 1) + k1];
@@ -1221,21 +1218,8 @@ static int product_layout(cs_fem *fem)
     /* row batches only where the wide kernel reads and writes them: elsewhere the lanes would
      * be added by rows in C (row_store), 10 % slower for the product than the 256-bit kernel's
      * own stores (--simd 256 on the Xeon of session 48) */
-    const bool rows = cs_simd_wide_default();
-    fem->n_row_batches = 0;
-    for (int b = 0; b < nb; b++) {
-        const int c0 = b * LANES;
-        bool row = rows && c0 + LANES <= fem->n_cells;
-        for (int r = 0; r < 4 && row; r++) {
-            const int32_t base = 3 * fem->cell_nodes[8 * c0 + ROW_K0[r]];
-            for (int l = 0; l < LANES && row; l++)
-                row = 3 * fem->cell_nodes[8 * (c0 + l) + ROW_K0[r]] == base + 3 * l &&
-                      3 * fem->cell_nodes[8 * (c0 + l) + ROW_K1[r]] == base + 3 * l + 3;
-            fem->rowb[4 * b + r] = base;
-        }
-        fem->rowb[4 * b] = row ? fem->rowb[4 * b] : -1;
-        fem->n_row_batches += row;
-    }
+    fem->n_row_batches =
+        cs_row_batches(fem->cell_nodes, fem->n_cells, LANES, cs_simd_wide_default(), fem->rowb);
     int32_t m = 0;
     for (int n = 0; n < nn; n++) {
         fem->nstart[n] = m;
@@ -1246,12 +1230,11 @@ static int product_layout(cs_fem *fem)
                 fem->fadj[m++] = 24 * (LANES * fem->bslot[b] + l) + 3 * k;
                 continue;
             }
-            /* in a row batch: corner k in node row ROW_OF[k]; at dx = 1 it is the next
-             * lane's dx = 0 node, added there, except for the last lane's (the row's end) */
-            const int off = CS_CORNER[k][0] ? (l + 1 < LANES ? -1 : 24) : 3 * l;
+            /* in a row batch: corner k in node row CS_ROW_OF[k] (rowbatch.h) */
+            const int off = cs_row_link(k, l, LANES);
             if (off >= 0) {
                 fem->fcell[m] = -1 - b;
-                fem->fadj[m++] = 24 * LANES * fem->bslot[b] + 32 * ROW_OF[k] + off;
+                fem->fadj[m++] = 24 * LANES * fem->bslot[b] + 32 * CS_ROW_OF[k] + off;
             }
         }
     }

@@ -11,6 +11,7 @@
 #include <omp.h>
 
 #include "mat3.h"
+#include "rowbatch.h"
 #include "segments.h"
 #include "simd.h"
 
@@ -75,10 +76,6 @@ _Static_assert(MG_CHEB_KIND != 4 ||
 #endif
 #define MG_LANES 16        /* cells per batch of the element pass (one float SIMD lane each) */
 #define VF_LANES 8         /* lanes per vector of the element pass's arithmetic */
-/* A row batch's node rows r = (dy, dz) = (0, 0), (1, 0), (0, 1), (1, 1): the corners at dx = 0
- * and dx = 1 in each (CS_CORNER), and each corner's row. */
-static const int ROW_K0[4] = {0, 3, 4, 7}, ROW_K1[4] = {1, 2, 5, 6};
-static const int ROW_OF[8] = {0, 0, 1, 1, 2, 2, 3, 3};
 enum { SIMD_256 = 1, SIMD_512 = 2 }; /* cs_mg.simd */
 typedef float vf __attribute__((vector_size(4 * VF_LANES)));
 #define MODAL_NAME modal_core_f
@@ -548,21 +545,8 @@ static int product_layout(mg_level *l)
         return -1;
     _Static_assert(MG_LANES == 16, "a row batch's layout: 17 nodes' 3 floats within 64");
     /* row batches only on the CPUs whose default is the 512-bit kernel (fem.c, product_layout) */
-    const bool rows = cs_simd_wide_default();
-    l->n_row_batches = 0;
-    for (int b = 0; b < l->n_batches; b++) {
-        const int c0 = b * MG_LANES;
-        bool row = rows && c0 + MG_LANES <= l->n_cells;
-        for (int r = 0; r < 4 && row; r++) {
-            const int32_t base = 3 * l->cell_nodes[8 * c0 + ROW_K0[r]];
-            for (int p = 0; p < MG_LANES && row; p++)
-                row = 3 * l->cell_nodes[8 * (c0 + p) + ROW_K0[r]] == base + 3 * p &&
-                      3 * l->cell_nodes[8 * (c0 + p) + ROW_K1[r]] == base + 3 * p + 3;
-            l->rowb[4 * b + r] = base;
-        }
-        l->rowb[4 * b] = row ? l->rowb[4 * b] : -1;
-        l->n_row_batches += row;
-    }
+    l->n_row_batches =
+        cs_row_batches(l->cell_nodes, l->n_cells, MG_LANES, cs_simd_wide_default(), l->rowb);
     int32_t m = 0;
     for (int n = 0; n < l->n_nodes; n++) {
         l->nstart[n] = m;
@@ -572,11 +556,10 @@ static int product_layout(mg_level *l)
                 l->fadj[m++] = 32 * (MG_LANES * l->bslot[b] + p) + 4 * k;
                 continue;
             }
-            /* in a row batch: corner k in node row ROW_OF[k]; at dx = 1 it is the next
-             * lane's dx = 0 node, added there, except for the last lane's (the row's end) */
-            const int r = ROW_OF[k], off = CS_CORNER[k][0] ? (p + 1 < MG_LANES ? -1 : 48) : 3 * p;
+            /* in a row batch: corner k in node row CS_ROW_OF[k] (rowbatch.h) */
+            const int off = cs_row_link(k, p, MG_LANES);
             if (off >= 0)
-                l->fadj[m++] = 32 * MG_LANES * l->bslot[b] + 64 * r + off;
+                l->fadj[m++] = 32 * MG_LANES * l->bslot[b] + 64 * CS_ROW_OF[k] + off;
         }
     }
     l->nstart[l->n_nodes] = m;
@@ -1202,16 +1185,16 @@ static inline __attribute__((always_inline)) void half_rest(const mg_level *l, i
 }
 
 /* A row batch's results (yt as half_rest leaves them) into its rows in fe: node p of row r
- * gets corner ROW_K0[r] of lane p plus corner ROW_K1[r] of lane p − 1 (0 for p = 0), the row's
- * end node corner ROW_K1[r] of lane 15 (row_wide: the same sums). */
+ * gets corner CS_ROW_K0[r] of lane p plus corner CS_ROW_K1[r] of lane p − 1 (0 for p = 0), the row's
+ * end node corner CS_ROW_K1[r] of lane 15 (row_wide: the same sums). */
 static inline __attribute__((always_inline)) void row_store(const mg_level *l, int b,
                                                             const float *yt)
 {
     float *out = l->fe + 32 * ((size_t)MG_LANES * l->bslot[b]);
     for (int r = 0; r < 4; r++)
         for (int i = 0; i < 3; i++) {
-            const float *y0 = yt + MG_LANES * (3 * ROW_K0[r] + i);
-            const float *y1 = yt + MG_LANES * (3 * ROW_K1[r] + i);
+            const float *y0 = yt + MG_LANES * (3 * CS_ROW_K0[r] + i);
+            const float *y1 = yt + MG_LANES * (3 * CS_ROW_K1[r] + i);
             out[64 * r + i] = y0[0] + 0.0f;
             for (int p = 1; p < MG_LANES; p++)
                 out[64 * r + 3 * p + i] = y0[p] + y1[p - 1];
@@ -1348,8 +1331,8 @@ row_inputs(const float *restrict x, const int32_t *rowb, vf16 u[24])
             const __m512 v = _mm512_permutex2var_ps(_mm512_permutex2var_ps(A, lo[i], B), hi[i], C);
             /* the end node's component i in lane 0 */
             const __m512i e = _mm512_castps_si512(_mm512_maskz_loadu_ps(1, p + 48 + i));
-            u[3 * ROW_K0[r] + i] = (vf16)v;
-            u[3 * ROW_K1[r] + i] =
+            u[3 * CS_ROW_K0[r] + i] = (vf16)v;
+            u[3 * CS_ROW_K1[r] + i] =
                 (vf16)_mm512_castsi512_ps(_mm512_alignr_epi32(e, _mm512_castps_si512(v), 1));
         }
     }
@@ -1375,8 +1358,8 @@ row_outputs(const vf16 y[24], float *out)
     for (int r = 0; r < 4; r++) {
         __m512 S[3];
         for (int i = 0; i < 3; i++) {
-            const __m512i y1 = _mm512_castps_si512((__m512)y[3 * ROW_K1[r] + i]);
-            S[i] = _mm512_add_ps((__m512)y[3 * ROW_K0[r] + i],
+            const __m512i y1 = _mm512_castps_si512((__m512)y[3 * CS_ROW_K1[r] + i]);
+            S[i] = _mm512_add_ps((__m512)y[3 * CS_ROW_K0[r] + i],
                                  _mm512_castsi512_ps(_mm512_alignr_epi32(y1, zero, 15)));
         }
         float *o = out + 64 * r;
@@ -1384,8 +1367,8 @@ row_outputs(const vf16 y[24], float *out)
             _mm512_storeu_ps(o + 16 * v, _mm512_permutex2var_ps(
                                              _mm512_permutex2var_ps(S[0], ia[v], S[1]), ib[v], S[2]));
         const __m512 end = _mm512_permutex2var_ps(
-            _mm512_permutex2var_ps((__m512)y[3 * ROW_K1[r]], e0, (__m512)y[3 * ROW_K1[r] + 1]), e1,
-            (__m512)y[3 * ROW_K1[r] + 2]);
+            _mm512_permutex2var_ps((__m512)y[3 * CS_ROW_K1[r]], e0, (__m512)y[3 * CS_ROW_K1[r] + 1]), e1,
+            (__m512)y[3 * CS_ROW_K1[r] + 2]);
         _mm512_mask_storeu_ps(o + 48, 0x7, end);
     }
 }
