@@ -2138,9 +2138,14 @@ static bool same_as_last_setup(const cs_mg *mg)
            memcmp(mg->prev_mask, l->mask, 3 * (size_t)l->n_nodes) == 0;
 }
 
-/* After a whole setup: what same_as_last_setup compares with (not kept if out of memory). */
-static void remember_setup(cs_mg *mg)
+/* After a whole setup: what same_as_last_setup compares with (not kept if out of memory);
+ * `same`: the copies hold these values already. */
+static void remember_setup(cs_mg *mg, bool same)
 {
+    if (same) {
+        mg->prev_ok = true;
+        return;
+    }
     const mg_level *l = &mg->lv[0];
     const size_t ns = (size_t)l->n_cells * sizeof(double), nd = (size_t)l->n_nodes * sizeof(double),
                  nm = 3 * (size_t)l->n_nodes;
@@ -2181,7 +2186,7 @@ int cs_mg_setup(cs_mg *mg, const cs_fem *fem, cs_matvec_fn A, void *ctx, const d
         return -1;
     for (int l = 0; l < mg->n_levels; l++)
         to_single(&mg->lv[l], mg->hl, mg->hm, same);
-    remember_setup(mg);
+    remember_setup(mg, same);
     /* Smoothing weights: re-estimated when the operator's kind changes, and now and then. */
     const double key[3] = {l0->s[0], l0->dg[0], (double)mg->n_levels};
     if (mg->setups % MG_LAMBDA_EVERY == 0 || memcmp(key, mg->key, sizeof key) != 0) {
