@@ -273,7 +273,11 @@ int cs_fem_relink(cs_fem *fem, const cs_cubemesh *cm)
     for (int e = 0; e < 8 * cm->n_cells; e++)
         fem->adj[fill[cm->cell_nodes[e]]++] = e;
     free(fill);
-    return product_layout(fem);
+    cs_fem_lattice_free(fem->lat);
+    fem->lat = NULL;
+    if (product_layout(fem) != 0)
+        return -1;
+    return cs_fem_lattice_build(fem, cm, &fem->lat);
 }
 
 int cs_fem_init(cs_fem *fem, const cs_cubemesh *cm, double young, double poisson,
@@ -287,6 +291,7 @@ int cs_fem_init(cs_fem *fem, const cs_cubemesh *cm, double young, double poisson
      * barrier for a scheduler timeslice): small objects run on one thread. */
     fem->threads = threads > 1 && cm->n_cells >= CS_FEM_PARALLEL_CELLS ? threads : 1;
     fem->wide = cs_simd_wide_default();
+    fem->lattice = true;
     cs_cube_stiffness(young, poisson, cm->h, fem->K);
     fem->lambda = young * poisson / ((1 + poisson) * (1 - 2 * poisson));
     fem->mu = young / (2 * (1 + poisson));
@@ -333,6 +338,7 @@ void cs_fem_free(cs_fem *fem)
     free(fem->fcell);
     free(fem->rowb);
     free(fem->nstart);
+    cs_fem_lattice_free(fem->lat);
     memset(fem, 0, sizeof *fem);
 }
 
@@ -642,23 +648,16 @@ typedef double vd8 __attribute__((vector_size(64)));
 __attribute__((target("arch=x86-64-v4"))) static inline __attribute__((always_inline)) void
 row_inputs(const double *restrict x, const int32_t *row, vd8 u[24])
 {
-    const __m512i lo[3] = {_mm512_setr_epi64(0, 3, 6, 9, 12, 15, 0, 0),
-                           _mm512_setr_epi64(1, 4, 7, 10, 13, 0, 0, 0),
-                           _mm512_setr_epi64(2, 5, 8, 11, 14, 0, 0, 0)};
-    const __m512i hi[3] = {_mm512_setr_epi64(0, 1, 2, 3, 4, 5, 10, 13),
-                           _mm512_setr_epi64(0, 1, 2, 3, 4, 8, 11, 14),
-                           _mm512_setr_epi64(0, 1, 2, 3, 4, 9, 12, 15)};
     for (int r = 0; r < 4; r++) {
         const double *p = x + row[r];
-        const __m512d A = _mm512_loadu_pd(p), B = _mm512_loadu_pd(p + 8),
-                      C = _mm512_loadu_pd(p + 16);
+        __m512d v[3];
+        cs_xyz8_split(_mm512_loadu_pd(p), _mm512_loadu_pd(p + 8), _mm512_loadu_pd(p + 16), v);
         for (int i = 0; i < 3; i++) {
-            const __m512d v = _mm512_permutex2var_pd(_mm512_permutex2var_pd(A, lo[i], B), hi[i], C);
             /* the end node's component i in lane 0 */
             const __m512i e = _mm512_castpd_si512(_mm512_maskz_loadu_pd(1, p + 24 + i));
-            u[3 * CS_ROW_K0[r] + i] = (vd8)v;
+            u[3 * CS_ROW_K0[r] + i] = (vd8)v[i];
             u[3 * CS_ROW_K1[r] + i] =
-                (vd8)_mm512_castsi512_pd(_mm512_alignr_epi64(e, _mm512_castpd_si512(v), 1));
+                (vd8)_mm512_castsi512_pd(_mm512_alignr_epi64(e, _mm512_castpd_si512(v[i]), 1));
         }
     }
 }
@@ -669,26 +668,20 @@ row_inputs(const double *restrict x, const int32_t *row, vd8 u[24])
 __attribute__((target("arch=x86-64-v4"))) static inline __attribute__((always_inline)) void
 row_outputs(const vd8 y[24], double *out)
 {
-    const __m512i ia[3] = {_mm512_setr_epi64(0, 8, 0, 1, 9, 0, 2, 10),
-                           _mm512_setr_epi64(0, 3, 11, 0, 4, 12, 0, 5),
-                           _mm512_setr_epi64(13, 0, 6, 14, 0, 7, 15, 0)};
-    const __m512i ib[3] = {_mm512_setr_epi64(0, 1, 8, 3, 4, 9, 6, 7),
-                           _mm512_setr_epi64(10, 1, 2, 11, 4, 5, 12, 7),
-                           _mm512_setr_epi64(0, 13, 2, 3, 14, 5, 6, 15)};
     const __m512i e0 = _mm512_setr_epi64(7, 15, 0, 0, 0, 0, 0, 0);
     const __m512i e1 = _mm512_setr_epi64(0, 1, 15, 0, 0, 0, 0, 0);
     const __m512i zero = _mm512_setzero_si512();
     for (int r = 0; r < 4; r++) {
-        __m512d S[3];
+        __m512d S[3], o3[3];
         for (int i = 0; i < 3; i++) {
             const __m512i y1 = _mm512_castpd_si512((__m512d)y[3 * CS_ROW_K1[r] + i]);
             S[i] = _mm512_add_pd((__m512d)y[3 * CS_ROW_K0[r] + i],
                                  _mm512_castsi512_pd(_mm512_alignr_epi64(y1, zero, 7)));
         }
         double *o = out + 32 * r;
+        cs_xyz8_join(S, o3);
         for (int v = 0; v < 3; v++)
-            _mm512_storeu_pd(o + 8 * v, _mm512_permutex2var_pd(
-                                            _mm512_permutex2var_pd(S[0], ia[v], S[1]), ib[v], S[2]));
+            _mm512_storeu_pd(o + 8 * v, o3[v]);
         const __m512d end = _mm512_permutex2var_pd(
             _mm512_permutex2var_pd((__m512d)y[3 * CS_ROW_K1[r]], e0, (__m512d)y[3 * CS_ROW_K1[r] + 1]),
             e1, (__m512d)y[3 * CS_ROW_K1[r] + 2]);
@@ -1501,6 +1494,8 @@ static void kw_batch(cs_fem *fem, int b, double *fb, const void *ctx, double *e_
 
 void cs_fem_apply_Kw(cs_fem *fem, const double *kf, const double *p, double *y)
 {
+    if (!kf && cs_fem_lattice_product(fem, 1.0, 0.0, NULL, p, y))
+        return;
     const kw_ctx kc = {kf, p};
     fused_pass(fem, kw_batch, &kc, y, 1.0, NULL);
 }
@@ -1508,6 +1503,8 @@ void cs_fem_apply_Kw(cs_fem *fem, const double *kf, const double *p, double *y)
 void cs_fem_apply_K_mass(cs_fem *fem, double kcoef, double mcoef, const double *m,
                          const double *p, double *y)
 {
+    if (cs_fem_lattice_product(fem, kcoef, mcoef, m, p, y))
+        return;
     const kw_ctx kc = {fem->kf, p};
     const node_add na = {m, p, mcoef};
     fused_pass(fem, kw_batch, &kc, y, kcoef, &na);

@@ -18,7 +18,11 @@
  * deformation modes of the trilinear field, their stresses, and back (188 flops, 398 with the
  * rotations, instead of 1152 + 240), 8 cells per batch, one per SIMD lane (two 256-bit
  * halves; its arithmetic, modal_core.h, is shared with multigrid's single-precision V-cycle).
- * K stays for the diagonal blocks and multigrid's set-up.
+ * K stays for the diagonal blocks and multigrid's set-up. On CPUs with AVX-512, cs_fem_apply_K
+ * and cs_fem_apply_K_mass of a mesh whose nodes sit one per lattice point (no fracture) and
+ * whose box is not mostly empty run on the lattice instead (fem_lattice.c: the nodal vectors
+ * as x, y, z arrays over the box, read and summed by whole rows, no slots and no node pass;
+ * the same sums in another fixed order, also independent of the thread count).
  *
  * Material fields (world_internal.h, seed 001 §3.3): with kf set (8 factors per cell, one per
  * Gauss point), cell c's stiffness is K_e = Σ_g kf[8c+g]·K_g, K_g the shared unit matrix of
@@ -39,6 +43,9 @@
 
 /* Objects with fewer cells than this are stepped on one thread (see cs_fem_init). */
 #define CS_FEM_PARALLEL_CELLS 2048
+
+/* The lattice form of the products (fem_lattice.c), built by cs_fem_relink where it applies. */
+typedef struct cs_fem_lattice cs_fem_lattice;
 
 typedef struct cs_fem {
     int n_cells, n_nodes;
@@ -84,6 +91,11 @@ typedef struct cs_fem {
     int32_t *rowb, *nstart, *fadj, *fcell;
     int n_row_batches;
     int span; /* the largest distance between a node's first and last batch */
+    /* cs_fem_apply_K(w) and cs_fem_apply_K_mass on the lattice of the cells' box
+     * (fem_lattice.c; NULL: the mesh is not one the lattice form takes). `lattice`: use it
+     * (cs_fem_init sets true; false: fem.c's product, for comparisons). */
+    cs_fem_lattice *lat;
+    bool lattice;
 } cs_fem;
 
 int cs_fem_init(cs_fem *fem, const cs_cubemesh *cm, double young, double poisson,
@@ -158,6 +170,13 @@ void cs_cube_cells_product(const double K[24 * 24], int n_cells, const int32_t *
                            int threads);
 /* hλ and hμ of a cube stiffness K built by cs_cube_stiffness (K is linear in both). */
 void cs_cube_lame_h(const double K[24 * 24], double *hl, double *hm);
+/* fem_lattice.c: *lt = the lattice form for this mesh, or NULL where it does not apply
+ * (returns -1 on out of memory); its product (false: not taken, the caller runs fem.c's):
+ * y = sign·K p (+ (mcoef·m_n)·p_n per node when m is not NULL). */
+int cs_fem_lattice_build(const cs_fem *fem, const cs_cubemesh *cm, cs_fem_lattice **lt);
+void cs_fem_lattice_free(cs_fem_lattice *lt);
+bool cs_fem_lattice_product(cs_fem *fem, double sign, double mcoef, const double *m,
+                            const double *p, double *y);
 /* Floating-point operations of one cs_fem_apply_K on this mesh (the kernel as implemented). */
 double cs_fem_product_flops(const cs_fem *fem);
 

@@ -16,6 +16,8 @@
 #include <stdbool.h>
 #include <stdint.h>
 
+#include <immintrin.h>
+
 #include "cubemesh.h"
 
 /* Node row r's corners at dx = 0 and dx = 1 (CS_CORNER), and each corner's node row. */
@@ -52,6 +54,35 @@ static inline int cs_row_batches(const int32_t *cell_nodes, int n_cells, int lan
 static inline int cs_row_link(int k, int l, int lanes)
 {
     return CS_CORNER[k][0] ? (l + 1 < lanes ? -1 : 3 * lanes) : 3 * l;
+}
+
+/* 8 nodes' interleaved (x, y, z) in three vectors (A: doubles 0–7, B: 8–15, C: 16–23) →
+ * v[0] = their x, v[1] their y, v[2] their z: two two-source permutes each. */
+static inline __attribute__((always_inline, target("arch=x86-64-v4"))) void
+cs_xyz8_split(__m512d A, __m512d B, __m512d C, __m512d v[3])
+{
+    const __m512i lo[3] = {_mm512_setr_epi64(0, 3, 6, 9, 12, 15, 0, 0),
+                           _mm512_setr_epi64(1, 4, 7, 10, 13, 0, 0, 0),
+                           _mm512_setr_epi64(2, 5, 8, 11, 14, 0, 0, 0)};
+    const __m512i hi[3] = {_mm512_setr_epi64(0, 1, 2, 3, 4, 5, 10, 13),
+                           _mm512_setr_epi64(0, 1, 2, 3, 4, 8, 11, 14),
+                           _mm512_setr_epi64(0, 1, 2, 3, 4, 9, 12, 15)};
+    for (int i = 0; i < 3; i++)
+        v[i] = _mm512_permutex2var_pd(_mm512_permutex2var_pd(A, lo[i], B), hi[i], C);
+}
+
+/* The inverse: x, y, z of 8 nodes (v) → their interleaved 24 doubles in o[0..2]. */
+static inline __attribute__((always_inline, target("arch=x86-64-v4"))) void
+cs_xyz8_join(const __m512d v[3], __m512d o[3])
+{
+    const __m512i ia[3] = {_mm512_setr_epi64(0, 8, 0, 1, 9, 0, 2, 10),
+                           _mm512_setr_epi64(0, 3, 11, 0, 4, 12, 0, 5),
+                           _mm512_setr_epi64(13, 0, 6, 14, 0, 7, 15, 0)};
+    const __m512i ib[3] = {_mm512_setr_epi64(0, 1, 8, 3, 4, 9, 6, 7),
+                           _mm512_setr_epi64(10, 1, 2, 11, 4, 5, 12, 7),
+                           _mm512_setr_epi64(0, 13, 2, 3, 14, 5, 6, 15)};
+    for (int i = 0; i < 3; i++)
+        o[i] = _mm512_permutex2var_pd(_mm512_permutex2var_pd(v[0], ia[i], v[1]), ib[i], v[2]);
 }
 
 #endif

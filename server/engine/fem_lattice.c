@@ -1,0 +1,481 @@
+/*
+ * fem_lattice.c — cs_fem_apply_K and cs_fem_apply_K_mass on a lattice: the nodal vectors as
+ * three arrays (x, y, z) over the box of the object's cells, read and summed by whole rows.
+ *
+ * fem.c's product reads each cell's 8 corners from the interleaved (x, y, z) nodal vectors and
+ * transposes them into the SIMD lanes, and writes each cell's 24 results to a slot that a node
+ * pass gathers: most of its time goes to those loads, transposes, stores and gathers, not to
+ * the arithmetic (README, "The element product against the peak"). Here the object's nodes are
+ * placed on the lattice of its bounding box, a row of nodes along x at consecutive places of
+ * three component arrays (ps): a batch of 8 cells along a row reads each of its 8 corners'
+ * components as one vector load (the dx = 1 corners the same row one place on), with no
+ * transpose, and adds its results into the rows of the sums (ys) as whole vectors, each node's
+ * two results in the row first added in registers (the dx = 1 corner of cell i − 1 and the
+ * dx = 0 corner of cell i: a lane shift). No slots, no node pass. The nodal vectors go onto
+ * the lattice and back node layer by node layer: before a cell layer, the node layer above it
+ * is placed (loads and permutes where consecutive places hold consecutive nodes, as along a
+ * row of a block; one by one elsewhere); after it, the node layer below it is complete and
+ * goes back to the nodes with the operator's mass term. Two node layers of inputs and of sums
+ * are live per part (225 kB of each on 64³), so they stay in L2.
+ *
+ * Per lane the arithmetic is fem.c's wide kernel (modal_core.h, rotations rebuilt from the
+ * quaternions fem->q), so every cell's 24 results are the same bits; the sums per node are
+ * in a fixed order: cell rows by layer (z) then row (y), each adding its pair of results to
+ * the node, from zero. The cell layers are split into two parts at a fixed layer (the one
+ * that halves the work), whatever the thread count: the second part's sums on the shared
+ * node layer are kept apart and added to the first's at the end. So results do not depend on
+ * the number of threads; they differ from fem.c's (a different order of the same sums) in the
+ * last bits.
+ *
+ * Taken (cs_fem_lattice_product) on CPUs with AVX-512 (in 512-bit vectors whatever fem->wide
+ * says: measured only on Intel's full-width cores; results do not depend on it), for products of the uniform material
+ * (fem->kf NULL), without an active region, on meshes whose nodes are each one lattice point
+ * (none split by fracture, none without a cell) and whose box holds at most 3 × (nodes + 4096)
+ * lattice places; anything else runs fem.c's product.
+ */
+#include "fem.h"
+
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include <immintrin.h>
+#include <omp.h>
+
+#include "mat3.h"
+#include "rowbatch.h"
+
+#define LLANES 8 /* cells per batch: doubles per 512-bit vector */
+
+struct cs_fem_lattice {
+    int nx, ny, nz; /* cells in the box */
+    int nxb;        /* batches per cell row: nx / 8 rounded up */
+    int sx;         /* places per node row: 8·nxb + 8 (the last lane's dx = 1 corner) */
+    size_t layer;   /* places per node layer: sx·(ny + 1) */
+    size_t npos;    /* places: layer·(nz + 1) */
+    int kmid;       /* the second part's first cell layer (nz: one part) */
+    uint8_t *bmask; /* per batch (ib + nxb·(j + ny·k)): its lanes with a cell */
+    int32_t *bq;    /* per batch: 4·(its first cell) if its 8 cells are consecutive, else -1 */
+    int32_t *qix;   /* 8 per batch: 4·cell per lane (0 where none) */
+    int32_t *node;  /* per place: its node, or -1 */
+    /* Per part, two node layers of the input (ps) and of the sums (ys) in turn (layer kn in
+     * slot kn & 1), each 3 × layer doubles (x, y, z arrays); the shared node layer kmid's sums
+     * of the first part (mid) and of the second (seam). */
+    double *ps[2][2], *ys[2][2];
+    double *mid, *seam;
+};
+
+void cs_fem_lattice_free(cs_fem_lattice *lt)
+{
+    if (!lt)
+        return;
+    free(lt->bmask);
+    free(lt->bq);
+    free(lt->qix);
+    free(lt->node);
+    for (int a = 0; a < 2; a++)
+        for (int b = 0; b < 2; b++) {
+            free(lt->ps[a][b]);
+            free(lt->ys[a][b]);
+        }
+    free(lt->mid);
+    free(lt->seam);
+    free(lt);
+}
+
+static double *alloc_doubles(size_t n)
+{
+    const size_t bytes = (n * sizeof(double) + 63) / 64 * 64;
+    double *p = aligned_alloc(64, bytes ? bytes : 64);
+    if (p)
+        memset(p, 0, bytes);
+    return p;
+}
+
+int cs_fem_lattice_build(const cs_fem *fem, const cs_cubemesh *cm, cs_fem_lattice **out)
+{
+    *out = NULL;
+    const int nc = cm->n_cells, nn = cm->n_nodes;
+    if (nc == 0 || nn == 0)
+        return 0;
+    int32_t lo[3], hi[3];
+    for (int a = 0; a < 3; a++)
+        lo[a] = hi[a] = cm->cell_ijk[a];
+    for (int c = 0; c < nc; c++)
+        for (int a = 0; a < 3; a++) {
+            const int32_t v = cm->cell_ijk[3 * (size_t)c + a];
+            lo[a] = v < lo[a] ? v : lo[a];
+            hi[a] = v > hi[a] ? v : hi[a];
+        }
+    const int64_t nx = (int64_t)hi[0] - lo[0] + 1, ny = (int64_t)hi[1] - lo[1] + 1,
+                  nz = (int64_t)hi[2] - lo[2] + 1;
+    const int64_t nxb = (nx + LLANES - 1) / LLANES, sx = LLANES * nxb + LLANES;
+    const int64_t npos = sx * (ny + 1) * (nz + 1);
+    if (npos > 3 * ((int64_t)nn + 4096) || npos > INT32_MAX / 4)
+        return 0; /* a sparse box: fem.c's product */
+    cs_fem_lattice *lt = calloc(1, sizeof *lt);
+    if (!lt)
+        return -1;
+    lt->nx = (int)nx, lt->ny = (int)ny, lt->nz = (int)nz;
+    lt->nxb = (int)nxb, lt->sx = (int)sx;
+    lt->layer = (size_t)(sx * (ny + 1));
+    lt->npos = (size_t)npos;
+    const size_t nb = (size_t)(nxb * ny * nz);
+    lt->bmask = calloc(nb, 1);
+    lt->bq = malloc(nb * sizeof(int32_t));
+    lt->qix = calloc(nb * LLANES, sizeof(int32_t));
+    lt->node = malloc((size_t)npos * sizeof(int32_t));
+    bool got = true;
+    for (int a = 0; a < 2; a++)
+        for (int b = 0; b < 2; b++) {
+            lt->ps[a][b] = alloc_doubles(3 * lt->layer);
+            lt->ys[a][b] = alloc_doubles(3 * lt->layer);
+            got = got && lt->ps[a][b] && lt->ys[a][b];
+        }
+    lt->mid = alloc_doubles(3 * lt->layer);
+    lt->seam = alloc_doubles(3 * lt->layer);
+    int32_t *cellat = malloc(nb * LLANES * sizeof(int32_t));
+    if (!lt->bmask || !lt->bq || !lt->qix || !lt->node || !got || !lt->mid || !lt->seam ||
+        !cellat) {
+        free(cellat);
+        cs_fem_lattice_free(lt);
+        return -1;
+    }
+    for (int64_t q = 0; q < npos; q++)
+        lt->node[q] = -1;
+    for (size_t s = 0; s < nb * LLANES; s++)
+        cellat[s] = -1;
+    bool ok = true;
+    for (int c = 0; c < nc && ok; c++) {
+        const int32_t *ijk = cm->cell_ijk + 3 * (size_t)c;
+        const int64_t i = ijk[0] - lo[0], j = ijk[1] - lo[1], k = ijk[2] - lo[2];
+        cellat[(size_t)(i + LLANES * nxb * (j + ny * k))] = c;
+        for (int kk = 0; kk < 8 && ok; kk++) {
+            const int64_t q = (i + CS_CORNER[kk][0]) + sx * ((j + CS_CORNER[kk][1]) +
+                                                             (ny + 1) * (k + CS_CORNER[kk][2]));
+            const int32_t n = cm->cell_nodes[8 * (size_t)c + kk];
+            if (lt->node[q] < 0)
+                lt->node[q] = n;
+            else
+                ok = lt->node[q] == n;
+        }
+    }
+    /* every node at one place: none split (fracture), none without a cell */
+    int64_t placed = 0;
+    for (int64_t q = 0; q < npos && ok; q++)
+        placed += lt->node[q] >= 0;
+    ok = ok && placed == nn;
+    if (!ok) {
+        free(cellat);
+        cs_fem_lattice_free(lt);
+        return 0;
+    }
+    /* batches; the part boundary: the layer that splits the cells most evenly */
+    int64_t seen = 0, best = -1;
+    lt->kmid = lt->nz;
+    for (int64_t k = 0; k < nz; k++) {
+        if (k > 0) {
+            const int64_t d = 2 * seen - nc < 0 ? nc - 2 * seen : 2 * seen - nc;
+            if (best < 0 || d < best) {
+                best = d;
+                lt->kmid = (int)k;
+            }
+        }
+        for (int64_t j = 0; j < ny; j++)
+            for (int64_t ib = 0; ib < nxb; ib++) {
+                const size_t b = (size_t)(ib + nxb * (j + ny * k));
+                const int32_t *cl = cellat + LLANES * b;
+                bool run = cl[0] >= 0;
+                for (int l = 0; l < LLANES; l++) {
+                    if (cl[l] >= 0) {
+                        lt->bmask[b] |= (uint8_t)(1u << l);
+                        lt->qix[LLANES * b + l] = 4 * cl[l];
+                        seen++;
+                    }
+                    run = run && cl[l] == cl[0] + l;
+                }
+                lt->bq[b] = run ? 4 * cl[0] : -1;
+            }
+    }
+    free(cellat);
+    *out = lt;
+    return 0;
+}
+
+typedef double vd8 __attribute__((vector_size(64)));
+#define MODAL_NAME lattice_core8
+#define MODAL_V vd8
+#define MODAL_S double
+#include "modal_core.h"
+
+/* Cell layer k: each cell row's batches read the four node rows around it from the input
+ * layers (pl: node layer k, ph: k + 1; 3 × layer each) and add into those of the sums (yl,
+ * yh). A node row is zeroed just before the first cell row of the part that adds to it
+ * (first: k is the part's first layer). */
+__attribute__((optimize("fp-contract=fast"), target("arch=x86-64-v4"))) static void
+cell_layer(const cs_fem *fem, const cs_fem_lattice *lt, int k, const double *restrict pl,
+           const double *restrict ph, double *restrict yl, double *restrict yh, bool first,
+           int rot)
+{
+    const double c16 = fem->h / 16.0;
+    const __m512d Lc = _mm512_set1_pd(c16 * fem->lambda * 1.0),
+                  Mc = _mm512_set1_pd(c16 * fem->mu * 1.0);
+    const size_t layer = lt->layer;
+    const int sx = lt->sx, nxb = lt->nxb, ny = lt->ny;
+    const double *restrict Q = fem->q;
+    const __m512i wx = _mm512_setr_epi64(0, 4, 8, 12, 1, 5, 9, 13);
+    const __m512i yz = _mm512_setr_epi64(2, 6, 10, 14, 3, 7, 11, 15);
+    for (int j = 0; j < ny; j++) {
+        const size_t q0 = (size_t)j * sx;
+        const double *irow[4] = {pl + q0, pl + q0 + sx, ph + q0, ph + q0 + sx};
+        double *orow[4] = {yl + q0, yl + q0 + sx, yh + q0, yh + q0 + sx};
+        /* zero the node rows this cell row is the first to reach */
+        const bool zero[4] = {j == 0 && first, first, j == 0, true};
+        for (int r = 0; r < 4; r++)
+            for (int c = 0; zero[r] && c < 3; c++)
+                for (int x = 0; x < sx; x += LLANES)
+                    _mm512_store_pd(orow[r] + c * layer + x, _mm512_setzero_pd());
+        const size_t b0 = (size_t)nxb * (j + (size_t)ny * k);
+        /* each node row's last results at dx = 1 (lane 7: the next batch's first node's), in
+         * memory: kept in registers they would hold 12 of 32 through the kernel */
+        double carry[12][LLANES] __attribute__((aligned(64)));
+        bool live = false;
+        for (int ib = 0; ib < nxb; ib++) {
+            const size_t b = b0 + ib;
+            const __mmask8 mask = lt->bmask[b];
+            if (!mask || !live) {
+                /* the last batch's dx = 1 corner of its last lane: the next node's */
+                for (int r = 0; live && r < 4; r++)
+                    for (int c = 0; c < 3; c++)
+                        orow[r][c * layer + LLANES * ib] += carry[3 * r + c][LLANES - 1];
+                for (int v = 0; v < 12; v++)
+                    _mm512_store_pd(carry[v], _mm512_setzero_pd());
+                live = mask != 0;
+                if (!mask)
+                    continue;
+            }
+            vd8 u[24], R[9], y[24];
+            const size_t x0 = (size_t)LLANES * ib;
+            for (int r = 0; r < 4; r++)
+                for (int c = 0; c < 3; c++) {
+                    const double *p = irow[r] + c * layer + x0;
+                    u[3 * CS_ROW_K0[r] + c] = (vd8)_mm512_load_pd(p);
+                    u[3 * CS_ROW_K1[r] + c] = (vd8)_mm512_loadu_pd(p + 1);
+                }
+            if (rot) {
+                __m512d w, x1, y1, z1;
+                if (lt->bq[b] >= 0) {
+                    /* 8 consecutive cells' (w, x, y, z), regrouped by component */
+                    const double *Qp = Q + lt->bq[b];
+                    const __m512d A = _mm512_loadu_pd(Qp), B = _mm512_loadu_pd(Qp + 8),
+                                  C = _mm512_loadu_pd(Qp + 16), D = _mm512_loadu_pd(Qp + 24);
+                    const __m512d p0 = _mm512_permutex2var_pd(A, wx, B),
+                                  p1 = _mm512_permutex2var_pd(A, yz, B);
+                    const __m512d p2 = _mm512_permutex2var_pd(C, wx, D),
+                                  p3 = _mm512_permutex2var_pd(C, yz, D);
+                    w = _mm512_shuffle_f64x2(p0, p2, 0x44);
+                    x1 = _mm512_shuffle_f64x2(p0, p2, 0xEE);
+                    y1 = _mm512_shuffle_f64x2(p1, p3, 0x44);
+                    z1 = _mm512_shuffle_f64x2(p1, p3, 0xEE);
+                } else {
+                    const __m256i ix = _mm256_loadu_si256((const __m256i *)(lt->qix + LLANES * b));
+                    w = _mm512_i32gather_pd(ix, Q, 8);
+                    x1 = _mm512_i32gather_pd(ix, Q + 1, 8);
+                    y1 = _mm512_i32gather_pd(ix, Q + 2, 8);
+                    z1 = _mm512_i32gather_pd(ix, Q + 3, 8);
+                }
+                const vd8 W = (vd8)w, X = (vd8)x1, Y = (vd8)y1, Z = (vd8)z1;
+                CS_QUAT_TO_MAT(W, X, Y, Z, R);
+            }
+            const vd8 L = (vd8)_mm512_maskz_mov_pd(mask, Lc), M = (vd8)_mm512_maskz_mov_pd(mask, Mc);
+            lattice_core8(u, rot ? R : NULL, 0.0, &L, &M, NULL, y);
+            if (mask != 0xff) /* a lane without a cell adds nothing (even for a NaN input) */
+                for (int v = 0; v < 24; v++)
+                    y[v] = (vd8)_mm512_maskz_mov_pd(mask, (__m512d)y[v]);
+            for (int r = 0; r < 4; r++)
+                for (int c = 0; c < 3; c++) {
+                    const __m512d y1 = (__m512d)y[3 * CS_ROW_K1[r] + c];
+                    const __m512d sm = _mm512_add_pd(
+                        (__m512d)y[3 * CS_ROW_K0[r] + c],
+                        _mm512_castsi512_pd(_mm512_alignr_epi64(
+                            _mm512_castpd_si512(y1), _mm512_load_si512(carry[3 * r + c]), 7)));
+                    double *o = orow[r] + c * layer + x0;
+                    _mm512_store_pd(o, _mm512_add_pd(_mm512_load_pd(o), sm));
+                    _mm512_store_pd(carry[3 * r + c], y1);
+                }
+        }
+        for (int r = 0; live && r < 4; r++)
+            for (int c = 0; c < 3; c++)
+                orow[r][c * layer + LLANES * nxb] += carry[3 * r + c][LLANES - 1];
+    }
+}
+
+/* A group of 8 places whose nodes are mostly consecutive (along a node row the mesh numbers
+ * them so, but for a swapped pair at the row's start): `base` such that lane l's node is
+ * base + l for the lanes in *run (the last lane with a node decides), the other lanes with a
+ * node in *rest; and in *e the 24-double mask of the run's (x, y, z) from 3·base. */
+__attribute__((target("arch=x86-64-v4"))) static inline __attribute__((always_inline)) int32_t
+group_run(const int32_t *node, __mmask8 *run, __mmask8 *rest, uint32_t *e)
+{
+    const __m256i n = _mm256_loadu_si256((const __m256i *)node);
+    const __mmask8 has = _mm256_cmpge_epi32_mask(n, _mm256_setzero_si256());
+    if (!has) {
+        *run = *rest = 0;
+        *e = 0;
+        return 0;
+    }
+    const int l = 31 - __builtin_clz((unsigned)has);
+    const int32_t base = node[l] - l;
+    const __m256i step = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+    *run = _mm256_mask_cmpeq_epi32_mask(has, n, _mm256_add_epi32(_mm256_set1_epi32(base), step));
+    *rest = has & (__mmask8)~*run;
+    *e = _pdep_u32(*run, 0x249249u) * 7u;
+    return base;
+}
+
+/* 8 places' nodal vectors (group_run's) as x, y, z vectors (0 where no node). */
+__attribute__((target("arch=x86-64-v4"))) static inline __attribute__((always_inline)) void
+group_in(const int32_t *node, const double *restrict p, __m512d v[3])
+{
+    __mmask8 run, rest;
+    uint32_t e;
+    const int32_t base = group_run(node, &run, &rest, &e);
+    /* masked loads: lanes outside the run are neither read nor faulted */
+    const double *s = (const double *)((uintptr_t)p + (uintptr_t)(24 * (int64_t)base));
+    cs_xyz8_split(_mm512_maskz_loadu_pd((__mmask8)e, s),
+                  _mm512_maskz_loadu_pd((__mmask8)(e >> 8), s + 8),
+                  _mm512_maskz_loadu_pd((__mmask8)(e >> 16), s + 16), v);
+    for (unsigned r = rest; r; r &= r - 1) {
+        const int l = __builtin_ctz(r);
+        const double *n = p + 3 * (size_t)node[l];
+        for (int c = 0; c < 3; c++)
+            v[c] = _mm512_mask_broadcastsd_pd(v[c], (__mmask8)(1u << l), _mm_set_sd(n[c]));
+    }
+}
+
+/* Node layer kn of the input p onto the lattice (dst: 3 × layer; places without a node 0). */
+__attribute__((target("arch=x86-64-v4"))) static void layer_in(const cs_fem_lattice *lt,
+                                                                const double *restrict p, int kn,
+                                                                double *restrict dst)
+{
+    const size_t layer = lt->layer;
+    const int32_t *node = lt->node + (size_t)kn * layer;
+    for (size_t q = 0; q < layer; q += LLANES) {
+        __m512d v[3];
+        group_in(node + q, p, v);
+        for (int c = 0; c < 3; c++)
+            _mm512_store_pd(dst + c * layer + q, v[c]);
+    }
+}
+
+/* The operator's terms on the product (lattice_product's). */
+typedef struct lat_out {
+    const double *p, *m;
+    double *y;
+    double sign, mcoef;
+} lat_out;
+
+/* Node layer kn's sums back to its nodes: y = sign·Σ (+ (mcoef·m_n)·p_n with m), Σ = s1
+ * (+ s2: the shared layer, the first part's sum then the second's); pin: the layer's input on
+ * the lattice (NULL: read from p). */
+__attribute__((target("arch=x86-64-v4"))) static void
+layer_out(const cs_fem_lattice *lt, const lat_out *o, int kn, const double *restrict s1,
+          const double *restrict s2, const double *restrict pin)
+{
+    const size_t layer = lt->layer;
+    const int32_t *node = lt->node + (size_t)kn * layer;
+    const __m512d sg = _mm512_set1_pd(o->sign), mc = _mm512_set1_pd(o->mcoef);
+    const double *restrict m = o->m;
+    double *restrict y = o->y;
+    for (size_t q = 0; q < layer; q += LLANES) {
+        __mmask8 run, rest;
+        uint32_t e;
+        const int32_t base = group_run(node + q, &run, &rest, &e);
+        if (!(run | rest))
+            continue;
+        __m512d r[3], mm = _mm512_setzero_pd(), P[3];
+        if (m) {
+            mm = _mm512_maskz_loadu_pd(run, (const void *)((uintptr_t)m + (uintptr_t)(8 * (int64_t)base)));
+            for (unsigned t = rest; t; t &= t - 1) {
+                const int l = __builtin_ctz(t);
+                mm = _mm512_mask_broadcastsd_pd(mm, (__mmask8)(1u << l), _mm_set_sd(m[node[q + l]]));
+            }
+            mm = _mm512_mul_pd(mc, mm);
+            if (pin)
+                for (int c = 0; c < 3; c++)
+                    P[c] = _mm512_load_pd(pin + c * layer + q);
+            else
+                group_in(node + q, o->p, P);
+        }
+        for (int c = 0; c < 3; c++) {
+            __m512d s = _mm512_load_pd(s1 + c * layer + q);
+            if (s2)
+                s = _mm512_add_pd(s, _mm512_load_pd(s2 + c * layer + q));
+            r[c] = _mm512_mul_pd(sg, s);
+            if (m)
+                r[c] = _mm512_add_pd(r[c], _mm512_mul_pd(mm, P[c]));
+        }
+        double *out = (double *)((uintptr_t)y + (uintptr_t)(24 * (int64_t)base));
+        __m512d o3[3];
+        cs_xyz8_join(r, o3);
+        for (int v = 0; v < 3; v++)
+            _mm512_mask_storeu_pd(out + 8 * v, (__mmask8)(e >> (8 * v)), o3[v]);
+        if (rest) {
+            double t[3][LLANES];
+            for (int c = 0; c < 3; c++)
+                _mm512_storeu_pd(t[c], r[c]);
+            for (unsigned u = rest; u; u &= u - 1) {
+                const int l = __builtin_ctz(u);
+                double *v = y + 3 * (size_t)node[q + l];
+                for (int c = 0; c < 3; c++)
+                    v[c] = t[c][l];
+            }
+        }
+    }
+}
+
+/* Part `part` of the product: cell layers [k0, k1), node layer by node layer: the input of
+ * layer k + 1 onto the lattice, cell layer k, node layer k (now complete) back to the nodes.
+ * With two parts the shared node layer kmid's sums stay in lt->mid (first part) and lt->seam
+ * (second part) for after the barrier. */
+static void lattice_part(const cs_fem *fem, cs_fem_lattice *lt, const lat_out *o, int part,
+                         int k0, int k1, bool split, int rot)
+{
+    double *const *ps = lt->ps[part], *const *ys = lt->ys[part];
+    layer_in(lt, o->p, k0, ps[k0 & 1]);
+    for (int k = k0; k < k1; k++) {
+        layer_in(lt, o->p, k + 1, ps[(k + 1) & 1]);
+        double *yl = split && part == 1 && k == k0 ? lt->seam : ys[k & 1];
+        double *yh = split && part == 0 && k + 1 == k1 ? lt->mid : ys[(k + 1) & 1];
+        cell_layer(fem, lt, k, ps[k & 1], ps[(k + 1) & 1], yl, yh, k == k0, rot);
+        if (yl != lt->seam)
+            layer_out(lt, o, k, yl, NULL, ps[k & 1]);
+    }
+    if (!(split && part == 0))
+        layer_out(lt, o, k1, ys[k1 & 1], NULL, ps[k1 & 1]);
+}
+
+bool cs_fem_lattice_product(cs_fem *fem, double sign, double mcoef, const double *m,
+                            const double *p, double *y)
+{
+    cs_fem_lattice *lt = fem->lat;
+    if (!lt || !fem->lattice || fem->kf || fem->cell_active ||
+        !__builtin_cpu_supports("x86-64-v4"))
+        return false;
+    const int rot = fem->corotational;
+    const bool split = lt->kmid < lt->nz;
+    const lat_out o = {p, m, y, sign, mcoef};
+#pragma omp parallel num_threads(split ? fem->threads : 1)
+    {
+        const int nt = omp_get_num_threads(), t = omp_get_thread_num();
+        for (int part = t; part < (split ? 2 : 1); part += nt)
+            lattice_part(fem, lt, &o, part, part ? lt->kmid : 0, part ? lt->nz : lt->kmid, split,
+                         rot);
+        if (split) {
+#pragma omp barrier
+            if (t == nt - 1)
+                layer_out(lt, &o, lt->kmid, lt->mid, lt->seam, NULL);
+        }
+    }
+    return true;
+}
