@@ -42,22 +42,17 @@
 #include <immintrin.h>
 #include <omp.h>
 
+#include "lattice_map.h"
 #include "mat3.h"
 #include "rowbatch.h"
 
 #define LLANES 8 /* cells per batch: doubles per 512-bit vector */
 
 struct cs_fem_lattice {
-    int nx, ny, nz; /* cells in the box */
-    int nxb;        /* batches per cell row: nx / 8 rounded up */
-    int sx;         /* places per node row: 8·nxb + 8 (the last lane's dx = 1 corner) */
-    size_t layer;   /* places per node layer: sx·(ny + 1) */
-    size_t npos;    /* places: layer·(nz + 1) */
-    int kmid;       /* the second part's first cell layer (nz: one part) */
+    cs_lattice_map m; /* places, batches of 8 cells, the two parts (lattice_map.h) */
     uint8_t *bmask; /* per batch (ib + nxb·(j + ny·k)): its lanes with a cell */
     int32_t *bq;    /* per batch: 4·(its first cell) if its 8 cells are consecutive, else -1 */
     int32_t *qix;   /* 8 per batch: 4·cell per lane (0 where none) */
-    int32_t *node;  /* per place: its node, or -1 */
     /* Per part, two node layers of the input (ps) and of the sums (ys) in turn (layer kn in
      * slot kn & 1), each 3 × layer doubles (x, y, z arrays); the shared node layer kmid's sums
      * of the first part (mid) and of the second (seam). */
@@ -72,7 +67,7 @@ void cs_fem_lattice_free(cs_fem_lattice *lt)
     free(lt->bmask);
     free(lt->bq);
     free(lt->qix);
-    free(lt->node);
+    cs_lattice_map_free(&lt->m);
     for (int a = 0; a < 2; a++)
         for (int b = 0; b < 2; b++) {
             free(lt->ps[a][b]);
@@ -94,110 +89,47 @@ static double *alloc_doubles(size_t n)
 
 int cs_fem_lattice_build(const cs_fem *fem, const cs_cubemesh *cm, cs_fem_lattice **out)
 {
+    (void)fem;
     *out = NULL;
-    const int nc = cm->n_cells, nn = cm->n_nodes;
-    if (nc == 0 || nn == 0)
-        return 0;
-    int32_t lo[3], hi[3];
-    for (int a = 0; a < 3; a++)
-        lo[a] = hi[a] = cm->cell_ijk[a];
-    for (int c = 0; c < nc; c++)
-        for (int a = 0; a < 3; a++) {
-            const int32_t v = cm->cell_ijk[3 * (size_t)c + a];
-            lo[a] = v < lo[a] ? v : lo[a];
-            hi[a] = v > hi[a] ? v : hi[a];
-        }
-    const int64_t nx = (int64_t)hi[0] - lo[0] + 1, ny = (int64_t)hi[1] - lo[1] + 1,
-                  nz = (int64_t)hi[2] - lo[2] + 1;
-    const int64_t nxb = (nx + LLANES - 1) / LLANES, sx = LLANES * nxb + LLANES;
-    const int64_t npos = sx * (ny + 1) * (nz + 1);
-    if (npos > 3 * ((int64_t)nn + 4096) || npos > INT32_MAX / 4)
-        return 0; /* a sparse box: fem.c's product */
+    cs_lattice_map map;
+    const int rc = cs_lattice_map_build(&map, cm, LLANES);
+    if (rc <= 0)
+        return rc;
     cs_fem_lattice *lt = calloc(1, sizeof *lt);
-    if (!lt)
+    if (!lt) {
+        cs_lattice_map_free(&map);
         return -1;
-    lt->nx = (int)nx, lt->ny = (int)ny, lt->nz = (int)nz;
-    lt->nxb = (int)nxb, lt->sx = (int)sx;
-    lt->layer = (size_t)(sx * (ny + 1));
-    lt->npos = (size_t)npos;
-    const size_t nb = (size_t)(nxb * ny * nz);
+    }
+    lt->m = map;
+    const size_t nb = (size_t)map.nxb * map.ny * map.nz, layer = map.layer;
     lt->bmask = calloc(nb, 1);
     lt->bq = malloc(nb * sizeof(int32_t));
     lt->qix = calloc(nb * LLANES, sizeof(int32_t));
-    lt->node = malloc((size_t)npos * sizeof(int32_t));
-    bool got = true;
+    bool got = lt->bmask && lt->bq && lt->qix;
     for (int a = 0; a < 2; a++)
         for (int b = 0; b < 2; b++) {
-            lt->ps[a][b] = alloc_doubles(3 * lt->layer);
-            lt->ys[a][b] = alloc_doubles(3 * lt->layer);
+            lt->ps[a][b] = alloc_doubles(3 * layer);
+            lt->ys[a][b] = alloc_doubles(3 * layer);
             got = got && lt->ps[a][b] && lt->ys[a][b];
         }
-    lt->mid = alloc_doubles(3 * lt->layer);
-    lt->seam = alloc_doubles(3 * lt->layer);
-    int32_t *cellat = malloc(nb * LLANES * sizeof(int32_t));
-    if (!lt->bmask || !lt->bq || !lt->qix || !lt->node || !got || !lt->mid || !lt->seam ||
-        !cellat) {
-        free(cellat);
+    lt->mid = alloc_doubles(3 * layer);
+    lt->seam = alloc_doubles(3 * layer);
+    if (!got || !lt->mid || !lt->seam) {
         cs_fem_lattice_free(lt);
         return -1;
     }
-    for (int64_t q = 0; q < npos; q++)
-        lt->node[q] = -1;
-    for (size_t s = 0; s < nb * LLANES; s++)
-        cellat[s] = -1;
-    bool ok = true;
-    for (int c = 0; c < nc && ok; c++) {
-        const int32_t *ijk = cm->cell_ijk + 3 * (size_t)c;
-        const int64_t i = ijk[0] - lo[0], j = ijk[1] - lo[1], k = ijk[2] - lo[2];
-        cellat[(size_t)(i + LLANES * nxb * (j + ny * k))] = c;
-        for (int kk = 0; kk < 8 && ok; kk++) {
-            const int64_t q = (i + CS_CORNER[kk][0]) + sx * ((j + CS_CORNER[kk][1]) +
-                                                             (ny + 1) * (k + CS_CORNER[kk][2]));
-            const int32_t n = cm->cell_nodes[8 * (size_t)c + kk];
-            if (lt->node[q] < 0)
-                lt->node[q] = n;
-            else
-                ok = lt->node[q] == n;
-        }
-    }
-    /* every node at one place: none split (fracture), none without a cell */
-    int64_t placed = 0;
-    for (int64_t q = 0; q < npos && ok; q++)
-        placed += lt->node[q] >= 0;
-    ok = ok && placed == nn;
-    if (!ok) {
-        free(cellat);
-        cs_fem_lattice_free(lt);
-        return 0;
-    }
-    /* batches; the part boundary: the layer that splits the cells most evenly */
-    int64_t seen = 0, best = -1;
-    lt->kmid = lt->nz;
-    for (int64_t k = 0; k < nz; k++) {
-        if (k > 0) {
-            const int64_t d = 2 * seen - nc < 0 ? nc - 2 * seen : 2 * seen - nc;
-            if (best < 0 || d < best) {
-                best = d;
-                lt->kmid = (int)k;
+    for (size_t b = 0; b < nb; b++) {
+        const int32_t *cl = map.cell + LLANES * b;
+        bool run = cl[0] >= 0;
+        for (int l = 0; l < LLANES; l++) {
+            if (cl[l] >= 0) {
+                lt->bmask[b] |= (uint8_t)(1u << l);
+                lt->qix[LLANES * b + l] = 4 * cl[l];
             }
+            run = run && cl[l] == cl[0] + l;
         }
-        for (int64_t j = 0; j < ny; j++)
-            for (int64_t ib = 0; ib < nxb; ib++) {
-                const size_t b = (size_t)(ib + nxb * (j + ny * k));
-                const int32_t *cl = cellat + LLANES * b;
-                bool run = cl[0] >= 0;
-                for (int l = 0; l < LLANES; l++) {
-                    if (cl[l] >= 0) {
-                        lt->bmask[b] |= (uint8_t)(1u << l);
-                        lt->qix[LLANES * b + l] = 4 * cl[l];
-                        seen++;
-                    }
-                    run = run && cl[l] == cl[0] + l;
-                }
-                lt->bq[b] = run ? 4 * cl[0] : -1;
-            }
+        lt->bq[b] = run ? 4 * cl[0] : -1;
     }
-    free(cellat);
     *out = lt;
     return 0;
 }
@@ -220,8 +152,8 @@ cell_layer(const cs_fem *fem, const cs_fem_lattice *lt, int k, const double *res
     const double c16 = fem->h / 16.0;
     const __m512d Lc = _mm512_set1_pd(c16 * fem->lambda * 1.0),
                   Mc = _mm512_set1_pd(c16 * fem->mu * 1.0);
-    const size_t layer = lt->layer;
-    const int sx = lt->sx, nxb = lt->nxb, ny = lt->ny;
+    const size_t layer = lt->m.layer;
+    const int sx = lt->m.sx, nxb = lt->m.nxb, ny = lt->m.ny;
     const double *restrict Q = fem->q;
     const __m512i wx = _mm512_setr_epi64(0, 4, 8, 12, 1, 5, 9, 13);
     const __m512i yz = _mm512_setr_epi64(2, 6, 10, 14, 3, 7, 11, 15);
@@ -358,8 +290,8 @@ __attribute__((target("arch=x86-64-v4"))) static void layer_in(const cs_fem_latt
                                                                 const double *restrict p, int kn,
                                                                 double *restrict dst)
 {
-    const size_t layer = lt->layer;
-    const int32_t *node = lt->node + (size_t)kn * layer;
+    const size_t layer = lt->m.layer;
+    const int32_t *node = lt->m.node + (size_t)kn * layer;
     for (size_t q = 0; q < layer; q += LLANES) {
         __m512d v[3];
         group_in(node + q, p, v);
@@ -382,8 +314,8 @@ __attribute__((target("arch=x86-64-v4"))) static void
 layer_out(const cs_fem_lattice *lt, const lat_out *o, int kn, const double *restrict s1,
           const double *restrict s2, const double *restrict pin)
 {
-    const size_t layer = lt->layer;
-    const int32_t *node = lt->node + (size_t)kn * layer;
+    const size_t layer = lt->m.layer;
+    const int32_t *node = lt->m.node + (size_t)kn * layer;
     const __m512d sg = _mm512_set1_pd(o->sign), mc = _mm512_set1_pd(o->mcoef);
     const double *restrict m = o->m;
     double *restrict y = o->y;
@@ -463,18 +395,18 @@ bool cs_fem_lattice_product(cs_fem *fem, double sign, double mcoef, const double
         !__builtin_cpu_supports("x86-64-v4"))
         return false;
     const int rot = fem->corotational;
-    const bool split = lt->kmid < lt->nz;
+    const bool split = lt->m.kmid < lt->m.nz;
     const lat_out o = {p, m, y, sign, mcoef};
 #pragma omp parallel num_threads(split ? fem->threads : 1)
     {
         const int nt = omp_get_num_threads(), t = omp_get_thread_num();
         for (int part = t; part < (split ? 2 : 1); part += nt)
-            lattice_part(fem, lt, &o, part, part ? lt->kmid : 0, part ? lt->nz : lt->kmid, split,
+            lattice_part(fem, lt, &o, part, part ? lt->m.kmid : 0, part ? lt->m.nz : lt->m.kmid, split,
                          rot);
         if (split) {
 #pragma omp barrier
             if (t == nt - 1)
-                layer_out(lt, &o, lt->kmid, lt->mid, lt->seam, NULL);
+                layer_out(lt, &o, lt->m.kmid, lt->mid, lt->seam, NULL);
         }
     }
     return true;

@@ -1,0 +1,90 @@
+/*
+ * lattice_map.c — see lattice_map.h.
+ */
+#include "lattice_map.h"
+
+#include <stdbool.h>
+#include <stdlib.h>
+#include <string.h>
+
+void cs_lattice_map_free(cs_lattice_map *m)
+{
+    free(m->node);
+    free(m->cell);
+    memset(m, 0, sizeof *m);
+}
+
+int cs_lattice_map_build(cs_lattice_map *m, const cs_cubemesh *cm, int lanes)
+{
+    memset(m, 0, sizeof *m);
+    const int nc = cm->n_cells, nn = cm->n_nodes;
+    if (nc == 0 || nn == 0 || lanes < 1)
+        return 0;
+    int32_t lo[3], hi[3];
+    for (int a = 0; a < 3; a++)
+        lo[a] = hi[a] = cm->cell_ijk[a];
+    for (int c = 0; c < nc; c++)
+        for (int a = 0; a < 3; a++) {
+            const int32_t v = cm->cell_ijk[3 * (size_t)c + a];
+            lo[a] = v < lo[a] ? v : lo[a];
+            hi[a] = v > hi[a] ? v : hi[a];
+        }
+    const int64_t nx = (int64_t)hi[0] - lo[0] + 1, ny = (int64_t)hi[1] - lo[1] + 1,
+                  nz = (int64_t)hi[2] - lo[2] + 1;
+    const int64_t nxb = (nx + lanes - 1) / lanes, sx = lanes * nxb + lanes;
+    const int64_t npos = sx * (ny + 1) * (nz + 1), nb = nxb * ny * nz;
+    if (npos > 3 * ((int64_t)nn + 4096) || npos > INT32_MAX / 16 || nb * lanes > INT32_MAX / 16)
+        return 0; /* a sparse box */
+    m->nx = (int)nx, m->ny = (int)ny, m->nz = (int)nz;
+    m->lanes = lanes, m->nxb = (int)nxb, m->sx = (int)sx;
+    m->layer = (size_t)(sx * (ny + 1));
+    m->npos = (size_t)npos;
+    m->node = malloc((size_t)npos * sizeof(int32_t));
+    m->cell = malloc((size_t)(nb * lanes) * sizeof(int32_t));
+    if (!m->node || !m->cell) {
+        cs_lattice_map_free(m);
+        return -1;
+    }
+    for (int64_t q = 0; q < npos; q++)
+        m->node[q] = -1;
+    for (int64_t s = 0; s < nb * lanes; s++)
+        m->cell[s] = -1;
+    bool ok = true;
+    for (int c = 0; c < nc && ok; c++) {
+        const int32_t *ijk = cm->cell_ijk + 3 * (size_t)c;
+        const int64_t i = ijk[0] - lo[0], j = ijk[1] - lo[1], k = ijk[2] - lo[2];
+        m->cell[i + lanes * nxb * (j + ny * k)] = c;
+        for (int kk = 0; kk < 8 && ok; kk++) {
+            const int64_t q = (i + CS_CORNER[kk][0]) +
+                              sx * ((j + CS_CORNER[kk][1]) + (ny + 1) * (k + CS_CORNER[kk][2]));
+            const int32_t n = cm->cell_nodes[8 * (size_t)c + kk];
+            if (m->node[q] < 0)
+                m->node[q] = n;
+            else
+                ok = m->node[q] == n;
+        }
+    }
+    /* every node at one place: none split (fracture), none without a cell */
+    int64_t placed = 0;
+    for (int64_t q = 0; q < npos && ok; q++)
+        placed += m->node[q] >= 0;
+    if (!ok || placed != nn) {
+        cs_lattice_map_free(m);
+        return 0;
+    }
+    /* the part boundary: the cell layer that splits the cells most evenly */
+    int64_t seen = 0, best = -1;
+    m->kmid = m->nz;
+    for (int64_t k = 0; k < nz; k++) {
+        if (k > 0) {
+            const int64_t d = 2 * seen > nc ? 2 * seen - nc : nc - 2 * seen;
+            if (best < 0 || d < best) {
+                best = d;
+                m->kmid = (int)k;
+            }
+        }
+        for (int64_t s = lanes * nxb * ny * k; s < lanes * nxb * ny * (k + 1); s++)
+            seen += m->cell[s] >= 0;
+    }
+    return 1;
+}
