@@ -11,6 +11,7 @@
 #include <omp.h>
 
 #include "mat3.h"
+#include "mg_lattice.h"
 #include "rowbatch.h"
 #include "segments.h"
 #include "simd.h"
@@ -91,6 +92,11 @@ typedef float vf __attribute__((vector_size(4 * VF_LANES)));
 #define MG_PARALLEL_CELLS CS_FEM_PARALLEL_CELLS
 #endif
 #define MG_LAMBDA_EVERY 64 /* re-estimate λmax(D⁻¹A) after this many setups */
+/* Levels with at least this many cells run their passes on the lattice where they can
+ * (mg_lattice.c); below, mg.c's slots and node pass. */
+#ifndef MG_LATTICE_CELLS
+#define MG_LATTICE_CELLS 256
+#endif
 
 typedef struct mg_tw {
     int32_t node;
@@ -189,6 +195,9 @@ typedef struct mg_level {
     int cycles;
     float *gb, *gx;
     double cheb_c[CS_MG_CHEB_MAX];    /* fourth kind: the steps' weights × λ (cs_mg_smoother_steps) */
+    /* the level's passes on the lattice of its cells' box (mg_lattice.c; NULL: not this
+     * level: fewer than MG_LATTICE_CELLS cells, or not one node per lattice point) */
+    cs_mgl *lat;
 } mg_level;
 
 struct cs_mg {
@@ -218,6 +227,7 @@ struct cs_mg {
     double *prev_s, *prev_dg;
     uint8_t *prev_mask;
     bool prev_ok; /* they hold a whole setup's (a failed one clears it) */
+    bool lattice; /* take the levels' lattice passes (cs_mg_set_lattice; true by default) */
 };
 
 static bool corner_blocks_ok(const double *K);
@@ -889,6 +899,7 @@ static int alloc_level_state(mg_level *l, int level, int threads, int cheb_deg)
 
 static void free_level(mg_level *l)
 {
+    cs_mgl_free(l->lat);
     free(l->own_nodes);
     free(l->own_ijk);
     free(l->own_adj_start);
@@ -1019,6 +1030,19 @@ cs_mg *cs_mg_build(const cs_cubemesh *cm, const cs_fem *fem, uint32_t version)
     for (int l = 0; l < mg->n_levels; l++)
         if (transfer_layout(mg, l) != 0)
             goto fail;
+    mg->lattice = true;
+    for (int l = 0; l < mg->n_levels; l++) {
+        mg_level *v = &mg->lv[l];
+        if (v->n_cells < MG_LATTICE_CELLS)
+            continue;
+        cs_cubemesh view = {0};
+        view.n_cells = v->n_cells;
+        view.n_nodes = v->n_nodes;
+        view.cell_ijk = (int32_t *)v->cell_ijk;
+        view.cell_nodes = (int32_t *)v->cell_nodes;
+        if (cs_mgl_build(&view, &v->lat) != 0)
+            goto fail;
+    }
     for (int l = 0; l < mg->n_levels; l++) {
         mg_level *c = &mg->lv[l];
         c->cycles = l > 0 && l < mg->n_levels - 1 &&
@@ -1315,25 +1339,16 @@ typedef int vi16 __attribute__((vector_size(64)));
 static inline __attribute__((always_inline, target("arch=x86-64-v4"))) void
 row_inputs(const float *restrict x, const int32_t *rowb, vf16 u[24])
 {
-    const __m512i lo[3] = {
-        _mm512_setr_epi32(0, 3, 6, 9, 12, 15, 18, 21, 24, 27, 30, 0, 0, 0, 0, 0),
-        _mm512_setr_epi32(1, 4, 7, 10, 13, 16, 19, 22, 25, 28, 31, 0, 0, 0, 0, 0),
-        _mm512_setr_epi32(2, 5, 8, 11, 14, 17, 20, 23, 26, 29, 0, 0, 0, 0, 0, 0)};
-    const __m512i hi[3] = {
-        _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 17, 20, 23, 26, 29),
-        _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 18, 21, 24, 27, 30),
-        _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 16, 19, 22, 25, 28, 31)};
     for (int r = 0; r < 4; r++) {
         const float *p = x + rowb[r];
-        const __m512 A = _mm512_loadu_ps(p), B = _mm512_loadu_ps(p + 16),
-                     C = _mm512_loadu_ps(p + 32);
+        __m512 v[3];
+        cs_xyz16_split(_mm512_loadu_ps(p), _mm512_loadu_ps(p + 16), _mm512_loadu_ps(p + 32), v);
         for (int i = 0; i < 3; i++) {
-            const __m512 v = _mm512_permutex2var_ps(_mm512_permutex2var_ps(A, lo[i], B), hi[i], C);
             /* the end node's component i in lane 0 */
             const __m512i e = _mm512_castps_si512(_mm512_maskz_loadu_ps(1, p + 48 + i));
-            u[3 * CS_ROW_K0[r] + i] = (vf16)v;
+            u[3 * CS_ROW_K0[r] + i] = (vf16)v[i];
             u[3 * CS_ROW_K1[r] + i] =
-                (vf16)_mm512_castsi512_ps(_mm512_alignr_epi32(e, _mm512_castps_si512(v), 1));
+                (vf16)_mm512_castsi512_ps(_mm512_alignr_epi32(e, _mm512_castps_si512(v[i]), 1));
         }
     }
 }
@@ -1344,28 +1359,20 @@ row_inputs(const float *restrict x, const int32_t *rowb, vf16 u[24])
 static inline __attribute__((always_inline, target("arch=x86-64-v4"))) void
 row_outputs(const vf16 y[24], float *out)
 {
-    const __m512i ia[3] = {
-        _mm512_setr_epi32(0, 16, 0, 1, 17, 0, 2, 18, 0, 3, 19, 0, 4, 20, 0, 5),
-        _mm512_setr_epi32(21, 0, 6, 22, 0, 7, 23, 0, 8, 24, 0, 9, 25, 0, 10, 26),
-        _mm512_setr_epi32(0, 11, 27, 0, 12, 28, 0, 13, 29, 0, 14, 30, 0, 15, 31, 0)};
-    const __m512i ib[3] = {
-        _mm512_setr_epi32(0, 1, 16, 3, 4, 17, 6, 7, 18, 9, 10, 19, 12, 13, 20, 15),
-        _mm512_setr_epi32(0, 21, 2, 3, 22, 5, 6, 23, 8, 9, 24, 11, 12, 25, 14, 15),
-        _mm512_setr_epi32(26, 1, 2, 27, 4, 5, 28, 7, 8, 29, 10, 11, 30, 13, 14, 31)};
     const __m512i e0 = _mm512_setr_epi32(15, 31, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0);
     const __m512i e1 = _mm512_setr_epi32(0, 1, 31, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0);
     const __m512i zero = _mm512_setzero_si512();
     for (int r = 0; r < 4; r++) {
-        __m512 S[3];
+        __m512 S[3], o3[3];
         for (int i = 0; i < 3; i++) {
             const __m512i y1 = _mm512_castps_si512((__m512)y[3 * CS_ROW_K1[r] + i]);
             S[i] = _mm512_add_ps((__m512)y[3 * CS_ROW_K0[r] + i],
                                  _mm512_castsi512_ps(_mm512_alignr_epi32(y1, zero, 15)));
         }
         float *o = out + 64 * r;
+        cs_xyz16_join(S, o3);
         for (int v = 0; v < 3; v++)
-            _mm512_storeu_ps(o + 16 * v, _mm512_permutex2var_ps(
-                                             _mm512_permutex2var_ps(S[0], ia[v], S[1]), ib[v], S[2]));
+            _mm512_storeu_ps(o + 16 * v, o3[v]);
         const __m512 end = _mm512_permutex2var_ps(
             _mm512_permutex2var_ps((__m512)y[3 * CS_ROW_K1[r]], e0, (__m512)y[3 * CS_ROW_K1[r] + 1]), e1,
             (__m512)y[3 * CS_ROW_K1[r] + 2]);
@@ -1653,6 +1660,14 @@ static void apply_path(const cs_mg *mg, int level, int simd, const float *x, con
             node_out(l, n, x, b, y, cs, mode);
         return;
     }
+    /* on the lattice (mg_lattice.c): the product, the residual and a first Chebyshev step
+     * without d (the fourth kind's steps); not for the portable path (simd 0) */
+    if (l->lat && simd && mg->lattice && (!cs || (cs->first && !cs->d))) {
+        const int lm = !b ? CS_MGL_APPLY : !cs ? CS_MGL_RESID : CS_MGL_CHEB;
+        if (cs_mgl_apply(l->lat, l->threads, lm, cs ? cs->x : (float *)x, b, y,
+                         cs ? cs->c : 0.0f, cs ? cs->out : NULL))
+            return;
+    }
     /* Each segment (product_layout; one per thread when the team is complete): its batches
      * chunk by chunk, each chunk's element pass followed by the node pass of the nodes whose
      * cells are all done and all in the segment (their results still in cache); after the
@@ -1711,6 +1726,11 @@ void cs_mg_cheb_step_level(const cs_mg *mg, int level, const float *b, float *x,
     apply_path(mg, level, mg->simd, x, b, NULL, &cs);
 }
 
+void cs_mg_set_lattice(cs_mg *mg, bool on)
+{
+    mg->lattice = on;
+}
+
 int cs_mg_level_layout(const cs_mg *mg, int level)
 {
     if (level < 0 || level >= mg->n_levels)
@@ -1718,7 +1738,7 @@ int cs_mg_level_layout(const cs_mg *mg, int level)
     const mg_level *l = &mg->lv[level];
     return (l->bidx16 ? CS_MG_NARROW_CORNERS : 0) | (l->bQ_ok ? CS_MG_QUAT_ROTATIONS : 0) |
            (l->pc_ent ? CS_MG_CELL_PROLONGATION : 0) | (l->r_pk ? CS_MG_PACKED_RESTRICTION : 0) |
-           (l->n_row_batches ? CS_MG_ROW_BATCHES : 0);
+           (l->n_row_batches ? CS_MG_ROW_BATCHES : 0) | (l->lat ? CS_MG_LATTICE : 0);
 }
 
 void cs_mg_level_smoother(const cs_mg *mg, int level, float *inv, uint8_t *mask)
@@ -2125,6 +2145,9 @@ static void to_single(mg_level *l, double hl, double hm, bool same)
                                (l->mask[3 * n + 2] ? 4 : 0));
     }
     l->invf[9 * (size_t)l->n_nodes] = 0.0f; /* the tail dinv's last column load reads */
+    if (l->lat)
+        cs_mgl_set(l->lat, l->bL, l->bM, l->bQ, l->bQ_ok, l->invf, l->dgf, l->held, same,
+                   l->threads);
 }
 
 /* Whether level 0's s, dg and held dofs are the last whole setup's (mg->prev_*, remember_setup;

@@ -144,7 +144,14 @@ void cs_mg_level_smoother(const cs_mg *mg, int level, float *inv, uint8_t *mask)
  * those rows and each node's two results in a row added in the pass (the same sums on every
  * path). Only on CPUs whose default is the 512-bit kernel (simd.h, cs_simd_wide_default). */
 #define CS_MG_ROW_BATCHES 16
+/* CS_MG_LATTICE: its passes (product, residual, fourth-kind Chebyshev step) run on the lattice
+ * of its cells' box where the CPU has AVX-512 (mg_lattice.c: nodal vectors read and summed by
+ * whole lattice rows; the same sums as the slots and node pass in another fixed order). */
+#define CS_MG_LATTICE 32
 int cs_mg_level_layout(const cs_mg *mg, int level);
+/* Whether the levels' lattice passes are taken (true after cs_mg_build; false: the slots and
+ * node pass, for comparisons). */
+void cs_mg_set_lattice(cs_mg *mg, bool on);
 
 /* The transfers between level `level` and the next coarser one, without masks (for tests):
  * xf = P xc (prolongation, trilinear) and xc = Pᵀ xf (restriction); nothing on the coarsest. */

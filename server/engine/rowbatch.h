@@ -85,4 +85,35 @@ cs_xyz8_join(const __m512d v[3], __m512d o[3])
         o[i] = _mm512_permutex2var_pd(_mm512_permutex2var_pd(v[0], ia[i], v[1]), ib[i], v[2]);
 }
 
+/* The same for 16 nodes in float: (x, y, z) interleaved in A (floats 0–15), B, C → v. */
+static inline __attribute__((always_inline, target("arch=x86-64-v4"))) void
+cs_xyz16_split(__m512 A, __m512 B, __m512 C, __m512 v[3])
+{
+    const __m512i lo[3] = {
+        _mm512_setr_epi32(0, 3, 6, 9, 12, 15, 18, 21, 24, 27, 30, 0, 0, 0, 0, 0),
+        _mm512_setr_epi32(1, 4, 7, 10, 13, 16, 19, 22, 25, 28, 31, 0, 0, 0, 0, 0),
+        _mm512_setr_epi32(2, 5, 8, 11, 14, 17, 20, 23, 26, 29, 0, 0, 0, 0, 0, 0)};
+    const __m512i hi[3] = {
+        _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 17, 20, 23, 26, 29),
+        _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 18, 21, 24, 27, 30),
+        _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 16, 19, 22, 25, 28, 31)};
+    for (int i = 0; i < 3; i++)
+        v[i] = _mm512_permutex2var_ps(_mm512_permutex2var_ps(A, lo[i], B), hi[i], C);
+}
+
+static inline __attribute__((always_inline, target("arch=x86-64-v4"))) void
+cs_xyz16_join(const __m512 v[3], __m512 o[3])
+{
+    const __m512i ia[3] = {
+        _mm512_setr_epi32(0, 16, 0, 1, 17, 0, 2, 18, 0, 3, 19, 0, 4, 20, 0, 5),
+        _mm512_setr_epi32(21, 0, 6, 22, 0, 7, 23, 0, 8, 24, 0, 9, 25, 0, 10, 26),
+        _mm512_setr_epi32(0, 11, 27, 0, 12, 28, 0, 13, 29, 0, 14, 30, 0, 15, 31, 0)};
+    const __m512i ib[3] = {
+        _mm512_setr_epi32(0, 1, 16, 3, 4, 17, 6, 7, 18, 9, 10, 19, 12, 13, 20, 15),
+        _mm512_setr_epi32(0, 21, 2, 3, 22, 5, 6, 23, 8, 9, 24, 11, 12, 25, 14, 15),
+        _mm512_setr_epi32(26, 1, 2, 27, 4, 5, 28, 7, 8, 29, 10, 11, 30, 13, 14, 31)};
+    for (int i = 0; i < 3; i++)
+        o[i] = _mm512_permutex2var_ps(_mm512_permutex2var_ps(v[0], ia[i], v[1]), ib[i], v[2]);
+}
+
 #endif

@@ -17,6 +17,7 @@
 #include "dense_ref.h"
 #include "fem.h"
 #include "lattice.h"
+#include "mg.h"
 
 static double urand(unsigned *seed)
 {
@@ -24,10 +25,11 @@ static double urand(unsigned *seed)
 }
 
 /* The test meshes: 0 a 29 × 7 × 6 block (rows of 3 whole batches and a partial one), 1 the
- * same scrambled, 2 a 37 × 6 × 5 block with holes (single cells, and cells 8–15 of some rows:
- * whole batches without a cell), 3 a 21 × 5 × 1 slab (one layer: one part), 4 a 16 × 4 × 3
- * block (rows of whole batches: the last lane's dx = 1 corner is the row's end node). */
-static const int DIMS[5][3] = {{29, 7, 6}, {29, 7, 6}, {37, 6, 5}, {21, 5, 1}, {16, 4, 3}};
+ * same scrambled, 2 a 37 × 6 × 5 block with holes (single cells, and cells 16–31 of some rows:
+ * whole batches without a cell), 3 a 40 × 8 × 1 slab (one layer: one part), 4 a 32 × 4 × 3
+ * block (rows of whole batches of 8 and of 16: the last lane's dx = 1 corner is the row's end
+ * node). Each has at least MG_LATTICE_CELLS (mg.c) cells. */
+static const int DIMS[5][3] = {{29, 7, 6}, {29, 7, 6}, {37, 6, 5}, {40, 8, 1}, {32, 4, 3}};
 
 static int test_mesh(cs_cubemesh *cm, int which)
 {
@@ -40,7 +42,7 @@ static int test_mesh(cs_cubemesh *cm, int which)
     for (int c = 0; c < nx * ny * nz; c++) {
         const int32_t *q = ijk + 3 * c;
         if (which == 2 && ((q[0] * 7 + q[1] * 13 + q[2] * 29) % 9 == 4 ||
-                           (q[0] >= 8 && q[0] < 16 && (q[1] + q[2]) % 3 == 1)))
+                           (q[0] >= 16 && q[0] < 32 && (q[1] + q[2]) % 3 == 1)))
             continue;
         memmove(ijk + 3 * n++, q, 3 * sizeof(int32_t));
     }
@@ -54,6 +56,27 @@ static bool has_node(const cs_cubemesh *cm, int c, int a)
         if (cm->cell_nodes[8 * c + k] == a)
             return true;
     return false;
+}
+
+/* The node inside the box (not on its faces; a one-layer box: any z) with the fewest cells:
+ * on mesh 2 one next to holes, whose cell-less lanes read it too. */
+static int fewest_cells_inside(const cs_cubemesh *cm, const int d[3])
+{
+    int bad = -1, fewest = 9;
+    for (int a = 0; a < cm->n_nodes; a++) {
+        int inside = 1, cells = 0;
+        for (int i = 0; i < 3; i++) {
+            const long l = lround(cm->node_rest[3 * a + i] / cm->h);
+            inside &= d[i] == 1 || (l > 0 && l < d[i]);
+        }
+        for (int c = 0; inside && c < cm->n_cells; c++)
+            cells += has_node(cm, c, a);
+        if (inside && cells < fewest) {
+            fewest = cells;
+            bad = a;
+        }
+    }
+    return bad;
 }
 
 TEST(fem_lattice_product_matches_dense_fem_and_threads)
@@ -111,23 +134,8 @@ TEST(fem_lattice_product_matches_dense_fem_and_threads)
             cs_fem_apply_K_mass(&f[t], kc, mc, m, p, y[t]);
             ENSURE_MSG(memcmp(y[t], yf, bytes) == 0, "mesh %d threads %d: K + mass", which, t + 1);
         }
-        /* a NaN at one node reaches only the nodes of its own cells: the node inside the box
-         * with the fewest cells (on mesh 2 one next to holes, whose lanes read it too) */
-        const int *d = DIMS[linear ? 0 : which];
-        int bad = -1, fewest = 9;
-        for (int a = 0; a < n; a++) {
-            int inside = 1, cells = 0;
-            for (int i = 0; i < 3; i++) {
-                const long l = lround(cm.node_rest[3 * a + i] / cm.h);
-                inside &= d[i] == 1 || (l > 0 && l < d[i]);
-            }
-            for (int c = 0; inside && c < cm.n_cells; c++)
-                cells += has_node(&cm, c, a);
-            if (inside && cells < fewest) {
-                fewest = cells;
-                bad = a;
-            }
-        }
+        /* a NaN at one node reaches only the nodes of its own cells */
+        const int bad = fewest_cells_inside(&cm, DIMS[linear ? 0 : which]);
         ENSURE(bad >= 0);
         memcpy(ref, y[0], bytes);
         cs_fem_apply_K(&f[1], p, ref);
@@ -188,4 +196,158 @@ TEST(fem_lattice_form_refuses_split_nodes_and_sparse_boxes)
     free(y);
     cs_fem_free(&fem);
     cs_cubemesh_free(&cm);
+}
+
+/* ------------------------------------------------------------------ the V-cycle's passes */
+
+/* The V-cycle's level-0 passes on the lattice (mg_lattice.c) against mg.c's slots and node
+ * pass (cs_mg_set_lattice false) on the test meshes and on a holey, scrambled 41 × 9 × 7 block
+ * (rows of two batches of 16 and a partial one; two threads): y = A x, the residual (exactly 0
+ * at held dofs), a Chebyshev step (held dofs exactly 0) and whole V-cycles (whose last step
+ * also writes x in double) within float rounding; on the large block the same bits on one and
+ * two threads. */
+static int mg_case(int which, int threads, float *keep, double *keepz, size_t *nkeep)
+{
+    cs_cubemesh cm;
+    int32_t *ijk = NULL;
+    int n = 0;
+    if (which < 5) {
+        if (test_mesh(&cm, which) != 0)
+            return -1;
+    } else {
+        ijk = cs_box_cells(41, 9, 7);
+        for (int c = 0; c < 41 * 9 * 7; c++) {
+            const int32_t *q = ijk + 3 * c;
+            if ((q[0] * 5 + q[1] * 11 + q[2] * 23) % 13 == 6)
+                continue;
+            memmove(ijk + 3 * n++, q, 3 * sizeof(int32_t));
+        }
+        if (cells_build(&cm, 0.04, ijk, n, 3) != 0)
+            return -1;
+    }
+    cs_fem fem;
+    if (cs_fem_init(&fem, &cm, 2e6, 0.3, true, threads) != 0) {
+        cs_cubemesh_free(&cm);
+        return -1;
+    }
+    const int nn = cm.n_nodes, nc = cm.n_cells;
+    double *x = malloc(sizeof(double) * 3 * nn), *inv = malloc(sizeof(double) * 9 * nn),
+           *r = malloc(sizeof(double) * 3 * nn), *z[2] = {malloc(sizeof(double) * 3 * nn),
+                                                          malloc(sizeof(double) * 3 * nn)};
+    float *xf = malloc(sizeof(float) * 3 * nn), *bf = malloc(sizeof(float) * 3 * nn),
+          *y[2][3] = {{NULL}};
+    uint8_t *mask = calloc(3 * (size_t)nn, 1);
+    unsigned seed = 77 + which;
+    for (int a = 0; a < nn; a++) {
+        const double *X = cm.node_rest + 3 * a, th = 0.9 * X[2] + 0.2 * X[1];
+        x[3 * a] = X[0] * cos(th) + X[2] * sin(th) + 0.05 * cm.h * urand(&seed);
+        x[3 * a + 1] = X[1] + 0.05 * cm.h * urand(&seed);
+        x[3 * a + 2] = -X[0] * sin(th) + X[2] * cos(th);
+    }
+    cs_fem_update_rotations(&fem, x);
+    cs_mg *mg = cs_mg_build(&cm, &fem, 1);
+    int bad = mg ? 0 : -1;
+    if (mg) {
+        double *s = cs_mg_cell_scale(mg), *dg = cs_mg_node_diag(mg);
+        for (int c = 0; c < nc; c++)
+            s[c] = exp(2.0 * (urand(&seed) + 0.5));
+        for (int a = 0; a < nn; a++) {
+            dg[a] = 40.0 * (1.0 + urand(&seed));
+            const double o = 1e-5 * urand(&seed);
+            for (int j = 0; j < 9; j++)
+                inv[9 * a + j] = j % 4 == 0 ? 1e-3 * (1.0 + 0.3 * urand(&seed)) : o;
+            for (int i = 0; i < 3; i++) /* every held pattern */
+                mask[3 * a + i] = (a % 9 < 8 && (a % 9) >> i & 1) || a % 23 == 0;
+        }
+        for (int d = 0; d < 3 * nn; d++) {
+            xf[d] = (float)urand(&seed);
+            bf[d] = (float)urand(&seed);
+            r[d] = urand(&seed);
+        }
+        bad = cs_mg_setup(mg, &fem, NULL, NULL, inv, mask) != 0;
+        bad += !(cs_mg_level_layout(mg, 0) & CS_MG_LATTICE);
+        const float c = 0.37f;
+        for (int on = 1; on >= 0 && !bad; on--) {
+            cs_mg_set_lattice(mg, on);
+            for (int k = 0; k < 3; k++)
+                y[on][k] = malloc(sizeof(float) * 3 * nn);
+            cs_mg_apply_level(mg, 0, false, xf, y[on][0]);
+            cs_mg_residual_level(mg, 0, xf, bf, y[on][1]);
+            memcpy(y[on][2], xf, sizeof(float) * 3 * nn);
+            cs_mg_cheb_step_level(mg, 0, bf, y[on][2], NULL, 0.0f, c, true);
+            cs_mg_vcycle(mg, r, z[on]);
+        }
+        cs_mg_set_lattice(mg, true);
+        for (int k = 0; k < 3 && !bad; k++) {
+            float big = 0;
+            for (int d = 0; d < 3 * nn; d++)
+                big = fmaxf(big, fabsf(y[0][k][d]));
+            for (int d = 0; d < 3 * nn; d++) {
+                bad += !(fabsf(y[1][k][d] - y[0][k][d]) <= 4e-6f * big);
+                if (k > 0 && mask[d])
+                    bad += y[1][k][d] != 0.0f;
+            }
+        }
+        double zb = 0;
+        for (int d = 0; d < 3 * nn && !bad; d++)
+            zb = fmax(zb, fabs(z[0][d]));
+        for (int d = 0; d < 3 * nn && !bad; d++)
+            bad += !(fabs(z[1][d] - z[0][d]) <= 1e-4 * zb) || (mask[d] && z[1][d] != 0.0);
+        if (which == 2 && !bad) {
+            /* a NaN at one node reaches only the nodes of its own cells */
+            const int nan_at = fewest_cells_inside(&cm, DIMS[2]);
+            xf[3 * nan_at] = NAN;
+            cs_mg_apply_level(mg, 0, false, xf, y[0][0]);
+            for (int a = 0; a < nn; a++) {
+                bool near = false;
+                for (int cc = 0; cc < nc && !near; cc++)
+                    near = has_node(&cm, cc, a) && has_node(&cm, cc, nan_at);
+                for (int i = 0; !near && i < 3; i++)
+                    bad += !isfinite(y[0][0][3 * a + i]);
+            }
+        }
+        if (keep && !bad) {
+            for (int k = 0; k < 3; k++)
+                memcpy(keep + 3 * (size_t)nn * k, y[1][k], sizeof(float) * 3 * nn);
+            memcpy(keepz, z[1], sizeof(double) * 3 * nn);
+            *nkeep = 3 * (size_t)nn;
+        }
+    }
+    for (int on = 0; on < 2; on++)
+        for (int k = 0; k < 3; k++)
+            free(y[on][k]);
+    cs_mg_free(mg);
+    free(x);
+    free(inv);
+    free(r);
+    free(z[0]);
+    free(z[1]);
+    free(xf);
+    free(bf);
+    free(mask);
+    cs_fem_free(&fem);
+    cs_cubemesh_free(&cm);
+    return bad;
+}
+
+TEST(mg_lattice_passes_match_slots_and_threads)
+{
+    for (int which = 0; which < 5; which++)
+        ENSURE_MSG(mg_case(which, 1, NULL, NULL, NULL) == 0, "mesh %d", which);
+    const size_t cap = 3 * 42 * 10 * 8;
+    float *keep[2] = {malloc(sizeof(float) * 3 * cap), malloc(sizeof(float) * 3 * cap)};
+    double *kz[2] = {malloc(sizeof(double) * cap), malloc(sizeof(double) * cap)};
+    size_t nk[2] = {0, 0};
+    for (int t = 0; t < 2; t++)
+        ENSURE_MSG(mg_case(5, t + 1, keep[t], kz[t], &nk[t]) == 0, "large block, %d threads",
+                   t + 1);
+    ENSURE(nk[0] == nk[1] && nk[0] > 0);
+    ENSURE_MSG(memcmp(keep[0], keep[1], sizeof(float) * 3 * nk[0]) == 0,
+               "the passes differ between 1 and 2 threads");
+    ENSURE_MSG(memcmp(kz[0], kz[1], sizeof(double) * nk[0]) == 0,
+               "the V-cycle differs between 1 and 2 threads");
+    for (int t = 0; t < 2; t++) {
+        free(keep[t]);
+        free(kz[t]);
+    }
 }

@@ -160,11 +160,16 @@ TEST(mg_fine_product_windowed_matches_fem)
             for (int a = 0; a < n; a++)
                 dg[a] = 0.0;
             ENSURE(cs_mg_setup(mg, &fem, NULL, NULL, inv, mask) == 0);
-            cs_mg_apply_level(mg, 0, false, pf, y[t]);
-            if (t == 1) {
+            cs_mg_apply_level(mg, 0, false, pf, y[t]); /* on the lattice where taken */
+            if (t == 1) { /* the slots and node pass: the same bits both ways */
+                float *ys = malloc(sizeof(float) * 3 * n);
+                cs_mg_set_lattice(mg, false);
+                cs_mg_apply_level(mg, 0, false, pf, ys);
                 cs_mg_apply_level(mg, 0, true, pf, y[2]);
-                ENSURE_MSG(memcmp(y[1], y[2], sizeof(float) * 3 * n) == 0,
+                cs_mg_set_lattice(mg, true);
+                ENSURE_MSG(memcmp(ys, y[2], sizeof(float) * 3 * n) == 0,
                            "the portable gathers give another product");
+                free(ys);
             }
             cs_mg_free(mg);
             cs_fem_free(&fem);
