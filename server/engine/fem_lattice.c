@@ -242,36 +242,28 @@ cell_layer(const cs_fem *fem, const cs_fem_lattice *lt, int k, const double *res
     }
 }
 
-/* A group of 8 places whose nodes are mostly consecutive (along a node row the mesh numbers
- * them so, but for a swapped pair at the row's start): `base` such that lane l's node is
- * base + l for the lanes in *run (the last lane with a node decides), the other lanes with a
- * node in *rest; and in *e the 24-double mask of the run's (x, y, z) from 3·base. */
+/* Group q / 8 of places (lattice_map.h): its run's base, the run's and the other lanes
+ * with a node, and in *e the mask of the run's (x, y, z) from 3·base. */
 __attribute__((target("arch=x86-64-v4"))) static inline __attribute__((always_inline)) int32_t
-group_run(const int32_t *node, __mmask8 *run, __mmask8 *rest, uint32_t *e)
+group_run(const cs_lattice_map *m, size_t q,
+                                                               __mmask8 *run, __mmask8 *rest,
+                                                               uint32_t *e)
 {
-    const __m256i n = _mm256_loadu_si256((const __m256i *)node);
-    const __mmask8 has = _mm256_cmpge_epi32_mask(n, _mm256_setzero_si256());
-    if (!has) {
-        *run = *rest = 0;
-        *e = 0;
-        return 0;
-    }
-    const int l = 31 - __builtin_clz((unsigned)has);
-    const int32_t base = node[l] - l;
-    const __m256i step = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
-    *run = _mm256_mask_cmpeq_epi32_mask(has, n, _mm256_add_epi32(_mm256_set1_epi32(base), step));
-    *rest = has & (__mmask8)~*run;
+    const size_t g = q / 8;
+    *run = (__mmask8)m->grun[g];
+    *rest = (__mmask8)m->grest[g];
     *e = _pdep_u32(*run, 0x249249u) * 7u;
-    return base;
+    return m->gbase[g];
 }
 
 /* 8 places' nodal vectors (group_run's) as x, y, z vectors (0 where no node). */
 __attribute__((target("arch=x86-64-v4"))) static inline __attribute__((always_inline)) void
-group_in(const int32_t *node, const double *restrict p, __m512d v[3])
+group_in(const cs_lattice_map *m, size_t q, const double *restrict p, __m512d v[3])
 {
     __mmask8 run, rest;
     uint32_t e;
-    const int32_t base = group_run(node, &run, &rest, &e);
+    const int32_t base = group_run(m, q, &run, &rest, &e);
+    const int32_t *node = m->node + q;
     /* masked loads: lanes outside the run are neither read nor faulted */
     const double *s = (const double *)((uintptr_t)p + (uintptr_t)(24 * (int64_t)base));
     cs_xyz8_split(_mm512_maskz_loadu_pd((__mmask8)e, s),
@@ -290,11 +282,10 @@ __attribute__((target("arch=x86-64-v4"))) static void layer_in(const cs_fem_latt
                                                                 const double *restrict p, int kn,
                                                                 double *restrict dst)
 {
-    const size_t layer = lt->m.layer;
-    const int32_t *node = lt->m.node + (size_t)kn * layer;
+    const size_t layer = lt->m.layer, q0 = (size_t)kn * layer;
     for (size_t q = 0; q < layer; q += LLANES) {
         __m512d v[3];
-        group_in(node + q, p, v);
+        group_in(&lt->m, q0 + q, p, v);
         for (int c = 0; c < 3; c++)
             _mm512_store_pd(dst + c * layer + q, v[c]);
     }
@@ -314,15 +305,15 @@ __attribute__((target("arch=x86-64-v4"))) static void
 layer_out(const cs_fem_lattice *lt, const lat_out *o, int kn, const double *restrict s1,
           const double *restrict s2, const double *restrict pin)
 {
-    const size_t layer = lt->m.layer;
-    const int32_t *node = lt->m.node + (size_t)kn * layer;
+    const size_t layer = lt->m.layer, q0 = (size_t)kn * layer;
+    const int32_t *node = lt->m.node + q0;
     const __m512d sg = _mm512_set1_pd(o->sign), mc = _mm512_set1_pd(o->mcoef);
     const double *restrict m = o->m;
     double *restrict y = o->y;
     for (size_t q = 0; q < layer; q += LLANES) {
         __mmask8 run, rest;
         uint32_t e;
-        const int32_t base = group_run(node + q, &run, &rest, &e);
+        const int32_t base = group_run(&lt->m, q0 + q, &run, &rest, &e);
         if (!(run | rest))
             continue;
         __m512d r[3], mm = _mm512_setzero_pd(), P[3];
@@ -337,7 +328,7 @@ layer_out(const cs_fem_lattice *lt, const lat_out *o, int kn, const double *rest
                 for (int c = 0; c < 3; c++)
                     P[c] = _mm512_load_pd(pin + c * layer + q);
             else
-                group_in(node + q, o->p, P);
+                group_in(&lt->m, q0 + q, o->p, P);
         }
         for (int c = 0; c < 3; c++) {
             __m512d s = _mm512_load_pd(s1 + c * layer + q);

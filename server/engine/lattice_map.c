@@ -11,6 +11,9 @@ void cs_lattice_map_free(cs_lattice_map *m)
 {
     free(m->node);
     free(m->cell);
+    free(m->gbase);
+    free(m->grun);
+    free(m->grest);
     memset(m, 0, sizeof *m);
 }
 
@@ -18,7 +21,7 @@ int cs_lattice_map_build(cs_lattice_map *m, const cs_cubemesh *cm, int lanes)
 {
     memset(m, 0, sizeof *m);
     const int nc = cm->n_cells, nn = cm->n_nodes;
-    if (nc == 0 || nn == 0 || lanes < 1)
+    if (nc == 0 || nn == 0 || lanes < 1 || lanes > 16)
         return 0;
     int32_t lo[3], hi[3];
     for (int a = 0; a < 3; a++)
@@ -71,6 +74,33 @@ int cs_lattice_map_build(cs_lattice_map *m, const cs_cubemesh *cm, int lanes)
     if (!ok || placed != nn) {
         cs_lattice_map_free(m);
         return 0;
+    }
+    /* the groups' runs */
+    const int64_t ng = npos / lanes;
+    m->gbase = malloc((size_t)ng * sizeof(int32_t));
+    m->grun = malloc((size_t)ng * sizeof(uint16_t));
+    m->grest = malloc((size_t)ng * sizeof(uint16_t));
+    if (!m->gbase || !m->grun || !m->grest) {
+        cs_lattice_map_free(m);
+        return -1;
+    }
+    for (int64_t g = 0; g < ng; g++) {
+        const int32_t *nd = m->node + g * lanes;
+        int last = -1;
+        for (int l = 0; l < lanes; l++)
+            last = nd[l] >= 0 ? l : last;
+        const int32_t base = last >= 0 ? nd[last] - last : 0;
+        unsigned run = 0, rest = 0;
+        for (int l = 0; l < lanes; l++)
+            if (nd[l] >= 0) {
+                if (nd[l] == base + l)
+                    run |= 1u << l;
+                else
+                    rest |= 1u << l;
+            }
+        m->gbase[g] = base;
+        m->grun[g] = (uint16_t)run;
+        m->grest[g] = (uint16_t)rest;
     }
     /* the part boundary: the cell layer that splits the cells most evenly */
     int64_t seen = 0, best = -1;

@@ -229,34 +229,28 @@ cell_layer(const cs_mgl *g, int k, const float *restrict pl, const float *restri
     }
 }
 
-/* 16 places (fem_lattice.c's group_run): the lanes whose node is base + lane (run), the others
- * with a node (rest), and in *e the 48-float mask of the run's (x, y, z) from 3·base. */
+/* Group q / 16 of places (lattice_map.h): its run's base, the run's and the other lanes
+ * with a node, and in *e the mask of the run's (x, y, z) from 3·base. */
 __attribute__((target("arch=x86-64-v4"))) static inline __attribute__((always_inline)) int32_t
-group_run(const int32_t *node, __mmask16 *run, __mmask16 *rest, uint64_t *e)
+group_run(const cs_lattice_map *m, size_t q,
+                                                               __mmask16 *run, __mmask16 *rest,
+                                                               uint64_t *e)
 {
-    const __m512i n = _mm512_loadu_si512(node);
-    const __mmask16 has = _mm512_cmpge_epi32_mask(n, _mm512_setzero_si512());
-    if (!has) {
-        *run = *rest = 0;
-        *e = 0;
-        return 0;
-    }
-    const int l = 31 - __builtin_clz((unsigned)has);
-    const int32_t base = node[l] - l;
-    const __m512i step = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
-    *run = _mm512_mask_cmpeq_epi32_mask(has, n, _mm512_add_epi32(_mm512_set1_epi32(base), step));
-    *rest = has & (__mmask16)~*run;
+    const size_t g = q / 16;
+    *run = (__mmask16)m->grun[g];
+    *rest = (__mmask16)m->grest[g];
     *e = _pdep_u64(*run, 0x249249249249ull) * 7u;
-    return base;
+    return m->gbase[g];
 }
 
 /* 16 places' 3-vectors of the node-ordered v as x, y, z vectors (0 where no node). */
 __attribute__((target("arch=x86-64-v4"))) static inline __attribute__((always_inline)) void
-group_in(const int32_t *node, const float *restrict v, __m512 o[3])
+group_in(const cs_lattice_map *m, size_t q, const float *restrict v, __m512 o[3])
 {
     __mmask16 run, rest;
     uint64_t e;
-    const int32_t base = group_run(node, &run, &rest, &e);
+    const int32_t base = group_run(m, q, &run, &rest, &e);
+    const int32_t *node = m->node + q;
     const float *s = (const float *)((uintptr_t)v + (uintptr_t)(12 * (int64_t)base));
     cs_xyz16_split(_mm512_maskz_loadu_ps((__mmask16)e, s),
                    _mm512_maskz_loadu_ps((__mmask16)(e >> 16), s + 16),
@@ -271,11 +265,13 @@ group_in(const int32_t *node, const float *restrict v, __m512 o[3])
 
 /* x, y, z vectors of 16 places (r) into the node-ordered dst (3 per node). */
 __attribute__((target("arch=x86-64-v4"))) static inline __attribute__((always_inline)) void
-group_out(const int32_t *node, const __m512 r[3], float *restrict dst, double *restrict dd)
+group_out(const cs_lattice_map *m, size_t q, const __m512 r[3], float *restrict dst,
+          double *restrict dd)
 {
     __mmask16 run, rest;
     uint64_t e;
-    const int32_t base = group_run(node, &run, &rest, &e);
+    const int32_t base = group_run(m, q, &run, &rest, &e);
+    const int32_t *node = m->node + q;
     __m512 o3[3];
     cs_xyz16_join(r, o3);
     float *o = (float *)((uintptr_t)dst + (uintptr_t)(12 * (int64_t)base));
@@ -323,17 +319,17 @@ layer_out(const cs_mgl *g, const mgl_op *o, int kn, const float *restrict s1,
           const float *restrict s2, const float *restrict xin)
 {
     const size_t layer = g->m.layer, np = g->m.npos, q0 = (size_t)kn * layer;
-    const int32_t *node = g->m.node + q0;
     const __m512 cc = _mm512_set1_ps(o->c);
     for (size_t q = 0; q < layer; q += GL) {
-        if (_mm512_cmpge_epi32_mask(_mm512_loadu_si512(node + q), _mm512_setzero_si512()) == 0)
+        const size_t gq = (q0 + q) / GL;
+        if (!(g->m.grun[gq] | g->m.grest[gq]))
             continue;
         __m512 xv[3], ax[3];
         if (xin)
             for (int c = 0; c < 3; c++)
                 xv[c] = _mm512_load_ps(xin + c * layer + q);
         else
-            group_in(node + q, o->x, xv);
+            group_in(&g->m, q0 + q, o->x, xv);
         const __m512 dg = _mm512_load_ps(g->ldg + q0 + q);
         for (int c = 0; c < 3; c++) {
             __m512 s = _mm512_load_ps(s1 + c * layer + q);
@@ -342,7 +338,7 @@ layer_out(const cs_mgl *g, const mgl_op *o, int kn, const float *restrict s1,
             ax[c] = _mm512_add_ps(s, _mm512_mul_ps(dg, xv[c]));
         }
         if (o->mode == CS_MGL_APPLY) {
-            group_out(node + q, ax, o->y, NULL);
+            group_out(&g->m, q0 + q, ax, o->y, NULL);
             continue;
         }
         const __m512i h = _mm512_cvtepu8_epi32(_mm_loadu_si128((const __m128i *)(g->lheld + q0 + q)));
@@ -350,11 +346,11 @@ layer_out(const cs_mgl *g, const mgl_op *o, int kn, const float *restrict s1,
         for (int c = 0; c < 3; c++)
             fr[c] = _mm512_testn_epi32_mask(h, _mm512_set1_epi32(1 << c));
         __m512 bv[3], r[3];
-        group_in(node + q, o->b, bv);
+        group_in(&g->m, q0 + q, o->b, bv);
         for (int c = 0; c < 3; c++)
             r[c] = _mm512_maskz_sub_ps(fr[c], bv[c], ax[c]);
         if (o->mode == CS_MGL_RESID) {
-            group_out(node + q, r, o->y, NULL);
+            group_out(&g->m, q0 + q, r, o->y, NULL);
             continue;
         }
         const float *inv = g->linv + q0 + q;
@@ -367,7 +363,7 @@ layer_out(const cs_mgl *g, const mgl_op *o, int kn, const float *restrict s1,
             const __m512 dj = _mm512_maskz_mul_ps(fr[k], cc, z);
             xn[k] = _mm512_maskz_add_ps(fr[k], xv[k], dj);
         }
-        group_out(node + q, xn, o->x, o->out);
+        group_out(&g->m, q0 + q, xn, o->x, o->out);
     }
 }
 
@@ -376,11 +372,10 @@ __attribute__((target("arch=x86-64-v4"))) static void layer_in(const cs_mgl *g,
                                                                 const float *restrict v, int kn,
                                                                 float *restrict dst)
 {
-    const size_t layer = g->m.layer;
-    const int32_t *node = g->m.node + (size_t)kn * layer;
+    const size_t layer = g->m.layer, q0 = (size_t)kn * layer;
     for (size_t q = 0; q < layer; q += GL) {
         __m512 o[3];
-        group_in(node + q, v, o);
+        group_in(&g->m, q0 + q, v, o);
         for (int c = 0; c < 3; c++)
             _mm512_store_ps(dst + c * layer + q, o[c]);
     }
