@@ -56,7 +56,9 @@ int cs_lattice_map_build(cs_lattice_map *m, const cs_cubemesh *cm, int lanes)
     for (int c = 0; c < nc && ok; c++) {
         const int32_t *ijk = cm->cell_ijk + 3 * (size_t)c;
         const int64_t i = ijk[0] - lo[0], j = ijk[1] - lo[1], k = ijk[2] - lo[2];
-        m->cell[i + lanes * nxb * (j + ny * k)] = c;
+        int32_t *slot = &m->cell[i + lanes * nxb * (j + ny * k)];
+        ok = *slot < 0; /* two cells at one lattice index (a coarse level across a crack) */
+        *slot = c;
         for (int kk = 0; kk < 8 && ok; kk++) {
             const int64_t q = (i + CS_CORNER[kk][0]) +
                               sx * ((j + CS_CORNER[kk][1]) + (ny + 1) * (k + CS_CORNER[kk][2]));

@@ -36,8 +36,9 @@ typedef struct cs_lattice_map {
     uint16_t *grun, *grest;
 } cs_lattice_map;
 
-/* lanes: 8 or 16. Returns 1 with m built; 0 where the mesh does not take the lattice form (no cells, a node
- * split in two or without a cell, or a box of more than 3 × (nodes + 4096) places), m empty;
+/* lanes: 8 or 16. Returns 1 with m built; 0 where the mesh does not take the lattice form (no cells, two
+ * cells at one index, a node split in two or without a cell, or a box of more than 3 × (nodes + 4096)
+ * places), m empty;
  * -1 on out of memory. */
 int cs_lattice_map_build(cs_lattice_map *m, const cs_cubemesh *cm, int lanes);
 void cs_lattice_map_free(cs_lattice_map *m);

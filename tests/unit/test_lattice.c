@@ -162,7 +162,7 @@ TEST(fem_lattice_product_matches_dense_fem_and_threads)
     }
 }
 
-TEST(fem_lattice_form_refuses_split_nodes_and_sparse_boxes)
+TEST(fem_lattice_form_refuses_split_nodes_twin_cells_and_sparse_boxes)
 {
     cs_cubemesh cm;
     ENSURE(test_mesh(&cm, 0) == 0);
@@ -181,6 +181,23 @@ TEST(fem_lattice_form_refuses_split_nodes_and_sparse_boxes)
     cm.cell_nodes = keep;
     cm.n_nodes--;
     free(split);
+    /* two cells at one lattice index (as a coarse level across a crack can have), here cell 1
+     * made a copy of cell 0: every node still placed, but one cell would be lost */
+    int32_t *ijk0 = cm.cell_ijk, *twin = malloc(sizeof(int32_t) * 3 * cm.n_cells),
+            *tn = malloc(sizeof(int32_t) * 8 * cm.n_cells);
+    memcpy(twin, ijk0, sizeof(int32_t) * 3 * cm.n_cells);
+    memcpy(tn, keep, sizeof(int32_t) * 8 * cm.n_cells);
+    memcpy(twin + 3, twin, 3 * sizeof(int32_t));
+    memcpy(tn + 8, tn, 8 * sizeof(int32_t));
+    cm.cell_ijk = twin;
+    cm.cell_nodes = tn;
+    lt = fem.lat;
+    ENSURE(cs_fem_lattice_build(&fem, &cm, &lt) == 0);
+    ENSURE(lt == NULL);
+    cm.cell_ijk = ijk0;
+    cm.cell_nodes = keep;
+    free(twin);
+    free(tn);
     cs_fem_free(&fem);
     cs_cubemesh_free(&cm);
     /* a diagonal line of 40 cells: its box would be 40³ */
