@@ -31,7 +31,7 @@
  * stress, nodal forces: about 2900 flops, 7 times a modal product). No matrix is stored per
  * element.
  *
- * Owns: R, q, fe, adj_start, adj, Kg. Borrows: cell_nodes (from the object's cube mesh) and kf
+ * Owns: R, q, fe, adj_start, adj, Kg, lat. Borrows: cell_nodes (from the object's cube mesh) and kf
  * (the object's young field).
  */
 #ifndef CS_FEM_H

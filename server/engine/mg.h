@@ -42,10 +42,12 @@
  * (ω = 4/(3λ), a symmetric polynomial). A coarse level with at least 1.5 nodes per cell (thin
  * or small: where coarse cubes lock in bending) is solved by two cycles instead of one (a
  * W-cycle below it; two cycles of a symmetric B are 2B − BAB, symmetric too). Products run on
- * the object's threads in fixed-order element and node passes, so the result is independent
- * of the thread count.
+ * the object's threads in fixed-order element and node passes (or, where the CPU has AVX-512,
+ * on the lattice of a level's box: mg_lattice.c, CS_MG_LATTICE below), so the result is
+ * independent of the thread count.
  *
- * Owns: every array of every coarse level and the scratch vectors. Borrows: the finest level's
+ * Owns: every array of every coarse level, each level's lattice form and the scratch vectors.
+ * Borrows: the finest level's
  * cell links and lattice indices (the object's cube mesh), its adjacency and rotations (fem).
  */
 #ifndef CS_MG_H
