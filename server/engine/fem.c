@@ -252,6 +252,9 @@ static int product_layout(cs_fem *fem);
 
 int cs_fem_relink(cs_fem *fem, const cs_cubemesh *cm)
 {
+    /* the old lattice form first: whatever fails below, no product reads a stale map */
+    cs_fem_lattice_free(fem->lat);
+    fem->lat = NULL;
     free(fem->adj_start);
     free(fem->adj);
     fem->n_cells = cm->n_cells;
@@ -273,8 +276,6 @@ int cs_fem_relink(cs_fem *fem, const cs_cubemesh *cm)
     for (int e = 0; e < 8 * cm->n_cells; e++)
         fem->adj[fill[cm->cell_nodes[e]]++] = e;
     free(fill);
-    cs_fem_lattice_free(fem->lat);
-    fem->lat = NULL;
     if (product_layout(fem) != 0)
         return -1;
     return cs_fem_lattice_build(fem, cm, &fem->lat);
@@ -1494,7 +1495,7 @@ static void kw_batch(cs_fem *fem, int b, double *fb, const void *ctx, double *e_
 
 void cs_fem_apply_Kw(cs_fem *fem, const double *kf, const double *p, double *y)
 {
-    if (!kf && cs_fem_lattice_product(fem, 1.0, 0.0, NULL, p, y))
+    if (cs_fem_lattice_product(fem, kf, 1.0, 0.0, NULL, p, y))
         return;
     const kw_ctx kc = {kf, p};
     fused_pass(fem, kw_batch, &kc, y, 1.0, NULL);
@@ -1503,7 +1504,7 @@ void cs_fem_apply_Kw(cs_fem *fem, const double *kf, const double *p, double *y)
 void cs_fem_apply_K_mass(cs_fem *fem, double kcoef, double mcoef, const double *m,
                          const double *p, double *y)
 {
-    if (cs_fem_lattice_product(fem, kcoef, mcoef, m, p, y))
+    if (cs_fem_lattice_product(fem, fem->kf, kcoef, mcoef, m, p, y))
         return;
     const kw_ctx kc = {fem->kf, p};
     const node_add na = {m, p, mcoef};

@@ -172,11 +172,12 @@ void cs_cube_cells_product(const double K[24 * 24], int n_cells, const int32_t *
 void cs_cube_lame_h(const double K[24 * 24], double *hl, double *hm);
 /* fem_lattice.c: *lt = the lattice form for this mesh, or NULL where it does not apply
  * (returns -1 on out of memory); its product (false: not taken, the caller runs fem.c's):
- * y = sign·K p (+ (mcoef·m_n)·p_n per node when m is not NULL). */
+ * y = sign·K p (+ (mcoef·m_n)·p_n per node when m is not NULL), K of the uniform material
+ * (taken only for kf NULL: no stiffness factors). */
 int cs_fem_lattice_build(const cs_fem *fem, const cs_cubemesh *cm, cs_fem_lattice **lt);
 void cs_fem_lattice_free(cs_fem_lattice *lt);
-bool cs_fem_lattice_product(cs_fem *fem, double sign, double mcoef, const double *m,
-                            const double *p, double *y);
+bool cs_fem_lattice_product(cs_fem *fem, const double *kf, double sign, double mcoef,
+                            const double *m, const double *p, double *y);
 /* Floating-point operations of one cs_fem_apply_K on this mesh (the kernel as implemented). */
 double cs_fem_product_flops(const cs_fem *fem);
 

@@ -378,17 +378,17 @@ static void lattice_part(const cs_fem *fem, cs_fem_lattice *lt, const lat_out *o
         layer_out(lt, o, k1, ys[k1 & 1], NULL, ps[k1 & 1]);
 }
 
-bool cs_fem_lattice_product(cs_fem *fem, double sign, double mcoef, const double *m,
-                            const double *p, double *y)
+bool cs_fem_lattice_product(cs_fem *fem, const double *kf, double sign, double mcoef,
+                            const double *m, const double *p, double *y)
 {
     cs_fem_lattice *lt = fem->lat;
-    if (!lt || !fem->lattice || fem->kf || fem->cell_active ||
+    if (!lt || !fem->lattice || kf || fem->cell_active ||
         !__builtin_cpu_supports("x86-64-v4"))
         return false;
     const int rot = fem->corotational;
     const bool split = lt->m.kmid < lt->m.nz;
     const lat_out o = {p, m, y, sign, mcoef};
-#pragma omp parallel num_threads(split ? fem->threads : 1)
+#pragma omp parallel num_threads(split && fem->threads > 1 ? 2 : 1) /* one per part */
     {
         const int nt = omp_get_num_threads(), t = omp_get_thread_num();
         for (int part = t; part < (split ? 2 : 1); part += nt)

@@ -35,6 +35,9 @@ int cs_lattice_map_build(cs_lattice_map *m, const cs_cubemesh *cm, int lanes)
     const int64_t nx = (int64_t)hi[0] - lo[0] + 1, ny = (int64_t)hi[1] - lo[1] + 1,
                   nz = (int64_t)hi[2] - lo[2] + 1;
     const int64_t nxb = (nx + lanes - 1) / lanes, sx = lanes * nxb + lanes;
+    /* each factor at most 2^21 + 17 (cubemesh.h: indices within ±2^20): no overflow */
+    if (sx * (ny + 1) > INT32_MAX / 16)
+        return 0;
     const int64_t npos = sx * (ny + 1) * (nz + 1), nb = nxb * ny * nz;
     if (npos > 3 * ((int64_t)nn + 4096) || npos > INT32_MAX / 16 || nb * lanes > INT32_MAX / 16)
         return 0; /* a sparse box */
@@ -52,6 +55,11 @@ int cs_lattice_map_build(cs_lattice_map *m, const cs_cubemesh *cm, int lanes)
         m->node[q] = -1;
     for (int64_t s = 0; s < nb * lanes; s++)
         m->cell[s] = -1;
+    uint8_t *put = calloc((size_t)nn, 1); /* nodes placed: each at one place only */
+    if (!put) {
+        cs_lattice_map_free(m);
+        return -1;
+    }
     bool ok = true;
     for (int c = 0; c < nc && ok; c++) {
         const int32_t *ijk = cm->cell_ijk + 3 * (size_t)c;
@@ -63,16 +71,23 @@ int cs_lattice_map_build(cs_lattice_map *m, const cs_cubemesh *cm, int lanes)
             const int64_t q = (i + CS_CORNER[kk][0]) +
                               sx * ((j + CS_CORNER[kk][1]) + (ny + 1) * (k + CS_CORNER[kk][2]));
             const int32_t n = cm->cell_nodes[8 * (size_t)c + kk];
-            if (m->node[q] < 0)
+            if (n < 0 || n >= nn) {
+                ok = false;
+            } else if (m->node[q] < 0) {
+                ok = !put[n]; /* not placed elsewhere already */
+                put[n] = 1;
                 m->node[q] = n;
-            else
+            } else {
                 ok = m->node[q] == n;
+            }
         }
     }
-    /* every node at one place: none split (fracture), none without a cell */
+    /* every node at one place: none split (fracture), none at two places, none without a
+     * cell */
     int64_t placed = 0;
     for (int64_t q = 0; q < npos && ok; q++)
         placed += m->node[q] >= 0;
+    free(put);
     if (!ok || placed != nn) {
         cs_lattice_map_free(m);
         return 0;

@@ -406,7 +406,7 @@ bool cs_mgl_apply(cs_mgl *g, int threads, int mode, float *x, const float *b, fl
     const cs_lattice_map *m = &g->m;
     const bool split = m->kmid < m->nz;
     const mgl_op o = {mode, x, b, y, c, out};
-#pragma omp parallel num_threads(split ? threads : 1)
+#pragma omp parallel num_threads(split && threads > 1 ? 2 : 1) /* one per part */
     {
         const int nt = omp_get_num_threads(), t = omp_get_thread_num();
         for (int part = t; part < (split ? 2 : 1); part += nt)

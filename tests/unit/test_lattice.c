@@ -112,7 +112,7 @@ TEST(fem_lattice_product_matches_dense_fem_and_threads)
         for (int i = 0; i < 3 * n; i++)
             big = fmax(big, fabs(ref[i]));
         /* the lattice form is taken where the CPU has AVX-512 */
-        ENSURE(cs_fem_lattice_product(&f[0], 1.0, 0.0, NULL, p, y[0]) == v4);
+        ENSURE(cs_fem_lattice_product(&f[0], NULL, 1.0, 0.0, NULL, p, y[0]) == v4);
         f[0].lattice = false;
         cs_fem_apply_K(&f[0], p, yf); /* fem.c's product */
         f[0].lattice = true;
@@ -162,7 +162,7 @@ TEST(fem_lattice_product_matches_dense_fem_and_threads)
     }
 }
 
-TEST(fem_lattice_form_refuses_split_nodes_twin_cells_and_sparse_boxes)
+TEST(fem_lattice_form_refuses_split_twin_and_doubled_nodes_and_sparse_boxes)
 {
     cs_cubemesh cm;
     ENSURE(test_mesh(&cm, 0) == 0);
@@ -198,6 +198,17 @@ TEST(fem_lattice_form_refuses_split_nodes_twin_cells_and_sparse_boxes)
     cm.cell_nodes = keep;
     free(twin);
     free(tn);
+    /* a node at two places and one without a cell: cell 0's corner 0 (the block's corner,
+     * no other cell's) made its corner 6; every place still holds one node */
+    tn = malloc(sizeof(int32_t) * 8 * cm.n_cells);
+    memcpy(tn, keep, sizeof(int32_t) * 8 * cm.n_cells);
+    tn[0] = tn[6];
+    cm.cell_nodes = tn;
+    lt = fem.lat;
+    ENSURE(cs_fem_lattice_build(&fem, &cm, &lt) == 0);
+    ENSURE(lt == NULL);
+    cm.cell_nodes = keep;
+    free(tn);
     cs_fem_free(&fem);
     cs_cubemesh_free(&cm);
     /* a diagonal line of 40 cells: its box would be 40³ */
@@ -208,7 +219,7 @@ TEST(fem_lattice_form_refuses_split_nodes_twin_cells_and_sparse_boxes)
     ENSURE(cs_fem_init(&fem, &cm, 3e6, 0.3, true, 1) == 0);
     ENSURE(fem.lat == NULL);
     double *p = calloc(3 * (size_t)cm.n_nodes, sizeof(double)), *y = malloc(sizeof(double) * 3 * cm.n_nodes);
-    ENSURE(!cs_fem_lattice_product(&fem, 1.0, 0.0, NULL, p, y));
+    ENSURE(!cs_fem_lattice_product(&fem, NULL, 1.0, 0.0, NULL, p, y));
     free(p);
     free(y);
     cs_fem_free(&fem);
