@@ -40,7 +40,6 @@
 #include <string.h>
 
 #include <immintrin.h>
-#include <omp.h>
 
 #include "lattice_map.h"
 #include "mat3.h"
@@ -53,11 +52,7 @@ struct cs_fem_lattice {
     uint8_t *bmask; /* per batch (ib + nxb·(j + ny·k)): its lanes with a cell */
     int32_t *bq;    /* per batch: 4·(its first cell) if its 8 cells are consecutive, else -1 */
     int32_t *qix;   /* 8 per batch: 4·cell per lane (0 where none) */
-    /* Per part, two node layers of the input (ps) and of the sums (ys) in turn (layer kn in
-     * slot kn & 1), each 3 × layer doubles (x, y, z arrays); the shared node layer kmid's sums
-     * of the first part (mid) and of the second (seam). */
-    double *ps[2][2], *ys[2][2];
-    double *mid, *seam;
+    cs_lattice_bufs b; /* the layers in turn (lattice_map.h), doubles */
 };
 
 void cs_fem_lattice_free(cs_fem_lattice *lt)
@@ -68,23 +63,8 @@ void cs_fem_lattice_free(cs_fem_lattice *lt)
     free(lt->bq);
     free(lt->qix);
     cs_lattice_map_free(&lt->m);
-    for (int a = 0; a < 2; a++)
-        for (int b = 0; b < 2; b++) {
-            free(lt->ps[a][b]);
-            free(lt->ys[a][b]);
-        }
-    free(lt->mid);
-    free(lt->seam);
+    cs_lattice_bufs_free(&lt->b);
     free(lt);
-}
-
-static double *alloc_doubles(size_t n)
-{
-    const size_t bytes = (n * sizeof(double) + 63) / 64 * 64;
-    double *p = aligned_alloc(64, bytes ? bytes : 64);
-    if (p)
-        memset(p, 0, bytes);
-    return p;
 }
 
 int cs_fem_lattice_build(const cs_fem *fem, const cs_cubemesh *cm, cs_fem_lattice **out)
@@ -101,20 +81,11 @@ int cs_fem_lattice_build(const cs_fem *fem, const cs_cubemesh *cm, cs_fem_lattic
         return -1;
     }
     lt->m = map;
-    const size_t nb = (size_t)map.nxb * map.ny * map.nz, layer = map.layer;
+    const size_t nb = (size_t)map.nxb * map.ny * map.nz;
     lt->bmask = calloc(nb, 1);
     lt->bq = malloc(nb * sizeof(int32_t));
     lt->qix = calloc(nb * LLANES, sizeof(int32_t));
-    bool got = lt->bmask && lt->bq && lt->qix;
-    for (int a = 0; a < 2; a++)
-        for (int b = 0; b < 2; b++) {
-            lt->ps[a][b] = alloc_doubles(3 * layer);
-            lt->ys[a][b] = alloc_doubles(3 * layer);
-            got = got && lt->ps[a][b] && lt->ys[a][b];
-        }
-    lt->mid = alloc_doubles(3 * layer);
-    lt->seam = alloc_doubles(3 * layer);
-    if (!got || !lt->mid || !lt->seam) {
+    if (!lt->bmask || !lt->bq || !lt->qix || cs_lattice_bufs_alloc(&lt->b, &map, sizeof(double))) {
         cs_fem_lattice_free(lt);
         return -1;
     }
@@ -242,27 +213,13 @@ cell_layer(const cs_fem *fem, const cs_fem_lattice *lt, int k, const double *res
     }
 }
 
-/* Group q / 8 of places (lattice_map.h): its run's base, the run's and the other lanes
- * with a node, and in *e the mask of the run's (x, y, z) from 3·base. */
-__attribute__((target("arch=x86-64-v4"))) static inline __attribute__((always_inline)) int32_t
-group_run(const cs_lattice_map *m, size_t q,
-                                                               __mmask8 *run, __mmask8 *rest,
-                                                               uint32_t *e)
-{
-    const size_t g = q / 8;
-    *run = (__mmask8)m->grun[g];
-    *rest = (__mmask8)m->grest[g];
-    *e = _pdep_u32(*run, 0x249249u) * 7u;
-    return m->gbase[g];
-}
-
-/* 8 places' nodal vectors (group_run's) as x, y, z vectors (0 where no node). */
+/* 8 places' nodal vectors (cs_lattice_group's run and rest) as x, y, z vectors (0 where no node). */
 __attribute__((target("arch=x86-64-v4"))) static inline __attribute__((always_inline)) void
 group_in(const cs_lattice_map *m, size_t q, const double *restrict p, __m512d v[3])
 {
-    __mmask8 run, rest;
-    uint32_t e;
-    const int32_t base = group_run(m, q, &run, &rest, &e);
+    unsigned run, rest;
+    uint64_t e;
+    const int32_t base = cs_lattice_group(m, q, &run, &rest, &e);
     const int32_t *node = m->node + q;
     /* masked loads: lanes outside the run are neither read nor faulted */
     const double *s = (const double *)((uintptr_t)p + (uintptr_t)(24 * (int64_t)base));
@@ -311,14 +268,14 @@ layer_out(const cs_fem_lattice *lt, const lat_out *o, int kn, const double *rest
     const double *restrict m = o->m;
     double *restrict y = o->y;
     for (size_t q = 0; q < layer; q += LLANES) {
-        __mmask8 run, rest;
-        uint32_t e;
-        const int32_t base = group_run(&lt->m, q0 + q, &run, &rest, &e);
+        unsigned run, rest;
+        uint64_t e;
+        const int32_t base = cs_lattice_group(&lt->m, q0 + q, &run, &rest, &e);
         if (!(run | rest))
             continue;
         __m512d r[3], mm = _mm512_setzero_pd(), P[3];
         if (m) {
-            mm = _mm512_maskz_loadu_pd(run, (const void *)((uintptr_t)m + (uintptr_t)(8 * (int64_t)base)));
+            mm = _mm512_maskz_loadu_pd((__mmask8)run, (const void *)((uintptr_t)m + (uintptr_t)(8 * (int64_t)base)));
             for (unsigned t = rest; t; t &= t - 1) {
                 const int l = __builtin_ctz(t);
                 mm = _mm512_mask_broadcastsd_pd(mm, (__mmask8)(1u << l), _mm_set_sd(m[node[q + l]]));
@@ -357,25 +314,31 @@ layer_out(const cs_fem_lattice *lt, const lat_out *o, int kn, const double *rest
     }
 }
 
-/* Part `part` of the product: cell layers [k0, k1), node layer by node layer: the input of
- * layer k + 1 onto the lattice, cell layer k, node layer k (now complete) back to the nodes.
- * With two parts the shared node layer kmid's sums stay in lt->mid (first part) and lt->seam
- * (second part) for after the barrier. */
-static void lattice_part(const cs_fem *fem, cs_fem_lattice *lt, const lat_out *o, int part,
-                         int k0, int k1, bool split, int rot)
+/* The product's steps for cs_lattice_run. */
+typedef struct fem_pass {
+    const cs_fem *fem;
+    const cs_fem_lattice *lt;
+    lat_out o;
+    int rot;
+} fem_pass;
+
+static void pass_in(void *ctx, int kn, void *dst)
 {
-    double *const *ps = lt->ps[part], *const *ys = lt->ys[part];
-    layer_in(lt, o->p, k0, ps[k0 & 1]);
-    for (int k = k0; k < k1; k++) {
-        layer_in(lt, o->p, k + 1, ps[(k + 1) & 1]);
-        double *yl = split && part == 1 && k == k0 ? lt->seam : ys[k & 1];
-        double *yh = split && part == 0 && k + 1 == k1 ? lt->mid : ys[(k + 1) & 1];
-        cell_layer(fem, lt, k, ps[k & 1], ps[(k + 1) & 1], yl, yh, k == k0, rot);
-        if (yl != lt->seam)
-            layer_out(lt, o, k, yl, NULL, ps[k & 1]);
-    }
-    if (!(split && part == 0))
-        layer_out(lt, o, k1, ys[k1 & 1], NULL, ps[k1 & 1]);
+    const fem_pass *f = ctx;
+    layer_in(f->lt, f->o.p, kn, dst);
+}
+
+static void pass_cells(void *ctx, int k, const void *pl, const void *ph, void *yl, void *yh,
+                       bool first)
+{
+    const fem_pass *f = ctx;
+    cell_layer(f->fem, f->lt, k, pl, ph, yl, yh, first, f->rot);
+}
+
+static void pass_out(void *ctx, int kn, const void *s1, const void *s2, const void *pin)
+{
+    const fem_pass *f = ctx;
+    layer_out(f->lt, &f->o, kn, s1, s2, pin);
 }
 
 bool cs_fem_lattice_product(cs_fem *fem, const double *kf, double sign, double mcoef,
@@ -385,20 +348,8 @@ bool cs_fem_lattice_product(cs_fem *fem, const double *kf, double sign, double m
     if (!lt || !fem->lattice || kf || fem->cell_active ||
         !__builtin_cpu_supports("x86-64-v4"))
         return false;
-    const int rot = fem->corotational;
-    const bool split = lt->m.kmid < lt->m.nz;
-    const lat_out o = {p, m, y, sign, mcoef};
-#pragma omp parallel num_threads(split && fem->threads > 1 ? 2 : 1) /* one per part */
-    {
-        const int nt = omp_get_num_threads(), t = omp_get_thread_num();
-        for (int part = t; part < (split ? 2 : 1); part += nt)
-            lattice_part(fem, lt, &o, part, part ? lt->m.kmid : 0, part ? lt->m.nz : lt->m.kmid, split,
-                         rot);
-        if (split) {
-#pragma omp barrier
-            if (t == nt - 1)
-                layer_out(lt, &o, lt->m.kmid, lt->mid, lt->seam, NULL);
-        }
-    }
+    fem_pass f = {fem, lt, {p, m, y, sign, mcoef}, fem->corotational};
+    const cs_lattice_pass pass = {&f, pass_in, pass_cells, pass_out};
+    cs_lattice_run(&lt->m, fem->threads, &lt->b, &pass);
     return true;
 }

@@ -7,6 +7,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include <omp.h>
+
 void cs_lattice_map_free(cs_lattice_map *m)
 {
     free(m->node);
@@ -134,4 +136,79 @@ int cs_lattice_map_build(cs_lattice_map *m, const cs_cubemesh *cm, int lanes)
             seen += m->cell[s] >= 0;
     }
     return 1;
+}
+
+void *cs_lattice_zalloc(size_t n)
+{
+    const size_t bytes = (n + 63) / 64 * 64;
+    void *p = aligned_alloc(64, bytes ? bytes : 64);
+    if (p)
+        memset(p, 0, bytes ? bytes : 64);
+    return p;
+}
+
+void cs_lattice_bufs_free(cs_lattice_bufs *b)
+{
+    for (int a = 0; a < 2; a++)
+        for (int c = 0; c < 2; c++) {
+            free(b->ps[a][c]);
+            free(b->ys[a][c]);
+        }
+    free(b->mid);
+    free(b->seam);
+    memset(b, 0, sizeof *b);
+}
+
+int cs_lattice_bufs_alloc(cs_lattice_bufs *b, const cs_lattice_map *m, size_t elem)
+{
+    const size_t n = 3 * m->layer * elem;
+    bool got = true;
+    for (int a = 0; a < 2; a++)
+        for (int c = 0; c < 2; c++) {
+            b->ps[a][c] = cs_lattice_zalloc(n);
+            b->ys[a][c] = cs_lattice_zalloc(n);
+            got = got && b->ps[a][c] && b->ys[a][c];
+        }
+    b->mid = cs_lattice_zalloc(n);
+    b->seam = cs_lattice_zalloc(n);
+    if (got && b->mid && b->seam)
+        return 0;
+    cs_lattice_bufs_free(b);
+    return -1;
+}
+
+/* One part: cell layers [k0, k1); with two parts the first keeps node layer k1's sums in mid
+ * and the second node layer k0's in seam, for after the barrier. */
+static void run_part(cs_lattice_bufs *b, const cs_lattice_pass *p, int part, int k0, int k1,
+                     bool split)
+{
+    void *const *ps = b->ps[part], *const *ys = b->ys[part];
+    p->in(p->ctx, k0, ps[k0 & 1]);
+    for (int k = k0; k < k1; k++) {
+        p->in(p->ctx, k + 1, ps[(k + 1) & 1]);
+        void *yl = split && part == 1 && k == k0 ? b->seam : ys[k & 1];
+        void *yh = split && part == 0 && k + 1 == k1 ? b->mid : ys[(k + 1) & 1];
+        p->cells(p->ctx, k, ps[k & 1], ps[(k + 1) & 1], yl, yh, k == k0);
+        if (yl != b->seam)
+            p->out(p->ctx, k, yl, NULL, ps[k & 1]);
+    }
+    if (!(split && part == 0))
+        p->out(p->ctx, k1, ys[k1 & 1], NULL, ps[k1 & 1]);
+}
+
+void cs_lattice_run(const cs_lattice_map *m, int threads, cs_lattice_bufs *b,
+                    const cs_lattice_pass *p)
+{
+    const bool split = m->kmid < m->nz;
+#pragma omp parallel num_threads(split && threads > 1 ? 2 : 1) /* one per part */
+    {
+        const int nt = omp_get_num_threads(), t = omp_get_thread_num();
+        for (int part = t; part < (split ? 2 : 1); part += nt)
+            run_part(b, p, part, part ? m->kmid : 0, part ? m->nz : m->kmid, split);
+        if (split) {
+#pragma omp barrier
+            if (t == nt - 1)
+                p->out(p->ctx, m->kmid, b->mid, b->seam, NULL);
+        }
+    }
 }

@@ -22,7 +22,6 @@
 #include <string.h>
 
 #include <immintrin.h>
-#include <omp.h>
 
 #include "lattice_map.h"
 #include "mat3.h"
@@ -39,7 +38,7 @@ struct cs_mgl {
     float *linv;     /* 9 × npos: D⁻¹ by columns (invf's order), per place */
     float *ldg;      /* npos: the diagonal term */
     uint8_t *lheld;  /* npos: held bits */
-    float *ps[2][2], *ys[2][2], *mid, *seam; /* per part two node layers (3 × layer each) */
+    cs_lattice_bufs b; /* the layers in turn (lattice_map.h), floats */
 };
 
 void cs_mgl_free(cs_mgl *g)
@@ -54,23 +53,13 @@ void cs_mgl_free(cs_mgl *g)
     free(g->linv);
     free(g->ldg);
     free(g->lheld);
-    for (int a = 0; a < 2; a++)
-        for (int b = 0; b < 2; b++) {
-            free(g->ps[a][b]);
-            free(g->ys[a][b]);
-        }
-    free(g->mid);
-    free(g->seam);
+    cs_lattice_bufs_free(&g->b);
     free(g);
 }
 
 static float *alloc_floats(size_t n)
 {
-    const size_t bytes = (n * sizeof(float) + 63) / 64 * 64;
-    float *p = aligned_alloc(64, bytes ? bytes : 64);
-    if (p)
-        memset(p, 0, bytes);
-    return p;
+    return cs_lattice_zalloc(n * sizeof(float));
 }
 
 int cs_mgl_build(const cs_cubemesh *cm, cs_mgl **out)
@@ -86,7 +75,7 @@ int cs_mgl_build(const cs_cubemesh *cm, cs_mgl **out)
         return -1;
     }
     g->m = map;
-    const size_t nb = (size_t)map.nxb * map.ny * map.nz, layer = map.layer;
+    const size_t nb = (size_t)map.nxb * map.ny * map.nz;
     g->bmask = calloc(nb, sizeof *g->bmask);
     g->lL = alloc_floats(nb * GL);
     g->lM = alloc_floats(nb * GL);
@@ -94,16 +83,8 @@ int cs_mgl_build(const cs_cubemesh *cm, cs_mgl **out)
     g->linv = alloc_floats(9 * map.npos);
     g->ldg = alloc_floats(map.npos);
     g->lheld = calloc(map.npos + GL, 1);
-    bool got = g->bmask && g->lL && g->lM && g->lQ && g->linv && g->ldg && g->lheld;
-    for (int a = 0; a < 2; a++)
-        for (int b = 0; b < 2; b++) {
-            g->ps[a][b] = alloc_floats(3 * layer);
-            g->ys[a][b] = alloc_floats(3 * layer);
-            got = got && g->ps[a][b] && g->ys[a][b];
-        }
-    g->mid = alloc_floats(3 * layer);
-    g->seam = alloc_floats(3 * layer);
-    if (!got || !g->mid || !g->seam) {
+    if (!g->bmask || !g->lL || !g->lM || !g->lQ || !g->linv || !g->ldg || !g->lheld ||
+        cs_lattice_bufs_alloc(&g->b, &map, sizeof(float))) {
         cs_mgl_free(g);
         return -1;
     }
@@ -229,27 +210,13 @@ cell_layer(const cs_mgl *g, int k, const float *restrict pl, const float *restri
     }
 }
 
-/* Group q / 16 of places (lattice_map.h): its run's base, the run's and the other lanes
- * with a node, and in *e the mask of the run's (x, y, z) from 3·base. */
-__attribute__((target("arch=x86-64-v4"))) static inline __attribute__((always_inline)) int32_t
-group_run(const cs_lattice_map *m, size_t q,
-                                                               __mmask16 *run, __mmask16 *rest,
-                                                               uint64_t *e)
-{
-    const size_t g = q / 16;
-    *run = (__mmask16)m->grun[g];
-    *rest = (__mmask16)m->grest[g];
-    *e = _pdep_u64(*run, 0x249249249249ull) * 7u;
-    return m->gbase[g];
-}
-
 /* 16 places' 3-vectors of the node-ordered v as x, y, z vectors (0 where no node). */
 __attribute__((target("arch=x86-64-v4"))) static inline __attribute__((always_inline)) void
 group_in(const cs_lattice_map *m, size_t q, const float *restrict v, __m512 o[3])
 {
-    __mmask16 run, rest;
+    unsigned run, rest;
     uint64_t e;
-    const int32_t base = group_run(m, q, &run, &rest, &e);
+    const int32_t base = cs_lattice_group(m, q, &run, &rest, &e);
     const int32_t *node = m->node + q;
     const float *s = (const float *)((uintptr_t)v + (uintptr_t)(12 * (int64_t)base));
     cs_xyz16_split(_mm512_maskz_loadu_ps((__mmask16)e, s),
@@ -268,9 +235,9 @@ __attribute__((target("arch=x86-64-v4"))) static inline __attribute__((always_in
 group_out(const cs_lattice_map *m, size_t q, const __m512 r[3], float *restrict dst,
           double *restrict dd)
 {
-    __mmask16 run, rest;
+    unsigned run, rest;
     uint64_t e;
-    const int32_t base = group_run(m, q, &run, &rest, &e);
+    const int32_t base = cs_lattice_group(m, q, &run, &rest, &e);
     const int32_t *node = m->node + q;
     __m512 o3[3];
     cs_xyz16_join(r, o3);
@@ -381,21 +348,29 @@ __attribute__((target("arch=x86-64-v4"))) static void layer_in(const cs_mgl *g,
     }
 }
 
-/* One part: cell layers [k0, k1) (fem_lattice.c's lattice_part). */
-static void mgl_part(cs_mgl *g, const mgl_op *o, int part, int k0, int k1, bool split)
+/* The passes' steps for cs_lattice_run. */
+typedef struct mgl_pass {
+    const cs_mgl *g;
+    mgl_op o;
+} mgl_pass;
+
+static void pass_in(void *ctx, int kn, void *dst)
 {
-    float *const *ps = g->ps[part], *const *ys = g->ys[part];
-    layer_in(g, o->x, k0, ps[k0 & 1]);
-    for (int k = k0; k < k1; k++) {
-        layer_in(g, o->x, k + 1, ps[(k + 1) & 1]);
-        float *yl = split && part == 1 && k == k0 ? g->seam : ys[k & 1];
-        float *yh = split && part == 0 && k + 1 == k1 ? g->mid : ys[(k + 1) & 1];
-        cell_layer(g, k, ps[k & 1], ps[(k + 1) & 1], yl, yh, k == k0);
-        if (yl != g->seam)
-            layer_out(g, o, k, yl, NULL, ps[k & 1]);
-    }
-    if (!(split && part == 0))
-        layer_out(g, o, k1, ys[k1 & 1], NULL, ps[k1 & 1]);
+    const mgl_pass *f = ctx;
+    layer_in(f->g, f->o.x, kn, dst);
+}
+
+static void pass_cells(void *ctx, int k, const void *pl, const void *ph, void *yl, void *yh,
+                       bool first)
+{
+    const mgl_pass *f = ctx;
+    cell_layer(f->g, k, pl, ph, yl, yh, first);
+}
+
+static void pass_out(void *ctx, int kn, const void *s1, const void *s2, const void *pin)
+{
+    const mgl_pass *f = ctx;
+    layer_out(f->g, &f->o, kn, s1, s2, pin);
 }
 
 bool cs_mgl_apply(cs_mgl *g, int threads, int mode, float *x, const float *b, float *y, float c,
@@ -403,19 +378,8 @@ bool cs_mgl_apply(cs_mgl *g, int threads, int mode, float *x, const float *b, fl
 {
     if (!g || !g->q_ok || !__builtin_cpu_supports("x86-64-v4"))
         return false;
-    const cs_lattice_map *m = &g->m;
-    const bool split = m->kmid < m->nz;
-    const mgl_op o = {mode, x, b, y, c, out};
-#pragma omp parallel num_threads(split && threads > 1 ? 2 : 1) /* one per part */
-    {
-        const int nt = omp_get_num_threads(), t = omp_get_thread_num();
-        for (int part = t; part < (split ? 2 : 1); part += nt)
-            mgl_part(g, &o, part, part ? m->kmid : 0, part ? m->nz : m->kmid, split);
-        if (split) {
-#pragma omp barrier
-            if (t == nt - 1)
-                layer_out(g, &o, m->kmid, g->mid, g->seam, NULL);
-        }
-    }
+    mgl_pass f = {g, {mode, x, b, y, c, out}};
+    const cs_lattice_pass pass = {&f, pass_in, pass_cells, pass_out};
+    cs_lattice_run(&g->m, threads, &g->b, &pass);
     return true;
 }
